@@ -1,0 +1,242 @@
+"""The ``matremap`` command.
+
+Subcommands are verbs: ``models`` lists the reflectance models, ``render`` draws a material on
+the probe sphere, ``fit`` remaps a uniform material onto another model. Errors print one line on
+stderr and exit with status 2; nothing is written when a command fails.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from . import __version__
+from .errors import MatremapError
+from .models import Material, get_model, list_models, parse_material
+from .scene import Scene, parse_lights
+
+EXAMPLES = {
+    "fit": """examples:
+  matremap fit --source '{"model": "mitsuba06:ward", "params": {"variant": "ward", "alpha": 0.3,
+      "specularReflectance": 0.12, "diffuseReflectance": 0}}' --target mitsuba06:pbr --fix distribution=as
+  matremap fit --source ward.json --target cycles:glossy --strategy three-stage --light 0 45 --json
+  matremap fit --source mitsuba06:roughconductor,distribution=as,alpha=0.2 --target mitsuba06:ward""",
+    "render": """examples:
+  matremap render 'mitsuba06:ward,alpha=0.2,specularReflectance=0.1' -o ward.exr
+  matremap render material.json -o sphere.png --light 45 --size 256 --part specular""",
+    "models": """examples:
+  matremap models
+  matremap models mitsuba06:roughconductor
+  matremap models --json""",
+}
+
+
+def load_material(arg: str) -> Material:
+    """A material from a JSON file path, inline JSON, or the compact form MODEL,name=value,..."""
+    text = arg.strip()
+    looks_like_file = text.endswith(".json") or os.sep in text and not text.startswith("{")
+    if looks_like_file or (Path(text).is_file() and not text.startswith("{")):
+        p = Path(text)
+        if not p.is_file():
+            raise MatremapError(f"material file {p} not found")
+        try:
+            obj = json.loads(p.read_text())
+        except (OSError, UnicodeDecodeError) as e:
+            raise MatremapError(f"cannot read material file {p}: {e}") from None
+        except json.JSONDecodeError as e:
+            raise MatremapError(f"material file {p} is not valid JSON: {e.msg} (line {e.lineno})") from None
+        return Material.from_dict(obj, where=str(p))
+    return parse_material(text)
+
+
+def parse_assignments(items: Sequence[str], flag: str) -> dict[str, str]:
+    out: dict[str, str] = {}
+    for item in items:
+        if "=" not in item:
+            raise MatremapError(f"{flag} takes NAME=VALUE, got {item!r}")
+        k, v = item.split("=", 1)
+        out[k.strip()] = v.strip()
+    return out
+
+
+def make_scene(args: argparse.Namespace) -> Scene:
+    return Scene.probe(lights=parse_lights(args.light), resolution=args.size)
+
+
+def write_text_atomic(path: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+# ---------------------------------------------------------------------------------------------
+def cmd_models(args: argparse.Namespace) -> int:
+    specs = [get_model(args.model)] if args.model else list_models()
+    if args.json:
+        print(json.dumps([s.to_dict() for s in specs], indent=2))
+        return 0
+    if not args.model:
+        width = max(len(s.id) for s in specs)
+        for s in specs:
+            opts = "".join(f" [{o.name}: {'|'.join(o.choices)}]" for o in s.options)
+            print(f"{s.id:<{width}}  {', '.join(s.param_names)}{opts}")
+            if s.summary:
+                print(f"{'':<{width}}    {s.summary}")
+        return 0
+    s = specs[0]
+    print(f"{s.id}: {s.summary}")
+    for o in s.options:
+        print(f"  option {o.name}: {' | '.join(o.choices)} (default {o.default})")
+    for p in s.params:
+        default = p.default if not isinstance(p.default, tuple) else list(p.default)
+        held = "" if p.fit else f", held at {p.fit_value if p.fit_value is not None else default} in fits"
+        kind = "RGB" if p.channels == 3 else "scalar"
+        print(f"  {p.name}: {kind} {p.role} in [{p.bounds[0]:g}, {p.bounds[1]:g}], default {default}{held}")
+        if p.doc:
+            print(f"      {p.doc}")
+    return 0
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    from .fit import part
+    from .imageio import IMAGE_SUFFIXES, check_output, write_image
+    from .renderers import get_renderer
+
+    material = load_material(args.material)
+    scene = make_scene(args)
+    out = check_output(args.output, args.force, IMAGE_SUFFIXES)
+    renderer = get_renderer(args.renderer)
+    shown = part(material, args.part)
+    if shown is None:
+        raise MatremapError(f"{material.model} has no {args.part} part to render")
+    image = renderer.render([shown], scene)[0]
+    write_image(out, image, force=args.force)
+    print(f"wrote {out} ({scene.resolution}x{scene.resolution}, {material.model}, {args.part})", file=sys.stderr)
+    return 0
+
+
+def cmd_fit(args: argparse.Namespace) -> int:
+    from .fit import fit
+
+    source = load_material(args.source)
+    spec = get_model(args.target)
+    fix = parse_assignments(args.fix, "--fix")
+    for name in fix:
+        if name not in spec.param_names and name not in spec.option_names:
+            spec.param(name)  # raises with the list of valid names
+    out = None
+    if args.output:
+        from .imageio import check_output
+
+        out = check_output(args.output, args.force, (".json",))
+    result = fit(
+        source,
+        spec,
+        strategy=args.strategy,
+        scene=make_scene(args),
+        source_renderer=args.source_renderer,
+        target_renderer=args.target_renderer,
+        fix=fix,
+        free=args.free,
+    )
+    record = result.to_dict()
+    if out is not None:
+        write_text_atomic(out, json.dumps(record, indent=2) + "\n")
+    if args.json:
+        print(json.dumps(record))
+    else:
+        _print_fit(record)
+    return 0
+
+
+def _print_fit(r: dict[str, Any]) -> None:
+    print(f"{r['source']['model']} -> {r['model']}  ({r['strategy']}, {r['renderers']['source']} -> "
+          f"{r['renderers']['target']})")
+    for k, v in r["params"].items():
+        v = f"{v:.6g}" if isinstance(v, float) else (
+            "[" + ", ".join(f"{x:.6g}" for x in v) + "]" if isinstance(v, list) else v)
+        print(f"  {k} = {v}")
+    print(f"loss (relative RMSE) {r['loss']:.4g}   renders {r['renders']}   {r['seconds'] * 1000:.1f} ms"
+          + (f"   irradiance scale {r['irradiance_scale']:.4g}" if r["irradiance_scale"] != 1.0 else ""))
+    for s in r["stages"]:
+        print(f"  stage {s['name']}: loss {s['loss']:.4g}, {s['renders']} renders, {s['message']}")
+
+
+# ---------------------------------------------------------------------------------------------
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # one line, exit 2
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def _scene_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--light", nargs="+", metavar="DEG", help="light angles from the view axis (default 0: headlight)")
+    p.add_argument("--size", type=int, default=128, metavar="N", help="image resolution (default 128)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    fmt = argparse.RawDescriptionHelpFormatter
+    parser = _Parser(prog="matremap", description="Remap material parameters between renderers and models.")
+    parser.add_argument("--version", action="version", version=f"matremap {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    p = sub.add_parser("models", help="list reflectance models", epilog=EXAMPLES["models"], formatter_class=fmt)
+    p.add_argument("model", nargs="?", help="show one model's parameters")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.set_defaults(func=cmd_models)
+
+    p = sub.add_parser("render", help="render a material on the probe sphere", epilog=EXAMPLES["render"],
+                       formatter_class=fmt)
+    p.add_argument("material", help="JSON file, inline JSON, or MODEL,name=value,...")
+    p.add_argument("-o", "--output", required=True, help="image file: .exr, .png (sRGB), .npy, .tif, .hdr")
+    p.add_argument("--part", choices=("full", "diffuse", "specular"), default="full")
+    p.add_argument("--renderer", default="embedded")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    _scene_args(p)
+    p.set_defaults(func=cmd_render)
+
+    p = sub.add_parser("fit", help="remap a uniform material onto a target model", epilog=EXAMPLES["fit"],
+                       formatter_class=fmt)
+    p.add_argument("--source", required=True, metavar="MATERIAL", help="JSON file, inline JSON, or MODEL,name=value,...")
+    p.add_argument("--target", required=True, metavar="MODEL", help="target model id (see `matremap models`)")
+    p.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
+                   help="set a target option or hold a parameter (repeatable), e.g. distribution=as")
+    p.add_argument("--free", action="append", default=[], metavar="NAME",
+                   help="also fit a parameter that is held by default (repeatable)")
+    p.add_argument("--strategy", choices=("simple", "two-stage", "three-stage"), default="two-stage")
+    p.add_argument("--source-renderer", default="embedded", metavar="NAME")
+    p.add_argument("--target-renderer", default="embedded", metavar="NAME")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("-o", "--output", metavar="FILE.json", help="also save the result as JSON")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    _scene_args(p)
+    p.set_defaults(func=cmd_fit)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except MatremapError as e:
+        print(f"matremap: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("matremap: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,395 @@
+"""Uniform remapping: fit a target model's parameters so that its render matches a source render.
+
+Sztrajman et al. 2019, §3: render the probe scene with the source material, then minimise the
+L2 difference of linear HDR images over the target's parameters with SciPy's trust-region
+reflective least squares (``least_squares(method="trf")``) inside the parameter bounds. The
+target renderer is a black box; the Jacobian is taken by forward differences, all columns in one
+batched render.
+
+Strategies:
+
+``simple``       all free parameters at once against the full render;
+``two-stage``    diffuse parameters against the diffuse-only render and specular parameters
+                 (roles specular, roughness, fresnel) against the specular-only render, merged
+                 (the robust default);
+``three-stage``  two-stage, then all parameters jointly from that start.
+
+The loss reported is the relative RMSE over sphere pixels, ||t - s|| / ||s||.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from .calibrate import irradiance_scale
+from .errors import MatremapError
+from .models import SPECULAR_ROLES, Material, ModelSpec, ParamSpec, get_model
+from .renderers.base import Renderer, get_renderer
+from .scene import Scene
+
+STRATEGIES = ("simple", "two-stage", "three-stage")
+DIFFUSE, SPECULAR, FULL = "diffuse", "specular", "full"
+
+#: relative forward-difference step (images are float32, so well above sqrt(eps64))
+FD_STEP = 1e-4
+#: a source part whose energy is below this fraction of the full render counts as absent
+ABSENT = 1e-9
+#: least_squares ftol / xtol / gtol
+FIT_TOL = 1e-6
+
+
+@dataclass
+class StageReport:
+    name: str
+    params: list[str]
+    start: dict[str, Any]
+    result: dict[str, Any]
+    loss: float
+    renders: int
+    evaluations: int
+    seconds: float
+    message: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return dict(self.__dict__)
+
+
+@dataclass
+class FitResult:
+    source: Material
+    target: Material
+    strategy: str
+    loss: float
+    renders: int
+    seconds: float
+    irradiance_scale: float
+    scene: Scene
+    source_renderer: str
+    target_renderer: str
+    stages: list[StageReport] = field(default_factory=list)
+
+    @property
+    def params(self) -> dict[str, Any]:
+        return self.target.to_dict()["params"]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "model": self.target.model,
+            "params": self.params,
+            "loss": self.loss,
+            "renders": self.renders,
+            "seconds": self.seconds,
+            "strategy": self.strategy,
+            "irradiance_scale": self.irradiance_scale,
+            "source": self.source.to_dict(),
+            "scene": self.scene.to_dict(),
+            "renderers": {"source": self.source_renderer, "target": self.target_renderer},
+            "stages": [s.to_dict() for s in self.stages],
+        }
+
+
+class _Counter:
+    """Renders through a renderer and counts every image made."""
+
+    def __init__(self, scene: Scene) -> None:
+        self.scene = scene
+        self.indices = scene.pixel_indices()
+        self.images = 0
+
+    def pixels(self, renderer: Renderer, materials: Sequence[Material]) -> np.ndarray:
+        """Sphere pixels [N, P, 3] as float64."""
+        self.images += len(materials)
+        images = renderer.render(list(materials), self.scene)
+        return np.take(images.reshape(len(materials), -1, 3), self.indices, axis=1).astype(np.float64)
+
+    def images_of(self, renderer: Renderer, materials: Sequence[Material]) -> np.ndarray:
+        self.images += len(materials)
+        return renderer.render(list(materials), self.scene)
+
+
+def part(material: Material, which: str) -> Material | None:
+    """The material restricted to its diffuse or specular part (None if it has no such part)."""
+    if which == FULL:
+        return material
+    overrides = material.spec.diffuse_only if which == DIFFUSE else material.spec.specular_only
+    if overrides is None:
+        return None
+    values = dict(material.values)
+    for name, v in overrides.items():
+        values[name] = np.full_like(values[name], v)
+    return Material(material.model, values, material.options)
+
+
+class _Problem:
+    """Least-squares problem over the free parameters of a target template.
+
+    In ``grey`` mode (the source image has equal RGB channels and the target model is channel
+    separable) each RGB parameter is one grey variable and only the first image channel is
+    compared: the same optimum at a third of the cost.
+    """
+
+    def __init__(
+        self,
+        template: Material,
+        free: Sequence[ParamSpec],
+        which: str,
+        goal: np.ndarray,
+        renderer: Renderer,
+        counter: _Counter,
+        grey: bool = False,
+    ) -> None:
+        self.template = template
+        self.free = list(free)
+        self.which = which
+        self.grey = grey
+        self.goal = goal[:, :1] if grey else goal
+        self.norm = float(np.linalg.norm(self.goal))
+        self.renderer = renderer
+        self.counter = counter
+        self.width = [1 if grey else p.channels for p in self.free]
+        self.slices: list[slice] = []
+        i = 0
+        for w in self.width:
+            self.slices.append(slice(i, i + w))
+            i += w
+        self.size = i
+        lo, hi = [], []
+        for p, w in zip(self.free, self.width, strict=True):
+            a, b = p.bounds
+            if p.log:
+                a, b = np.log(max(a, 1e-300)), np.log(b)
+            lo += [a] * w
+            hi += [b] * w
+        self.lower, self.upper = np.array(lo), np.array(hi)
+        self._last: tuple[np.ndarray, np.ndarray] | None = None
+        self.evaluations = 0
+
+    def encode(self, m: Material) -> np.ndarray:
+        parts = []
+        for p, w in zip(self.free, self.width, strict=True):
+            v = m.values[p.name]
+            v = np.array([v.mean()]) if w < p.channels else v
+            parts.append(np.log(np.maximum(v, 1e-300)) if p.log else v)
+        return np.clip(np.concatenate(parts), self.lower, self.upper)
+
+    def decode(self, x: np.ndarray) -> Material:
+        values = dict(self.template.values)
+        for p, s in zip(self.free, self.slices, strict=True):
+            v = np.exp(x[s]) if p.log else x[s]
+            values[p.name] = np.broadcast_to(np.clip(v, *p.bounds), (p.channels,)).copy()
+        return Material(self.template.model, values, self.template.options)
+
+    def _pixels(self, xs: Sequence[np.ndarray]) -> np.ndarray:
+        mats = [part(self.decode(x), self.which) for x in xs]
+        pix = self.counter.pixels(self.renderer, mats)
+        return pix[:, :, :1] if self.grey else pix
+
+    def residual(self, x: np.ndarray) -> np.ndarray:
+        self.evaluations += 1
+        r = ((self._pixels([x])[0] - self.goal) / self.norm).ravel()
+        self._last = (x.copy(), r)
+        return r
+
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
+        if self._last is not None and np.array_equal(self._last[0], x):
+            r0 = self._last[1]
+        else:
+            r0 = self.residual(x)
+        # one perturbed render per scalar variable; one per RGB parameter when the model's
+        # channels are independent (channel c of the image depends on channel c only)
+        separable = self.template.spec.channel_separable
+        columns: list[tuple[np.ndarray, list[int], np.ndarray]] = []
+        for p, s in zip(self.free, self.slices, strict=True):
+            idx = list(range(s.start, s.stop))
+            groups = [idx] if (separable and len(idx) == 3) else [[i] for i in idx]
+            for g in groups:
+                h = FD_STEP * np.maximum(np.abs(x[g]), 1.0 if p.log else 1e-2)
+                h = np.where(x[g] + h > self.upper[g], -h, h)
+                xp = x.copy()
+                xp[g] += h
+                columns.append((xp, g, h))
+        pix = self._pixels([c[0] for c in columns])
+        jac = np.zeros((r0.size, self.size))
+        for (_, g, h), img in zip(columns, pix, strict=True):
+            diff = ((img - self.goal) / self.norm).ravel() - r0
+            if len(g) == 1:
+                jac[:, g[0]] = diff / h[0]
+            else:  # an RGB parameter perturbed at once: channel k of the image is its column k
+                for k, var in enumerate(g):
+                    jac[k::3, var] = diff[k::3] / h[k]
+        return jac
+
+    def solve(self, start: Material) -> tuple[Material, Any]:
+        x0 = self.encode(start)
+        sol = least_squares(
+            self.residual,
+            x0,
+            jac=self.jacobian,
+            bounds=(self.lower, self.upper),
+            method="trf",
+            x_scale="jac",
+            ftol=FIT_TOL,
+            xtol=FIT_TOL,
+            gtol=FIT_TOL,
+            max_nfev=200,
+        )
+        return self.decode(sol.x), sol
+
+
+def is_grey(pixels: np.ndarray) -> bool:
+    """Whether an image's three channels are equal (to float32 precision)."""
+    scale = float(np.max(np.abs(pixels))) or 1.0
+    return bool(np.max(np.abs(pixels - pixels[:, :1])) <= 1e-6 * scale)
+
+
+def _values_dict(m: Material, names: Sequence[str]) -> dict[str, Any]:
+    d = m.to_dict()["params"]
+    return {n: d[n] for n in names}
+
+
+def target_template(spec: ModelSpec, fix: Mapping[str, Any] | None) -> tuple[Material, list[ParamSpec]]:
+    """Target material to start from (defaults, ``fit_value`` for held parameters, then ``fix``)
+    and the parameters a fit adjusts."""
+    held = {p.name: p.fit_value for p in spec.params if not p.fit and p.fit_value is not None}
+    template = Material.create(spec.id).with_params(held).with_params(dict(fix or {}))
+    fixed = set(fix or {})
+    free = [p for p in spec.params if p.fit and p.name not in fixed]
+    return template, free
+
+
+def fit(
+    source: Material,
+    target_model: str | ModelSpec,
+    strategy: str = "two-stage",
+    scene: Scene | None = None,
+    source_renderer: str | Renderer | None = None,
+    target_renderer: str | Renderer | None = None,
+    *,
+    fix: Mapping[str, Any] | None = None,
+    free: Sequence[str] = (),
+    start: Mapping[str, Any] | None = None,
+) -> FitResult:
+    """Remap a uniform ``source`` material onto ``target_model`` (see the module docstring).
+
+    ``fix`` sets target options or holds parameters at given values; ``free`` also fits parameters
+    that are held by default (e.g. ``eta`` of a conductor); ``start`` gives starting values.
+    """
+    t0 = time.perf_counter()
+    if strategy not in STRATEGIES:
+        raise MatremapError(f"unknown strategy {strategy!r}; choose one of {', '.join(STRATEGIES)}")
+    spec = target_model if isinstance(target_model, ModelSpec) else get_model(target_model)
+    scene = scene or Scene()
+    src_r, tgt_r = get_renderer(source_renderer), get_renderer(target_renderer)
+    for r, model in ((src_r, source.model), (tgt_r, spec.id)):
+        if not r.supports(model):
+            raise MatremapError(f"renderer {r.name!r} cannot render model {model}")
+    template, free_params = target_template(spec, fix)
+    for name in free:
+        p = spec.param(name)
+        if p.name in (fix or {}):
+            raise MatremapError(f"{name} is both fixed and freed; drop one of --fix {name}=... / --free {name}")
+        if p not in free_params:
+            free_params.append(p)
+    if start:
+        template = template.with_params(start)
+    if not free_params:
+        raise MatremapError(f"nothing to fit: every parameter of {spec.id} is fixed")
+
+    counter = _Counter(scene)
+    scale = irradiance_scale(
+        source, src_r, spec.id, tgt_r, scene, render=lambda r, ms: counter.images_of(r, ms)
+    )
+
+    which = [FULL] if strategy == "simple" else [DIFFUSE, SPECULAR, FULL]
+    src_parts = [part(source, w) for w in which]
+    rendered = counter.pixels(src_r, [m for m in src_parts if m is not None])
+    goals: dict[str, np.ndarray] = {}
+    it = iter(rendered)
+    for w, m in zip(which, src_parts, strict=True):
+        goals[w] = scale * next(it) if m is not None else np.zeros((counter.indices.size, 3))
+
+    stages: list[StageReport] = []
+    current = template
+    if strategy in ("two-stage", "three-stage"):
+        total = float(np.sum(goals[FULL] ** 2)) or 1.0
+        diffuse_free = [p for p in free_params if p.role == "diffuse"]
+        specular_free = [p for p in free_params if p.role in SPECULAR_ROLES]
+        for which_part, params in ((DIFFUSE, diffuse_free), (SPECULAR, specular_free)):
+            current = _run_stage(
+                which_part, params, current, goals[which_part], total, tgt_r, counter, stages
+            )
+    if strategy in ("simple", "three-stage"):
+        name = "joint" if strategy == "three-stage" else FULL
+        current = _run_stage(
+            FULL, free_params, current, goals[FULL], 1.0, tgt_r, counter, stages, name=name
+        )
+
+    final = counter.pixels(tgt_r, [current])[0]
+    goal = goals[FULL]
+    norm = float(np.linalg.norm(goal))
+    loss = float(np.linalg.norm(final - goal) / norm) if norm > 0 else float(np.linalg.norm(final))
+    return FitResult(
+        source=source,
+        target=current,
+        strategy=strategy,
+        loss=loss,
+        renders=counter.images,
+        seconds=time.perf_counter() - t0,
+        irradiance_scale=scale,
+        scene=scene,
+        source_renderer=src_r.name,
+        target_renderer=tgt_r.name,
+        stages=stages,
+    )
+
+
+def _run_stage(
+    which: str,
+    params: list[ParamSpec],
+    current: Material,
+    goal: np.ndarray,
+    total_energy: float,
+    renderer: Renderer,
+    counter: _Counter,
+    stages: list[StageReport],
+    name: str | None = None,
+) -> Material:
+    t0 = time.perf_counter()
+    renders0 = counter.images
+    names = [p.name for p in params]
+    name = name or which
+    energy = float(np.sum(goal * goal))
+    spec = current.spec
+    has_part = (spec.diffuse_only if which == DIFFUSE else spec.specular_only) is not None or which == FULL
+
+    def report(result: Material, loss: float, evaluations: int, message: str) -> None:
+        stages.append(
+            StageReport(
+                name, names, _values_dict(current, names), _values_dict(result, names), loss,
+                counter.images - renders0, evaluations, time.perf_counter() - t0, message,
+            )
+        )
+
+    if energy <= ABSENT * total_energy:
+        # the source has no such part: switch the target's part off (lowest allowed values)
+        off = {p.name: p.bounds[0] for p in params if p.role in ("diffuse", "specular")}
+        result = current.with_params(off)
+        report(result, 0.0, 0, "source part is black; target part set to its minimum")
+        return result
+    if not has_part or not params:
+        why = "target model has no such part" if not has_part else "no free parameter for this part"
+        report(current, 1.0, 0, f"{why}; {100 * energy / total_energy:.3g}% of the source energy is unmatched")
+        return current
+    grey = spec.channel_separable and is_grey(goal) and all(
+        np.all(current.values[p.name] == current.values[p.name][0]) for p in params
+    )
+    problem = _Problem(current, params, which, goal, renderer, counter, grey=grey)
+    result, sol = problem.solve(current)
+    report(result, float(np.sqrt(2.0 * sol.cost)), problem.evaluations, str(sol.message))
+    return result

@@ -1,0 +1,90 @@
+"""Writing rendered images: linear float EXR, sRGB-encoded PNG, raw numpy arrays.
+
+EXR and PNG go through OpenImageIO (imported lazily). Files are written to a temporary name
+in the destination folder and moved into place, so a failure never leaves a partial file, and an
+existing file is only replaced when the caller says so.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from .errors import MatremapError
+
+IMAGE_SUFFIXES = (".exr", ".png", ".npy", ".tif", ".tiff", ".hdr")
+
+
+def linear_to_srgb(x: np.ndarray) -> np.ndarray:
+    """The sRGB transfer function (IEC 61966-2-1) on values clipped to [0, 1]."""
+    x = np.clip(x, 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+
+
+def check_output(path: str | os.PathLike, force: bool, suffixes: tuple[str, ...] | None = None) -> Path:
+    """Validate an output path before any work is done: known suffix, existing folder, no clobbering."""
+    p = Path(path)
+    if suffixes is not None and p.suffix.lower() not in suffixes:
+        raise MatremapError(f"cannot write {p}: unknown file type {p.suffix!r}; use one of {', '.join(suffixes)}")
+    if not p.parent.exists():
+        raise MatremapError(f"cannot write {p}: folder {p.parent} does not exist")
+    if p.exists() and not force:
+        raise MatremapError(f"{p} already exists; pass --force to overwrite it")
+    return p
+
+
+def write_image(path: str | os.PathLike, image: np.ndarray, force: bool = False) -> Path:
+    """Write a linear RGB float image [H, W, 3]: .exr/.hdr/.tif as float, .png as 8-bit sRGB, .npy raw."""
+    p = check_output(path, force, IMAGE_SUFFIXES)
+    suffix = p.suffix.lower()
+    fd, tmp = tempfile.mkstemp(prefix=f".{p.stem}.", suffix=suffix, dir=p.parent)
+    os.close(fd)
+    try:
+        if suffix == ".npy":
+            np.save(tmp, image.astype(np.float32))
+        else:
+            _write_oiio(tmp, image, suffix)
+        os.replace(tmp, p)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return p
+
+
+def _write_oiio(path: str, image: np.ndarray, suffix: str) -> None:
+    try:
+        import OpenImageIO as oiio
+    except ImportError:  # pragma: no cover - it is a dependency
+        raise MatremapError("writing EXR/PNG needs OpenImageIO: pip install openimageio") from None
+    h, w, c = image.shape
+    if suffix == ".png":
+        data = np.round(linear_to_srgb(image) * 255.0).astype(np.uint8)
+        fmt = oiio.UINT8
+    else:
+        data = np.ascontiguousarray(image, dtype=np.float32)
+        fmt = oiio.FLOAT
+    spec = oiio.ImageSpec(w, h, c, fmt)
+    out = oiio.ImageOutput.create(path)
+    if out is None or not out.open(path, spec):
+        raise MatremapError(f"cannot write {path}: {oiio.geterror()}")
+    ok = out.write_image(data)
+    out.close()
+    if not ok:
+        raise MatremapError(f"cannot write {path}: {oiio.geterror()}")
+
+
+def read_image(path: str | os.PathLike) -> np.ndarray:
+    """Read an image as float32 [H, W, C] (values as stored: EXR linear, PNG 0..1 code values)."""
+    p = Path(path)
+    if p.suffix.lower() == ".npy":
+        return np.load(p)
+    import OpenImageIO as oiio
+
+    buf = oiio.ImageBuf(str(p))
+    if buf.has_error:
+        raise MatremapError(f"cannot read {p}: {buf.geterror()}")
+    return buf.get_pixels(oiio.FLOAT)

@@ -1,0 +1,74 @@
+"""The renderer protocol, and the registry of renderer backends.
+
+A renderer turns a batch of materials and a :class:`~matremap.scene.Scene` into linear HDR RGB
+images, float32 ``[N, H, W, 3]``. The fitter only ever calls :meth:`Renderer.render`: a renderer
+is a black box, and a new one is a module implementing this protocol.
+"""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Callable, Sequence
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from ..errors import MatremapError
+from ..models import Material
+from ..scene import Scene
+
+
+@runtime_checkable
+class Renderer(Protocol):
+    #: registry name, e.g. "embedded", "mitsuba3"
+    name: str
+
+    def supports(self, model_id: str) -> bool:
+        """Whether this renderer can draw materials of the model."""
+        ...
+
+    def render(self, materials: Sequence[Material], scene: Scene) -> np.ndarray:
+        """Render each material on the scene's sphere: float32 [N, H, W, 3], linear radiance."""
+        ...
+
+
+_FACTORIES: dict[str, Callable[[], Renderer]] = {}
+_INSTANCES: dict[str, Renderer] = {}
+
+
+def register_renderer(name: str, factory: Callable[[], Renderer]) -> None:
+    _FACTORIES[name] = factory
+
+
+def renderer_names() -> list[str]:
+    _load_builtin()
+    return sorted(_FACTORIES)
+
+
+def get_renderer(name: str | Renderer | None = None) -> Renderer:
+    """A renderer by name (default: the embedded one); renderer objects pass through."""
+    if name is None:
+        name = "embedded"
+    if not isinstance(name, str):
+        return name
+    _load_builtin()
+    if name not in _FACTORIES:
+        near = difflib.get_close_matches(name, list(_FACTORIES), n=2)
+        hint = f"; did you mean {' or '.join(near)}?" if near else f"; known renderers: {', '.join(sorted(_FACTORIES))}"
+        raise MatremapError(f"unknown renderer {name!r}{hint}")
+    if name not in _INSTANCES:
+        _INSTANCES[name] = _FACTORIES[name]()
+    return _INSTANCES[name]
+
+
+def check_supported(renderer: Renderer, materials: Sequence[Material]) -> None:
+    for m in materials:
+        if not renderer.supports(m.model):
+            raise MatremapError(f"renderer {renderer.name!r} cannot render model {m.model}")
+
+
+def _load_builtin() -> None:
+    if "embedded" not in _FACTORIES:
+        from .embedded import EmbeddedRenderer
+
+        register_renderer("embedded", EmbeddedRenderer)
