@@ -129,9 +129,9 @@ def part(material: Material, which: str) -> Material | None:
 class _Problem:
     """Least-squares problem over the free parameters of a target template.
 
-    In ``grey`` mode (the source image has equal RGB channels and the target model is channel
-    separable) each RGB parameter is one grey variable and only the first image channel is
-    compared: the same optimum at a third of the cost.
+    In ``grey`` mode (the source image has equal RGB channels and every target value is grey)
+    each RGB parameter is one grey variable and only the first image channel is compared: the
+    same optimum at a fraction of the cost.
     """
 
     def __init__(
@@ -227,6 +227,9 @@ class _Problem:
 
     def solve(self, start: Material) -> tuple[Material, Any]:
         x0 = self.encode(start)
+        # a start on a bound (e.g. a diffuse albedo of 0) stalls the trust region: move inside
+        span = np.minimum(self.upper - self.lower, 1.0)
+        x0 = np.where((x0 <= self.lower) | (x0 >= self.upper), self.lower + 0.5 * span, x0)
         sol = least_squares(
             self.residual,
             x0,
@@ -386,9 +389,8 @@ def _run_stage(
         why = "target model has no such part" if not has_part else "no free parameter for this part"
         report(current, 1.0, 0, f"{why}; {100 * energy / total_energy:.3g}% of the source energy is unmatched")
         return current
-    grey = spec.channel_separable and is_grey(goal) and all(
-        np.all(current.values[p.name] == current.values[p.name][0]) for p in params
-    )
+    # grey goal and grey parameters (grey parameters render grey images in an RGB renderer)
+    grey = is_grey(goal) and all(np.all(v == v[0]) for v in current.values.values())
     problem = _Problem(current, params, which, goal, renderer, counter, grey=grey)
     result, sol = problem.solve(current)
     report(result, float(np.sqrt(2.0 * sol.cost)), problem.evaluations, str(sol.message))

@@ -63,10 +63,9 @@ def d_mitsuba06(distribution: str, cos_h: np.ndarray, tan2_h: np.ndarray, alpha:
 def g1_beckmann_rational(tan2_v: np.ndarray, alpha: np.ndarray) -> np.ndarray:
     """Smith G1 for Beckmann, Walter et al. 2007 rational fit: a = 1/(alpha tan);
     G1 = 1 for a >= 1.6, else (3.535 a + 2.181 a^2) / (1 + 2.276 a + 2.577 a^2)."""
-    tan_v = np.sqrt(tan2_v)
-    with np.errstate(divide="ignore"):
-        a = 1.0 / (alpha * tan_v)
-    g = (3.535 * a + 2.181 * a * a) / (1.0 + 2.276 * a + 2.577 * a * a)
+    with np.errstate(divide="ignore", invalid="ignore"):  # a = inf at normal incidence: G1 = 1
+        a = 1.0 / (alpha * np.sqrt(tan2_v))
+        g = (3.535 * a + 2.181 * a * a) / (1.0 + 2.276 * a + 2.577 * a * a)
     return np.where(a >= 1.6, 1.0, g)
 
 

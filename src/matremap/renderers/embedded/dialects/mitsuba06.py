@@ -102,13 +102,14 @@ WARD = ModelSpec(
     id="mitsuba06:ward",
     summary="Ward anisotropic model, isotropic use (ward.cpp)",
     params=(
-        _alpha(),
+        _alpha(hi=2.0),
         _specular(0.2, 10.0, doc="rho_s; the energy clamp rescales it when rho_s + rho_d > 1"),
         _diffuse(),
     ),
     options=(OptionSpec("variant", ("ward", "ward-duer", "balanced"), "balanced", "normalisation variant"),),
     diffuse_only={"specularReflectance": 0.0},
     specular_only={"diffuseReflectance": 0.0},
+    channel_separable=False,  # the energy clamp looks at all channels at once
 )
 
 
@@ -142,6 +143,7 @@ PHONG = ModelSpec(
     ),
     diffuse_only={"specularReflectance": 0.0},
     specular_only={"diffuseReflectance": 0.0},
+    channel_separable=False,  # the energy clamp looks at all channels at once
 )
 
 

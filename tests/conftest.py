@@ -1,0 +1,36 @@
+"""Shared fixtures: the probe scene, the embedded renderer, the authors' published table."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import pytest
+
+from matremap.renderers import get_renderer
+from matremap.scene import Scene
+
+REFERENCE = Path(__file__).resolve().parents[2] / "shared" / "reference" / "mitsuba-ward2mitsuba-as.csv"
+
+
+@pytest.fixture(scope="session")
+def scene() -> Scene:
+    return Scene()
+
+
+@pytest.fixture(scope="session")
+def embedded():
+    return get_renderer("embedded")
+
+
+@pytest.fixture(scope="session")
+def reference_rows() -> list[dict[str, float]]:
+    """Rows of the Ward -> AS table published with the paper (../shared/reference)."""
+    if not REFERENCE.is_file():
+        pytest.skip(f"reference table not found at {REFERENCE} (it lives in ../shared beside the checkout)")
+    with REFERENCE.open() as f:
+        rows = [
+            {k: float(r[k]) for k in ("alpha1", "specular1", "alpha2", "eta2")}
+            for r in csv.DictReader(f, delimiter="\t")
+        ]
+    return sorted(rows, key=lambda r: (r["alpha1"], r["specular1"]))

@@ -1,0 +1,171 @@
+import math
+
+import numpy as np
+import pytest
+
+from matremap.errors import MatremapError
+from matremap.fit import fit, part
+from matremap.models import Material
+from matremap.optics import f0_from_ior
+from matremap.renderers import get_renderer
+from matremap.scene import Scene
+
+
+def rel(a, b):
+    return np.abs(np.asarray(a) / np.asarray(b) - 1.0)
+
+
+@pytest.mark.parametrize(
+    "model, params, fix",
+    [
+        ("mitsuba06:ward", {"variant": "ward", "alpha": 0.25, "specularReflectance": 0.15, "diffuseReflectance": 0.4},
+         {"variant": "ward"}),
+        ("mitsuba06:pbr", {"distribution": "as", "alpha": 0.3, "F0": 0.08, "diffuseReflectance": 0.2},
+         {"distribution": "as"}),
+        ("cycles:glossy", {"Roughness": 0.45, "Color": [0.9, 0.6, 0.3], "Diffuse Color": 0.1}, {}),
+        ("mitsuba06:roughconductor", {"distribution": "ggx", "alpha": 0.15, "eta": 1.0, "k": [3.0, 2.0, 1.0]},
+         {"distribution": "ggx"}),
+        ("mitsuba06:phong", {"exponent": 80.0, "specularReflectance": 0.3, "diffuseReflectance": 0.3}, {}),
+        ("blender27:ward", {"specular_slope": 0.2, "specular_color": 0.6, "diffuse_color": 0.5,
+                            "specular_intensity": 1.0, "diffuse_intensity": 1.0}, {}),
+    ],
+)
+def test_identity_remap_recovers_parameters(model, params, fix):
+    source = Material.create(model, params)
+    result = fit(source, model, fix=fix)
+    for name, value in source.values.items():
+        if np.any(value > 0):
+            assert np.all(rel(result.target.values[name], value) < 5e-3), (name, result.target.values[name], value)
+    assert result.loss < 1e-3
+
+
+def test_reproduces_the_authors_ward_to_as_table(reference_rows):
+    """F0/rho_s and alpha2 within 0.5 % of the published fits (rows with alpha1 >= 0.03)."""
+    rows = [r for r in reference_rows if r["alpha1"] >= 0.03][::61]
+    assert len(rows) >= 10
+    for r in rows:
+        source = Material.create("mitsuba06:ward", {
+            "variant": "ward", "alpha": r["alpha1"], "specularReflectance": r["specular1"], "diffuseReflectance": 0,
+        })
+        result = fit(source, "mitsuba06:pbr", fix={"distribution": "as"})
+        alpha2 = result.target.values["alpha"][0]
+        f0 = result.target.values["F0"][0]
+        assert rel(alpha2, r["alpha2"]) < 5e-3, r
+        assert rel(f0 / r["specular1"], r["eta2"] / r["specular1"]) < 5e-3, r
+
+
+@pytest.mark.parametrize("alpha", [0.1, 0.3])
+@pytest.mark.parametrize("eta, k", [((1.5, 1.5, 1.5), (0.0, 0.0, 0.0)), ((1.2, 1.0, 0.9), (1.6, 1.2, 0.8))])
+def test_conductor_round_trip_through_ward_recovers_f0(alpha, eta, k):
+    source = Material.create("mitsuba06:roughconductor", {"distribution": "as", "alpha": alpha, "eta": eta, "k": k})
+    there = fit(source, "mitsuba06:ward", fix={"variant": "ward"})
+    assert there.target.values["specularReflectance"].max() < 1.0  # Ward's energy clamp stays off
+    back = fit(there.target, "mitsuba06:roughconductor", fix={"distribution": "as"})
+    f0 = f0_from_ior(source.values["eta"], source.values["k"])
+    f0_back = f0_from_ior(back.target.values["eta"], back.target.values["k"])
+    assert np.all(rel(f0_back, f0) < 0.01), (f0, f0_back)
+    assert rel(back.target.values["alpha"], alpha) < 0.01
+
+
+def test_two_stage_separates_diffuse_and_specular():
+    source = Material.create("mitsuba06:ward", {"variant": "ward", "alpha": 0.2, "specularReflectance": 0.1,
+                                                "diffuseReflectance": [0.6, 0.4, 0.2]})
+    result = fit(source, "mitsuba06:pbr", fix={"distribution": "as"})
+    assert [s.name for s in result.stages] == ["diffuse", "specular"]
+    np.testing.assert_allclose(result.target.values["diffuseReflectance"], [0.6, 0.4, 0.2], rtol=2e-3)
+    assert result.loss < 0.02
+
+
+def test_strategies_run_their_stages_and_three_stage_does_not_lose():
+    source = Material.create("mitsuba06:roughplastic", {"alpha": 0.2, "intIOR": 1.5, "diffuseReflectance": 0.3})
+    results = {s: fit(source, "mitsuba06:ward", strategy=s) for s in ("simple", "two-stage", "three-stage")}
+    assert [s.name for s in results["simple"].stages] == ["full"]
+    assert [s.name for s in results["three-stage"].stages] == ["diffuse", "specular", "joint"]
+    assert results["three-stage"].loss <= results["two-stage"].loss + 1e-9
+    for r in results.values():
+        assert r.loss < 0.1
+
+
+def test_irradiance_is_matched_across_renderer_families():
+    """Blender Internal's Lambert has no 1/pi: the scale is 1/pi and colours carry over."""
+    source = Material.create("blender27:ward", {"diffuse_color": [0.5, 0.4, 0.3], "diffuse_intensity": 1.0,
+                                                "specular_intensity": 0.0})
+    result = fit(source, "mitsuba06:diffuse")
+    assert result.irradiance_scale == pytest.approx(1 / math.pi, rel=1e-6)
+    np.testing.assert_allclose(result.target.values["reflectance"], [0.5, 0.4, 0.3], rtol=1e-4)
+    same = fit(Material.create("mitsuba06:diffuse"), "mitsuba06:diffuse")
+    assert same.irradiance_scale == 1.0
+
+
+class CountingRenderer:
+    """Wraps a renderer and counts the images it makes."""
+
+    def __init__(self, inner):
+        self.inner, self.name, self.images = inner, inner.name, 0
+
+    def supports(self, model_id):
+        return self.inner.supports(model_id)
+
+    def render(self, materials, scene):
+        self.images += len(materials)
+        return self.inner.render(materials, scene)
+
+
+@pytest.mark.parametrize("strategy", ["simple", "two-stage", "three-stage"])
+def test_render_count_is_every_image_rendered(strategy):
+    r = CountingRenderer(get_renderer())
+    source = Material.create("cycles:glossy", {"Roughness": 0.5, "Color": [0.8, 0.5, 0.2], "Diffuse Color": 0.2})
+    result = fit(source, "mitsuba06:pbr", strategy=strategy, source_renderer=r, target_renderer=r)
+    assert result.renders == r.images > 0
+
+
+def test_fit_is_deterministic():
+    source = Material.create("mitsuba06:ward", {"alpha": 0.3, "specularReflectance": [0.2, 0.1, 0.05]})
+    a = fit(source, "cycles:glossy").to_dict()
+    b = fit(source, "cycles:glossy").to_dict()
+    for key in ("params", "loss", "renders"):
+        assert a[key] == b[key]
+
+
+def test_fixed_and_freed_parameters():
+    source = Material.create("mitsuba06:roughconductor", {"alpha": 0.2})
+    held = fit(source, "mitsuba06:roughconductor", fix={"alpha": 0.3})
+    assert held.target.values["alpha"][0] == 0.3
+    freed = fit(source, "mitsuba06:roughconductor", free=["eta"])
+    assert "eta" in freed.stages[-1].params
+
+
+def test_part_renders_use_the_models_overrides(scene, embedded):
+    m = Material.create("mitsuba06:ward", {"alpha": 0.2, "specularReflectance": 0.3, "diffuseReflectance": 0.4})
+    full, diffuse, specular = embedded.render([m, part(m, "diffuse"), part(m, "specular")], scene)
+    np.testing.assert_allclose(full, diffuse + specular, rtol=1e-5, atol=1e-7)
+    assert part(Material.create("mitsuba06:roughconductor"), "diffuse") is None
+
+
+def test_a_target_without_a_diffuse_part_reports_the_unmatched_energy():
+    source = Material.create("mitsuba06:ward", {"diffuseReflectance": 0.5})
+    result = fit(source, "mitsuba06:roughconductor")
+    assert "no such part" in result.stages[0].message
+    assert result.loss > 0.3
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"strategy": "four-stage"}, "unknown strategy"),
+        ({"fix": {"alpha": 0.2}, "free": ["alpha"]}, "both fixed and freed"),
+        ({"target_renderer": "mitsuba7"}, "unknown renderer"),
+        ({"fix": {"alpha": 0.2, "F0": 0.1, "diffuseReflectance": 0.0}}, "nothing to fit"),
+    ],
+)
+def test_bad_fit_requests(kwargs, message):
+    with pytest.raises(MatremapError, match=message):
+        fit(Material.create("mitsuba06:ward"), "mitsuba06:pbr", **kwargs)
+
+
+def test_scene_light_positions_change_the_fit_but_not_its_quality():
+    source = Material.create("mitsuba06:ward", {"variant": "ward", "alpha": 0.2, "specularReflectance": 0.1,
+                                                "diffuseReflectance": 0})
+    side = fit(source, "mitsuba06:pbr", scene=Scene.probe([45.0]), fix={"distribution": "as"})
+    assert side.scene.lights[0].theta == 45.0
+    assert side.loss < 0.05
