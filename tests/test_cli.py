@@ -1,0 +1,120 @@
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from matremap.cli import main
+from matremap.models import Material
+from matremap.renderers import get_renderer
+from matremap.scene import Scene
+
+WARD = '{"model": "mitsuba06:ward", "params": {"variant": "ward", "specularReflectance": 0.12, "alpha": 0.3, "diffuseReflectance": 0}}'
+
+
+def run(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_models_json_lists_parameters_bounds_and_options(capsys):
+    code, out, _ = run(capsys, "models", "--json")
+    assert code == 0
+    models = {m["id"]: m for m in json.loads(out)}
+    ward = models["mitsuba06:ward"]
+    assert {p["name"] for p in ward["params"]} == {"alpha", "specularReflectance", "diffuseReflectance"}
+    assert ward["options"][0]["choices"] == ["ward", "ward-duer", "balanced"]
+    assert all("bounds" in p and "role" in p for m in models.values() for p in m["params"])
+
+
+def test_models_shows_one_model(capsys):
+    code, out, _ = run(capsys, "models", "mitsuba06:roughconductor")
+    assert code == 0 and "distribution: beckmann | ggx | phong | as" in out
+
+
+@pytest.mark.parametrize("suffix", [".npy", ".exr", ".png"])
+def test_render_writes_the_image(capsys, tmp_path, suffix):
+    out = tmp_path / f"sphere{suffix}"
+    code, _, _ = run(capsys, "render", WARD, "-o", str(out), "--size", "32")
+    assert code == 0 and out.is_file()
+    expected = get_renderer().render([Material.from_dict(json.loads(WARD))], Scene(resolution=32))[0]
+    if suffix == ".npy":
+        np.testing.assert_array_equal(np.load(out), expected)
+    elif suffix == ".exr":
+        from matremap.imageio import read_image
+
+        np.testing.assert_array_equal(read_image(out), expected)
+    else:
+        from matremap.imageio import read_image
+
+        assert read_image(out).shape == (32, 32, 3)
+
+
+def test_render_refuses_to_overwrite_without_force(capsys, tmp_path):
+    out = tmp_path / "keep.npy"
+    out.write_bytes(b"precious")
+    code, _, err = run(capsys, "render", WARD, "-o", str(out))
+    assert code == 2 and "--force" in err and out.read_bytes() == b"precious"
+    code, _, _ = run(capsys, "render", WARD, "-o", str(out), "--force", "--size", "16")
+    assert code == 0 and np.load(out).shape == (16, 16, 3)
+
+
+def test_fit_json_prints_one_object(capsys, tmp_path):
+    out = tmp_path / "fit.json"
+    code, stdout, _ = run(capsys, "fit", "--source", WARD, "--target", "mitsuba06:pbr", "--fix", "distribution=as",
+                          "--json", "-o", str(out))
+    assert code == 0
+    record = json.loads(stdout)
+    assert {"params", "loss", "renders", "seconds", "strategy"} <= set(record)
+    assert record["params"]["distribution"] == "as"
+    # the authors' table gives alpha2 = 0.26784 at alpha1 = 0.2947 and 0.28923 at 0.3237: 0.2717 at 0.3
+    assert record["params"]["alpha"] == pytest.approx(0.2717, rel=5e-3)
+    assert json.loads(out.read_text())["params"] == record["params"]
+
+
+def test_fit_reads_a_material_file_and_prints_a_table(capsys, tmp_path):
+    f = tmp_path / "ward.json"
+    f.write_text(WARD)
+    code, out, _ = run(capsys, "fit", "--source", str(f), "--target", "cycles:glossy", "--light", "0", "45",
+                       "--size", "64", "--strategy", "three-stage")
+    assert code == 0 and "Roughness =" in out and "stage joint" in out
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["fit", "--source", WARD, "--target", "mitsuba06:wart"], "unknown model 'mitsuba06:wart'; did you mean"),
+        (["fit", "--source", WARD, "--target", "mitsuba06:pbr", "--fix", "shine=1"], "has no parameter 'shine'"),
+        (["fit", "--source", WARD, "--target", "mitsuba06:pbr", "--fix", "distribution=cook"], "not one of"),
+        (["fit", "--source", "mitsuba06:ward,alpha=nan", "--target", "mitsuba06:pbr"], "not finite"),
+        (["fit", "--source", "mitsuba06:ward,alpha=7", "--target", "mitsuba06:pbr"], "outside its range"),
+        (["fit", "--source", "mitsuba06:ward,diffuseReflectance=1:2", "--target", "mitsuba06:pbr"], "RGB triple"),
+        (["fit", "--source", "missing.json", "--target", "mitsuba06:pbr"], "not found"),
+        (["fit", "--source", WARD, "--target", "mitsuba06:pbr", "--light", "east"], "--light takes an angle"),
+        (["render", WARD, "-o", "x.jpg2"], "unknown file type"),
+    ],
+)
+def test_bad_input_is_one_line_exit_2(capsys, tmp_path, argv, message):
+    os.chdir(tmp_path)
+    code, out, err = run(capsys, *argv)
+    assert code == 2
+    assert message in err and err.count("\n") == 1 and err.startswith("matremap: error:")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_malformed_material_file(capsys, tmp_path):
+    f = tmp_path / "bad.json"
+    f.write_text('{"model": "mitsuba06:ward", "params": {"alpha": 0.1,}')
+    out = tmp_path / "fit.json"
+    code, _, err = run(capsys, "fit", "--source", str(f), "--target", "mitsuba06:pbr", "-o", str(out))
+    assert code == 2 and "not valid JSON" in err and not out.exists()
+
+
+def test_console_script_runs():
+    proc = subprocess.run([sys.executable, "-m", "matremap.cli", "models"], capture_output=True, text=True)
+    assert proc.returncode == 0 and "mitsuba06:ward" in proc.stdout
+    proc = subprocess.run([sys.executable, "-m", "matremap.cli", "fit"], capture_output=True, text=True)
+    assert proc.returncode == 2 and "required" in proc.stderr
