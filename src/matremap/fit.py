@@ -40,6 +40,8 @@ DIFFUSE, SPECULAR, FULL = "diffuse", "specular", "full"
 FD_STEP = 1e-4
 #: a source part whose energy is below this fraction of the full render counts as absent
 ABSENT = 1e-9
+#: try a few roughness values and an intensity ratio before the descent (see initial_guess)
+COARSE_START = True
 #: least_squares ftol / xtol / gtol
 FIT_TOL = 1e-6
 
@@ -225,11 +227,43 @@ class _Problem:
                     jac[k::3, var] = diff[k::3] / h[k]
         return jac
 
+    def initial_guess(self, x0: np.ndarray) -> np.ndarray:
+        """A start near the optimum, from one batched render: a few values of the first roughness
+        parameter are tried, and the parameters the image scales with (albedos, F0) are multiplied
+        by the least-squares intensity ratio of the best candidate."""
+        rough = next((i for i, p in enumerate(self.free) if p.role == "roughness"), None)
+        linear = [i for i, p in enumerate(self.free) if p.scales_image]
+        candidates = [x0]
+        if rough is not None:
+            p, sl = self.free[rough], self.slices[rough]
+            for v in roughness_candidates(p):
+                xc = x0.copy()
+                xc[sl] = np.log(v) if p.log else v
+                candidates.append(xc)
+        if len(candidates) == 1 and not linear:
+            return x0
+        best, best_err, best_k = x0, np.inf, 1.0
+        for xc, img in zip(candidates, self._pixels(candidates), strict=True):
+            tt = float(np.sum(img * img))
+            k = float(np.sum(img * self.goal)) / tt if (linear and tt > 0) else 1.0
+            k = k if k > 0 else 1.0
+            err = float(np.sum((k * img - self.goal) ** 2))
+            if err < best_err:
+                best, best_err, best_k = xc, err, k
+        x = best.copy()
+        for i in linear:
+            sl, p = self.slices[i], self.free[i]
+            x[sl] = x[sl] + np.log(best_k) if p.log else x[sl] * best_k
+        return np.clip(x, self.lower, self.upper)
+
     def solve(self, start: Material) -> tuple[Material, Any]:
         x0 = self.encode(start)
         # a start on a bound (e.g. a diffuse albedo of 0) stalls the trust region: move inside
         span = np.minimum(self.upper - self.lower, 1.0)
         x0 = np.where((x0 <= self.lower) | (x0 >= self.upper), self.lower + 0.5 * span, x0)
+        if COARSE_START:
+            x0 = self.initial_guess(x0)
+            x0 = np.where((x0 <= self.lower) | (x0 >= self.upper), self.lower + 0.5 * span, x0)
         sol = least_squares(
             self.residual,
             x0,
@@ -243,6 +277,17 @@ class _Problem:
             max_nfev=200,
         )
         return self.decode(sol.x), sol
+
+
+def roughness_candidates(p: ParamSpec, count: int = 5) -> np.ndarray:
+    """Values tried for a roughness parameter before the least-squares descent: geometric steps
+    over the parameter's range (an exponent's range is capped at [1, 1e4])."""
+    lo, hi = p.bounds
+    if p.log:
+        lo, hi = max(lo, 1.0), min(hi, 1e4)
+    else:
+        lo, hi = max(lo, 0.03 * hi), 0.9 * hi
+    return np.geomspace(lo, hi, count)
 
 
 def is_grey(pixels: np.ndarray) -> bool:

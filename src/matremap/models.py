@@ -35,6 +35,7 @@ class ParamSpec:
     ``fit`` says whether a target fit adjusts it by default; a parameter that is not fitted holds
     ``fit_value`` (or ``default`` when that is None) unless the user fixes it.
     ``log`` asks the fitter to work on log(value) (for exponents spanning decades).
+    ``linear`` marks a parameter the image scales with (see :attr:`scales_image`).
     """
 
     name: str
@@ -45,7 +46,14 @@ class ParamSpec:
     fit: bool = True
     fit_value: float | None = None
     log: bool = False
+    linear: bool | None = None
     doc: str = ""
+
+    @property
+    def scales_image(self) -> bool:
+        """Whether the image scales (roughly) in proportion to this parameter: albedos, colours,
+        F0. Defaults to the diffuse and specular roles; a fitter's start heuristic uses it."""
+        return self.linear if self.linear is not None else self.role in ("diffuse", "specular")
 
     def __post_init__(self) -> None:
         if self.role not in ROLES:

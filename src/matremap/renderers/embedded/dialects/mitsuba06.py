@@ -226,7 +226,9 @@ PBR = ModelSpec(
     summary="the paper authors' microfacet plugin with Schlick Fresnel (pbr.cpp)",
     params=(
         _alpha(),
-        ParamSpec("F0", "fresnel", (0.04,) * 3, (0.0, 1.0), channels=3, doc="normal-incidence reflectance"),
+        ParamSpec(
+            "F0", "fresnel", (0.04,) * 3, (0.0, 1.0), channels=3, linear=True, doc="normal-incidence reflectance"
+        ),
         _specular(1.0, 10.0, fit=False, doc="ks multiplier"),
         _diffuse(0.0, doc="optional Lambertian term (not in the original plugin)"),
     ),
