@@ -72,3 +72,11 @@ def test_scene_round_trips_through_a_dict():
 def test_bad_scenes_are_refused(kwargs):
     with pytest.raises(MatremapError):
         Scene(**kwargs)
+
+
+def test_sphere_pixels_fast_path_equals_the_masked_image(scene, embedded):
+    from matremap.renderers.base import render_pixels
+
+    mats = [Material.create("mitsuba06:pbr", {"F0": [0.9, 0.5, 0.2]}), Material.create("cycles:glossy")]
+    images = embedded.render(mats, scene)
+    assert np.array_equal(render_pixels(embedded, mats, scene), images[:, scene.mask()])

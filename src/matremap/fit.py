@@ -30,7 +30,7 @@ from scipy.optimize import least_squares
 from .calibrate import irradiance_scale
 from .errors import MatremapError
 from .models import SPECULAR_ROLES, Material, ModelSpec, ParamSpec, get_model
-from .renderers.base import Renderer, get_renderer
+from .renderers.base import Renderer, get_renderer, render_pixels
 from .scene import Scene
 
 STRATEGIES = ("simple", "two-stage", "three-stage")
@@ -107,8 +107,7 @@ class _Counter:
     def pixels(self, renderer: Renderer, materials: Sequence[Material]) -> np.ndarray:
         """Sphere pixels [N, P, 3] as float64."""
         self.images += len(materials)
-        images = renderer.render(list(materials), self.scene)
-        return np.take(images.reshape(len(materials), -1, 3), self.indices, axis=1).astype(np.float64)
+        return render_pixels(renderer, list(materials), self.scene).astype(np.float64)
 
     def images_of(self, renderer: Renderer, materials: Sequence[Material]) -> np.ndarray:
         self.images += len(materials)
@@ -233,14 +232,14 @@ class _Problem:
         by the least-squares intensity ratio of the best candidate."""
         rough = next((i for i, p in enumerate(self.free) if p.role == "roughness"), None)
         linear = [i for i, p in enumerate(self.free) if p.scales_image]
-        candidates = [x0]
+        candidates = [x0] if rough is None else []
         if rough is not None:
             p, sl = self.free[rough], self.slices[rough]
             for v in roughness_candidates(p):
                 xc = x0.copy()
                 xc[sl] = np.log(v) if p.log else v
                 candidates.append(xc)
-        if len(candidates) == 1 and not linear:
+        if rough is None and not linear:
             return x0
         best, best_err, best_k = x0, np.inf, 1.0
         for xc, img in zip(candidates, self._pixels(candidates), strict=True):

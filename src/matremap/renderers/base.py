@@ -32,6 +32,19 @@ class Renderer(Protocol):
         ...
 
 
+def render_pixels(renderer: Renderer, materials: Sequence[Material], scene: Scene) -> np.ndarray:
+    """The sphere pixels of a render, float32 [N, P, 3] in ``scene.pixel_indices()`` order.
+
+    A renderer may offer this directly (method ``render_pixels``) to skip building whole images;
+    it must return exactly ``render(...)`` at the sphere pixels.
+    """
+    fast = getattr(renderer, "render_pixels", None)
+    if fast is not None:
+        return fast(materials, scene)
+    images = renderer.render(materials, scene)
+    return np.take(images.reshape(len(materials), -1, 3), scene.pixel_indices(), axis=1)
+
+
 _FACTORIES: dict[str, Callable[[], Renderer]] = {}
 _INSTANCES: dict[str, Renderer] = {}
 

@@ -22,7 +22,7 @@ from .geometry import LocalGeometry
 
 @dataclass(frozen=True, eq=False)
 class SceneGeometry:
-    """Shading inputs for the sphere pixels of a scene, per light: arrays [L, P, 1]."""
+    """Shading inputs for the sphere pixels of a scene, per light: arrays [L, P]."""
 
     local: LocalGeometry
     irradiance: np.ndarray  # I / d^2 where the light is above the surface, else 0
@@ -45,7 +45,7 @@ def scene_geometry(scene: Scene) -> SceneGeometry:
         cos_o.append(np.sum(n * wo, axis=-1))
         i_dot_o.append(np.sum(wi * wo, axis=-1))
         irr.append(scene.light_intensity(light) / d2)
-    cos_i, cos_o, i_dot_o, irr = (np.stack(a)[..., None] for a in (cos_i, cos_o, i_dot_o, irr))
+    cos_i, cos_o, i_dot_o, irr = (np.stack(a) for a in (cos_i, cos_o, i_dot_o, irr))
     lit = (cos_i > 0.0) & (cos_o > 0.0)
     # keep every formula finite where the point is unlit; the result is masked there anyway
     cos_i = np.where(lit, cos_i, 1.0)
@@ -70,28 +70,41 @@ class EmbeddedRenderer:
         materials = list(materials)
         res = scene.resolution
         out = np.zeros((len(materials), res * res, 3), dtype=np.float32)
-        if materials:
-            out[:, scene.pixel_indices()] = self.render_pixels(materials, scene)
+        pix = scene.pixel_indices()
+        for idx, radiance in self._shade(materials, scene):  # radiance [n, C, P]
+            target = out if len(idx) == len(materials) else out[idx]
+            for c in range(3):
+                target[:, pix, c] = radiance[:, min(c, radiance.shape[1] - 1)]
+            if target is not out:
+                out[idx] = target
         return out.reshape(len(materials), res, res, 3)
 
     def render_pixels(self, materials: Sequence[Material], scene: Scene) -> np.ndarray:
-        """Radiance of the sphere pixels only, float64 [N, P, 3] (P = scene.mask().sum())."""
+        """The sphere pixels of :meth:`render`, float32 [N, P, 3] in ``scene.pixel_indices()``
+        order, without the image around them (the fitter's fast path)."""
+        materials = list(materials)
+        out = np.zeros((len(materials), scene.pixel_indices().size, 3), dtype=np.float32)
+        for idx, radiance in self._shade(materials, scene):
+            out[idx] = radiance.transpose(0, 2, 1)
+        return out
+
+    def _shade(self, materials: list[Material], scene: Scene):
+        """Yield (material indices, radiance [n, C, P]) per group of materials sharing a model and
+        options. Evaluators work on [N, C, L, P] arrays (channels before pixels, so that numpy's
+        inner loops run over pixels): parameters come as [N, C, 1, 1], geometry as [L, P]."""
         from .dialects import EVALUATORS
 
         check_supported(self, materials)
         geo = scene_geometry(scene)
-        n_pix = geo.lit.shape[1]
-        out = np.zeros((len(materials), n_pix, 3))
         groups: dict[tuple, list[int]] = {}
-        for idx, m in enumerate(materials):
-            groups.setdefault((m.model, tuple(sorted(m.options.items()))), []).append(idx)
+        for i, m in enumerate(materials):
+            groups.setdefault((m.model, tuple(sorted(m.options.items()))), []).append(i)
         for (model, options), idx in groups.items():
             params = {
-                name: np.stack([materials[i].values[name] for i in idx])[:, None, None, :]
+                name: np.stack([materials[i].values[name] for i in idx])[:, :, None, None]
                 for name in materials[idx[0]].values
             }
-            fcos = EVALUATORS[model](params, dict(options), geo.local)  # [n, L, P, C]
+            fcos = EVALUATORS[model](params, dict(options), geo.local)
             # unlit points have finite stand-in geometry and zero irradiance
             radiance = fcos * geo.irradiance
-            out[idx] = radiance[:, 0] if radiance.shape[1] == 1 else radiance.sum(axis=1)
-        return out
+            yield idx, (radiance[:, :, 0] if radiance.shape[2] == 1 else radiance.sum(axis=2))

@@ -58,6 +58,31 @@ class LocalGeometry:
     def tan2_o(self) -> np.ndarray:
         return tan2(self.cos_o)
 
+    @cached_property
+    def tan_i(self) -> np.ndarray:
+        return np.sqrt(self.tan2_i)
+
+    @cached_property
+    def tan_o(self) -> np.ndarray:
+        return np.sqrt(self.tan2_o)
+
+    @cached_property
+    def schlick_weight(self) -> np.ndarray:
+        """(1 - i.h)^5, the angular factor of Schlick's Fresnel."""
+        m = 1.0 - np.minimum(self.i_dot_h, 1.0)
+        m2 = m * m
+        return m2 * m2 * m
+
+    @cached_property
+    def lambert(self) -> np.ndarray:
+        """cos_i / pi: a Lambertian BRDF of albedo 1 times the cosine."""
+        return self.cos_i / np.pi
+
+    @cached_property
+    def log_cos_h(self) -> np.ndarray:
+        with np.errstate(divide="ignore"):
+            return np.log(np.maximum(self.cos_h, 0.0))
+
 
 def tan2(cos: np.ndarray) -> np.ndarray:
     c2 = cos * cos
@@ -65,14 +90,16 @@ def tan2(cos: np.ndarray) -> np.ndarray:
 
 
 def from_directions(wi: np.ndarray, wo: np.ndarray, normal: np.ndarray | None = None) -> LocalGeometry:
-    """Geometry of unit light / view directions [..., 3] about a normal (default +z)."""
+    """Geometry of unit light / view directions [..., 3] about a normal (default +z); the
+    arrays have the leading shape of the directions (evaluate with parameters shaped [N, C, 1, 1]
+    for directions [L, P], or [N, C, 1] for directions [P])."""
     wi = np.asarray(wi, dtype=float)
     wo = np.asarray(wo, dtype=float)
     n = np.array([0.0, 0.0, 1.0]) if normal is None else np.asarray(normal, dtype=float)
     return LocalGeometry(
-        cos_i=np.sum(wi * n, axis=-1)[..., None],
-        cos_o=np.sum(wo * n, axis=-1)[..., None],
-        i_dot_o=np.sum(wi * wo, axis=-1)[..., None],
+        cos_i=np.sum(wi * n, axis=-1),
+        cos_o=np.sum(wo * n, axis=-1),
+        i_dot_o=np.sum(wi * wo, axis=-1),
     )
 
 

@@ -6,8 +6,8 @@ separable Smith G = G1(i) G1(o) with Walter et al.'s rational approximation of t
 (also used for Phong). Cycles conventions (``kernel/closure/bsdf_microfacet.h``): height-correlated
 Smith G = 1 / (1 + Lambda(i) + Lambda(o)).
 
-All functions broadcast: ``cos_h`` / ``tan2`` are arrays of cosines or tan^2 of polar angles,
-``alpha`` an array of roughness values.
+All functions broadcast: ``cos_h``, ``tan2_h`` / ``tan_v`` are arrays of cosines, tan^2 of the
+half-vector angle and tangents of polar angles, ``alpha`` an array of roughness values.
 """
 
 from __future__ import annotations
@@ -38,61 +38,68 @@ def d_ggx(cos_h: np.ndarray, tan2_h: np.ndarray, alpha: np.ndarray) -> np.ndarra
     return 1.0 / (np.pi * a2 * c2 * c2 * r * r)
 
 
-def d_phong(cos_h: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+def d_phong(cos_h: np.ndarray, alpha: np.ndarray, log_cos_h: np.ndarray | None = None) -> np.ndarray:
     """Normalised Blinn-Phong D = (e + 2)/(2 pi) cos^e with e = 2/alpha^2 - 2 (isotropic
-    Ashikhmin-Shirley, Mitsuba 0.6 'phong' and 'as')."""
+    Ashikhmin-Shirley, Mitsuba 0.6 'phong' and 'as'). ``log_cos_h`` may be passed precomputed."""
     e = phong_exponent(alpha)
-    return (e + 2.0) / (2.0 * np.pi) * np.power(np.maximum(cos_h, 0.0), e)
+    if log_cos_h is None:
+        with np.errstate(divide="ignore"):
+            log_cos_h = np.log(np.maximum(cos_h, 0.0))
+    return (e + 2.0) / (2.0 * np.pi) * np.exp(e * log_cos_h)
 
 
-def d_mitsuba06(distribution: str, cos_h: np.ndarray, tan2_h: np.ndarray, alpha: np.ndarray) -> np.ndarray:
-    """Mitsuba 0.6 ``MicrofacetDistribution::eval`` for an isotropic alpha (clamped >= 1e-4);
-    values with D cos < 1e-20 are flushed to zero as Mitsuba does."""
+def d_mitsuba06(distribution: str, g, alpha: np.ndarray) -> np.ndarray:
+    """Mitsuba 0.6 ``MicrofacetDistribution::eval`` for an isotropic alpha (clamped >= 1e-4) on a
+    :class:`~.geometry.LocalGeometry`; values with D cos < 1e-20 are flushed to zero as Mitsuba does."""
     alpha = np.maximum(alpha, ALPHA_MIN)
     if distribution == "beckmann":
-        d = d_beckmann(cos_h, tan2_h, alpha)
+        d = d_beckmann(g.cos_h, g.tan2_h, alpha)
     elif distribution == "ggx":
-        d = d_ggx(cos_h, tan2_h, alpha)
+        d = d_ggx(g.cos_h, g.tan2_h, alpha)
     elif distribution in ("phong", "as"):
-        d = d_phong(cos_h, alpha)
+        d = d_phong(g.cos_h, alpha, g.log_cos_h)
     else:
         raise ValueError(f"unknown distribution {distribution!r}")
-    return np.where(d * cos_h < 1e-20, 0.0, d)
+    return np.where(d * g.cos_h < 1e-20, 0.0, d)
 
 
-def g1_beckmann_rational(tan2_v: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+def g1_beckmann_rational(tan_v: np.ndarray, alpha: np.ndarray) -> np.ndarray:
     """Smith G1 for Beckmann, Walter et al. 2007 rational fit: a = 1/(alpha tan);
-    G1 = 1 for a >= 1.6, else (3.535 a + 2.181 a^2) / (1 + 2.276 a + 2.577 a^2)."""
-    with np.errstate(divide="ignore", invalid="ignore"):  # a = inf at normal incidence: G1 = 1
-        a = 1.0 / (alpha * np.sqrt(tan2_v))
-        g = (3.535 * a + 2.181 * a * a) / (1.0 + 2.276 * a + 2.577 * a * a)
-    return np.where(a >= 1.6, 1.0, g)
+    G1 = 1 for a >= 1.6, else (3.535 a + 2.181 a^2) / (1 + 2.276 a + 2.577 a^2),
+    evaluated as (3.535 b + 2.181) / (b^2 + 2.276 b + 2.577) with b = 1/a = alpha tan."""
+    b = alpha * tan_v
+    g = (3.535 * b + 2.181) / ((b + 2.276) * b + 2.577)
+    return np.where(b <= 0.625, 1.0, g)
 
 
-def g1_ggx(tan2_v: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+def g1_ggx(tan_v: np.ndarray, alpha: np.ndarray) -> np.ndarray:
     """Smith G1 for GGX: 2 / (1 + sqrt(1 + alpha^2 tan^2))."""
-    return 2.0 / (1.0 + np.sqrt(1.0 + alpha * alpha * tan2_v))
+    b = alpha * tan_v
+    return 2.0 / (1.0 + np.sqrt(1.0 + b * b))
 
 
-def g_mitsuba06(distribution: str, tan2_i: np.ndarray, tan2_o: np.ndarray, alpha: np.ndarray) -> np.ndarray:
-    """Separable Smith G = G1(i) G1(o) as in Mitsuba 0.6 (Beckmann's G1 also for Phong/AS)."""
+def g_mitsuba06(distribution: str, tan_i: np.ndarray, tan_o: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    """Separable Smith G = G1(i) G1(o) as in Mitsuba 0.6 (Beckmann's G1 also for Phong/AS);
+    ``tan_i``, ``tan_o`` are the tangents of the polar angles."""
     alpha = np.maximum(alpha, ALPHA_MIN)
     g1 = g1_ggx if distribution == "ggx" else g1_beckmann_rational
-    return g1(tan2_i, alpha) * g1(tan2_o, alpha)
+    return g1(tan_i, alpha) * g1(tan_o, alpha)
 
 
-def lambda_ggx(tan2_v: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+def lambda_ggx(tan_v: np.ndarray, alpha: np.ndarray) -> np.ndarray:
     """Smith Lambda for GGX: (sqrt(1 + alpha^2 tan^2) - 1) / 2."""
-    return 0.5 * (np.sqrt(1.0 + alpha * alpha * tan2_v) - 1.0)
+    b = alpha * tan_v
+    return 0.5 * (np.sqrt(1.0 + b * b) - 1.0)
 
 
-def lambda_beckmann(tan2_v: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+def lambda_beckmann(tan_v: np.ndarray, alpha: np.ndarray) -> np.ndarray:
     """Smith Lambda for Beckmann, rational fit used by Cycles: a = 1/(alpha tan);
-    ((0.396 a - 1.259) a + 1) / ((2.181 a + 3.535) a) for a < 1.6, else 0."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        a = 1.0 / (alpha * np.sqrt(tan2_v))
-        lam = ((0.396 * a - 1.259) * a + 1.0) / ((2.181 * a + 3.535) * a)
-    return np.where(a < 1.6, lam, 0.0)
+    ((0.396 a - 1.259) a + 1) / ((2.181 a + 3.535) a), evaluated as
+    (0.396 - 1.259 b + b^2) / (2.181 + 3.535 b) with b = 1/a = alpha tan; zero where
+    alpha^2 tan^2 < 0.39 (Cycles' ``bsdf_lambda_from_sqr_alpha_tan_n`` cut, a hair below a = 1.6)."""
+    b = alpha * tan_v
+    lam = (0.396 + b * (b - 1.259)) / (2.181 + 3.535 * b)
+    return np.where(b * b < 0.39, 0.0, lam)
 
 
 def g_height_correlated(lam_i: np.ndarray, lam_o: np.ndarray) -> np.ndarray:

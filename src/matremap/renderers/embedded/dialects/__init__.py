@@ -14,7 +14,8 @@ import numpy as np
 from ....models import ModelSpec, register
 from ..geometry import LocalGeometry
 
-#: f(params, options, geometry) -> f * cos(theta_i), broadcast over [N, L, P, C]
+#: f(params, options, geometry) -> f * cos(theta_i); params are [N, C, 1, 1] (C = 1 or 3 channels),
+#: geometry arrays [L, P] (lights, pixels), the result broadcasts to [N, C, L, P]
 Evaluator = Callable[[Mapping[str, np.ndarray], Mapping[str, str], LocalGeometry], np.ndarray]
 
 EVALUATORS: dict[str, Evaluator] = {}
@@ -35,7 +36,7 @@ def energy_clamp(rho_s: np.ndarray, rho_d: np.ndarray) -> np.ndarray:
     """Mitsuba 0.6 ``BSDF::ensureEnergyConservation`` (``src/librender/bsdf.cpp``): when the largest
     per-channel sum rho_s + rho_d exceeds 1, both are scaled by 0.99 / (that sum).
     Returns the scale factor, broadcastable to the inputs."""
-    total = np.max(rho_s + rho_d, axis=-1, keepdims=True)
+    total = np.max(rho_s + rho_d, axis=1, keepdims=True)  # parameters are [N, C, 1, 1]
     return np.where(total > 1.0, 0.99 / np.maximum(total, 1e-300), 1.0)
 
 

@@ -59,9 +59,9 @@ def glossy(p, opt, g):
         else:
             d = mf.d_beckmann(g.cos_h, g.tan2_h, alpha)
             lam = mf.lambda_beckmann
-        gg = mf.g_height_correlated(lam(g.tan2_i, alpha), lam(g.tan2_o, alpha))
+        gg = mf.g_height_correlated(lam(g.tan_i, alpha), lam(g.tan_o, alpha))
         lobe = np.where(alpha * alpha <= 2e-10, 0.0, d * gg / (4.0 * g.cos_o))
-    return p["Color"] * lobe + p["Diffuse Color"] * (INV_PI * g.cos_i)
+    return p["Color"] * lobe + p["Diffuse Color"] * g.lambert
 
 
 def _ashikhmin_shirley(alpha: np.ndarray, g) -> np.ndarray:
@@ -86,7 +86,7 @@ DIFFUSE = ModelSpec(
 
 @dialect(DIFFUSE)
 def diffuse(p, opt, g):
-    return p["Color"] * (INV_PI * g.cos_i)
+    return p["Color"] * g.lambert
 
 
 register_white_reference("cycles", "cycles:diffuse", {"Color": 1.0})

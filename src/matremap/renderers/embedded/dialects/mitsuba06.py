@@ -46,7 +46,7 @@ from __future__ import annotations
 import numpy as np
 
 from ....models import ModelSpec, OptionSpec, ParamSpec, register_white_reference
-from ....optics import fresnel_conductor, fresnel_dielectric, fresnel_schlick
+from ....optics import fresnel_conductor, fresnel_dielectric
 from .. import microfacet as mf
 from . import dialect, energy_clamp
 
@@ -75,8 +75,8 @@ def _distribution(choices: tuple[str, ...], default: str) -> OptionSpec:
 
 def _microfacet(distribution: str, alpha: np.ndarray, g) -> np.ndarray:
     """D G / (4 cos_o): the microfacet lobe times cos_i, without Fresnel."""
-    d = mf.d_mitsuba06(distribution, g.cos_h, g.tan2_h, alpha)
-    gg = mf.g_mitsuba06(distribution, g.tan2_i, g.tan2_o, alpha)
+    d = mf.d_mitsuba06(distribution, g, alpha)
+    gg = mf.g_mitsuba06(distribution, g.tan_i, g.tan_o, alpha)
     return d * gg / (4.0 * g.cos_o)
 
 
@@ -92,7 +92,7 @@ DIFFUSE = ModelSpec(
 
 @dialect(DIFFUSE)
 def diffuse(p, opt, g):
-    return p["reflectance"] * (INV_PI * g.cos_i)
+    return p["reflectance"] * g.lambert
 
 
 register_white_reference("mitsuba06", "mitsuba06:diffuse", {"reflectance": 1.0})
@@ -129,7 +129,7 @@ def ward(p, opt, g):
     lobe = np.where(lobe > 1e-10, lobe, 0.0)
     rho_s, rho_d = p["specularReflectance"], p["diffuseReflectance"]
     scale = energy_clamp(rho_s, rho_d)
-    return scale * (rho_s * lobe + rho_d * INV_PI) * g.cos_i
+    return (scale * rho_s) * (lobe * g.cos_i) + (scale * rho_d) * g.lambert
 
 
 # ---------------------------------------------------------------------------------------------
@@ -153,7 +153,7 @@ def phong(p, opt, g):
     lobe = (e + 2.0) * (0.5 * INV_PI) * np.power(np.maximum(g.cos_reflect, 0.0), e)
     rho_s, rho_d = p["specularReflectance"], p["diffuseReflectance"]
     scale = energy_clamp(rho_s, rho_d)
-    return scale * (rho_s * lobe + rho_d * INV_PI) * g.cos_i
+    return (scale * rho_s) * (lobe * g.cos_i) + (scale * rho_d) * g.lambert
 
 
 # ---------------------------------------------------------------------------------------------
@@ -217,7 +217,7 @@ def roughplastic(p, opt, g):
     rho = rho_d / (1.0 - rho_d * fdr) if opt["nonlinear"] == "true" else rho_d / (1.0 - fdr)
     t12 = transmittance(distribution, g.cos_i, alpha, eta)
     t21 = transmittance(distribution, g.cos_o, alpha, eta)
-    return spec + rho * (INV_PI * g.cos_i) * t12 * t21 / (eta * eta)
+    return spec + rho * (g.lambert * t12 * t21 / (eta * eta))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -240,6 +240,7 @@ PBR = ModelSpec(
 
 @dialect(PBR)
 def pbr(p, opt, g):
-    f = fresnel_schlick(g.i_dot_h, p["F0"])
-    spec = p["specularReflectance"] * f * _microfacet(opt["distribution"], p["alpha"], g)
-    return spec + p["diffuseReflectance"] * (INV_PI * g.cos_i)
+    f0 = p["F0"]
+    fresnel = f0 + (1.0 - f0) * g.schlick_weight  # Schlick
+    lobe = _microfacet(opt["distribution"], p["alpha"], g)
+    return (p["specularReflectance"] * fresnel) * lobe + p["diffuseReflectance"] * g.lambert
