@@ -141,6 +141,11 @@ def cmd_fit(args: argparse.Namespace) -> int:
         from .imageio import check_output
 
         out = check_output(args.output, args.force, (".json",))
+    compare = None
+    if args.compare:
+        from .imageio import check_output
+
+        compare = check_output(args.compare, args.force, (".png", ".exr", ".tif", ".tiff"))
     result = fit(
         source,
         spec,
@@ -152,6 +157,13 @@ def cmd_fit(args: argparse.Namespace) -> int:
         free=args.free,
     )
     record = result.to_dict()
+    for w in result.warnings:
+        print(f"matremap: warning: {w}", file=sys.stderr)
+    if compare is not None:
+        from .imageio import write_image
+        from .report import comparison_strip
+
+        write_image(compare, comparison_strip(result), force=args.force)
     if out is not None:
         write_text_atomic(out, json.dumps(record, indent=2) + "\n")
     if args.json:
@@ -219,7 +231,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--target-renderer", default="embedded", metavar="NAME")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("-o", "--output", metavar="FILE.json", help="also save the result as JSON")
-    p.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    p.add_argument("--compare", metavar="FILE.png",
+                   help="write source | target | difference renders side by side (.png sRGB, .exr linear)")
+    p.add_argument("--force", action="store_true", help="overwrite existing output files")
     _scene_args(p)
     p.set_defaults(func=cmd_fit)
     return parser

@@ -43,7 +43,7 @@ ABSENT = 1e-9
 #: try a few roughness values and an intensity ratio before the descent (see initial_guess)
 COARSE_START = True
 #: least_squares ftol / xtol / gtol
-FIT_TOL = 1e-6
+FIT_TOL = 1e-5
 
 
 @dataclass
@@ -75,6 +75,7 @@ class FitResult:
     source_renderer: str
     target_renderer: str
     stages: list[StageReport] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def params(self) -> dict[str, Any]:
@@ -93,6 +94,7 @@ class FitResult:
             "scene": self.scene.to_dict(),
             "renderers": {"source": self.source_renderer, "target": self.target_renderer},
             "stages": [s.to_dict() for s in self.stages],
+            "warnings": list(self.warnings),
         }
 
 
@@ -361,6 +363,7 @@ def fit(
     for w, m in zip(which, src_parts, strict=True):
         goals[w] = scale * next(it) if m is not None else np.zeros((counter.indices.size, 3))
 
+    warnings = _check_resolution(goals[SPECULAR if strategy != "simple" else FULL], scene)
     stages: list[StageReport] = []
     current = template
     if strategy in ("two-stage", "three-stage"):
@@ -393,7 +396,27 @@ def fit(
         source_renderer=src_r.name,
         target_renderer=tgt_r.name,
         stages=stages,
+        warnings=warnings,
     )
+
+
+#: a highlight must cover at least this many pixels (above half its peak, a 3x3 block) to be fitted
+MIN_HIGHLIGHT_PIXELS = 9
+
+
+def _check_resolution(specular: np.ndarray, scene: Scene) -> list[str]:
+    """Warn when the source highlight is too small for the image to resolve it."""
+    luminance = specular.sum(axis=1)
+    peak = float(luminance.max()) if luminance.size else 0.0
+    if peak <= 0:
+        return []
+    covered = int(np.count_nonzero(luminance >= 0.5 * peak))
+    if covered >= MIN_HIGHLIGHT_PIXELS:
+        return []
+    return [
+        f"the source highlight covers {covered} pixel(s) at {scene.resolution}x{scene.resolution}: "
+        f"too few to fit its shape; raise the resolution (--size {4 * scene.resolution})"
+    ]
 
 
 def _run_stage(
