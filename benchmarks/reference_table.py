@@ -35,10 +35,9 @@ def main() -> int:
         print(f"reference table not found at {TABLE}; it lives in ../shared beside the checkout", file=sys.stderr)
         return 1
     with TABLE.open() as f:
-        rows = sorted(
-            ({k: float(r[k]) for k in ("alpha1", "specular1", "alpha2", "eta2")} for r in csv.DictReader(f, delimiter="\t")),
-            key=lambda r: (r["alpha1"], r["specular1"]),
-        )[:: args.every]
+        table = [{k: float(r[k]) for k in ("alpha1", "specular1", "alpha2", "eta2")}
+                 for r in csv.DictReader(f, delimiter="\t")]
+    rows = sorted(table, key=lambda r: (r["alpha1"], r["specular1"]))[:: args.every]
     scene = Scene(resolution=args.size)
     dev_a, dev_k, a1s, secs, renders = [], [], [], [], []
     for r in rows:

@@ -11,7 +11,10 @@ from matremap.models import Material
 from matremap.renderers import get_renderer
 from matremap.scene import Scene
 
-WARD = '{"model": "mitsuba06:ward", "params": {"variant": "ward", "specularReflectance": 0.12, "alpha": 0.3, "diffuseReflectance": 0}}'
+WARD = (
+    '{"model": "mitsuba06:ward", "params": '
+    '{"variant": "ward", "specularReflectance": 0.12, "alpha": 0.3, "diffuseReflectance": 0}}'
+)
 
 
 def run(capsys, *argv):
@@ -118,3 +121,18 @@ def test_console_script_runs():
     assert proc.returncode == 0 and "mitsuba06:ward" in proc.stdout
     proc = subprocess.run([sys.executable, "-m", "matremap.cli", "fit"], capture_output=True, text=True)
     assert proc.returncode == 2 and "required" in proc.stderr
+
+
+def test_fit_compare_writes_source_target_difference(capsys, tmp_path):
+    from matremap.imageio import read_image
+
+    out = tmp_path / "cmp.exr"
+    code, stdout, _ = run(capsys, "fit", "--source", WARD, "--target", "cycles:glossy", "--size", "48",
+                          "--compare", str(out), "--json")
+    assert code == 0
+    loss = json.loads(stdout)["loss"]
+    strip = read_image(out)
+    assert strip.shape == (48, 3 * 48 + 8, 3)
+    source, target, diff = strip[:, :48], strip[:, 52:100], strip[:, 104:]
+    assert np.linalg.norm(target - source) / np.linalg.norm(source) == pytest.approx(loss, rel=1e-3)
+    np.testing.assert_allclose(diff, 10 * np.abs(target - source), rtol=1e-4, atol=1e-6)

@@ -169,3 +169,12 @@ def test_scene_light_positions_change_the_fit_but_not_its_quality():
     side = fit(source, "mitsuba06:pbr", scene=Scene.probe([45.0]), fix={"distribution": "as"})
     assert side.scene.lights[0].theta == 45.0
     assert side.loss < 0.05
+
+
+def test_a_sub_pixel_highlight_is_flagged():
+    tiny = Material.create("mitsuba06:ward", {"variant": "ward", "alpha": 0.005, "specularReflectance": 0.1,
+                                              "diffuseReflectance": 0})
+    result = fit(tiny, "mitsuba06:ward", fix={"variant": "ward"}, scene=Scene(resolution=64))
+    assert result.warnings and "raise the resolution" in result.warnings[0]
+    broad = fit(Material.create("mitsuba06:ward", {"alpha": 0.2}), "mitsuba06:pbr")
+    assert broad.warnings == []

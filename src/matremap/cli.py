@@ -11,7 +11,6 @@ import argparse
 import json
 import os
 import sys
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -67,18 +66,6 @@ def parse_assignments(items: Sequence[str], flag: str) -> dict[str, str]:
 
 def make_scene(args: argparse.Namespace) -> Scene:
     return Scene.probe(lights=parse_lights(args.light), resolution=args.size)
-
-
-def write_text_atomic(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 # ---------------------------------------------------------------------------------------------
@@ -165,7 +152,9 @@ def cmd_fit(args: argparse.Namespace) -> int:
 
         write_image(compare, comparison_strip(result), force=args.force)
     if out is not None:
-        write_text_atomic(out, json.dumps(record, indent=2) + "\n")
+        from .imageio import write_text
+
+        write_text(out, json.dumps(record, indent=2) + "\n")
     if args.json:
         print(json.dumps(record))
     else:
@@ -220,7 +209,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("fit", help="remap a uniform material onto a target model", epilog=EXAMPLES["fit"],
                        formatter_class=fmt)
-    p.add_argument("--source", required=True, metavar="MATERIAL", help="JSON file, inline JSON, or MODEL,name=value,...")
+    p.add_argument("--source", required=True, metavar="MATERIAL",
+                   help="JSON file, inline JSON, or MODEL,name=value,...")
     p.add_argument("--target", required=True, metavar="MODEL", help="target model id (see `matremap models`)")
     p.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
                    help="set a target option or hold a parameter (repeatable), e.g. distribution=as")

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import os
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -36,22 +38,39 @@ def check_output(path: str | os.PathLike, force: bool, suffixes: tuple[str, ...]
     return p
 
 
+@contextmanager
+def atomic_output(path: Path) -> Iterator[str]:
+    """Yield a temporary file name beside ``path``; on success it replaces ``path`` (with the
+    permissions a new file would get), on failure it is removed."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    try:
+        yield tmp
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def write_text(path: Path, text: str) -> None:
+    """Write a text file atomically."""
+    with atomic_output(path) as tmp, open(tmp, "w") as f:
+        f.write(text)
+
+
 def write_image(path: str | os.PathLike, image: np.ndarray, force: bool = False) -> Path:
     """Write a linear RGB float image [H, W, 3]: .exr/.hdr/.tif as float, .png as 8-bit sRGB, .npy raw."""
     p = check_output(path, force, IMAGE_SUFFIXES)
     suffix = p.suffix.lower()
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.stem}.", suffix=suffix, dir=p.parent)
-    os.close(fd)
-    try:
+    with atomic_output(p) as tmp:
         if suffix == ".npy":
-            np.save(tmp, image.astype(np.float32))
+            with open(tmp, "wb") as f:
+                np.save(f, image.astype(np.float32))
         else:
             _write_oiio(tmp, image, suffix)
-        os.replace(tmp, p)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
     return p
 
 

@@ -206,12 +206,16 @@ class Material:
     @classmethod
     def from_dict(cls, obj: Any, where: str = "material") -> Material:
         if not isinstance(obj, Mapping):
-            raise MatremapError(f'{where}: expected a JSON object like {{"model": "mitsuba06:ward", "params": {{...}}}}')
+            raise MatremapError(
+                f'{where}: expected a JSON object like {{"model": "mitsuba06:ward", "params": {{...}}}}'
+            )
         unknown = set(obj) - {"model", "params"}
         if unknown:
             raise MatremapError(f"{where}: unknown key(s) {', '.join(sorted(unknown))}; expected 'model' and 'params'")
         if "model" not in obj or not isinstance(obj["model"], str):
-            raise MatremapError(f'{where}: missing "model" (a model id such as "mitsuba06:ward"; see `matremap models`)')
+            raise MatremapError(
+                f'{where}: missing "model" (a model id such as "mitsuba06:ward"; see `matremap models`)'
+            )
         params = obj.get("params", {})
         if not isinstance(params, Mapping):
             raise MatremapError(f'{where}: "params" must be an object of parameter names to values')
