@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from functools import cached_property
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -119,34 +119,33 @@ class Scene:
         d = np.stack(np.broadcast_arrays(x, y, -np.ones_like(x * y)), axis=-1)
         return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
-    @cached_property
-    def _hits(self) -> tuple[np.ndarray, np.ndarray]:
-        d = self.camera_rays()
-        o = np.array([0.0, 0.0, self.camera_distance])
-        b = d @ o
-        disc = b * b - (o @ o - self.sphere_radius**2)
-        mask = disc > 0.0
-        t = -b - np.sqrt(np.where(mask, disc, 0.0))
-        points = o + t[..., None] * d
-        return mask, points[mask]
-
     def mask(self) -> np.ndarray:
         """Boolean [H, W]: True on pixels whose centre ray hits the sphere."""
-        return self._hits[0]
-
-    @cached_property
-    def _pixel_indices(self) -> np.ndarray:
-        idx = np.flatnonzero(self._hits[0])
-        idx.flags.writeable = False
-        return idx
+        return _sphere_hits(self)[0]
 
     def pixel_indices(self) -> np.ndarray:
         """Flat indices (row-major, into H*W) of the sphere pixels; faster than the boolean mask."""
-        return self._pixel_indices
+        return _sphere_hits(self)[1]
 
     def sphere_points(self) -> np.ndarray:
         """World positions [P, 3] of the sphere points seen through the masked pixels (row-major)."""
-        return self._hits[1]
+        return _sphere_hits(self)[2]
+
+
+@lru_cache(maxsize=32)
+def _sphere_hits(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mask, flat pixel indices and hit points of the camera rays on the sphere (read-only)."""
+    d = scene.camera_rays()
+    o = np.array([0.0, 0.0, scene.camera_distance])
+    b = d @ o
+    disc = b * b - (o @ o - scene.sphere_radius**2)
+    mask = disc > 0.0
+    t = -b - np.sqrt(np.where(mask, disc, 0.0))
+    points = (o + t[..., None] * d)[mask]
+    out = (mask, np.flatnonzero(mask), points)
+    for a in out:
+        a.flags.writeable = False
+    return out
 
 
 def parse_lights(values: Iterable[str | float] | None) -> tuple[float, ...]:

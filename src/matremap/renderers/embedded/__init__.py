@@ -104,6 +104,9 @@ class EmbeddedRenderer:
                 name: np.stack([materials[i].values[name] for i in idx])[:, :, None, None]
                 for name in materials[idx[0]].values
             }
+            # grey parameters shade the same in every channel: compute one and broadcast
+            if all(np.all(v == v[:, :1]) for v in params.values()):
+                params = {k: v[:, :1] for k, v in params.items()}
             fcos = EVALUATORS[model](params, dict(options), geo.local)
             # unlit points have finite stand-in geometry and zero irradiance
             radiance = fcos * geo.irradiance
