@@ -26,20 +26,25 @@ roughplastic uses ``Fdr = 1 - evalDiffuse`` of the *internal* side (relative IOR
 
 **Numerics.** The integral over m uses the importance variable of D cos(theta_m) in theta_m, split
 where the admissible azimuth range (i.m > 0, or above the critical cosine) starts to shrink, with a
-cosine substitution on the second panel and an endpoint substitution in phi_m (8+12 x 8 Gauss
-nodes outside, 8+24 x 8 inside; quadrature error < 1e-4 outside, < 4e-4 inside). Tables, per
+cosine substitution on the second panel and an endpoint substitution in phi_m ((8 + 12) x 8 Gauss
+nodes outside, (8 + 40) x 8 inside; quadrature error < 2e-4 outside, < 5e-4 inside). Tables, per
 distribution and per side (eta >= 1 and eta < 1, indexed by eta' = max(eta, 1/eta)), have
 48 (mu) x 44 (alpha) x 26 (eta') nodes: eta' = 1 + 3 x^4 on [1, 4] (Mitsuba's warp); alpha on
-[1e-4, alpha_max], uniform in a blend of log(alpha) and alpha; mu uniform in a blend of
+[1e-4, alpha_max], uniform in an equal blend of log(alpha) and alpha; mu uniform in a blend of
 asinh((mu - mu_c) / (alpha + w0)) and asin(sqrt(mu)), where mu_c = 0 outside and is the critical
 cosine sqrt(1 - eta^2) inside, so that the grazing and total-internal-reflection edges, whose width
 scales with alpha, are resolved. Values are interpolated with tensor-product Catmull-Rom splines
 (as Mitsuba) and clamped to [0, 1] (as Mitsuba); Fdr is tabulated on the (alpha, eta') nodes by
-integrating the mu-spline. Measured against direct integration at 4000 random points per
-distribution and side (mu, log-uniform alpha, eta' in [1.05, 4]): outside, max |error| 1.1e-3
-(99th percentile 2.5e-4); inside, max 5.5e-3 next to the critical angle for alpha ~ 0.01-0.1 and
-< 3.6e-3 elsewhere (99th percentile 4e-4); Fdr max 1e-4. For eta' < 1.05 (index-matched
-interfaces) the grazing corner mu, alpha -> 0 is not resolved (errors up to ~0.03).
+integrating the mu-spline. Measured against direct integration (quadrature error < 5e-5) at 4000
+random points per distribution and side (mu^(2/3), log(alpha) and sqrt(eta' - 1) uniform), for
+eta' in [1.05, 4]: outside, max |error| 1.2e-3 (8.7e-4 for eta' >= 1.2), 99th percentile 2.6e-4;
+inside, max 1.4e-3 away from the critical angle (|mu - mu_c| > 0.05) and up to 5e-3 next to it for
+alpha ~ 0.005-0.1, 99th percentile 4.6e-4; Fdr max 1.9e-4. For eta' < 1.05 (nearly index-matched
+interfaces) the corner mu, alpha -> 0 is not resolved (errors up to ~0.04 at grazing incidence).
+Against Mitsuba's own tables (at their nodes, eta' >= 1.05): outside rms 2e-4; inside Mitsuba's
+adaptive cubature returned exact zeros where transmission is confined to a small part of the
+sample space, and its internal Fdr is up to 0.024 too high at eta' ~ 3.8 and small alpha; for
+eta' ~ 1.5 and alpha >= 0.03 the internal Fdr agree within 1.5e-3.
 
 **Domain.** Inputs outside the tables are clamped: alpha to [1e-4, alpha_max] with alpha_max = 4
 (beckmann, ggx) or 1 (phong; e = 0 there). Mitsuba 0.6 also clamps alpha >= 1e-4, but *refuses*
@@ -47,7 +52,7 @@ alpha above its tables (4 for beckmann and ggx, 0.5 for phong) and eta' outside 
 eta' is clamped to [1, 4]. mu is clamped to [1e-6, 1]; a negative cosine means light from the
 other side: T(-mu, alpha, eta) = T(mu, alpha, 1/eta), as in ``RoughTransmittance::eval``.
 
-Tables take about 2 s per distribution to build (two threads) and are cached in memory and on
+Tables take about 2-3 s per distribution to build (two threads) and are cached in memory and on
 disk, in ``$MATREMAP_CACHE_DIR`` or ``~/.cache/matremap`` (skipped silently if not writable).
 """
 
@@ -83,11 +88,11 @@ ETA_MAX = 4.0
 #: smallest cosine (smaller ones are clamped)
 MU_MIN = 1e-6
 
-_FORMAT = 1
+_FORMAT = 2
 # nodes along mu, alpha, eta' (the same on both sides)
 _N_MU, _N_ALPHA, _N_ETA = 48, 44, 26
 # Gauss-Legendre nodes: theta_m panel 1, theta_m panel 2, phi_m (per side)
-_QUAD = {"ext": (8, 12, 8), "int": (8, 24, 8)}
+_QUAD = {"ext": (8, 12, 8), "int": (8, 40, 8)}
 # alpha coordinate: weight of log(alpha) (the rest is linear in alpha)
 _ALPHA_LOG_WEIGHT = 0.5
 # mu coordinate per side: (weight of the asinh part, w = slope * alpha + w0)
@@ -114,9 +119,9 @@ def _gauss01(n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _v_of_cos(distribution: str, cos_m: np.ndarray, alpha: np.ndarray) -> np.ndarray:
-    """Importance variable of a microfacet polar angle, v = 1 at the normal and 0 at grazing:
-    v^2 is the probability, under D(m) cos(theta_m), of a larger angle (beckmann, ggx) or of a
-    smaller cosine power ... for phong, v^2 = cos^(e+2); in all cases D cos dm = |d(v^2)| dphi / 2pi."""
+    """Importance variable of a microfacet polar angle, v = 1 at the normal and 0 at grazing,
+    with D cos(theta_m) dm = |d(v^2)| dphi / (2 pi): v^2 = exp(-tan^2 / alpha^2) (beckmann),
+    alpha^2 / (alpha^2 + tan^2) (ggx), cos^(e + 2) (phong)."""
     cos_m = np.clip(cos_m, 0.0, 1.0)
     tan2 = (1.0 - cos_m * cos_m) / (cos_m * cos_m)
     if distribution == "beckmann":
@@ -168,18 +173,17 @@ def _integrate_chunk(distribution, mu, alpha, eta, nodes):
     inv_eta = 1.0 / eta
     cos_t = np.sqrt(np.maximum(1.0 - (1.0 - c * c) * (inv_eta * inv_eta), 0.0))
     oz = cos_m * (c * inv_eta - cos_t) - mu * inv_eta  # z of o = refract(i, m)
-    oz2 = oz * oz
-    tan2_o = np.maximum(1.0 - oz2, 0.0) / oz2
-    tan2_i = (1.0 - mu * mu) / (mu * mu)
+    tan_o = np.sqrt(np.maximum(1.0 - oz * oz, 0.0)) / np.abs(oz)
+    tan_i = sin_i / mu
     g1 = g1_ggx if distribution == "ggx" else g1_beckmann_rational
-    f = np.where((oz < 0) & (c > 0), g1(tan2_o, alpha) * c * (1.0 - fresnel), 0.0)
+    f = np.where((oz < 0) & (c > 0), g1(tan_o, alpha) * c * (1.0 - fresnel), 0.0)
     inner = f @ wwphi  # [P, n_theta]
     # D cos dm = d(v^2) dphi / (2 pi); phi in [-phi1, phi1]
     jac = (2.0 * v[..., 0] * wv[..., 0]) * (2.0 * phi1[..., 0]) / (mu[..., 0] * cos_m[..., 0])
-    return g1(tan2_i[..., 0, 0], alpha[..., 0, 0]) * (inner * jac).sum(-1) / np.pi
+    return g1(tan_i[..., 0, 0], alpha[..., 0, 0]) * (inner * jac).sum(-1) / np.pi
 
 
-def _integrate(distribution, mu, alpha, eta, quad, workers=None, chunk_elems=1 << 15) -> np.ndarray:
+def _integrate(distribution, mu, alpha, eta, quad, workers=None, chunk_elems=1 << 17) -> np.ndarray:
     """T at points (flattened broadcast of the inputs), chunked, on up to 4 threads."""
     mu, alpha, eta = (np.ravel(a).astype(float) for a in np.broadcast_arrays(mu, alpha, eta))
     alpha = np.maximum(alpha, ALPHA_MIN)
@@ -210,7 +214,7 @@ def _integrate(distribution, mu, alpha, eta, quad, workers=None, chunk_elems=1 <
 
 
 def transmittance_direct(
-    distribution: str, cos_theta, alpha, eta, quad: tuple[int, int, int] = (16, 48, 16)
+    distribution: str, cos_theta, alpha, eta, quad: tuple[int, int, int] = (24, 96, 24)
 ) -> np.ndarray:
     """T by direct numerical integration (no table; not clamped to [0, 1]); slow, for checks.
     ``quad``: Gauss-Legendre nodes in the two theta_m panels and in phi_m."""
@@ -451,7 +455,8 @@ def _load(path: Path, d: str) -> dict[str, np.ndarray] | None:
 
 
 def _save(path: Path, d: str, data: dict[str, np.ndarray]) -> None:
-    """Write atomically (temporary file + os.replace); give up silently if that fails."""
+    """Write atomically (temporary file + os.replace) and drop tables of other grid versions; give
+    up silently if that fails."""
     tmp = None
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -461,6 +466,9 @@ def _save(path: Path, d: str, data: dict[str, np.ndarray]) -> None:
         os.chmod(tmp, 0o644)
         os.replace(tmp, path)
         tmp = None
+        for stale in path.parent.glob(f"rough_transmittance_{d}_*.npz"):  # from other grid versions
+            if stale != path:
+                stale.unlink(missing_ok=True)
     except OSError:
         pass
     finally:
@@ -471,7 +479,7 @@ def _save(path: Path, d: str, data: dict[str, np.ndarray]) -> None:
                 pass
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache  # = lru_cache(maxsize=None)
 def _tables(d: str) -> _Tables:
     path = _cache_path(d)
     data = _load(path, d)
