@@ -29,6 +29,17 @@ EXAMPLES = {
     "render": """examples:
   matremap render 'mitsuba06:ward,alpha=0.2,specularReflectance=0.1' -o ward.exr
   matremap render material.json -o sphere.png --light 45 --size 256 --part specular""",
+    "sweep": """examples:
+  matremap sweep --source mitsuba06:ward,variant=ward,diffuseReflectance=0 --target mitsuba06:pbr \\
+      --fix distribution=as --grid "alpha=0.005:0.99:35,specularReflectance=0.02:0.232:23" --db ward2as.sqlite
+  matremap sweep --source mitsuba06:roughconductor,distribution=as --target mitsuba06:ward \\
+      --grid grid.toml --db as2ward.sqlite --round-trip --dask-local 2
+  (run the same command again to resume; Ctrl-C stops cleanly)""",
+    "sweep-report": """examples:
+  matremap sweep-report ward2as.sqlite -o report/""",
+    "export": """examples:
+  matremap export ward2as.sqlite -o ward2as.csv
+  matremap export ward2as.sqlite -o ward2as.parquet   (needs pyarrow)""",
     "models": """examples:
   matremap models
   matremap models mitsuba06:roughconductor
@@ -175,6 +186,59 @@ def _print_fit(r: dict[str, Any]) -> None:
         print(f"  stage {s['name']}: loss {s['loss']:.4g}, {s['renders']} renders, {s['message']}")
 
 
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from .executors import make_executor
+    from .grid import parse_grid
+    from .sweep import SweepConfig, check_grid_for, describe, run_sweep
+
+    source = load_material(args.source)
+    config = SweepConfig(
+        source=source, target=get_model(args.target).id, fix=parse_assignments(args.fix, "--fix"),
+        free=tuple(args.free), strategy=args.strategy, scene=make_scene(args),
+        source_renderer=args.source_renderer, target_renderer=args.target_renderer,
+        continuation=args.continuation, round_trip=args.round_trip,
+    )
+    grid = parse_grid(args.grid, source.spec)
+    check_grid_for(config, grid)
+    db = Path(args.db)
+    if db.suffix.lower() not in (".sqlite", ".sqlite3", ".db"):
+        raise MatremapError(f"--db {db}: use a .sqlite (or .db) file name")
+    if not db.parent.is_dir():
+        raise MatremapError(f"cannot create {db}: folder {db.parent} does not exist")
+    with make_executor(args.workers, args.scheduler, args.dask_local) as (executor, desc):
+        slots = getattr(executor, "slots", 1)
+        from tqdm import tqdm
+
+        print(f"sweep {source.model} -> {config.target}: {len(grid)} points "
+              f"({' x '.join(f'{a.label} {len(a.values)}' for a in grid.axes)}) on {desc}", file=sys.stderr)
+        with tqdm(total=len(grid), unit="pt", disable=args.no_progress or None, dynamic_ncols=True,
+                  smoothing=0.1) as bar:
+            summary = run_sweep(config, grid, str(db), executor, progress=bar.update, executor_name=desc,
+                                on_start=lambda skipped: bar.update(skipped), in_flight=2 * slots)
+    print(describe(summary), file=sys.stderr)
+    return 130 if summary.interrupted else 0
+
+
+def cmd_sweep_report(args: argparse.Namespace) -> int:
+    from .sweep_report import write_report
+
+    out = Path(args.output)
+    if out.exists() and not out.is_dir():
+        raise MatremapError(f"{out} exists and is not a folder")
+    print(write_report(args.db, out, force=args.force))
+    return 0
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from .imageio import check_output
+    from .sweep_report import export_table
+
+    out = check_output(args.output, args.force, (".csv", ".parquet"))
+    n = export_table(args.db, out)
+    print(f"wrote {out} ({n} rows)", file=sys.stderr)
+    return 0
+
+
 # ---------------------------------------------------------------------------------------------
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # one line, exit 2
@@ -226,12 +290,52 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="overwrite existing output files")
     _scene_args(p)
     p.set_defaults(func=cmd_fit)
+
+    p = sub.add_parser("sweep", help="fit a grid of source materials into a remapping database",
+                       epilog=EXAMPLES["sweep"], formatter_class=fmt)
+    p.add_argument("--source", required=True, metavar="MATERIAL",
+                   help="the base source material; grid values replace its parameters")
+    p.add_argument("--target", required=True, metavar="MODEL", help="target model id")
+    p.add_argument("--grid", required=True,
+                   help="NAME=LO:HI:COUNT[:log] or NAME=V1;V2;..., comma-separated, or a .toml file")
+    p.add_argument("--db", required=True, metavar="FILE.sqlite", help="database (created, or resumed)")
+    p.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE", help="as for fit")
+    p.add_argument("--free", action="append", default=[], metavar="NAME", help="as for fit")
+    p.add_argument("--strategy", choices=("simple", "two-stage", "three-stage"), default="two-stage")
+    p.add_argument("--source-renderer", default="embedded", metavar="NAME")
+    p.add_argument("--target-renderer", default="embedded", metavar="NAME")
+    p.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: all cores)")
+    p.add_argument("--scheduler", metavar="ADDRESS", help="run on a Dask cluster (tcp://host:port)")
+    p.add_argument("--dask-local", type=int, metavar="N", help="start a local Dask cluster of N workers")
+    p.add_argument("--continuation", action="store_true",
+                   help="start each fit from its finished neighbour along the last grid axis")
+    p.add_argument("--round-trip", action="store_true", help="also fit each result back onto the source model")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    _scene_args(p)
+    p.set_defaults(func=cmd_sweep)
+
+    p = sub.add_parser("sweep-report", help="summarise a sweep database and plot it",
+                       epilog=EXAMPLES["sweep-report"], formatter_class=fmt)
+    p.add_argument("db", metavar="DB")
+    p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the PNG plots")
+    p.add_argument("--force", action="store_true", help="overwrite existing plots in DIR")
+    p.set_defaults(func=cmd_sweep_report)
+
+    p = sub.add_parser("export", help="export a sweep database as a table", epilog=EXAMPLES["export"],
+                       formatter_class=fmt)
+    p.add_argument("db", metavar="DB")
+    p.add_argument("-o", "--output", required=True, metavar="FILE", help=".csv or .parquet")
+    p.add_argument("--force", action="store_true", help="overwrite an existing file")
+    p.set_defaults(func=cmd_export)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    from .executors import limit_blas_threads
+
+    limit_blas_threads()
     try:
         return args.func(args)
     except MatremapError as e:

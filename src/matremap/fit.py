@@ -40,10 +40,8 @@ DIFFUSE, SPECULAR, FULL = "diffuse", "specular", "full"
 FD_STEP = 1e-4
 #: a source part whose energy is below this fraction of the full render counts as absent
 ABSENT = 1e-9
-#: try a few roughness values and an intensity ratio before the descent (see initial_guess)
-COARSE_START = True
 #: least_squares ftol / xtol / gtol
-FIT_TOL = 1e-5
+FIT_TOL = 1e-4
 
 
 @dataclass
@@ -257,12 +255,12 @@ class _Problem:
             x[sl] = x[sl] + np.log(best_k) if p.log else x[sl] * best_k
         return np.clip(x, self.lower, self.upper)
 
-    def solve(self, start: Material) -> tuple[Material, Any]:
+    def solve(self, start: Material, coarse: bool = True) -> tuple[Material, Any]:
         x0 = self.encode(start)
         # a start on a bound (e.g. a diffuse albedo of 0) stalls the trust region: move inside
         span = np.minimum(self.upper - self.lower, 1.0)
         x0 = np.where((x0 <= self.lower) | (x0 >= self.upper), self.lower + 0.5 * span, x0)
-        if COARSE_START:
+        if coarse:
             x0 = self.initial_guess(x0)
             x0 = np.where((x0 <= self.lower) | (x0 >= self.upper), self.lower + 0.5 * span, x0)
         sol = least_squares(
@@ -323,11 +321,14 @@ def fit(
     fix: Mapping[str, Any] | None = None,
     free: Sequence[str] = (),
     start: Mapping[str, Any] | None = None,
+    coarse: bool | None = None,
 ) -> FitResult:
     """Remap a uniform ``source`` material onto ``target_model`` (see the module docstring).
 
     ``fix`` sets target options or holds parameters at given values; ``free`` also fits parameters
-    that are held by default (e.g. ``eta`` of a conductor); ``start`` gives starting values.
+    that are held by default (e.g. ``eta`` of a conductor); ``start`` gives starting values (a warm
+    start). ``coarse`` (default: only without ``start``) tries a few roughness values and an
+    intensity ratio in one batched render before the descent.
     """
     t0 = time.perf_counter()
     if strategy not in STRATEGIES:
@@ -346,7 +347,9 @@ def fit(
         if p not in free_params:
             free_params.append(p)
     if start:
-        template = template.with_params(start)
+        template = template.with_params({k: v for k, v in start.items() if k not in (fix or {})})
+    if coarse is None:
+        coarse = not start
     if not free_params:
         raise MatremapError(f"nothing to fit: every parameter of {spec.id} is fixed")
 
@@ -372,12 +375,13 @@ def fit(
         specular_free = [p for p in free_params if p.role in SPECULAR_ROLES]
         for which_part, params in ((DIFFUSE, diffuse_free), (SPECULAR, specular_free)):
             current = _run_stage(
-                which_part, params, current, goals[which_part], total, tgt_r, counter, stages
+                which_part, params, current, goals[which_part], total, tgt_r, counter, stages, coarse=coarse
             )
     if strategy in ("simple", "three-stage"):
         name = "joint" if strategy == "three-stage" else FULL
         current = _run_stage(
-            FULL, free_params, current, goals[FULL], 1.0, tgt_r, counter, stages, name=name
+            FULL, free_params, current, goals[FULL], 1.0, tgt_r, counter, stages, name=name,
+            coarse=coarse and strategy == "simple",
         )
 
     final = counter.pixels(tgt_r, [current])[0]
@@ -429,6 +433,7 @@ def _run_stage(
     counter: _Counter,
     stages: list[StageReport],
     name: str | None = None,
+    coarse: bool = True,
 ) -> Material:
     t0 = time.perf_counter()
     renders0 = counter.images
@@ -459,6 +464,6 @@ def _run_stage(
     # grey goal and grey parameters (grey parameters render grey images in an RGB renderer)
     grey = is_grey(goal) and all(np.all(v == v[0]) for v in current.values.values())
     problem = _Problem(current, params, which, goal, renderer, counter, grey=grey)
-    result, sol = problem.solve(current)
+    result, sol = problem.solve(current, coarse=coarse)
     report(result, float(np.sqrt(2.0 * sol.cost)), problem.evaluations, str(sol.message))
     return result
