@@ -40,6 +40,8 @@ DIFFUSE, SPECULAR, FULL = "diffuse", "specular", "full"
 FD_STEP = 1e-4
 #: a source part whose energy is below this fraction of the full render counts as absent
 ABSENT = 1e-9
+#: cap on residual evaluations per stage (a converging fit needs 3-10; more means it is lost)
+MAX_EVALUATIONS = 50
 #: least_squares ftol / xtol / gtol
 FIT_TOL = 1e-4
 
@@ -273,7 +275,7 @@ class _Problem:
             ftol=FIT_TOL,
             xtol=FIT_TOL,
             gtol=FIT_TOL,
-            max_nfev=200,
+            max_nfev=MAX_EVALUATIONS,
         )
         return self.decode(sol.x), sol
 
