@@ -15,6 +15,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from . import __version__
 from .errors import MatremapError
 from .models import Material, get_model, list_models, parse_material
@@ -40,6 +42,14 @@ EXAMPLES = {
     "export": """examples:
   matremap export ward2as.sqlite -o ward2as.csv
   matremap export ward2as.sqlite -o ward2as.parquet   (needs pyarrow)""",
+    "learn": """examples:
+  matremap learn ward2as.sqlite -o ward2as.json
+  matremap learn ward2as.sqlite --reverse -o as2ward.json
+  matremap learn ward2as.sqlite --method svr -o ward2as-svr.json""",
+    "chain": """examples:
+  matremap chain blender2ward.json ward2ggx.json -o blender2ggx.json""",
+    "apply": """examples:
+  matremap apply ward2as.json --source mitsuba06:ward,variant=ward,alpha=0.3,specularReflectance=0.12""",
     "models": """examples:
   matremap models
   matremap models mitsuba06:roughconductor
@@ -239,6 +249,56 @@ def cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_learn(args: argparse.Namespace) -> int:
+    from .imageio import check_output
+    from .regress.transform import learn_transform
+
+    out = check_output(args.output, args.force, (".json",))
+    t = learn_transform(args.db, method=args.method, reverse=args.reverse, holdout=args.holdout,
+                        exclude_flagged=not args.keep_flagged)
+    t.save(out, force=args.force)
+    print(f"wrote {out}: {t.describe()}, {t.provenance['used']} points "
+          f"({t.provenance['excluded_flagged']} flagged points left out)", file=sys.stderr)
+    for name, e in t.errors.items():
+        lo, hi = t.domain.get(name, (0.0, 0.0))
+        held = e.get("heldout_rmse")
+        held_text = f"held-out RMSE {held:.3g}" if held is not None else "not fitted (constant)"
+        print(f"  {name}: {held_text}, training domain [{lo:.4g}, {hi:.4g}]", file=sys.stderr)
+    return 0
+
+
+def cmd_chain(args: argparse.Namespace) -> int:
+    from .imageio import check_output
+    from .regress.transform import Transform
+
+    out = check_output(args.output, args.force, (".json",))
+    chained = Transform.chain([Transform.load(p) for p in args.transforms])
+    chained.save(out, force=args.force)
+    print(f"wrote {out}: {chained.describe()}", file=sys.stderr)
+    return 0
+
+
+def cmd_apply(args: argparse.Namespace) -> int:
+    from .regress.quantities import material_values
+    from .regress.transform import Transform
+
+    t = Transform.load(args.transform)
+    source = load_material(args.source)
+    if source.model != t.source:
+        raise MatremapError(f"the transform maps {t.source}, not {source.model}")
+    values, outside = t.apply(material_values(source))
+    params = {k: (v.tolist() if np.ndim(v) else float(v)) for k, v in values.items()}
+    target = Material.create(t.target, {**t.target_options, **params})
+    record = {**target.to_dict(), "outside_domain": bool(outside)}
+    if args.json:
+        print(json.dumps(record))
+    else:
+        print(f"{t.describe()}: {json.dumps(record['params'])}")
+        if outside:
+            print("warning: the source lies outside the transform's training domain", file=sys.stderr)
+    return 0
+
+
 # ---------------------------------------------------------------------------------------------
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # one line, exit 2
@@ -327,6 +387,30 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", required=True, metavar="FILE", help=".csv or .parquet")
     p.add_argument("--force", action="store_true", help="overwrite an existing file")
     p.set_defaults(func=cmd_export)
+
+    p = sub.add_parser("learn", help="learn a transform from a sweep database", epilog=EXAMPLES["learn"],
+                       formatter_class=fmt)
+    p.add_argument("db", metavar="DB")
+    p.add_argument("--method", choices=("parametric", "svr"), default="parametric")
+    p.add_argument("-o", "--output", required=True, metavar="T.json")
+    p.add_argument("--reverse", action="store_true", help="learn the target -> source direction")
+    p.add_argument("--holdout", type=float, default=0.2, help="fraction of points held out to pick forms (0.2)")
+    p.add_argument("--keep-flagged", action="store_true", help="also train on points the stability analysis flags")
+    p.add_argument("--force", action="store_true", help="overwrite an existing file")
+    p.set_defaults(func=cmd_learn)
+
+    p = sub.add_parser("chain", help="compose transforms A -> B -> C", epilog=EXAMPLES["chain"], formatter_class=fmt)
+    p.add_argument("transforms", nargs="+", metavar="T.json")
+    p.add_argument("-o", "--output", required=True, metavar="AC.json")
+    p.add_argument("--force", action="store_true", help="overwrite an existing file")
+    p.set_defaults(func=cmd_chain)
+
+    p = sub.add_parser("apply", help="apply a transform to a uniform material", epilog=EXAMPLES["apply"],
+                       formatter_class=fmt)
+    p.add_argument("transform", metavar="T.json")
+    p.add_argument("--source", required=True, metavar="MATERIAL")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_apply)
     return parser
 
 

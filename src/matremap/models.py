@@ -109,6 +109,7 @@ class ModelSpec:
     summary: str = ""
     doc: str = ""
     channel_separable: bool = True
+    reflectance: tuple[str, ...] = ()
 
     @property
     def family(self) -> str:

@@ -44,6 +44,7 @@ WARD = ModelSpec(
     ),
     diffuse_only={"specular_intensity": 0.0},
     specular_only={"diffuse_intensity": 0.0},
+    reflectance=("param", "specular_color"),
 )
 
 

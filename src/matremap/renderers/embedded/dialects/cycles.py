@@ -43,6 +43,7 @@ GLOSSY = ModelSpec(
     options=(OptionSpec("distribution", ("ggx", "beckmann", "ashikhmin_shirley"), "ggx"),),
     diffuse_only={"Color": 0.0},
     specular_only={"Diffuse Color": 0.0},
+    reflectance=("param", "Color"),
 )
 
 

@@ -110,6 +110,7 @@ WARD = ModelSpec(
     diffuse_only={"specularReflectance": 0.0},
     specular_only={"diffuseReflectance": 0.0},
     channel_separable=False,  # the energy clamp looks at all channels at once
+    reflectance=("param", "specularReflectance"),
 )
 
 
@@ -144,6 +145,7 @@ PHONG = ModelSpec(
     diffuse_only={"specularReflectance": 0.0},
     specular_only={"diffuseReflectance": 0.0},
     channel_separable=False,  # the energy clamp looks at all channels at once
+    reflectance=("param", "specularReflectance"),
 )
 
 
@@ -173,6 +175,7 @@ ROUGHCONDUCTOR = ModelSpec(
     options=(_distribution(mf.DISTRIBUTIONS, "beckmann"),),
     diffuse_only=None,
     specular_only={},
+    reflectance=("conductor", "eta", "k", "extEta"),
 )
 
 
@@ -200,6 +203,7 @@ ROUGHPLASTIC = ModelSpec(
     ),
     diffuse_only={"specularReflectance": 0.0},
     specular_only={"diffuseReflectance": 0.0},
+    reflectance=("dielectric", "intIOR", "extIOR"),
 )
 
 
@@ -235,6 +239,7 @@ PBR = ModelSpec(
     options=(_distribution(mf.DISTRIBUTIONS, "as"),),
     diffuse_only={"specularReflectance": 0.0},
     specular_only={"diffuseReflectance": 0.0},
+    reflectance=("param", "F0"),
 )
 
 

@@ -1,0 +1,90 @@
+"""Training data from a remapping database: source and target quantities, row by row."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import MatremapError
+from ..models import Material, ModelSpec, get_model
+from ..store import SweepStore
+from . import quantities as qty
+
+
+@dataclass
+class TrainingData:
+    source: ModelSpec
+    target: ModelSpec
+    source_options: dict[str, str]
+    target_options: dict[str, str]
+    x: dict[str, np.ndarray]  # source quantities: roughness [n], reflectance [n, 3], diffuse [n, 3]
+    y: dict[str, np.ndarray]  # target quantities
+    template: dict[str, Any]  # target parameter values not driven by quantities (as JSON values)
+    provenance: dict[str, Any]
+    source_template: dict[str, Any]  # source values the sweep held fixed (defaults for missing inputs)
+
+    def __len__(self) -> int:
+        return len(next(iter(self.x.values())))
+
+    def varies(self, name: str) -> bool:
+        """Whether a source quantity takes more than one value in the data."""
+        v = self.x.get(name)
+        return v is not None and bool(np.ptp(v) > 1e-12)
+
+    def subset(self, keep: np.ndarray) -> TrainingData:
+        return TrainingData(self.source, self.target, self.source_options, self.target_options,
+                            {k: v[keep] for k, v in self.x.items()}, {k: v[keep] for k, v in self.y.items()},
+                            self.template, self.provenance, self.source_template)
+
+
+def _values(spec: ModelSpec, params: list[dict[str, Any]]) -> dict[str, np.ndarray]:
+    return {p.name: np.array([r[p.name] for r in params], dtype=float) for p in spec.params}
+
+
+def load_training_data(db: str | Path, reverse: bool = False, exclude_flagged: bool = True) -> TrainingData:
+    """Rows of a sweep database as quantities. ``reverse`` swaps source and target (learning the
+    way back); ``exclude_flagged`` leaves out points the stability analysis flags."""
+    from ..grid import Grid
+    from ..stability import analyse
+    from ..sweep import SweepConfig
+
+    with SweepStore.open(db) as store:
+        rows = store.rows()
+        ok = [r for r in rows if r["status"] == "ok"]
+        if not ok:
+            raise MatremapError(f"{db} has no successful fits to learn from ({len(rows)} rows, all failed or none)")
+        try:
+            config = SweepConfig.from_dict(store.config)
+            grid = Grid.from_dict(store.grid) if store.grid else None
+        except (KeyError, TypeError, ValueError) as e:
+            raise MatremapError(f"{db} holds no valid sweep configuration ({e}); was it made by matremap sweep?") from None
+    flagged = 0
+    if exclude_flagged and grid is not None:
+        analysis = analyse(rows, grid, config)
+        kept = [r for r in ok if not analysis.flags.get(r["key"])]
+        flagged = len(ok) - len(kept)
+        ok = kept or ok
+    src_spec, tgt_spec = get_model(config.source.model), get_model(config.target)
+    src_params = [r["source"] for r in ok]
+    tgt_params = [r["target"] for r in ok]
+    src_opts = {o: src_params[0][o] for o in src_spec.option_names}
+    tgt_opts = {o: tgt_params[0][o] for o in tgt_spec.option_names}
+    x = qty.read(src_spec, _values(src_spec, src_params))
+    y = qty.read(tgt_spec, _values(tgt_spec, tgt_params))
+    template_src = config.source.to_dict()["params"]
+    template_tgt = Material.create(tgt_spec.id, tgt_params[0]).to_dict()["params"]
+    provenance = {
+        "database": str(Path(db).name), "sweep": store_config_summary(config), "rows": len(rows),
+        "used": len(ok), "excluded_flagged": flagged, "reverse": reverse,
+    }
+    if reverse:
+        return TrainingData(tgt_spec, src_spec, tgt_opts, src_opts, y, x, template_src, provenance, template_tgt)
+    return TrainingData(src_spec, tgt_spec, src_opts, tgt_opts, x, y, template_tgt, provenance, template_src)
+
+
+def store_config_summary(config: Any) -> dict[str, Any]:
+    d = config.to_dict()
+    return {k: d[k] for k in ("source", "target", "strategy", "scene", "renderers", "matremap")}

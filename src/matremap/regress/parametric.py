@@ -1,0 +1,157 @@
+"""The paper's parametric regression (Sztrajman et al. 2019, §5.1).
+
+* target roughness = a polynomial of the source roughness, degree 1-4 chosen by held-out error;
+* target reflectance = k(alpha_1) * source reflectance, per channel, with
+  k(alpha) = c0 + c1 exp(-c2 alpha) + c3 exp(-c4 alpha^2)          (the paper's form)
+  or the same plus c5 / alpha (a variant in the authors' code), chosen by held-out error;
+  reflectances are F0 values, so models speaking an IOR go through eq. (1) both ways;
+* target diffuse = a per-channel scale of the source diffuse (least squares through the origin).
+
+Every mapping is a small JSON object; :func:`evaluate` applies one to arrays of any shape.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..errors import MatremapError
+from .data import TrainingData
+
+MAX_DEGREE = 4
+MIN_POINTS = 6
+
+
+# -- the forms ---------------------------------------------------------------------------------
+def k_alpha(alpha: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """k(alpha) = c0 + c1 exp(-c2 alpha) + c3 exp(-c4 alpha^2) [+ c5 / alpha]."""
+    alpha = np.asarray(alpha, dtype=float)
+    k = c[0] + c[1] * np.exp(-c[2] * alpha) + c[3] * np.exp(-c[4] * alpha * alpha)
+    if len(c) > 5:
+        k = k + c[5] / np.maximum(alpha, 1e-6)
+    return k
+
+
+def evaluate(mapping: dict[str, Any], x: dict[str, np.ndarray]) -> np.ndarray:
+    """Apply one parametric mapping to source quantities ``x``."""
+    kind, coef = mapping["kind"], np.asarray(mapping.get("coef", []), dtype=float)
+    if kind == "polynomial":
+        return np.polyval(coef, x["roughness"])
+    if kind == "k_alpha":
+        k = k_alpha(x["roughness"], coef) if mapping.get("roughness", True) else coef[0]
+        return np.asarray(k)[..., None] * x["reflectance"]
+    if kind == "scale":
+        return x[mapping["input"]] * coef
+    if kind == "constant":
+        shape = x["roughness"].shape if "roughness" in x else next(iter(x.values())).shape[:-1]
+        v = np.asarray(mapping["value"], dtype=float)
+        return np.broadcast_to(v, (*shape, *v.shape)).copy()
+    raise MatremapError(f"unknown parametric mapping kind {kind!r}")
+
+
+# -- fitting -------------------------------------------------------------------------------------
+def _split(n: int, holdout: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    idx = rng.permutation(n)
+    m = max(1, int(round(holdout * n)))
+    return idx[m:], idx[:m]
+
+
+def _rmse(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.sqrt(np.mean((np.asarray(a) - np.asarray(b)) ** 2)))
+
+
+def fit_roughness(x: np.ndarray, y: np.ndarray, holdout: float = 0.2, seed: int = 0) -> dict[str, Any]:
+    """Polynomial y = p(x), degree chosen by held-out RMSE, then refitted on all points."""
+    train, test = _split(len(x), holdout, seed)
+    scores = {}
+    for d in range(1, MAX_DEGREE + 1):
+        if len(np.unique(x[train])) <= d:
+            break
+        coef = np.polyfit(x[train], y[train], d)
+        scores[d] = _rmse(np.polyval(coef, x[test]), y[test])
+    if not scores:
+        raise MatremapError("too few distinct roughness values to fit a polynomial (need at least 2)")
+    degree = min(scores, key=lambda d: (scores[d] > 1.02 * min(scores.values()), d))  # simplest within 2 %
+    coef = np.polyfit(x, y, degree)
+    return {"kind": "polynomial", "input": "roughness", "coef": coef.tolist(), "degree": degree,
+            "heldout_rmse": scores[degree], "heldout_rmse_by_degree": {str(d): s for d, s in scores.items()}}
+
+
+def _fit_k(alpha: np.ndarray, s1: np.ndarray, s2: np.ndarray, terms: int) -> np.ndarray:
+    """Least squares on k(alpha) s1 - s2 (pooled channels), from a few starts."""
+    ratio = np.median(s2[s1 > 0] / s1[s1 > 0]) if np.any(s1 > 0) else 1.0
+    best = None
+    for c2, c4 in ((1.0, 1.0), (5.0, 5.0), (20.0, 2.0), (0.5, 20.0)):
+        x0 = [ratio, 0.0, c2, 0.0, c4] + ([0.0] * (terms - 5))
+        lo = [-np.inf, -np.inf, 0.0, -np.inf, 0.0] + [-np.inf] * (terms - 5)
+        sol = least_squares(lambda c: k_alpha(alpha, c) * s1 - s2, x0, bounds=(lo, np.inf), method="trf")
+        if best is None or sol.cost < best.cost:
+            best = sol
+    return best.x
+
+
+def fit_reflectance(alpha: np.ndarray | None, s1: np.ndarray, s2: np.ndarray, holdout: float = 0.2,
+                    seed: int = 0) -> dict[str, Any]:
+    """s2 = k(alpha) s1 per channel; with no source roughness, a constant k."""
+    a = None if alpha is None else np.repeat(alpha, s1.shape[-1])
+    s1f, s2f = s1.ravel(), s2.ravel()
+    if a is None:
+        k = float(np.sum(s1f * s2f) / max(np.sum(s1f * s1f), 1e-300))
+        return {"kind": "k_alpha", "input": "reflectance", "roughness": False, "coef": [k],
+                "heldout_rmse_by_form": {}}
+    n = len(alpha)
+    train, test = _split(n, holdout, seed)
+    ch = s1.shape[-1]
+    tr = (train[:, None] * ch + np.arange(ch)).ravel()
+    te = (test[:, None] * ch + np.arange(ch)).ravel()
+    scores, coefs = {}, {}
+    for name, terms in (("paper", 5), ("paper+c5/alpha", 6)):
+        c = _fit_k(a[tr], s1f[tr], s2f[tr], terms)
+        scores[name] = _rmse(k_alpha(a[te], c) * s1f[te], s2f[te])
+        coefs[name] = terms
+    form = min(scores, key=lambda f: (scores[f] > 1.02 * min(scores.values()), coefs[f]))
+    c = _fit_k(a, s1f, s2f, coefs[form])
+    return {"kind": "k_alpha", "input": "reflectance", "roughness": True, "form": form, "coef": c.tolist(),
+            "heldout_rmse": scores[form], "heldout_rmse_by_form": scores}
+
+
+def fit_diffuse(d1: np.ndarray, d2: np.ndarray, holdout: float = 0.2, seed: int = 0) -> dict[str, Any]:
+    """Per-channel scale through the origin."""
+
+    def scale_of(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return np.sum(a * b, axis=0) / np.maximum(np.sum(a * a, axis=0), 1e-300)
+
+    train, test = _split(len(d1), holdout, seed)
+    heldout = _rmse(d1[test] * scale_of(d1[train], d2[train]), d2[test])
+    return {"kind": "scale", "input": "diffuse", "coef": scale_of(d1, d2).tolist(), "heldout_rmse": heldout}
+
+
+def learn(data: TrainingData, holdout: float = 0.2, seed: int = 0) -> dict[str, dict[str, Any]]:
+    """Mappings for every quantity the target speaks: fitted where the data varies, a constant
+    (the value seen in the sweep) where it does not."""
+    if len(data) < MIN_POINTS:
+        raise MatremapError(f"{len(data)} usable points: too few to learn a transform (need {MIN_POINTS})")
+    mappings: dict[str, dict[str, Any]] = {}
+    x, y = data.x, data.y
+    if "roughness" in y:
+        if "roughness" in x and data.varies("roughness"):
+            mappings["roughness"] = fit_roughness(x["roughness"], y["roughness"], holdout, seed)
+        else:
+            mappings["roughness"] = {"kind": "constant", "value": float(np.median(y["roughness"]))}
+    if "reflectance" in y:
+        if "reflectance" in x and data.varies("reflectance"):
+            alpha = x["roughness"] if ("roughness" in x and data.varies("roughness")) else None
+            mappings["reflectance"] = fit_reflectance(alpha, x["reflectance"], y["reflectance"], holdout, seed)
+        else:
+            mappings["reflectance"] = {"kind": "constant", "value": np.median(y["reflectance"], axis=0).tolist()}
+    if "diffuse" in y:
+        if "diffuse" in x and data.varies("diffuse"):
+            mappings["diffuse"] = fit_diffuse(x["diffuse"], y["diffuse"], holdout, seed)
+        else:
+            mappings["diffuse"] = {"kind": "constant", "value": np.median(y["diffuse"], axis=0).tolist()}
+    if all(m["kind"] == "constant" for m in mappings.values()):
+        raise MatremapError("the sweep varies no source quantity the target can follow: nothing to learn")
+    return mappings

@@ -1,0 +1,122 @@
+"""A common vocabulary for remapping: roughness, specular reflectance F0 and diffuse albedo.
+
+Models speak their renderer's names (``alpha``, ``specular_slope``, ``Roughness``; ``F0``,
+``specularReflectance``, an IOR pair, a complex IOR). A transform maps these *quantities*:
+
+``roughness``    the model's roughness-role parameter, as given;
+``reflectance``  F0 per channel: the parameter itself when it is a reflectance, or F0 of an IOR by
+                 eq. (1) of the paper, F0 = ((eta - 1)^2 + k^2) / ((eta + 1)^2 + k^2);
+``diffuse``      the model's RGB diffuse-role parameter.
+
+and converts back: F0 -> IOR is eta = (1 + sqrt F0) / (1 - sqrt F0) for dielectrics, and for a
+conductor with eta held, k = sqrt((F0 (eta + 1)^2 - (eta - 1)^2) / (1 - F0)).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from ..errors import MatremapError
+from ..models import Material, ModelSpec, ParamSpec
+from ..optics import f0_from_ior, ior_from_f0
+
+QUANTITIES = ("roughness", "reflectance", "diffuse")
+
+
+def roughness_param(spec: ModelSpec) -> ParamSpec | None:
+    return next((p for p in spec.params if p.role == "roughness"), None)
+
+
+def diffuse_param(spec: ModelSpec) -> ParamSpec | None:
+    return next((p for p in spec.params if p.role == "diffuse" and p.channels == 3), None)
+
+
+def available(spec: ModelSpec) -> tuple[str, ...]:
+    """The quantities a model can express."""
+    out = []
+    if roughness_param(spec) is not None:
+        out.append("roughness")
+    if spec.reflectance:
+        out.append("reflectance")
+    if diffuse_param(spec) is not None:
+        out.append("diffuse")
+    return tuple(out)
+
+
+def _rgb(v: np.ndarray, channels: int) -> np.ndarray:
+    v = np.asarray(v, dtype=float)
+    return np.repeat(v[..., None], 3, axis=-1) if channels == 1 else v
+
+
+def read(spec: ModelSpec, values: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Quantities from parameter arrays: scalars [...], RGB [..., 3]; roughness [...], the others [..., 3]."""
+    out: dict[str, np.ndarray] = {}
+    rp = roughness_param(spec)
+    if rp is not None:
+        out["roughness"] = np.asarray(values[rp.name], dtype=float)
+    if spec.reflectance:
+        kind, *names = spec.reflectance
+        ch = {p.name: p.channels for p in spec.params}
+        if kind == "param":
+            out["reflectance"] = _rgb(values[names[0]], ch[names[0]])
+        elif kind == "dielectric":
+            eta = np.asarray(values[names[0]], dtype=float) / np.asarray(values[names[1]], dtype=float)
+            out["reflectance"] = _rgb(f0_from_ior(eta), 1)
+        elif kind == "conductor":
+            ext = np.asarray(values[names[2]], dtype=float)[..., None]
+            eta = _rgb(values[names[0]], ch[names[0]]) / ext
+            k = _rgb(values[names[1]], ch[names[1]]) / ext
+            out["reflectance"] = f0_from_ior(eta, k)
+        else:  # pragma: no cover - specs are checked by tests
+            raise ValueError(kind)
+    dp = diffuse_param(spec)
+    if dp is not None:
+        out["diffuse"] = np.asarray(values[dp.name], dtype=float)
+    return out
+
+
+def write(spec: ModelSpec, quantities: Mapping[str, np.ndarray], template: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    """Parameter arrays for ``quantities`` (others from ``template``, broadcast to the same shape)."""
+    shape = next(iter(quantities.values())).shape[:-1] if "roughness" not in quantities else \
+        np.shape(quantities["roughness"])
+    out: dict[str, np.ndarray] = {}
+    for p in spec.params:
+        v = np.asarray(template[p.name], dtype=float)
+        out[p.name] = np.broadcast_to(v if p.channels == 3 else v.reshape(()), (*shape, 3) if p.channels == 3
+                                      else shape).copy()
+    rp = roughness_param(spec)
+    if rp is not None and "roughness" in quantities:
+        out[rp.name] = np.asarray(quantities["roughness"], dtype=float)
+    if spec.reflectance and "reflectance" in quantities:
+        f0 = np.clip(np.asarray(quantities["reflectance"], dtype=float), 0.0, 1.0 - 1e-9)
+        kind, *names = spec.reflectance
+        ch = {p.name: p.channels for p in spec.params}
+        if kind == "param":
+            out[names[0]] = f0 if ch[names[0]] == 3 else f0.mean(axis=-1)
+        elif kind == "dielectric":
+            out[names[0]] = ior_from_f0(f0.mean(axis=-1)) * out[names[1]]
+        elif kind == "conductor":
+            ext = out[names[2]][..., None]
+            eta = _rgb(out[names[0]], ch[names[0]]) / ext
+            k2 = (f0 * (eta + 1) ** 2 - (eta - 1) ** 2) / (1.0 - f0)
+            out[names[1]] = np.sqrt(np.maximum(k2, 0.0)) * ext
+    dp = diffuse_param(spec)
+    if dp is not None and "diffuse" in quantities:
+        out[dp.name] = np.asarray(quantities["diffuse"], dtype=float)
+    for p in spec.params:  # stay inside what the renderer accepts
+        out[p.name] = np.clip(out[p.name], *p.bounds)
+    return out
+
+
+def material_values(m: Material) -> dict[str, np.ndarray]:
+    """A material's parameter values as arrays (scalars 0-d, RGB (3,))."""
+    return {p.name: (m.values[p.name][0] if p.channels == 1 else m.values[p.name]) for p in m.spec.params}
+
+
+def check_quantities(spec: ModelSpec, needed: tuple[str, ...], role: str) -> None:
+    missing = [q for q in needed if q not in available(spec)]
+    if missing:
+        raise MatremapError(f"{role} model {spec.id} cannot express {', '.join(missing)}")

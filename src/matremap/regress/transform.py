@@ -1,0 +1,261 @@
+"""Transforms: learned source -> target mappings as JSON files, applied to arrays of any shape.
+
+A transform file is plain JSON (loading one never runs code)::
+
+    {"schema": "matremap.transform/1", "method": "parametric" | "svr" | "chain",
+     "source": {"model": ..., "options": {...}}, "target": {"model": ..., "options": {...}},
+     "mappings": {"roughness": {...}, "reflectance": {...}, "diffuse": {...}},
+     "template": {target parameters not driven by a mapping},
+     "domain": {"roughness": [lo, hi], "reflectance": [lo, hi], "diffuse": [lo, hi]},
+     "errors": {quantity: {"heldout_rmse": ..., ...}}, "provenance": {...}}
+
+A chain holds its steps instead of mappings (``"steps": [transform, ...]``). Quantities are
+explained in :mod:`.quantities`; mapping forms in :mod:`.parametric` and :mod:`.svr`.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import __version__
+from ..errors import MatremapError
+from ..models import get_model
+from . import quantities as qty
+
+SCHEMA = "matremap.transform/1"
+METHODS = ("parametric", "svr", "chain")
+#: relative slack on the training domain before an input counts as outside it
+DOMAIN_SLACK = 1e-6
+
+
+@dataclass
+class Transform:
+    method: str
+    source: str
+    target: str
+    source_options: dict[str, str] = field(default_factory=dict)
+    target_options: dict[str, str] = field(default_factory=dict)
+    mappings: dict[str, dict[str, Any]] = field(default_factory=dict)
+    template: dict[str, Any] = field(default_factory=dict)
+    source_template: dict[str, Any] = field(default_factory=dict)
+    domain: dict[str, list[float]] = field(default_factory=dict)
+    errors: dict[str, dict[str, float]] = field(default_factory=dict)
+    provenance: dict[str, Any] = field(default_factory=dict)
+    steps: list[Transform] = field(default_factory=list)
+
+    # -- JSON ----------------------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        d: dict[str, Any] = {
+            "schema": SCHEMA,
+            "method": self.method,
+            "source": {"model": self.source, "options": self.source_options},
+            "target": {"model": self.target, "options": self.target_options},
+            "domain": self.domain,
+            "errors": self.errors,
+            "provenance": self.provenance,
+        }
+        if self.method == "chain":
+            d["steps"] = [s.to_dict() for s in self.steps]
+        else:
+            d["mappings"] = self.mappings
+            d["template"] = self.template
+            d["source_template"] = self.source_template
+        return d
+
+    def save(self, path: str | Path, force: bool = False) -> Path:
+        from ..imageio import check_output, write_text
+
+        p = check_output(path, force, (".json",))
+        write_text(p, json.dumps(self.to_dict(), indent=1) + "\n")
+        return p
+
+    @classmethod
+    def from_dict(cls, d: Any, where: str = "transform") -> Transform:
+        """Validate and build; every problem is one MatremapError naming it."""
+        if not isinstance(d, Mapping):
+            raise MatremapError(f"{where}: not a JSON object")
+        if d.get("schema") != SCHEMA:
+            raise MatremapError(f"{where}: schema {d.get('schema')!r} is not {SCHEMA!r}; relearn it with this version")
+        method = d.get("method")
+        if method not in METHODS:
+            raise MatremapError(f"{where}: method {method!r} is not one of {', '.join(METHODS)}")
+        try:
+            src, tgt = d["source"], d["target"]
+            t = cls(method, src["model"], tgt["model"], dict(src.get("options", {})), dict(tgt.get("options", {})),
+                    domain={k: [float(a), float(b)] for k, (a, b) in d.get("domain", {}).items()},
+                    errors=dict(d.get("errors", {})), provenance=dict(d.get("provenance", {})))
+        except (KeyError, TypeError, ValueError) as e:
+            raise MatremapError(f"{where}: malformed source/target/domain ({e})") from None
+        get_model(t.source), get_model(t.target)  # known models
+        if method == "chain":
+            steps = d.get("steps")
+            if not isinstance(steps, list) or len(steps) < 2:
+                raise MatremapError(f"{where}: a chain needs a list of at least two steps")
+            t.steps = [cls.from_dict(s, f"{where} step {i + 1}") for i, s in enumerate(steps)]
+            return t
+        mappings, template = d.get("mappings"), d.get("template")
+        if not isinstance(mappings, Mapping) or not mappings or not isinstance(template, Mapping):
+            raise MatremapError(f"{where}: needs 'mappings' and 'template' objects")
+        unknown = set(mappings) - set(qty.QUANTITIES)
+        if unknown:
+            raise MatremapError(f"{where}: unknown quantities {', '.join(sorted(unknown))}")
+        for name, m in mappings.items():
+            if not isinstance(m, Mapping) or "kind" not in m:
+                raise MatremapError(f"{where}: mapping {name} has no 'kind'")
+        spec = get_model(t.target)
+        missing = [p.name for p in spec.params if p.name not in template]
+        if missing:
+            raise MatremapError(f"{where}: template lacks target parameters {', '.join(missing)}")
+        t.mappings, t.template = {k: dict(v) for k, v in mappings.items()}, dict(template)
+        t.source_template = dict(d.get("source_template", {}))
+        return t
+
+    @classmethod
+    def load(cls, path: str | Path) -> Transform:
+        p = Path(path)
+        try:
+            obj = json.loads(p.read_text())
+        except FileNotFoundError:
+            raise MatremapError(f"transform {p} not found") from None
+        except (OSError, UnicodeDecodeError) as e:
+            raise MatremapError(f"cannot read transform {p}: {e}") from None
+        except json.JSONDecodeError as e:
+            raise MatremapError(f"transform {p} is not valid JSON: {e.msg} (line {e.lineno})") from None
+        return cls.from_dict(obj, str(p))
+
+    # -- application ----------------------------------------------------------------------------
+    def apply(self, values: Mapping[str, Any]) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        """Map source parameter arrays (scalars [...], RGB [..., 3]; missing ones take the values
+        the training sweep held them at) to target parameter arrays; also return a boolean [...]
+        array that is True where an input lies outside the training domain."""
+        if self.method == "chain":
+            out, outside = self.steps[0].apply(values)
+            for step in self.steps[1:]:
+                out, o = step.apply(out)
+                outside = outside | o
+            return out, outside
+        src = get_model(self.source)
+        arrays = _complete(src, values, self.source_template)
+        x = qty.read(src, arrays)
+        for name, v in x.items():
+            if not np.all(np.isfinite(v)):
+                raise MatremapError(f"{self.source} input {name} holds NaN or infinite values; fix or mask them first")
+        outside = np.zeros(_shape(src, arrays), dtype=bool)
+        for name, (lo, hi) in self.domain.items():
+            if name in x:
+                v = x[name] if x[name].ndim == outside.ndim else x[name].max(axis=-1)
+                v_lo = x[name] if x[name].ndim == outside.ndim else x[name].min(axis=-1)
+                slack = DOMAIN_SLACK * max(abs(hi), abs(lo), 1.0)
+                outside |= (v_lo < lo - slack) | (v > hi + slack)
+        y = {name: _evaluate(self.method, m, x) for name, m in self.mappings.items()}
+        return qty.write(get_model(self.target), y, self.template), outside
+
+    # -- composition -----------------------------------------------------------------------------
+    @classmethod
+    def chain(cls, transforms: Sequence[Transform]) -> Transform:
+        """A then B then ...: models must link up (A's target is B's source, same options)."""
+        if len(transforms) < 2:
+            raise MatremapError("a chain needs at least two transforms")
+        steps: list[Transform] = []
+        for t in transforms:
+            steps += t.steps if t.method == "chain" else [t]
+        for a, b in zip(steps, steps[1:], strict=False):
+            if a.target != b.source:
+                raise MatremapError(f"cannot chain: {a.source} -> {a.target} is followed by {b.source} -> {b.target}; "
+                                    f"the models must link up")
+            clash = {k for k in set(a.target_options) & set(b.source_options)
+                     if a.target_options[k] != b.source_options[k]}
+            if clash:
+                k = sorted(clash)[0]
+                raise MatremapError(f"cannot chain: {a.target} with {k}={a.target_options[k]} is followed by a "
+                                    f"transform trained on {k}={b.source_options[k]}")
+        errors = {f"step {i + 1}": {k: v.get("heldout_rmse") for k, v in s.errors.items()} for i, s in enumerate(steps)}
+        return cls("chain", steps[0].source, steps[-1].target, steps[0].source_options, steps[-1].target_options,
+                   domain=steps[0].domain, errors=errors, steps=steps,
+                   provenance={"chained": [f"{s.source} -> {s.target} ({s.method})" for s in steps],
+                               "created": time.strftime("%Y-%m-%dT%H:%M:%S"), "matremap": __version__})
+
+    def describe(self) -> str:
+        if self.method == "chain":
+            return " -> ".join([self.steps[0].source] + [s.target for s in self.steps]) + " (chain)"
+        return f"{self.source} -> {self.target} ({self.method})"
+
+
+def _complete(spec, values: Mapping[str, Any], defaults: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    unknown = set(values) - set(spec.param_names) - set(spec.option_names)
+    if unknown:
+        raise MatremapError(f"{spec.id} has no parameter {sorted(unknown)[0]!r}")
+    arrays = {k: np.asarray(v, dtype=float) for k, v in values.items() if k in spec.param_names}
+    shape = _shape(spec, arrays)
+    out = {}
+    for p in spec.params:
+        if p.name in arrays:
+            a = arrays[p.name]
+            # an RGB array carries a trailing channel axis; one shaped like the scalars is grey
+            if p.channels == 3 and (a.ndim == 0 or a.shape[-1] != 3 or (shape and a.shape == shape)):
+                a = np.repeat(a[..., None], 3, axis=-1)
+            out[p.name] = a
+        else:
+            d = np.asarray(defaults.get(p.name, p.default), dtype=float)
+            out[p.name] = np.broadcast_to(d, (*shape, 3) if p.channels == 3 else shape)
+    return out
+
+
+def _shape(spec, arrays: Mapping[str, np.ndarray]) -> tuple[int, ...]:
+    """The leading (per-element) shape: that of the scalar parameters if any is given, else that
+    of the RGB ones without their channel axis."""
+    channels = {p.name: p.channels for p in spec.params}
+    for k, a in arrays.items():
+        if channels.get(k) == 1:
+            return a.shape
+    for k, a in arrays.items():
+        if channels.get(k) == 3:
+            return a.shape[:-1] if a.ndim and a.shape[-1] == 3 else a.shape
+    return ()
+
+
+def _evaluate(method: str, mapping: dict[str, Any], x: dict[str, np.ndarray]) -> np.ndarray:
+    if mapping["kind"] == "svr":
+        from .svr import evaluate as svr_evaluate
+
+        return svr_evaluate(mapping, x)
+    from .parametric import evaluate
+
+    return evaluate(mapping, x)
+
+
+# ---------------------------------------------------------------------------------------------
+def learn_transform(db: str | Path, method: str = "parametric", reverse: bool = False, holdout: float = 0.2,
+                    seed: int = 0, exclude_flagged: bool = True) -> Transform:
+    """Learn a transform from a sweep database (``reverse``: the target -> source direction)."""
+    from .data import load_training_data
+
+    if method not in ("parametric", "svr"):
+        raise MatremapError(f"unknown method {method!r}; choose parametric or svr")
+    data = load_training_data(db, reverse=reverse, exclude_flagged=exclude_flagged)
+    if method == "parametric":
+        from .parametric import learn
+    else:
+        from .svr import learn
+    mappings = learn(data, holdout=holdout, seed=seed)
+    domain = {name: [float(np.min(v)), float(np.max(v))] for name, v in data.x.items()}
+    errors = {}
+    for name, m in mappings.items():
+        pred = _evaluate(method, m, data.x)
+        errors[name] = {"train_rmse": float(np.sqrt(np.mean((pred - data.y[name]) ** 2)))}
+        for key in ("heldout_rmse",):
+            if key in m:
+                errors[name][key] = m[key]
+    return Transform(
+        method, data.source.id, data.target.id, data.source_options, data.target_options, mappings,
+        data.template, data.source_template, domain, errors,
+        {**data.provenance, "created": time.strftime("%Y-%m-%dT%H:%M:%S"), "matremap": __version__,
+         "holdout": holdout, "seed": seed},
+    )
