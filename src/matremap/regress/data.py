@@ -60,7 +60,9 @@ def load_training_data(db: str | Path, reverse: bool = False, exclude_flagged: b
             config = SweepConfig.from_dict(store.config)
             grid = Grid.from_dict(store.grid) if store.grid else None
         except (KeyError, TypeError, ValueError) as e:
-            raise MatremapError(f"{db} holds no valid sweep configuration ({e}); was it made by matremap sweep?") from None
+            raise MatremapError(
+                f"{db} holds no valid sweep configuration ({e}); was it made by matremap sweep?"
+            ) from None
     flagged = 0
     if exclude_flagged and grid is not None:
         analysis = analyse(rows, grid, config)
