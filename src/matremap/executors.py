@@ -83,6 +83,20 @@ def make_executor(
         pool.shutdown(wait=True, cancel_futures=True)
 
 
+def _check_reachable(address: str) -> None:
+    """Fail fast (one line) when nothing listens at a tcp:// scheduler address."""
+    import socket
+    from urllib.parse import urlsplit
+
+    parts = urlsplit(address if "://" in address else f"tcp://{address}")
+    if parts.scheme != "tcp" or not parts.hostname or not parts.port:
+        raise MatremapError(f"--scheduler {address!r}: give a Dask scheduler address like tcp://host:8786")
+    try:
+        socket.create_connection((parts.hostname, parts.port), timeout=5).close()
+    except OSError as e:
+        raise MatremapError(f"cannot reach the Dask scheduler at {address}: {e.strerror or e}") from None
+
+
 @contextmanager
 def _dask_executor(scheduler: str | None, dask_local: int | None) -> Iterator[tuple[Executor, str]]:
     try:
@@ -101,6 +115,7 @@ def _dask_executor(scheduler: str | None, dask_local: int | None) -> Iterator[tu
             client = Client(cluster)
             desc = f"Dask LocalCluster with {dask_local} workers ({cluster.scheduler_address})"
         else:
+            _check_reachable(scheduler)
             try:
                 client = Client(scheduler, timeout=10)
             except (OSError, TimeoutError) as e:
