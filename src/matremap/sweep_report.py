@@ -236,6 +236,14 @@ def summary(data: SweepData, skipped: Sequence[str] = (), written: Sequence[Path
         for t in trips.values():
             lines.append(f"    {t.param}: slope {t.slope:.4f}, intercept {t.intercept:+.4g}, R² {t.r2:.4f} "
                          f"(y = x: {t.r2_identity:.4f}), n = {t.n}")
+        unflagged = [r for r in data.rows if not a.flags.get(r["key"])]
+        if len(unflagged) < len(data.rows):
+            clean = round_trip_stats(unflagged, grid)
+            lines.append(f"    without the {len(data.rows) - len(unflagged)} flagged points (as the paper filters "
+                         "unstable cases):")
+            for t in clean.values():
+                lines.append(f"    {t.param}: slope {t.slope:.4f}, intercept {t.intercept:+.4g}, R² {t.r2:.4f} "
+                             f"(y = x: {t.r2_identity:.4f}), n = {t.n}")
         back = [r["back_loss"] for r in ok if r.get("back_loss") is not None]
         if back:
             lines.append(f"    back-fit loss: median {np.median(back):.4g}, max {max(back):.4g}")
