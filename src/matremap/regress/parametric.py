@@ -25,29 +25,58 @@ MIN_POINTS = 6
 
 
 # -- the forms ---------------------------------------------------------------------------------
-def k_alpha(alpha: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """k(alpha) = c0 + c1 exp(-c2 alpha) + c3 exp(-c4 alpha^2) [+ c5 / alpha]."""
-    alpha = np.asarray(alpha, dtype=float)
-    k = c[0] + c[1] * np.exp(-c[2] * alpha) + c[3] * np.exp(-c[4] * alpha * alpha)
+def k_alpha(alpha: np.ndarray, c: Any) -> np.ndarray:
+    """k(alpha) = c0 + c1 exp(-c2 alpha) + c3 exp(-c4 alpha^2) [+ c5 / alpha].
+    Keeps alpha's float precision (float32 maps stay float32) and works in place."""
+    c = [float(v) for v in c]
+    alpha = np.asarray(alpha)
+    if not np.issubdtype(alpha.dtype, np.floating):
+        alpha = alpha.astype(float)
+    k = np.array(alpha, copy=True)  # 0-d stays an array, so the in-place steps work for scalars too
+    k *= -c[2]
+    np.exp(k, out=k)
+    k *= c[1]
+    t = np.array(alpha, copy=True)
+    t *= alpha
+    t *= -c[4]
+    np.exp(t, out=t)
+    t *= c[3]
+    k += t
+    k += c[0]
     if len(c) > 5:
-        k = k + c[5] / np.maximum(alpha, 1e-6)
+        np.maximum(alpha, 1e-6, out=t)
+        np.divide(c[5], t, out=t)
+        k += t
     return k
+
+
+def polynomial(coef: Any, x: np.ndarray) -> np.ndarray:
+    """Horner's rule in place (np.polyval's coefficient order), keeping x's float precision."""
+    coef = [float(v) for v in coef]
+    out = np.full_like(x, coef[0], dtype=x.dtype if np.issubdtype(x.dtype, np.floating) else float)
+    for c in coef[1:]:
+        out *= x
+        out += c
+    return out
 
 
 def evaluate(mapping: dict[str, Any], x: dict[str, np.ndarray]) -> np.ndarray:
     """Apply one parametric mapping to source quantities ``x``."""
-    kind, coef = mapping["kind"], np.asarray(mapping.get("coef", []), dtype=float)
+    kind, coef = mapping["kind"], mapping.get("coef", [])
     if kind == "polynomial":
-        return np.polyval(coef, x["roughness"])
+        return polynomial(coef, np.asarray(x["roughness"]))
     if kind == "k_alpha":
-        k = k_alpha(x["roughness"], coef) if mapping.get("roughness", True) else coef[0]
-        return np.asarray(k)[..., None] * x["reflectance"]
+        refl = np.asarray(x["reflectance"])
+        if not mapping.get("roughness", True):
+            return refl * float(coef[0])
+        return k_alpha(x["roughness"], coef)[..., None] * refl
     if kind == "scale":
-        return x[mapping["input"]] * coef
+        v = np.asarray(x[mapping["input"]])
+        return v * np.asarray(coef, dtype=v.dtype if np.issubdtype(v.dtype, np.floating) else float)
     if kind == "constant":
-        shape = x["roughness"].shape if "roughness" in x else next(iter(x.values())).shape[:-1]
+        shape = np.shape(x["roughness"]) if "roughness" in x else np.shape(next(iter(x.values())))[:-1]
         v = np.asarray(mapping["value"], dtype=float)
-        return np.broadcast_to(v, (*shape, *v.shape)).copy()
+        return np.broadcast_to(v, (*shape, *v.shape))
     raise MatremapError(f"unknown parametric mapping kind {kind!r}")
 
 

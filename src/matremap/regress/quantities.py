@@ -47,7 +47,7 @@ def available(spec: ModelSpec) -> tuple[str, ...]:
 
 
 def _rgb(v: np.ndarray, channels: int) -> np.ndarray:
-    v = np.asarray(v, dtype=float)
+    v = _f(v)
     return np.repeat(v[..., None], 3, axis=-1) if channels == 1 else v
 
 
@@ -56,17 +56,17 @@ def read(spec: ModelSpec, values: Mapping[str, np.ndarray]) -> dict[str, np.ndar
     out: dict[str, np.ndarray] = {}
     rp = roughness_param(spec)
     if rp is not None:
-        out["roughness"] = np.asarray(values[rp.name], dtype=float)
+        out["roughness"] = _f(values[rp.name])
     if spec.reflectance:
         kind, *names = spec.reflectance
         ch = {p.name: p.channels for p in spec.params}
         if kind == "param":
             out["reflectance"] = _rgb(values[names[0]], ch[names[0]])
         elif kind == "dielectric":
-            eta = np.asarray(values[names[0]], dtype=float) / np.asarray(values[names[1]], dtype=float)
+            eta = _f(values[names[0]]) / _f(values[names[1]])
             out["reflectance"] = _rgb(f0_from_ior(eta), 1)
         elif kind == "conductor":
-            ext = np.asarray(values[names[2]], dtype=float)[..., None]
+            ext = _f(values[names[2]])[..., None]
             eta = _rgb(values[names[0]], ch[names[0]]) / ext
             k = _rgb(values[names[1]], ch[names[1]]) / ext
             out["reflectance"] = f0_from_ior(eta, k)
@@ -74,40 +74,59 @@ def read(spec: ModelSpec, values: Mapping[str, np.ndarray]) -> dict[str, np.ndar
             raise ValueError(kind)
     dp = diffuse_param(spec)
     if dp is not None:
-        out["diffuse"] = np.asarray(values[dp.name], dtype=float)
+        out["diffuse"] = _f(values[dp.name])
     return out
 
 
+def _f(v: Any) -> np.ndarray:
+    """Floats, keeping float32 as float32."""
+    a = np.asarray(v)
+    return a if a.dtype in (np.float32, np.float64) else a.astype(float)
+
+
 def write(spec: ModelSpec, quantities: Mapping[str, np.ndarray], template: Mapping[str, Any]) -> dict[str, np.ndarray]:
-    """Parameter arrays for ``quantities`` (others from ``template``, broadcast to the same shape)."""
-    shape = next(iter(quantities.values())).shape[:-1] if "roughness" not in quantities else \
-        np.shape(quantities["roughness"])
+    """Parameter arrays for ``quantities``; parameters no quantity drives keep ``template``'s value
+    (returned as read-only broadcast views: no memory per texel)."""
+    if "roughness" in quantities:
+        shape = np.shape(quantities["roughness"])
+    else:
+        shape = np.shape(next(iter(quantities.values())))[:-1]
     out: dict[str, np.ndarray] = {}
     for p in spec.params:
         v = np.asarray(template[p.name], dtype=float)
         out[p.name] = np.broadcast_to(v if p.channels == 3 else v.reshape(()), (*shape, 3) if p.channels == 3
-                                      else shape).copy()
+                                      else shape)
+    driven: list[str] = []
     rp = roughness_param(spec)
     if rp is not None and "roughness" in quantities:
-        out[rp.name] = np.asarray(quantities["roughness"], dtype=float)
+        out[rp.name] = _f(quantities["roughness"])
+        driven.append(rp.name)
     if spec.reflectance and "reflectance" in quantities:
-        f0 = np.clip(np.asarray(quantities["reflectance"], dtype=float), 0.0, 1.0 - 1e-9)
+        f0 = np.clip(_f(quantities["reflectance"]), 0.0, 1.0 - 1e-7)
         kind, *names = spec.reflectance
         ch = {p.name: p.channels for p in spec.params}
         if kind == "param":
             out[names[0]] = f0 if ch[names[0]] == 3 else f0.mean(axis=-1)
+            driven.append(names[0])
         elif kind == "dielectric":
             out[names[0]] = ior_from_f0(f0.mean(axis=-1)) * out[names[1]]
+            driven.append(names[0])
         elif kind == "conductor":
             ext = out[names[2]][..., None]
             eta = _rgb(out[names[0]], ch[names[0]]) / ext
             k2 = (f0 * (eta + 1) ** 2 - (eta - 1) ** 2) / (1.0 - f0)
             out[names[1]] = np.sqrt(np.maximum(k2, 0.0)) * ext
+            driven.append(names[1])
     dp = diffuse_param(spec)
     if dp is not None and "diffuse" in quantities:
-        out[dp.name] = np.asarray(quantities["diffuse"], dtype=float)
-    for p in spec.params:  # stay inside what the renderer accepts
-        out[p.name] = np.clip(out[p.name], *p.bounds)
+        out[dp.name] = _f(quantities["diffuse"])
+        driven.append(dp.name)
+    bounds = {p.name: p.bounds for p in spec.params}
+    for name in driven:  # stay inside what the renderer accepts (in place: these arrays are ours)
+        a = out[name]
+        if not a.flags.writeable or not a.flags.owndata:
+            a = np.array(a)
+        out[name] = np.clip(a, *bounds[name], out=a)
     return out
 
 

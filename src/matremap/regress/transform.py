@@ -145,15 +145,17 @@ class Transform:
         arrays = _complete(src, values, self.source_template)
         x = qty.read(src, arrays)
         for name, v in x.items():
-            if not np.all(np.isfinite(v)):
-                raise MatremapError(f"{self.source} input {name} holds NaN or infinite values; fix or mask them first")
+            if not np.isfinite(v.sum()):  # one pass; a NaN or inf anywhere makes the sum non-finite
+                if not np.all(np.isfinite(v)):
+                    raise MatremapError(
+                        f"{self.source} input {name} holds NaN or infinite values; fix or mask them first"
+                    )
         outside = np.zeros(_shape(src, arrays), dtype=bool)
         for name, (lo, hi) in self.domain.items():
             if name in x:
-                v = x[name] if x[name].ndim == outside.ndim else x[name].max(axis=-1)
-                v_lo = x[name] if x[name].ndim == outside.ndim else x[name].min(axis=-1)
                 slack = DOMAIN_SLACK * max(abs(hi), abs(lo), 1.0)
-                outside |= (v_lo < lo - slack) | (v > hi + slack)
+                off = (x[name] < lo - slack) | (x[name] > hi + slack)
+                outside |= off if off.ndim == outside.ndim else off.any(axis=-1)
         y = {name: _evaluate(self.method, m, x) for name, m in self.mappings.items()}
         return qty.write(get_model(self.target), y, self.template), outside
 
@@ -192,7 +194,7 @@ def _complete(spec, values: Mapping[str, Any], defaults: Mapping[str, Any]) -> d
     unknown = set(values) - set(spec.param_names) - set(spec.option_names)
     if unknown:
         raise MatremapError(f"{spec.id} has no parameter {sorted(unknown)[0]!r}")
-    arrays = {k: np.asarray(v, dtype=float) for k, v in values.items() if k in spec.param_names}
+    arrays = {k: _floating(v) for k, v in values.items() if k in spec.param_names}
     shape = _shape(spec, arrays)
     out = {}
     for p in spec.params:
@@ -206,6 +208,12 @@ def _complete(spec, values: Mapping[str, Any], defaults: Mapping[str, Any]) -> d
             d = np.asarray(defaults.get(p.name, p.default), dtype=float)
             out[p.name] = np.broadcast_to(d, (*shape, 3) if p.channels == 3 else shape)
     return out
+
+
+def _floating(v: Any) -> np.ndarray:
+    """An array of floats, keeping float32 (texture maps) as it is."""
+    a = np.asarray(v)
+    return a if a.dtype in (np.float32, np.float64) else a.astype(float)
 
 
 def _shape(spec, arrays: Mapping[str, np.ndarray]) -> tuple[int, ...]:
