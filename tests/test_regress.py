@@ -168,3 +168,19 @@ def test_cli_learn_chain_apply(ward_db, tmp_path, capsys):
     assert main(["learn", str(ward_db), "-o", str(t1)]) == 2  # exists, no --force
     assert not out.exists()
     assert "--force" in capsys.readouterr().err
+
+
+def test_chunked_apply_equals_one_pass(ward_to_as, monkeypatch):
+    import matremap.regress.transform as transform_module
+
+    rng = np.random.default_rng(3)
+    values = {"alpha": rng.uniform(0.1, 0.8, (37, 29)).astype(np.float32),
+              "specularReflectance": rng.uniform(0.03, 0.2, (37, 29, 3)).astype(np.float32)}
+    whole, outside = ward_to_as.apply(values)
+    monkeypatch.setattr(transform_module, "CHUNK", 100)
+    chunked, outside_chunked = ward_to_as.apply(values)
+    assert set(chunked) == set(whole)
+    for k in whole:
+        np.testing.assert_array_equal(chunked[k], whole[k])
+    np.testing.assert_array_equal(outside_chunked, outside)
+    assert chunked["F0"].dtype == np.float32
