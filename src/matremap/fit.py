@@ -40,6 +40,8 @@ DIFFUSE, SPECULAR, FULL = "diffuse", "specular", "full"
 FD_STEP = 1e-4
 #: a source part whose energy is below this fraction of the full render counts as absent
 ABSENT = 1e-9
+#: a relative RMSE this small is float32 round-off: the images match
+EXACT = 1e-6
 #: cap on residual evaluations per stage (a converging fit needs 3-10; more means it is lost)
 MAX_EVALUATIONS = 50
 #: least_squares ftol / xtol / gtol
@@ -194,6 +196,8 @@ class _Problem:
         return pix[:, :, :1] if self.grey else pix
 
     def residual(self, x: np.ndarray) -> np.ndarray:
+        if self._last is not None and np.array_equal(self._last[0], x):
+            return self._last[1]
         self.evaluations += 1
         r = ((self._pixels([x])[0] - self.goal) / self.norm).ravel()
         self._last = (x.copy(), r)
@@ -265,6 +269,11 @@ class _Problem:
         if coarse:
             x0 = self.initial_guess(x0)
             x0 = np.where((x0 <= self.lower) | (x0 >= self.upper), self.lower + 0.5 * span, x0)
+            # the start may already match to float32 precision (e.g. one Lambertian onto another):
+            # nothing left to descend
+            r0 = self.residual(x0)
+            if float(np.sqrt(r0 @ r0)) < EXACT:
+                return self.decode(x0), _Solved(x0, 0.5 * float(r0 @ r0), "the start matches the source exactly")
         sol = least_squares(
             self.residual,
             x0,
@@ -278,6 +287,15 @@ class _Problem:
             max_nfev=MAX_EVALUATIONS,
         )
         return self.decode(sol.x), sol
+
+
+@dataclass
+class _Solved:
+    """The part of scipy's OptimizeResult a stage reads, for a stage finished without descent."""
+
+    x: np.ndarray
+    cost: float
+    message: str
 
 
 def roughness_candidates(p: ParamSpec, count: int = 5) -> np.ndarray:
