@@ -50,6 +50,14 @@ EXAMPLES = {
   matremap chain blender2ward.json ward2ggx.json -o blender2ggx.json""",
     "apply": """examples:
   matremap apply ward2as.json --source mitsuba06:ward,variant=ward,alpha=0.3,specularReflectance=0.12""",
+    "convert": """examples:
+  matremap convert examples/bronze --transform ward2as.json -o out/bronze-as
+  matremap convert maps/ --model mitsuba06:ward --transform a.json --transform b.json -o out/""",
+    "evaluate": """examples:
+  matremap evaluate examples/bronze out/bronze-as --envmap builtin --rotations 0:360:12 -o out/eval""",
+    "remap": """examples:
+  matremap remap examples/blue-plastic --from mitsuba06:ward --to mitsuba06:pbr --fix distribution=as -o out/plastic
+  (a second run reuses the cached transform)""",
     "models": """examples:
   matremap models
   matremap models mitsuba06:roughconductor
@@ -299,6 +307,67 @@ def cmd_apply(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_convert(args: argparse.Namespace) -> int:
+    from .regress.transform import Transform
+    from .svbrdf import convert
+    from .textures import load_map_set
+
+    transforms = [Transform.load(p) for p in args.transform]
+    map_set = load_map_set(args.maps, args.model)
+    for note in map_set.notes:
+        print(f"matremap: note: {note}", file=sys.stderr)
+    import warnings
+
+    with warnings.catch_warnings():  # reported below, in one line
+        warnings.simplefilter("ignore", UserWarning)
+        report = convert(map_set, transforms, args.output, workers=args.workers, force=args.force,
+                         out_format=args.format)
+    for note in report.notes:
+        print(f"matremap: note: {note}", file=sys.stderr)
+    if report.outside:
+        print(f"matremap: warning: {report.outside} of {report.texels} texels "
+              f"({100 * report.outside_fraction:.2f}%) lie outside the transform's training domain; "
+              f"see {Path(args.output) / 'outside_domain.png'}", file=sys.stderr)
+    print(f"wrote {args.output}: {report.model}, {report.texels} texels in {report.seconds:.2f} s", file=sys.stderr)
+    return 0
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from .envmap import resolve
+    from .evaluate import evaluate, parse_rotations
+    from .remap import load_arrays
+    from .textures import load_map_set
+
+    rotations = parse_rotations(args.rotations)
+    env = resolve(args.envmap)
+    sets = [load_map_set(p, m) for p, m in ((args.source_maps, args.source_model),
+                                            (args.target_maps, args.target_model))]
+    materials = []
+    for ms in sets:
+        params, normal = load_arrays(ms)
+        materials.append((ms.model, params, ms.options, normal))
+    result = evaluate(materials[0], materials[1], env, rotations, args.output, geometry=args.geometry,
+                      resolution=args.size, lights=args.lights, force=args.force)
+    print(f"mean 1-SSIM {result.mean_full:.4f} (specular only {result.mean_specular:.4f}) over "
+          f"{len(rotations)} rotations; report {Path(args.output) / 'report.html'}")
+    return 0
+
+
+def cmd_remap(args: argparse.Namespace) -> int:
+    from .remap import remap
+
+    result = remap(
+        args.maps, args.source, args.target, args.output, fix=parse_assignments(args.fix, "--fix"),
+        strategy=args.strategy, envmap=args.envmap, rotations=args.rotations, resolution=args.size,
+        lights=args.lights, workers=args.workers, cache=Path(args.cache) if args.cache else None,
+        evaluate=not args.no_evaluate, force=args.force, log=lambda m: print(m, file=sys.stderr),
+    )
+    print(f"done in {result.seconds['total']:.1f} s: maps {result.maps}"
+          + (f", report {result.report}" if result.report else "")
+          + (f", mean 1-SSIM {result.mean_dssim:.4f}" if result.mean_dssim is not None else ""))
+    return 0
+
+
 # ---------------------------------------------------------------------------------------------
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # one line, exit 2
@@ -411,6 +480,52 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--source", required=True, metavar="MATERIAL")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_apply)
+
+    p = sub.add_parser("convert", help="apply transforms to an SVBRDF map set", epilog=EXAMPLES["convert"],
+                       formatter_class=fmt)
+    p.add_argument("maps", metavar="MAPS", help="folder of maps (material.json, or *_diffuse/_specular/"
+                   "_roughness/_normal file names)")
+    p.add_argument("--transform", action="append", required=True, metavar="T.json",
+                   help="transform to apply; several are chained in order")
+    p.add_argument("-o", "--output", required=True, metavar="OUT", help="output folder")
+    p.add_argument("--model", help="source model, when the folder has no manifest")
+    p.add_argument("--format", help="output format instead of the inputs' (e.g. exr, png16)")
+    p.add_argument("--workers", type=int, default=2, metavar="N")
+    p.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    p.set_defaults(func=cmd_convert)
+
+    p = sub.add_parser("evaluate", help="compare two map sets under an environment map (SSIM, HTML report)",
+                       epilog=EXAMPLES["evaluate"], formatter_class=fmt)
+    p.add_argument("source_maps", metavar="SOURCE_MAPS")
+    p.add_argument("target_maps", metavar="TARGET_MAPS")
+    p.add_argument("--source-model", help="source model, when its folder has no manifest")
+    p.add_argument("--target-model", help="target model, when its folder has no manifest")
+    p.add_argument("--envmap", default="builtin", help="EXR/HDR file, or 'builtin' (default)")
+    p.add_argument("--rotations", default="0:360:12", help="START:STOP:COUNT in degrees (default 0:360:12)")
+    p.add_argument("--geometry", choices=("sphere", "plane"), default="sphere")
+    p.add_argument("--size", type=int, default=256, metavar="N", help="render resolution (default 256)")
+    p.add_argument("--lights", type=int, default=256, help="directional lights sampled from the map (256)")
+    p.add_argument("-o", "--output", required=True, metavar="DIR")
+    p.add_argument("--force", action="store_true", help="overwrite an existing report")
+    p.set_defaults(func=cmd_evaluate)
+
+    p = sub.add_parser("remap", help="the main job: sweep, learn, convert and evaluate a map set",
+                       epilog=EXAMPLES["remap"], formatter_class=fmt)
+    p.add_argument("maps", metavar="MAPS")
+    p.add_argument("--from", dest="source", metavar="MODEL", help="source model (default: the manifest's)")
+    p.add_argument("--to", dest="target", required=True, metavar="MODEL", help="target model")
+    p.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE", help="target options/held values")
+    p.add_argument("--strategy", choices=("simple", "two-stage", "three-stage"), default="two-stage")
+    p.add_argument("-o", "--output", required=True, metavar="OUT", help="output folder (maps/ and report/)")
+    p.add_argument("--envmap", default="builtin")
+    p.add_argument("--rotations", default="0:360:6")
+    p.add_argument("--size", type=int, default=160, metavar="N", help="evaluation render resolution (160)")
+    p.add_argument("--lights", type=int, default=128)
+    p.add_argument("--workers", type=int, metavar="N")
+    p.add_argument("--cache", metavar="DIR", help="transform cache (default ~/.cache/matremap/transforms)")
+    p.add_argument("--no-evaluate", action="store_true", help="skip the evaluation renders")
+    p.add_argument("--force", action="store_true", help="write into an existing output folder")
+    p.set_defaults(func=cmd_remap)
     return parser
 
 

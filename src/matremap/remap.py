@@ -1,0 +1,198 @@
+"""The main job: remap an SVBRDF map set from one model to another, end to end.
+
+sweep -> learn -> convert -> evaluate (paper §4-6):
+
+1. a sweep over the source parameters the maps actually use (the roughness and specular maps'
+   value ranges, and two diffuse levels), fitted onto the target model on the probe scene;
+2. a parametric transform learned from it, cached by everything that decides it, so a second run
+   with the same maps and models reuses it;
+3. the transform applied to every texel (:func:`matremap.svbrdf.convert`);
+4. source and result rendered under an environment map at several rotations and compared with SSIM
+   (:func:`matremap.evaluate.evaluate`), into a self-contained HTML report.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import time
+import warnings
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import __version__
+from .errors import MatremapError
+from .models import Material, get_model
+from .regress import quantities as qty
+from .regress.transform import Transform
+from .scene import Scene
+from .textures import MapSet, load_map_set, map_values, read_image
+
+#: grid points along the roughness and the specular axes of the sweep, and the diffuse levels
+ROUGHNESS_POINTS, SPECULAR_POINTS, DIFFUSE_LEVELS = 10, 6, (0.0, 1.0)
+
+
+@dataclass
+class RemapResult:
+    transform: Path
+    cached: bool
+    maps: Path
+    report: Path | None
+    outside: int
+    texels: int
+    mean_dssim: float | None
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+def default_cache() -> Path:
+    return Path(os.environ.get("MATREMAP_CACHE_DIR") or Path.home() / ".cache" / "matremap") / "transforms"
+
+
+def load_arrays(map_set: MapSet) -> tuple[dict[str, Any], np.ndarray | None]:
+    """Every map of a set as parameter arrays (model units), constants as they are, and the
+    normal map decoded to [-1, 1] (or None)."""
+    spec = map_set.spec
+    params: dict[str, Any] = {k: v for k, v in map_set.constants.items() if k in spec.param_names}
+    for name, path in map_set.maps.items():
+        image, _ = read_image(path, map_set.colorspace.get(name))
+        params[name] = map_values(spec, name, image, path, 0)
+    normal = None
+    if map_set.normal is not None:
+        from .svbrdf_render import decode_normal_map
+
+        normal = decode_normal_map(read_image(map_set.normal, "linear", colour=False)[0])
+    return params, normal
+
+
+def sweep_grid(map_set: MapSet, params: Mapping[str, Any]) -> str:
+    """A grid over the values the maps hold: roughness and specular ranges (grey), and two diffuse
+    levels so that the diffuse mapping is learned too."""
+    spec = map_set.spec
+    axes = []
+    rp = qty.roughness_param(spec)
+    if rp is not None and rp.name in map_set.maps:
+        lo, hi = _range(params[rp.name], rp.bounds)
+        axes.append(f"{rp.name}={lo!r}:{hi!r}:{ROUGHNESS_POINTS}")
+    if spec.reflectance and spec.reflectance[0] == "param" and spec.reflectance[1] in map_set.maps:
+        name = spec.reflectance[1]
+        lo, hi = _range(params[name], spec.param(name).bounds)
+        axes.append(f"{name}={lo!r}:{hi!r}:{SPECULAR_POINTS}")
+    dp = qty.diffuse_param(spec)
+    if dp is not None and dp.name in map_set.maps:
+        axes.append(f"{dp.name}={';'.join(repr(v) for v in DIFFUSE_LEVELS)}")
+    if not axes:
+        raise MatremapError(f"the map set gives no roughness, specular or diffuse map of {spec.id} to remap")
+    return ",".join(axes)
+
+
+def _range(values: Any, bounds: tuple[float, float]) -> tuple[float, float]:
+    v = np.asarray(values, dtype=float)
+    lo, hi = float(np.min(v)), float(np.max(v))
+    pad = 0.02 * (hi - lo) if hi > lo else 0.05 * max(abs(hi), 1e-3)
+    lo, hi = max(bounds[0], lo - pad, 1e-4), min(bounds[1], hi + pad)
+    return round(lo, 6), round(hi, 6)
+
+
+def cached_transform(
+    map_set: MapSet, params: Mapping[str, Any], target: str, fix: Mapping[str, Any], strategy: str,
+    cache: Path, workers: int | None, log: Callable[[str], None],
+) -> tuple[Transform, Path, bool]:
+    """The transform for these maps and models: from the cache, or swept and learned now."""
+    from .executors import make_executor
+    from .grid import parse_grid
+    from .regress.transform import learn_transform
+    from .sweep import SweepConfig, describe, run_sweep
+
+    spec = map_set.spec
+    base = Material.create(spec.id, {k: v for k, v in map_set.constants.items() if k not in map_set.maps})
+    grid_text = sweep_grid(map_set, params)
+    config = SweepConfig(source=base, target=get_model(target).id, fix=dict(fix), strategy=strategy, scene=Scene())
+    key_doc = {"config": config.to_dict(), "grid": grid_text, "version": __version__}
+    key = hashlib.sha256(json.dumps(key_doc, sort_keys=True).encode()).hexdigest()[:16]
+    cache.mkdir(parents=True, exist_ok=True)
+    path = cache / f"{spec.id.replace(':', '-')}--{config.target.replace(':', '-')}-{key}.json"
+    if path.is_file():
+        log(f"transform: cached {path}")
+        return Transform.load(path), path, True
+    db = path.with_suffix(".sqlite")
+    grid = parse_grid(grid_text, spec)
+    log(f"sweep: {spec.id} -> {config.target}, {len(grid)} fits over {grid_text}")
+    with make_executor(workers) as (executor, desc):
+        summary = run_sweep(config, grid, str(db), executor, executor_name=desc,
+                            in_flight=2 * getattr(executor, "slots", 1))
+    log(f"sweep: {describe(summary)}")
+    transform = learn_transform(db)
+    transform.save(path, force=True)
+    log(f"learn: {transform.describe()}, held-out RMSE "
+        + ", ".join(f"{k} {v['heldout_rmse']:.3g}" for k, v in transform.errors.items() if "heldout_rmse" in v))
+    return transform, path, False
+
+
+def remap(
+    maps: str | Path, source_model: str | None, target_model: str, out: str | Path, *,
+    fix: Mapping[str, Any] | None = None, strategy: str = "two-stage", envmap: str = "builtin",
+    rotations: str = "0:360:6", resolution: int = 160, lights: int = 128, workers: int | None = None,
+    cache: Path | None = None, evaluate: bool = True, force: bool = False,
+    log: Callable[[str], None] = print,
+) -> RemapResult:
+    """Remap the map set ``maps`` onto ``target_model``; write ``OUT/maps`` and ``OUT/report``."""
+    from .envmap import resolve
+    from .evaluate import evaluate as run_evaluation
+    from .evaluate import parse_rotations
+    from .svbrdf import convert
+
+    t0 = time.perf_counter()
+    seconds: dict[str, float] = {}
+    map_set = load_map_set(maps, source_model)
+    target = get_model(target_model).id
+    out = Path(out)
+    if out.exists() and any(out.iterdir()) and not force:
+        raise MatremapError(f"{out} exists and is not empty; pass --force to write into it")
+    root = Path(map_set.root).resolve()
+    if out.resolve() == root or root in out.resolve().parents:
+        raise MatremapError(f"{out} is inside the input folder {root}; choose another output folder")
+    angles = parse_rotations(rotations) if evaluate else []
+    env = resolve(envmap) if evaluate else None
+    if not out.parent.is_dir():
+        raise MatremapError(f"cannot write {out}: folder {out.parent} does not exist")
+    params, normal = load_arrays(map_set)
+    seconds["load"] = time.perf_counter() - t0
+
+    t = time.perf_counter()
+    transform, tpath, cached = cached_transform(map_set, params, target, fix or {}, strategy,
+                                                cache or default_cache(), workers, log)
+    seconds["transform"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    out.mkdir(exist_ok=True)
+    with warnings.catch_warnings():  # the outside-domain count is logged below
+        warnings.simplefilter("ignore", UserWarning)
+        report = convert(map_set, [transform], out / "maps", workers=workers or 2, force=force)
+    seconds["convert"] = time.perf_counter() - t
+    log(f"convert: {report.texels} texels into {out / 'maps'}"
+        + (f"; {report.outside} outside the training domain (see outside_domain.png)" if report.outside else ""))
+
+    mean = None
+    html = None
+    if evaluate:
+        t = time.perf_counter()
+        result_set = load_map_set(out / "maps")
+        target_params, target_normal = load_arrays(result_set)
+        result = run_evaluation(
+            (map_set.model, params, map_set.options, normal),
+            (result_set.model, target_params, result_set.options, target_normal),
+            env, angles, out / "report", resolution=resolution, lights=lights, force=force,
+            title=f"{map_set.model} -> {result_set.model}: {Path(maps).name}",
+        )
+        seconds["evaluate"] = time.perf_counter() - t
+        mean = float(result.mean_full)
+        html = out / "report" / "report.html"
+        log(f"evaluate: mean 1-SSIM {result.mean_full:.4f} (specular only {result.mean_specular:.4f}) over "
+            f"{len(angles)} rotations; {html}")
+    seconds["total"] = time.perf_counter() - t0
+    return RemapResult(tpath, cached, out / "maps", html, int(report.outside), int(report.texels), mean, seconds)
