@@ -121,7 +121,9 @@ def _svr(C: float, gamma: float, epsilon: float):
     try:
         from sklearn.svm import SVR
     except ImportError:  # pragma: no cover - depends on the environment
-        raise MatremapError("learning an SVR transform needs scikit-learn: pip install 'matremap[svr]' (or scikit-learn)") from None
+        raise MatremapError(
+            "learning an SVR transform needs scikit-learn: pip install 'matremap[svr]' (or scikit-learn)"
+        ) from None
     return SVR(kernel="rbf", C=C, gamma=gamma, epsilon=epsilon, tol=1e-4, cache_size=100)
 
 
