@@ -100,7 +100,7 @@ def _range(values: Any, bounds: tuple[float, float]) -> tuple[float, float]:
 
 def cached_transform(
     map_set: MapSet, params: Mapping[str, Any], target: str, fix: Mapping[str, Any], strategy: str,
-    cache: Path, workers: int | None, log: Callable[[str], None],
+    cache: Path, workers: int | None, log: Callable[[str], None], scene: Scene | None = None,
 ) -> tuple[Transform, Path, bool]:
     """The transform for these maps and models: from the cache, or swept and learned now."""
     from .executors import make_executor
@@ -111,7 +111,7 @@ def cached_transform(
     spec = map_set.spec
     base = Material.create(spec.id, {k: v for k, v in map_set.constants.items() if k not in map_set.maps})
     grid_text = sweep_grid(map_set, params)
-    config = SweepConfig(source=base, target=get_model(target).id, fix=dict(fix), strategy=strategy, scene=Scene())
+    config = SweepConfig(source=base, target=get_model(target).id, fix=dict(fix), strategy=strategy, scene=scene or Scene())
     key_doc = {"config": config.to_dict(), "grid": grid_text, "version": __version__}
     key = hashlib.sha256(json.dumps(key_doc, sort_keys=True).encode()).hexdigest()[:16]
     cache.mkdir(parents=True, exist_ok=True)
@@ -137,10 +137,11 @@ def remap(
     maps: str | Path, source_model: str | None, target_model: str, out: str | Path, *,
     fix: Mapping[str, Any] | None = None, strategy: str = "two-stage", envmap: str = "builtin",
     rotations: str = "0:360:6", resolution: int = 160, lights: int = 128, workers: int | None = None,
-    cache: Path | None = None, evaluate: bool = True, force: bool = False,
+    cache: Path | None = None, evaluate: bool = True, force: bool = False, scene: Scene | None = None,
     log: Callable[[str], None] = print,
 ) -> RemapResult:
-    """Remap the map set ``maps`` onto ``target_model``; write ``OUT/maps`` and ``OUT/report``."""
+    """Remap the map set ``maps`` onto ``target_model``; write ``OUT/maps`` and ``OUT/report``.
+    ``scene`` is the probe scene of the sweep (default: the paper's, with a headlight)."""
     from .envmap import resolve
     from .evaluate import evaluate as run_evaluation
     from .evaluate import parse_rotations
@@ -165,7 +166,7 @@ def remap(
 
     t = time.perf_counter()
     transform, tpath, cached = cached_transform(map_set, params, target, fix or {}, strategy,
-                                                cache or default_cache(), workers, log)
+                                                cache or default_cache(), workers, log, scene)
     seconds["transform"] = time.perf_counter() - t
 
     t = time.perf_counter()
