@@ -111,7 +111,8 @@ def cached_transform(
     spec = map_set.spec
     base = Material.create(spec.id, {k: v for k, v in map_set.constants.items() if k not in map_set.maps})
     grid_text = sweep_grid(map_set, params)
-    config = SweepConfig(source=base, target=get_model(target).id, fix=dict(fix), strategy=strategy, scene=scene or Scene())
+    config = SweepConfig(source=base, target=get_model(target).id, fix=dict(fix), strategy=strategy,
+                         scene=scene or Scene())
     key_doc = {"config": config.to_dict(), "grid": grid_text, "version": __version__}
     key = hashlib.sha256(json.dumps(key_doc, sort_keys=True).encode()).hexdigest()[:16]
     cache.mkdir(parents=True, exist_ok=True)
