@@ -160,8 +160,6 @@ def remap(
         raise MatremapError(f"{out} is inside the input folder {root}; choose another output folder")
     angles = parse_rotations(rotations) if evaluate else []
     env = resolve(envmap) if evaluate else None
-    if not out.parent.is_dir():
-        raise MatremapError(f"cannot write {out}: folder {out.parent} does not exist")
     params, normal = load_arrays(map_set)
     seconds["load"] = time.perf_counter() - t0
 
@@ -171,7 +169,7 @@ def remap(
     seconds["transform"] = time.perf_counter() - t
 
     t = time.perf_counter()
-    out.mkdir(exist_ok=True)
+    out.mkdir(parents=True, exist_ok=True)
     with warnings.catch_warnings():  # the outside-domain count is logged below
         warnings.simplefilter("ignore", UserWarning)
         report = convert(map_set, [transform], out / "maps", workers=workers or 2, force=force)
