@@ -26,14 +26,13 @@ from pathlib import Path
 
 import numpy as np
 
-from matremap import __version__
 from matremap.errors import MatremapError
 from matremap.executors import make_executor
 from matremap.grid import parse_grid
 from matremap.models import Material
-from matremap.regress import parametric, svr
+from matremap.regress import parametric
 from matremap.regress.data import TrainingData, load_training_data
-from matremap.regress.transform import Transform, _evaluate
+from matremap.regress.transform import Transform, _evaluate, transform_from_data
 from matremap.scene import Scene
 from matremap.sweep import SweepConfig, run_sweep
 
@@ -68,25 +67,9 @@ def sweep(grid_text: str, size: int, workers: int, cache: Path) -> tuple[Path, f
     return db, time.perf_counter() - t, summary.done
 
 
-def transform_from(data: TrainingData, method: str, holdout: float = 0.2, seed: int = 0) -> Transform:
-    """What ``learn_transform`` does, for training data already in memory (e.g. a subset)."""
-    learner = parametric.learn if method == "parametric" else svr.learn
-    mappings = learner(data, holdout=holdout, seed=seed)
-    domain = {n: [float(np.min(v)), float(np.max(v))] for n, v in data.x.items()}
-    errors = {}
-    for name, m in mappings.items():
-        pred = _evaluate(method, m, data.x)
-        errors[name] = {"train_rmse": float(np.sqrt(np.mean((pred - data.y[name]) ** 2)))}
-        if "heldout_rmse" in m:
-            errors[name]["heldout_rmse"] = m["heldout_rmse"]
-    return Transform(method, data.source.id, data.target.id, data.source_options, data.target_options, mappings,
-                     data.template, data.source_template, domain, errors,
-                     {**data.provenance, "matremap": __version__, "holdout": holdout, "seed": seed})
-
-
 def timed_learn(data: TrainingData, method: str) -> tuple[Transform, float]:
     t = time.perf_counter()
-    tr = transform_from(data, method)
+    tr = transform_from_data(data, method)
     return tr, time.perf_counter() - t
 
 
@@ -211,7 +194,7 @@ def authors(size: int, workers: int, cache: Path) -> None:
     print("\n## 4. the authors' grid (35 alpha1 x 23 rho_s)")
     db, seconds, done = sweep(GRID_AUTHORS, size, workers, cache)
     data = load_training_data(db)
-    tp = transform_from(data, "parametric")
+    tp = transform_from_data(data, "parametric")
     ra, rf = np.ptp(data.y["roughness"]), np.ptp(data.y["reflectance"])
     ea, ef = tp.mappings["roughness"]["heldout_rmse"], tp.mappings["reflectance"]["heldout_rmse"]
     print(f"our sweep ({len(data)} points, {done} swept now in {seconds:.1f} s): held-out RMSE alpha2 {ea:.5f} = "

@@ -70,16 +70,9 @@ def load_material(arg: str) -> Material:
     text = arg.strip()
     looks_like_file = text.endswith(".json") or os.sep in text and not text.startswith("{")
     if looks_like_file or (Path(text).is_file() and not text.startswith("{")):
-        p = Path(text)
-        if not p.is_file():
-            raise MatremapError(f"material file {p} not found")
-        try:
-            obj = json.loads(p.read_text())
-        except (OSError, UnicodeDecodeError) as e:
-            raise MatremapError(f"cannot read material file {p}: {e}") from None
-        except json.JSONDecodeError as e:
-            raise MatremapError(f"material file {p} is not valid JSON: {e.msg} (line {e.lineno})") from None
-        return Material.from_dict(obj, where=str(p))
+        from .documents import read_document
+
+        return Material.from_dict(read_document(text, "material file"), where=text)
     return parse_material(text)
 
 

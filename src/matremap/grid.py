@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import tomllib
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from .documents import read_document
 from .errors import MatremapError
 from .models import Material, ModelSpec
 
@@ -171,15 +171,8 @@ def parse_grid(text: str, spec: ModelSpec) -> Grid:
 
 
 def load_grid_toml(path: Path, spec: ModelSpec) -> Grid:
-    try:
-        doc = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise MatremapError(f"grid file {path} not found") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise MatremapError(f"cannot read grid file {path}: {e}") from None
-    except tomllib.TOMLDecodeError as e:
-        raise MatremapError(f"grid file {path} is not valid TOML: {e}") from None
-    table = doc.get("grid")
+    doc = read_document(path, "grid file")
+    table = doc.get("grid") if isinstance(doc, dict) else None
     if not isinstance(table, dict) or not table:
         raise MatremapError(f"grid file {path} needs a [grid] table with one entry per swept parameter")
     axes = []

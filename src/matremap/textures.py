@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import json
 import os
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -415,17 +414,9 @@ def _find_by_convention(root: Path) -> dict[str, Path]:
 
 
 def _read_manifest(path: Path) -> dict[str, Any]:
-    try:
-        if path.suffix == ".toml":
-            obj = tomllib.loads(path.read_text())
-        else:
-            obj = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError) as e:
-        raise MatremapError(f"cannot read {path}: {e}") from None
-    except json.JSONDecodeError as e:
-        raise MatremapError(f"{path} is not valid JSON: {e.msg} (line {e.lineno}); fix the manifest") from None
-    except tomllib.TOMLDecodeError as e:
-        raise MatremapError(f"{path} is not valid TOML: {e}; fix the manifest") from None
+    from .documents import read_document
+
+    obj = read_document(path, "manifest")
     if not isinstance(obj, dict):
         raise MatremapError(f"{path}: the manifest must be an object with 'model' and 'maps'")
     return obj

@@ -121,16 +121,9 @@ class Transform:
 
     @classmethod
     def load(cls, path: str | Path) -> Transform:
-        p = Path(path)
-        try:
-            obj = json.loads(p.read_text())
-        except FileNotFoundError:
-            raise MatremapError(f"transform {p} not found") from None
-        except (OSError, UnicodeDecodeError) as e:
-            raise MatremapError(f"cannot read transform {p}: {e}") from None
-        except json.JSONDecodeError as e:
-            raise MatremapError(f"transform {p} is not valid JSON: {e.msg} (line {e.lineno})") from None
-        return cls.from_dict(obj, str(p))
+        from ..documents import read_document
+
+        return cls.from_dict(read_document(path, "transform"), str(path))
 
     # -- application ----------------------------------------------------------------------------
     def apply(self, values: Mapping[str, Any]) -> tuple[dict[str, np.ndarray], np.ndarray]:
@@ -275,20 +268,26 @@ def learn_transform(db: str | Path, method: str = "parametric", reverse: bool = 
 
     if method not in ("parametric", "svr"):
         raise MatremapError(f"unknown method {method!r}; choose parametric or svr")
-    data = load_training_data(db, reverse=reverse, exclude_flagged=exclude_flagged)
+    return transform_from_data(load_training_data(db, reverse=reverse, exclude_flagged=exclude_flagged),
+                               method, holdout, seed)
+
+
+def transform_from_data(data: Any, method: str = "parametric", holdout: float = 0.2, seed: int = 0) -> Transform:
+    """Learn a transform from training data in memory (:class:`.data.TrainingData`, e.g. a subset)."""
     if method == "parametric":
         from .parametric import learn
-    else:
+    elif method == "svr":
         from .svr import learn
+    else:
+        raise MatremapError(f"unknown method {method!r}; choose parametric or svr")
     mappings = learn(data, holdout=holdout, seed=seed)
     domain = {name: [float(np.min(v)), float(np.max(v))] for name, v in data.x.items()}
     errors = {}
     for name, m in mappings.items():
         pred = _evaluate(method, m, data.x)
         errors[name] = {"train_rmse": float(np.sqrt(np.mean((pred - data.y[name]) ** 2)))}
-        for key in ("heldout_rmse",):
-            if key in m:
-                errors[name][key] = m[key]
+        if "heldout_rmse" in m:
+            errors[name]["heldout_rmse"] = m["heldout_rmse"]
     return Transform(
         method, data.source.id, data.target.id, data.source_options, data.target_options, mappings,
         data.template, data.source_template, domain, errors,
