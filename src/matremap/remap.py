@@ -123,9 +123,12 @@ def cached_transform(
     db = path.with_suffix(".sqlite")
     grid = parse_grid(grid_text, spec)
     log(f"sweep: {spec.id} -> {config.target}, {len(grid)} fits over {grid_text}")
-    with make_executor(workers) as (executor, desc):
-        summary = run_sweep(config, grid, str(db), executor, executor_name=desc,
-                            in_flight=2 * getattr(executor, "slots", 1))
+    from tqdm import tqdm
+
+    with make_executor(workers) as (executor, desc), \
+            tqdm(total=len(grid), unit="fit", desc="sweep", disable=None, leave=False) as bar:
+        summary = run_sweep(config, grid, str(db), executor, progress=bar.update, executor_name=desc,
+                            on_start=bar.update, in_flight=2 * getattr(executor, "slots", 1))
     log(f"sweep: {describe(summary)}")
     transform = learn_transform(db)
     transform.save(path, force=True)
