@@ -85,3 +85,7 @@ def _load_builtin() -> None:
         from .embedded import EmbeddedRenderer
 
         register_renderer("embedded", EmbeddedRenderer)
+    if "mitsuba3" not in _FACTORIES:
+        from .mitsuba3 import Mitsuba3Renderer  # imports Mitsuba itself only when first used
+
+        register_renderer("mitsuba3", Mitsuba3Renderer)
