@@ -130,7 +130,7 @@ def test_apply_is_vectorised_over_any_shape(svr_t):
     assert out["alpha"].shape == (4, 5) and out["F0"].shape == (4, 5, 3) and outside.shape == (4, 5)
     one, _ = svr_t.apply({"alpha": alpha[2, 3], "specularReflectance": rho[2, 3]})
     np.testing.assert_allclose(one["F0"], out["F0"][2, 3], rtol=1e-9)
-    np.testing.assert_allclose(one["alpha"], out["alpha"][2, 3], rtol=1e-12)
+    np.testing.assert_allclose(one["alpha"], out["alpha"][2, 3], rtol=1e-9)
     grey, _ = svr_t.apply({"alpha": alpha, "specularReflectance": rho[..., 0]})  # scalar rho_s map
     assert grey["F0"].shape == (4, 5, 3)
     np.testing.assert_allclose(grey["F0"][..., 1], grey["F0"][..., 0])
