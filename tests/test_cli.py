@@ -136,3 +136,15 @@ def test_fit_compare_writes_source_target_difference(capsys, tmp_path):
     source, target, diff = strip[:, :48], strip[:, 52:100], strip[:, 104:]
     assert np.linalg.norm(target - source) / np.linalg.norm(source) == pytest.approx(loss, rel=1e-3)
     np.testing.assert_allclose(diff, 10 * np.abs(target - source), rtol=1e-4, atol=1e-6)
+
+
+def test_renderers_lists_the_backends_and_their_models(capsys):
+    code, out, _ = run(capsys, "renderers", "--json")
+    assert code == 0
+    rows = {r["name"]: r for r in json.loads(out)}
+    assert rows["embedded"]["available"] and "mitsuba06:ward" in rows["embedded"]["models"]
+    assert "mitsuba3" in rows  # listed whether or not Mitsuba 3 is installed
+    if rows["mitsuba3"]["available"]:
+        assert "mitsuba3:roughconductor" in rows["mitsuba3"]["models"]
+    else:
+        assert "pip install" in rows["mitsuba3"]["reason"]

@@ -118,6 +118,30 @@ def cmd_models(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_renderers(args: argparse.Namespace) -> int:
+    from .renderers import get_renderer, renderer_names
+
+    rows = []
+    for name in renderer_names():
+        try:
+            r = get_renderer(name)
+        except MatremapError as e:
+            rows.append({"name": name, "available": False, "reason": str(e), "models": []})
+            continue
+        models = [m.id for m in list_models() if r.supports(m.id)]
+        rows.append({"name": name, "available": True, "details": repr(r) if name != "embedded" else "numpy",
+                     "models": models})
+    if args.json:
+        print(json.dumps(rows, indent=2))
+        return 0
+    for row in rows:
+        if row["available"]:
+            print(f"{row['name']}: {row['details']}; models {', '.join(row['models'])}")
+        else:
+            print(f"{row['name']}: not available ({row['reason']})")
+    return 0
+
+
 def cmd_render(args: argparse.Namespace) -> int:
     from .fit import part
     from .imageio import IMAGE_SUFFIXES, check_output, write_image
@@ -383,6 +407,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("model", nargs="?", help="show one model's parameters")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=cmd_models)
+
+    p = sub.add_parser("renderers", help="list renderer backends, whether they are installed, and their models")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.set_defaults(func=cmd_renderers)
 
     p = sub.add_parser("render", help="render a material on the probe sphere", epilog=EXAMPLES["render"],
                        formatter_class=fmt)
