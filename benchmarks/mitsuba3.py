@@ -7,6 +7,12 @@ each) and median loss. The issue's target: a two-stage fit with Mitsuba 3 as tar
 <= 20 s.
 
     python benchmarks/mitsuba3.py [--size 128] [--count 10] [--variant scalar_rgb] [--lights 0]
+    python benchmarks/mitsuba3.py --autodiff [--size 128] [--count 10] [--lights 0]
+
+``--autodiff`` compares, for ``mitsuba3:roughconductor`` targets, the finite-difference two-stage
+fit (:func:`matremap.fit.fit`, llvm_ad_rgb renderer) with the gradient-based fit through Mitsuba's
+autodiff (:func:`matremap.renderers.mitsuba3.fit_roughconductor_autodiff`): seconds, renders and
+the relative RMSE of the fitted material's image against the source image (sphere pixels).
 
 Needs ``pip install 'matremap[mitsuba]'``.
 """
@@ -61,13 +67,71 @@ PAIRS = [
 ]
 
 
+def relative_rmse(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
+    return float(np.linalg.norm(a[mask] - b[mask]) / np.linalg.norm(b[mask]))
+
+
+def autodiff(args: argparse.Namespace) -> None:
+    from matremap.renderers.base import get_renderer
+    from matremap.renderers.mitsuba3 import fit_roughconductor_autodiff, llvm_renders
+
+    if not llvm_renders():
+        raise SystemExit("llvm_ad_rgb does not render here: install Debian libllvm19")
+    scene = Scene.probe(args.lights, resolution=args.size)
+    mask = scene.mask()
+    renderer = Mitsuba3Renderer(variant="llvm_ad_rgb")
+    cases = [
+        ("mitsuba3:roughconductor", "mitsuba3", "ggx"),
+        ("mitsuba3:roughconductor", "mitsuba3", "beckmann"),
+        ("cycles:glossy", "embedded", "ggx"),
+        ("mitsuba06:ward", "embedded", "ggx"),
+    ]
+    # warm up both paths (JIT compilation of the kernels)
+    warm = sources("mitsuba3:roughconductor", 1, np.random.default_rng(1))[0]
+    t = renderer.render([warm], scene)[0]
+    for dist in ("ggx", "beckmann"):
+        fit_roughconductor_autodiff(t, scene, dist)
+        fit(warm, "mitsuba3:roughconductor", scene=scene, source_renderer=renderer, target_renderer=renderer,
+            fix={"distribution": dist, "eta": 1.0})
+    print(f"{args.size}x{args.size}, lights {args.lights}, {args.count} sources per case, llvm_ad_rgb; "
+          "image error: relative RMSE of the fitted image vs the source image\n")
+    print(f"{'source -> mitsuba3:roughconductor':<52} {'method':<22} {'median s':>8} {'renders':>7} {'image err':>9}")
+    for model, src_r, dist in cases:
+        mats = sources(model, args.count, np.random.default_rng(0))
+        if model == "mitsuba3:roughconductor":  # eta = 1: the fits hold eta at 1
+            mats = [m.with_params({"eta": 1.0, "distribution": dist}) for m in mats]
+        rows: dict[str, list[tuple[float, float, float]]] = {"finite differences": [], "autodiff L-BFGS-B": []}
+        for m in mats:
+            src_renderer = renderer if src_r == "mitsuba3" else "embedded"
+            target = get_renderer(src_renderer).render([m], scene)[0]
+            t0 = time.perf_counter()
+            r = fit(m, "mitsuba3:roughconductor", scene=scene, source_renderer=src_renderer,
+                    target_renderer=renderer, fix={"distribution": dist, "eta": 1.0})
+            secs = time.perf_counter() - t0
+            target = target * r.irradiance_scale  # what the fit matches (1 within the same probe physics)
+            img = renderer.render([r.target], scene)[0]
+            rows["finite differences"].append((secs, r.renders, relative_rmse(img, target, mask)))
+            a = fit_roughconductor_autodiff(target, scene, dist)
+            img = renderer.render([a.material], scene)[0]
+            rows["autodiff L-BFGS-B"].append((a.seconds, a.evaluations, relative_rmse(img, target, mask)))
+        for method, vals in rows.items():
+            s, n, e = (statistics.median(v[i] for v in vals) for i in range(3))
+            print(f"{model + ' (' + src_r + ') ' + dist:<52} {method:<22} {s:8.2f} {n:7.0f} {e:9.4f}")
+    print("\nrenders: materials rendered (finite differences, as the fit reports them) or forward+backward "
+          "evaluations (autodiff), each one Mitsuba image per light")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--size", type=int, default=128)
     ap.add_argument("--count", type=int, default=10)
     ap.add_argument("--variant", default=None, help="Mitsuba variant (default scalar_rgb; 'auto' picks llvm if usable)")
     ap.add_argument("--lights", type=float, nargs="+", default=[0.0], help="light angles (degrees)")
+    ap.add_argument("--autodiff", action="store_true", help="compare autodiff and finite-difference conductor fits")
     args = ap.parse_args()
+    if args.autodiff:
+        autodiff(args)
+        return
     scene = Scene.probe(args.lights, resolution=args.size)
     renderer = Mitsuba3Renderer(variant=args.variant)
     renderers = {"embedded": "embedded", "mitsuba3": renderer}
