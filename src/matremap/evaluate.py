@@ -222,6 +222,39 @@ def _colorbar() -> bytes:
     return _png_bytes(_colormap(ramp))
 
 
+class _MitsubaRender:
+    """A material drawn by real Mitsuba 3 (``mitsuba3:*`` models) under the environment map itself,
+    with the interface of :class:`SVBRDFRender` (the discrete lights are not used)."""
+
+    def __init__(self, model: str, params: Mapping[str, Any], options: Mapping[str, str], geometry: str,
+                 resolution: int, part: str, normal: np.ndarray | None, env: EnvMap) -> None:
+        if geometry != "sphere":
+            raise MatremapError(f"{model} is drawn by Mitsuba 3, which renders the sphere only; use --geometry sphere")
+        from .renderers.mitsuba3_svbrdf import render_svbrdf_mitsuba3
+
+        self._render = render_svbrdf_mitsuba3
+        self.args = (model, params, options, env)
+        self.resolution, self.part, self.normal = resolution, part, normal
+
+    def render_at(self, directions: np.ndarray, intensities: np.ndarray, rotation: float) -> np.ndarray:
+        model, params, options, env = self.args
+        return self._render(model, params, options, env, rotation_deg=rotation, resolution=self.resolution,
+                            part=self.part, normal_map=self.normal)
+
+
+class _EmbeddedRender(SVBRDFRender):
+    def render_at(self, directions: np.ndarray, intensities: np.ndarray, rotation: float) -> np.ndarray:
+        return self.render(directions, intensities)
+
+
+def _prepare(model: str, params: Mapping[str, Any], options: Mapping[str, str], geometry: str, resolution: int,
+             part: str, normal: np.ndarray | None, env: EnvMap) -> Any:
+    """The renderer of a material: real Mitsuba 3 for its own models, else the embedded one."""
+    if get_model(model).family == "mitsuba3":
+        return _MitsubaRender(model, params, options, geometry, resolution, part, normal, env)
+    return _EmbeddedRender(model, params, options, geometry, resolution, part, normal)
+
+
 def _irradiance_scale(source: SVMaterial, target: SVMaterial, env: EnvMap, lights: int) -> float:
     """Scale that brings source renders to the target family's irradiance units (1 in the same
     family): least-squares ratio of white Lambertian references rendered under ``env``."""
@@ -232,8 +265,9 @@ def _irradiance_scale(source: SVMaterial, target: SVMaterial, env: EnvMap, light
     imgs = []
     for fam in (fs, ft):
         ref = white_reference(fam)
-        r = SVBRDFRender(ref.model, {k: v for k, v in ref.values.items()}, dict(ref.options), "sphere", 32)
-        imgs.append(r.render(d, i).astype(float))
+        r = _prepare(ref.model, {k: v for k, v in ref.values.items()}, dict(ref.options), "sphere", 32, "full",
+                     None, env)
+        imgs.append(r.render_at(d, i, 0.0).astype(float))
     denom = float(np.sum(imgs[0] * imgs[0]))
     if not denom > 0.0:
         raise MatremapError(f"irradiance matching failed: the white reference of {fs} renders black")
@@ -280,7 +314,7 @@ def evaluate(
 
     # prepare everything (validates both materials) before writing anything
     prepared = {
-        (who, part): SVBRDFRender(m.model, m.params, m.options, geometry, resolution, part, m.normal)
+        (who, part): _prepare(m.model, m.params, m.options, geometry, resolution, part, m.normal, env)
         for who, m in (("source", src), ("target", tgt))
         for part in PARTS
     }
@@ -305,10 +339,10 @@ def evaluate(
     for k, rot in enumerate(rotations):
         d, i = directional_lights(env, lights, rot)
         for part in PARTS:
-            s_img = prepared[("source", part)].render(d, i)
+            s_img = prepared[("source", part)].render_at(d, i, rot)
             if scale != 1.0:
                 s_img = (s_img.astype(np.float64) * scale).astype(np.float32)
-            t_img = prepared[("target", part)].render(d, i)
+            t_img = prepared[("target", part)].render_at(d, i, rot)
             mssim, smap = ssim_map(s_img, t_img)
             dmap = 1.0 - smap
             dssim[part].append(float(dmap[mask].mean()) if mask.any() else float(1.0 - mssim))
