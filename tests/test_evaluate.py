@@ -181,7 +181,8 @@ def test_mitsuba3_materials_are_drawn_by_mitsuba3_and_compare_with_their_emulati
     rng = np.random.default_rng(0)
     alpha = rng.uniform(0.2, 0.4, (16, 32))
     k = np.stack([np.full((16, 32), v) for v in (3.0, 2.0, 1.0)], axis=-1)
-    real = ("mitsuba3:roughconductor", {"alpha": alpha, "eta": 1.0, "k": k}, {"distribution": "ggx", "material": "custom"})
+    real = ("mitsuba3:roughconductor", {"alpha": alpha, "eta": 1.0, "k": k},
+            {"distribution": "ggx", "material": "custom"})
     emulated = ("mitsuba06:roughconductor", {"alpha": alpha, "eta": 1.0 * 1.000277, "k": k * 1.000277},
                 {"distribution": "ggx"})
     env = envmap_module.builtin()
