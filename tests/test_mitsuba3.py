@@ -259,3 +259,17 @@ def test_autodiff_fit_recovers_a_conductor(mitsuba3):
         fit_roughconductor_autodiff(target, scene, "ggx", start=gold)
     with pytest.raises(MatremapError, match="target image"):
         fit_roughconductor_autodiff(target[:10], scene, "ggx")
+
+
+def test_the_regression_reads_and_writes_a_mitsuba3_conductor_as_f0():
+    """F0 of eta + i k (no exterior IOR), and back to k with eta held (models are data: no Mitsuba needed)."""
+    from matremap.models import Material, get_model
+    from matremap.optics import f0_from_ior
+    from matremap.regress import quantities as qty
+
+    spec = get_model("mitsuba3:roughconductor")
+    m = Material.create(spec.id, {"eta": 1.0, "k": [3.0, 2.0, 1.0], "material": "custom"})
+    q = qty.read(spec, qty.material_values(m))
+    np.testing.assert_allclose(q["reflectance"], f0_from_ior(1.0, np.array([3.0, 2.0, 1.0])), rtol=1e-12)
+    back = qty.write(spec, {"reflectance": q["reflectance"]}, m.to_dict()["params"])
+    np.testing.assert_allclose(back["k"], [3.0, 2.0, 1.0], rtol=1e-9)

@@ -65,8 +65,8 @@ def read(spec: ModelSpec, values: Mapping[str, np.ndarray]) -> dict[str, np.ndar
         elif kind == "dielectric":
             eta = _f(values[names[0]]) / _f(values[names[1]])
             out["reflectance"] = _rgb(f0_from_ior(eta), 1)
-        elif kind == "conductor":
-            ext = _f(values[names[2]])[..., None]
+        elif kind == "conductor":  # (eta, k) or (eta, k, exterior IOR)
+            ext = _f(values[names[2]])[..., None] if len(names) > 2 else 1.0
             eta = _rgb(values[names[0]], ch[names[0]]) / ext
             k = _rgb(values[names[1]], ch[names[1]]) / ext
             out["reflectance"] = f0_from_ior(eta, k)
@@ -112,7 +112,7 @@ def write(spec: ModelSpec, quantities: Mapping[str, np.ndarray], template: Mappi
             out[names[0]] = ior_from_f0(f0.mean(axis=-1)) * out[names[1]]
             driven.append(names[0])
         elif kind == "conductor":
-            ext = out[names[2]][..., None]
+            ext = out[names[2]][..., None] if len(names) > 2 else 1.0
             eta = _rgb(out[names[0]], ch[names[0]]) / ext
             k2 = (f0 * (eta + 1) ** 2 - (eta - 1) ** 2) / (1.0 - f0)
             out[names[1]] = np.sqrt(np.maximum(k2, 0.0)) * ext

@@ -131,9 +131,8 @@ ROUGHCONDUCTOR = register(
         ),
         diffuse_only=None,
         specular_only={},
-        # regress.quantities' "conductor" reading needs an exterior IOR parameter, which Mitsuba 3
-        # does not have; until it accepts two names the regression sees no reflectance here
-        reflectance=(),
+        # F0 of eta + i k (no exterior IOR in Mitsuba 3); with a named `material` eta/k are unused
+        reflectance=("conductor", "eta", "k"),
     )
 )
 
