@@ -338,7 +338,7 @@ def _load_builtin() -> None:
     global _LOADED
     if not _LOADED:
         _LOADED = True
-        from .renderers import mitsuba3  # noqa: F401  (registers Mitsuba 3's models; Mitsuba is imported lazily)
+        from .renderers import cycles, mitsuba3  # noqa: F401  (register their models; nothing heavy is imported)
         from .renderers.embedded import dialects  # noqa: F401  (registers the embedded dialects)
 
 

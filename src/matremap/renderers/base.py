@@ -89,3 +89,7 @@ def _load_builtin() -> None:
         from .mitsuba3 import Mitsuba3Renderer  # imports Mitsuba itself only when first used
 
         register_renderer("mitsuba3", Mitsuba3Renderer)
+    if "cycles" not in _FACTORIES:
+        from .cycles import CyclesRenderer  # bpy runs in a worker process of its own venv
+
+        register_renderer("cycles", CyclesRenderer)

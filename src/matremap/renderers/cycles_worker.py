@@ -1,0 +1,291 @@
+"""The Blender Cycles worker: a persistent process that imports ``bpy`` and renders the probe scene.
+
+Run by :class:`matremap.renderers.cycles.CyclesRenderer` with the Python of a separate venv that
+has ``bpy==5.0.1`` (``bpy`` pins numpy < 2, so it cannot share the main venv). This file imports
+nothing from matremap: it is run as a script.
+
+Protocol (binary, over the worker's stdin/stdout):
+
+* request: 4-byte big-endian length, then that many bytes of UTF-8 JSON,
+  ``{"op": "render", "scene": {...}, "materials": [{"model", "options", "values"}, ...]}``
+  or ``{"op": "ping"}`` / ``{"op": "quit"}``;
+* reply: 4-byte big-endian length, then JSON ``{"ok": true, "nbytes": n}`` followed by ``n`` bytes
+  of a ``.npy`` file (float32 [N, H, W, 3]), or ``{"ok": false, "error": "..."}``.
+
+Blender prints to stdout (``Saved: ...`` after each ``write_still``, and more from C code), so the
+reply channel is a duplicate of the original fd 1 and fd 1 itself is pointed at stderr before
+``bpy`` is imported.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import os
+import struct
+import sys
+import tempfile
+import traceback
+
+# -- the channel: keep fd 1 for replies only, send everything else printed to stderr ---------------
+_CHANNEL = os.fdopen(os.dup(1), "wb", buffering=0)
+os.dup2(2, 1)
+sys.stdout = sys.stderr
+
+# this file's directory holds matremap's cycles.py, which would shadow Blender's `cycles` add-on
+_HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path[:] = [p for p in sys.path if os.path.abspath(p or os.curdir) != _HERE]
+
+import bpy  # noqa: E402
+import numpy as np  # noqa: E402
+
+DISTRIBUTIONS = {"ggx": "GGX", "beckmann": "BECKMANN", "ashikhmin_shirley": "ASHIKHMIN_SHIRLEY",
+                 "multi_ggx": "MULTI_GGX"}
+
+
+def _read_exact(f, n: int) -> bytes | None:
+    buf = b""
+    while len(buf) < n:
+        chunk = f.read(n - len(buf))
+        if not chunk:
+            return None
+        buf += chunk
+    return buf
+
+
+def _send(header: dict, payload: bytes = b"") -> None:
+    data = json.dumps(header).encode()
+    _CHANNEL.write(struct.pack(">I", len(data)) + data + payload)
+
+
+class Probe:
+    """The probe scene in Blender: rebuilt when the scene description changes."""
+
+    def __init__(self) -> None:
+        self.key: str | None = None
+        self.tmp = tempfile.mkdtemp(prefix="matremap-cycles-")
+        self.materials: dict[str, tuple] = {}
+
+    # -- scene ---------------------------------------------------------------------------------
+    def build(self, s: dict) -> None:
+        key = json.dumps(s, sort_keys=True)
+        if key == self.key:
+            return
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        self.materials = {}
+        scene = bpy.context.scene
+        scene.render.engine = "CYCLES"
+        cy = scene.cycles
+        cy.device = "CPU"
+        cy.samples = 1
+        cy.use_adaptive_sampling = False
+        cy.use_denoising = False
+        cy.seed = 0
+        cy.use_animated_seed = False
+        cy.filter_width = 0.01
+        cy.film_exposure = 1.0
+        cy.max_bounces = 0  # direct light only: the probe sphere is convex
+        cy.light_sampling_threshold = 0.0  # no stochastic termination of dim light samples
+        cy.sample_clamp_direct = 0.0
+        cy.sample_clamp_indirect = 0.0
+        if hasattr(cy, "use_light_tree"):
+            cy.use_light_tree = False
+        scene.render.use_persistent_data = True
+        res = int(s["resolution"])
+        scene.render.resolution_x = res
+        scene.render.resolution_y = res
+        scene.render.resolution_percentage = 100
+        scene.render.film_transparent = False
+        scene.render.use_compositing = False
+        scene.render.use_sequencer = False
+        scene.world = None  # black background, no environment light
+        im = scene.render.image_settings
+        im.file_format = "OPEN_EXR"
+        im.color_depth = "32"
+        im.exr_codec = "NONE"
+        im.color_mode = "RGBA"
+        scene.view_settings.view_transform = "Standard"
+        scene.view_settings.exposure = 0.0
+        scene.view_settings.gamma = 1.0
+        scene.view_settings.look = "None"
+
+        # camera at (0, 0, d) looking down -z, +y up (Blender's default camera orientation)
+        cam_data = bpy.data.cameras.new("camera")
+        cam_data.type = "PERSP"
+        cam_data.sensor_fit = "HORIZONTAL"
+        cam_data.angle = math.radians(float(s["fov"]))
+        cam_data.clip_start = 1e-3
+        cam_data.clip_end = 10.0 * (float(s["camera_distance"]) + float(s["sphere_radius"]))
+        cam = bpy.data.objects.new("camera", cam_data)
+        cam.location = (0.0, 0.0, float(s["camera_distance"]))
+        cam.rotation_euler = (0.0, 0.0, 0.0)
+        scene.collection.objects.link(cam)
+        scene.camera = cam
+
+        self.sphere = self._sphere(float(s["sphere_radius"]), s.get("geometry", "points"))
+        scene.collection.objects.link(self.sphere)
+
+        # one point light, moved and re-powered per scene light (renders are summed): Cycles
+        # samples one light per sample, which would make multi-light renders noisy
+        light_data = bpy.data.lights.new("light", type="POINT")
+        light_data.shadow_soft_size = 0.0
+        if hasattr(light_data, "use_soft_falloff"):
+            light_data.use_soft_falloff = False
+        light_data.color = (1.0, 1.0, 1.0)
+        self.light = bpy.data.objects.new("light", light_data)
+        scene.collection.objects.link(self.light)
+        self.lights = [(tuple(map(float, lt["position"])), 4.0 * math.pi * float(lt["intensity"]))
+                       for lt in s["lights"]]
+        self.res = res
+        self.key = key
+
+    def _sphere(self, radius: float, geometry: str):
+        if geometry == "points":
+            # a point cloud of one point: Cycles intersects it as a true sphere (exact normals)
+            mesh = bpy.data.meshes.new("vertex")
+            mesh.from_pydata([(0.0, 0.0, 0.0)], [], [])
+            obj = bpy.data.objects.new("sphere", mesh)
+            tree = bpy.data.node_groups.new("to_points", "GeometryNodeTree")
+            tree.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+            tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+            n_in = tree.nodes.new("NodeGroupInput")
+            n_out = tree.nodes.new("NodeGroupOutput")
+            to_points = tree.nodes.new("GeometryNodeMeshToPoints")
+            to_points.inputs["Radius"].default_value = radius
+            self.set_material_node = tree.nodes.new("GeometryNodeSetMaterial")
+            tree.links.new(n_in.outputs[0], to_points.inputs["Mesh"])
+            tree.links.new(to_points.outputs["Points"], self.set_material_node.inputs["Geometry"])
+            tree.links.new(self.set_material_node.outputs["Geometry"], n_out.inputs[0])
+            mod = obj.modifiers.new("to_points", "NODES")
+            mod.node_group = tree
+            return obj
+        segments, rings = (int(x) for x in geometry.split("x")) if "x" in geometry else (512, 256)
+        self.set_material_node = None
+        bpy.ops.mesh.primitive_uv_sphere_add(segments=segments, ring_count=rings, radius=radius)
+        obj = bpy.context.active_object
+        for c in list(obj.users_collection):
+            c.objects.unlink(obj)
+        obj.data.shade_smooth()
+        return obj
+
+    # -- materials ---------------------------------------------------------------------------------
+    def material(self, model: str, options: dict):
+        key = json.dumps([model, options], sort_keys=True)
+        hit = self.materials.get(key)
+        if hit is not None:
+            return hit
+        mat = bpy.data.materials.new(key[:60])
+        mat.use_nodes = True
+        nt = mat.node_tree
+        for n in list(nt.nodes):
+            nt.nodes.remove(n)
+        out = nt.nodes.new("ShaderNodeOutputMaterial")
+        sockets: dict[str, object] = {}
+        if model == "cycles:glossy":
+            glossy = nt.nodes.new("ShaderNodeBsdfGlossy")
+            glossy.distribution = DISTRIBUTIONS[options.get("distribution", "ggx")]
+            diffuse = nt.nodes.new("ShaderNodeBsdfDiffuse")
+            diffuse.inputs["Roughness"].default_value = 0.0
+            add = nt.nodes.new("ShaderNodeAddShader")
+            nt.links.new(glossy.outputs[0], add.inputs[0])
+            nt.links.new(diffuse.outputs[0], add.inputs[1])
+            nt.links.new(add.outputs[0], out.inputs["Surface"])
+            sockets = {"Color": glossy.inputs["Color"], "Roughness": glossy.inputs["Roughness"],
+                       "Diffuse Color": diffuse.inputs["Color"]}
+        elif model == "cycles:diffuse":
+            diffuse = nt.nodes.new("ShaderNodeBsdfDiffuse")
+            diffuse.inputs["Roughness"].default_value = 0.0
+            nt.links.new(diffuse.outputs[0], out.inputs["Surface"])
+            sockets = {"Color": diffuse.inputs["Color"]}
+        elif model == "cycles:principled":
+            p = nt.nodes.new("ShaderNodeBsdfPrincipled")
+            p.distribution = DISTRIBUTIONS[options.get("distribution", "multi_ggx")]
+            nt.links.new(p.outputs[0], out.inputs["Surface"])
+            sockets = {n: p.inputs[n] for n in ("Base Color", "Metallic", "Roughness", "IOR",
+                                                 "Specular IOR Level", "Specular Tint")}
+        else:
+            raise ValueError(f"the Cycles worker cannot build model {model}")
+        hit = (mat, sockets)
+        self.materials[key] = hit
+        return hit
+
+    def assign(self, mat) -> None:
+        if self.set_material_node is not None:
+            if self.set_material_node.inputs["Material"].default_value != mat:
+                self.set_material_node.inputs["Material"].default_value = mat
+        else:
+            if self.sphere.data.materials:
+                if self.sphere.data.materials[0] != mat:
+                    self.sphere.data.materials[0] = mat
+            else:
+                self.sphere.data.materials.append(mat)
+
+    # -- rendering ---------------------------------------------------------------------------------
+    def render(self, request: dict) -> np.ndarray:
+        self.build(request["scene"])
+        res = self.res
+        mats = request["materials"]
+        out = np.zeros((len(mats), res, res, 3), dtype=np.float32)
+        path = os.path.join(self.tmp, "render.exr")
+        scene = bpy.context.scene
+        for i, m in enumerate(mats):
+            mat, sockets = self.material(m["model"], m.get("options", {}))
+            for name, socket in sockets.items():
+                v = m["values"][name]
+                if socket.type == "RGBA":
+                    rgb = [float(x) for x in v] * (3 if len(v) == 1 else 1)
+                    socket.default_value = (*rgb, 1.0)
+                else:
+                    socket.default_value = float(v[0])
+            self.assign(mat)
+            for pos, power in self.lights:
+                self.light.location = pos
+                self.light.data.energy = power
+                scene.render.filepath = path
+                bpy.ops.render.render(write_still=True)
+                img = bpy.data.images.load(path, check_existing=False)
+                try:
+                    buf = np.empty(res * res * 4, dtype=np.float32)
+                    img.pixels.foreach_get(buf)
+                finally:
+                    bpy.data.images.remove(img)
+                out[i] += buf.reshape(res, res, 4)[::-1, :, :3]
+        return out
+
+
+def main() -> int:
+    probe = Probe()
+    stdin = sys.stdin.buffer
+    _send({"ok": True, "ready": True, "blender": bpy.app.version_string})
+    while True:
+        head = _read_exact(stdin, 4)
+        if head is None:
+            return 0
+        (n,) = struct.unpack(">I", head)
+        body = _read_exact(stdin, n)
+        if body is None:
+            return 0
+        try:
+            request = json.loads(body)
+            op = request.get("op")
+            if op == "quit":
+                _send({"ok": True})
+                return 0
+            if op == "ping":
+                _send({"ok": True, "pid": os.getpid()})
+                continue
+            if op != "render":
+                raise ValueError(f"unknown request {op!r}")
+            images = probe.render(request)
+            f = io.BytesIO()
+            np.save(f, images)
+            payload = f.getvalue()
+            _send({"ok": True, "nbytes": len(payload)}, payload)
+        except Exception as e:  # reported to the parent, which raises MatremapError
+            traceback.print_exc()
+            _send({"ok": False, "error": f"{type(e).__name__}: {e}"})
+
+
+if __name__ == "__main__":
+    sys.exit(main())
