@@ -378,7 +378,7 @@ def cmd_remap(args: argparse.Namespace) -> int:
         strategy=args.strategy, envmap=args.envmap, rotations=args.rotations, resolution=args.size,
         lights=args.lights, workers=args.workers, cache=Path(args.cache) if args.cache else None,
         evaluate=not args.no_evaluate, force=args.force, log=lambda m: print(m, file=sys.stderr),
-        scene=Scene.probe(lights=parse_lights(args.light)),
+        scene=Scene.probe(lights=parse_lights(args.light)), target_renderer=args.target_renderer,
     )
     print(f"done in {result.seconds['total']:.1f} s: maps {result.maps}"
           + (f", report {result.report}" if result.report else "")
@@ -547,6 +547,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--cache", metavar="DIR", help="transform cache (default ~/.cache/matremap/transforms)")
     p.add_argument("--light", nargs="+", metavar="DEG",
                    help="light angles of the sweep's probe scene (default 0: headlight)")
+    p.add_argument("--target-renderer", default="embedded", metavar="NAME",
+                   help="renderer of the target model in the sweep (embedded, mitsuba3, cycles)")
     p.add_argument("--no-evaluate", action="store_true", help="skip the evaluation renders")
     p.add_argument("--force", action="store_true", help="write into an existing output folder")
     p.set_defaults(func=cmd_remap)

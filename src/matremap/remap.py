@@ -34,7 +34,7 @@ from .scene import Scene
 from .textures import MapSet, load_map_set, map_values, read_image
 
 #: grid points along the roughness and the specular axes of the sweep, and the diffuse levels
-ROUGHNESS_POINTS, SPECULAR_POINTS, DIFFUSE_LEVELS = 10, 6, (0.0, 1.0)
+ROUGHNESS_POINTS, SPECULAR_POINTS, DIFFUSE_LEVELS = 10, 6, (0.0, 0.9)
 
 
 @dataclass
@@ -78,10 +78,12 @@ def sweep_grid(map_set: MapSet, params: Mapping[str, Any]) -> str:
     if rp is not None and rp.name in map_set.maps:
         lo, hi = _range(params[rp.name], rp.bounds)
         axes.append(f"{rp.name}={lo!r}:{hi!r}:{ROUGHNESS_POINTS}")
-    if spec.reflectance and spec.reflectance[0] == "param" and spec.reflectance[1] in map_set.maps:
-        name = spec.reflectance[1]
-        lo, hi = _range(params[name], spec.param(name).bounds)
-        axes.append(f"{name}={lo!r}:{hi!r}:{SPECULAR_POINTS}")
+    if spec.reflectance:
+        kind, *names = spec.reflectance
+        name = names[1] if kind == "conductor" else names[0]  # the parameter a map of F0 drives (k for metals)
+        if name in map_set.maps:
+            lo, hi = _range(params[name], spec.param(name).bounds)
+            axes.append(f"{name}={lo!r}:{hi!r}:{SPECULAR_POINTS}")
     dp = qty.diffuse_param(spec)
     if dp is not None and dp.name in map_set.maps:
         axes.append(f"{dp.name}={';'.join(repr(v) for v in DIFFUSE_LEVELS)}")
@@ -101,6 +103,7 @@ def _range(values: Any, bounds: tuple[float, float]) -> tuple[float, float]:
 def cached_transform(
     map_set: MapSet, params: Mapping[str, Any], target: str, fix: Mapping[str, Any], strategy: str,
     cache: Path, workers: int | None, log: Callable[[str], None], scene: Scene | None = None,
+    target_renderer: str = "embedded",
 ) -> tuple[Transform, Path, bool]:
     """The transform for these maps and models: from the cache, or swept and learned now."""
     from .executors import make_executor
@@ -112,7 +115,7 @@ def cached_transform(
     base = Material.create(spec.id, {k: v for k, v in map_set.constants.items() if k not in map_set.maps})
     grid_text = sweep_grid(map_set, params)
     config = SweepConfig(source=base, target=get_model(target).id, fix=dict(fix), strategy=strategy,
-                         scene=scene or Scene())
+                         scene=scene or Scene(), target_renderer=target_renderer)
     key_doc = {"config": config.to_dict(), "grid": grid_text, "version": __version__}
     key = hashlib.sha256(json.dumps(key_doc, sort_keys=True).encode()).hexdigest()[:16]
     cache.mkdir(parents=True, exist_ok=True)
@@ -142,10 +145,11 @@ def remap(
     fix: Mapping[str, Any] | None = None, strategy: str = "two-stage", envmap: str = "builtin",
     rotations: str = "0:360:6", resolution: int = 160, lights: int = 128, workers: int | None = None,
     cache: Path | None = None, evaluate: bool = True, force: bool = False, scene: Scene | None = None,
-    log: Callable[[str], None] = print,
+    target_renderer: str = "embedded", log: Callable[[str], None] = print,
 ) -> RemapResult:
     """Remap the map set ``maps`` onto ``target_model``; write ``OUT/maps`` and ``OUT/report``.
-    ``scene`` is the probe scene of the sweep (default: the paper's, with a headlight)."""
+    ``scene`` is the probe scene of the sweep (default: the paper's, with a headlight);
+    ``target_renderer`` draws the target model in the sweep (e.g. "mitsuba3", "cycles")."""
     from .envmap import resolve
     from .evaluate import evaluate as run_evaluation
     from .evaluate import parse_rotations
@@ -168,7 +172,7 @@ def remap(
 
     t = time.perf_counter()
     transform, tpath, cached = cached_transform(map_set, params, target, fix or {}, strategy,
-                                                cache or default_cache(), workers, log, scene)
+                                                cache or default_cache(), workers, log, scene, target_renderer)
     seconds["transform"] = time.perf_counter() - t
 
     t = time.perf_counter()
