@@ -178,3 +178,17 @@ def test_two_stage_fit_ward_to_principled(cycles):
     assert r.irradiance_scale == pytest.approx(1.0, abs=1e-3)
     assert r.loss < 0.15
     np.testing.assert_allclose(r.target.values["Base Color"], [0.5, 0.3, 0.2], rtol=0.1)
+
+
+@needs_bpy
+def test_two_stage_fit_back_from_real_cycles_to_ward(cycles):
+    """The way back: real Cycles Principled (the fit above) -> embedded Mitsuba 0.6 Ward."""
+    scene = Scene.probe([0.0], resolution=64)
+    ward = Material.create("mitsuba06:ward", {"variant": "ward", "alpha": 0.2, "specularReflectance": 0.08,
+                                              "diffuseReflectance": [0.5, 0.3, 0.2]})
+    there = fit(ward, "cycles:principled", scene=scene, target_renderer=cycles)
+    back = fit(there.target, "mitsuba06:ward", scene=scene, source_renderer=cycles, fix={"variant": "ward"})
+    assert back.source_renderer == "cycles" and back.target_renderer == "embedded"
+    assert back.loss < 0.15
+    np.testing.assert_allclose(back.target.values["diffuseReflectance"], [0.5, 0.3, 0.2], rtol=0.1)
+    assert back.target.values["alpha"][0] == pytest.approx(0.2, rel=0.25)
