@@ -20,10 +20,23 @@ from .errors import MatremapError
 IMAGE_SUFFIXES = (".exr", ".png", ".npy", ".tif", ".tiff", ".hdr")
 
 
-def linear_to_srgb(x: np.ndarray) -> np.ndarray:
-    """The sRGB transfer function (IEC 61966-2-1) on values clipped to [0, 1]."""
-    x = np.clip(x, 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+def srgb_to_linear(v: np.ndarray) -> np.ndarray:
+    """sRGB-encoded values in [0, 1] to linear (IEC 61966-2-1; float32 stays float32)."""
+    v = np.asarray(v)
+    v = v if v.dtype in (np.float32, np.float64) else v.astype(np.float32)
+    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4).astype(v.dtype, copy=False)
+
+
+def linear_to_srgb(v: np.ndarray) -> np.ndarray:
+    """Linear values to the sRGB encoding (IEC 61966-2-1), clipped to [0, 1] (float32 stays float32)."""
+    v = np.asarray(v)
+    v = np.clip(v, 0.0, 1.0).astype(v.dtype if v.dtype in (np.float32, np.float64) else np.float32, copy=False)
+    out = np.power(v, 1.0 / 2.4, dtype=v.dtype)
+    out *= 1.055
+    out -= 0.055
+    low = v <= 0.0031308
+    out[low] = v[low] * 12.92
+    return out
 
 
 def check_output(path: str | os.PathLike, force: bool, suffixes: tuple[str, ...] | None = None) -> Path:

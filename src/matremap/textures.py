@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from .errors import MatremapError
-from .imageio import atomic_output, check_output
+from .imageio import atomic_output, check_output, linear_to_srgb, srgb_to_linear
 from .models import ModelSpec, get_model
 
 COLORSPACES = ("srgb", "linear")
@@ -69,25 +69,6 @@ def _oiio():
 
 # ---------------------------------------------------------------------------------------------
 # transfer functions
-
-
-def srgb_to_linear(v: np.ndarray) -> np.ndarray:
-    """sRGB-encoded values in [0, 1] to linear (float32 stays float32)."""
-    v = np.asarray(v)
-    v = v if v.dtype in (np.float32, np.float64) else v.astype(np.float32)
-    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4).astype(v.dtype, copy=False)
-
-
-def linear_to_srgb(v: np.ndarray) -> np.ndarray:
-    """Linear values to sRGB encoding, clipped to [0, 1] (float32 stays float32)."""
-    v = np.asarray(v)
-    v = np.clip(v, 0.0, 1.0).astype(v.dtype if v.dtype in (np.float32, np.float64) else np.float32, copy=False)
-    out = np.power(v, 1.0 / 2.4, dtype=v.dtype)
-    out *= 1.055
-    out -= 0.055
-    low = v <= 0.0031308
-    out[low] = v[low] * 12.92
-    return out
 
 
 _LUTS: dict[tuple[str, str], np.ndarray] = {}
