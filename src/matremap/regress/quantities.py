@@ -47,7 +47,7 @@ def available(spec: ModelSpec) -> tuple[str, ...]:
 
 
 def _rgb(v: np.ndarray, channels: int) -> np.ndarray:
-    v = _f(v)
+    v = as_floats(v)
     return np.repeat(v[..., None], 3, axis=-1) if channels == 1 else v
 
 
@@ -56,17 +56,17 @@ def read(spec: ModelSpec, values: Mapping[str, np.ndarray]) -> dict[str, np.ndar
     out: dict[str, np.ndarray] = {}
     rp = roughness_param(spec)
     if rp is not None:
-        out["roughness"] = _f(values[rp.name])
+        out["roughness"] = as_floats(values[rp.name])
     if spec.reflectance:
         kind, *names = spec.reflectance
         ch = {p.name: p.channels for p in spec.params}
         if kind == "param":
             out["reflectance"] = _rgb(values[names[0]], ch[names[0]])
         elif kind == "dielectric":
-            eta = _f(values[names[0]]) / _f(values[names[1]])
+            eta = as_floats(values[names[0]]) / as_floats(values[names[1]])
             out["reflectance"] = _rgb(f0_from_ior(eta), 1)
         elif kind == "conductor":  # (eta, k) or (eta, k, exterior IOR)
-            ext = _f(values[names[2]])[..., None] if len(names) > 2 else 1.0
+            ext = as_floats(values[names[2]])[..., None] if len(names) > 2 else 1.0
             eta = _rgb(values[names[0]], ch[names[0]]) / ext
             k = _rgb(values[names[1]], ch[names[1]]) / ext
             out["reflectance"] = f0_from_ior(eta, k)
@@ -74,12 +74,12 @@ def read(spec: ModelSpec, values: Mapping[str, np.ndarray]) -> dict[str, np.ndar
             raise ValueError(kind)
     dp = diffuse_param(spec)
     if dp is not None:
-        out["diffuse"] = _f(values[dp.name])
+        out["diffuse"] = as_floats(values[dp.name])
     return out
 
 
-def _f(v: Any) -> np.ndarray:
-    """Floats, keeping float32 as float32."""
+def as_floats(v: Any) -> np.ndarray:
+    """An array of floats, keeping float32 (texture maps) as float32."""
     a = np.asarray(v)
     return a if a.dtype in (np.float32, np.float64) else a.astype(float)
 
@@ -99,10 +99,10 @@ def write(spec: ModelSpec, quantities: Mapping[str, np.ndarray], template: Mappi
     driven: list[str] = []
     rp = roughness_param(spec)
     if rp is not None and "roughness" in quantities:
-        out[rp.name] = _f(quantities["roughness"])
+        out[rp.name] = as_floats(quantities["roughness"])
         driven.append(rp.name)
     if spec.reflectance and "reflectance" in quantities:
-        f0 = np.clip(_f(quantities["reflectance"]), 0.0, 1.0 - 1e-7)
+        f0 = np.clip(as_floats(quantities["reflectance"]), 0.0, 1.0 - 1e-7)
         kind, *names = spec.reflectance
         ch = {p.name: p.channels for p in spec.params}
         if kind == "param":
@@ -119,7 +119,7 @@ def write(spec: ModelSpec, quantities: Mapping[str, np.ndarray], template: Mappi
             driven.append(names[1])
     dp = diffuse_param(spec)
     if dp is not None and "diffuse" in quantities:
-        out[dp.name] = _f(quantities["diffuse"])
+        out[dp.name] = as_floats(quantities["diffuse"])
         driven.append(dp.name)
     bounds = {p.name: p.bounds for p in spec.params}
     for name in driven:  # stay inside what the renderer accepts (in place: these arrays are ours)

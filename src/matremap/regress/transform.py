@@ -215,7 +215,7 @@ def _complete(spec, values: Mapping[str, Any], defaults: Mapping[str, Any]) -> d
     unknown = set(values) - set(spec.param_names) - set(spec.option_names)
     if unknown:
         raise MatremapError(f"{spec.id} has no parameter {sorted(unknown)[0]!r}")
-    arrays = {k: _floating(v) for k, v in values.items() if k in spec.param_names}
+    arrays = {k: qty.as_floats(v) for k, v in values.items() if k in spec.param_names}
     shape = _shape(spec, arrays)
     out = {}
     for p in spec.params:
@@ -229,12 +229,6 @@ def _complete(spec, values: Mapping[str, Any], defaults: Mapping[str, Any]) -> d
             d = np.asarray(defaults.get(p.name, p.default), dtype=float)
             out[p.name] = np.broadcast_to(d, (*shape, 3) if p.channels == 3 else shape)
     return out
-
-
-def _floating(v: Any) -> np.ndarray:
-    """An array of floats, keeping float32 (texture maps) as it is."""
-    a = np.asarray(v)
-    return a if a.dtype in (np.float32, np.float64) else a.astype(float)
 
 
 def _shape(spec, arrays: Mapping[str, np.ndarray]) -> tuple[int, ...]:
