@@ -426,25 +426,14 @@ class Mitsuba3Renderer:
     def scene_dict(self, scene: Scene, light: int, bsdf: dict[str, Any]) -> dict[str, Any]:
         """The ``mi.load_dict`` dictionary of the probe scene with one of its lights."""
         mi = self.mi
-        res = scene.resolution
         jitter = self.spp > 1
         lt = scene.lights[light]
         return {
             "type": "scene",
             "integrator": {"type": "direct", "emitter_samples": 1, "bsdf_samples": 0},
-            "sensor": {
-                "type": "perspective",
-                "fov": float(scene.effective_fov),
-                "fov_axis": "x",
-                "near_clip": 1e-3,
-                "far_clip": 10.0 * (scene.camera_distance + scene.sphere_radius),
-                "to_world": mi.ScalarTransform4f().look_at(
-                    origin=[0.0, 0.0, float(scene.camera_distance)], target=[0.0, 0.0, 0.0], up=[0.0, 1.0, 0.0]
-                ),
-                "sampler": {"type": "stratified", "sample_count": self.spp, "jitter": jitter, "seed": self.seed},
-                "film": {"type": "hdrfilm", "width": res, "height": res, "pixel_format": "rgb",
-                         "rfilter": {"type": "box"}},
-            },
+            "sensor": probe_sensor(
+                mi, scene, {"type": "stratified", "sample_count": self.spp, "jitter": jitter, "seed": self.seed}
+            ),
             "sphere": {"type": "sphere", "center": [0.0, 0.0, 0.0], "radius": float(scene.sphere_radius),
                        "bsdf": bsdf},
             "light": {
@@ -453,6 +442,24 @@ class Mitsuba3Renderer:
                 "intensity": {"type": "rgb", "value": float(scene.light_intensity(lt))},
             },
         }
+
+
+def probe_sensor(mi, scene: Scene, sampler: dict[str, Any]) -> dict[str, Any]:  # noqa: ANN001
+    """The probe scene's camera as a Mitsuba sensor: at (0, 0, camera_distance) looking at the
+    origin, +y up, the scene's field of view along x, a square box-filtered HDR film."""
+    res = scene.resolution
+    return {
+        "type": "perspective",
+        "fov": float(scene.effective_fov),
+        "fov_axis": "x",
+        "near_clip": 1e-3,
+        "far_clip": 10.0 * (scene.camera_distance + scene.sphere_radius),
+        "to_world": mi.ScalarTransform4f().look_at(
+            origin=[0.0, 0.0, float(scene.camera_distance)], target=[0.0, 0.0, 0.0], up=[0.0, 1.0, 0.0]
+        ),
+        "sampler": sampler,
+        "film": {"type": "hdrfilm", "width": res, "height": res, "pixel_format": "rgb", "rfilter": {"type": "box"}},
+    }
 
 
 # ---------------------------------------------------------------------------------------------

@@ -42,7 +42,7 @@ from ..envmap import EnvMap
 from ..errors import MatremapError
 from ..models import Material, ModelSpec, get_model
 from ..scene import Scene
-from .mitsuba3 import MODELS, _bsdf, _call, choose_variant, import_mitsuba
+from .mitsuba3 import MODELS, _bsdf, _call, choose_variant, import_mitsuba, probe_sensor
 
 PARTS = ("full", "specular", "diffuse")
 
@@ -171,19 +171,7 @@ def scene_dict(
     return {
         "type": "scene",
         "integrator": {"type": "path", "max_depth": 2, "hide_emitters": True},
-        "sensor": {
-            "type": "perspective",
-            "fov": float(scene.effective_fov),
-            "fov_axis": "x",
-            "near_clip": 1e-3,
-            "far_clip": 10.0 * (scene.camera_distance + scene.sphere_radius),
-            "to_world": mi.ScalarTransform4f().look_at(
-                origin=[0.0, 0.0, float(scene.camera_distance)], target=[0.0, 0.0, 0.0], up=[0.0, 1.0, 0.0]
-            ),
-            "sampler": {"type": "multijitter", "sample_count": int(spp), "seed": int(seed)},
-            "film": {"type": "hdrfilm", "width": scene.resolution, "height": scene.resolution, "pixel_format": "rgb",
-                     "rfilter": {"type": "box"}},
-        },
+        "sensor": probe_sensor(mi, scene, {"type": "multijitter", "sample_count": int(spp), "seed": int(seed)}),
         "sphere": {"type": "sphere", "to_world": _sphere_to_world(mi, float(scene.sphere_radius)), "bsdf": bsdf},
         "env": {
             "type": "envmap",
