@@ -8,7 +8,8 @@ Protocol (binary, over the worker's stdin/stdout):
 
 * request: 4-byte big-endian length, then that many bytes of UTF-8 JSON,
   ``{"op": "render", "scene": {...}, "materials": [{"model", "options", "values"}, ...]}``
-  or ``{"op": "ping"}`` / ``{"op": "quit"}``;
+  or ``{"op": "ping"}`` / ``{"op": "quit"}``, or ``{"op": "svbrdf", ...}`` (a textured sphere under an
+  environment map, arrays passed as ``.npy`` files in ``dir``: see ``matremap.renderers.cycles_svbrdf``);
 * reply: 4-byte big-endian length, then JSON ``{"ok": true, "nbytes": n}`` followed by ``n`` bytes
   of a ``.npy`` file (float32 [N, H, W, 3]), or ``{"ok": false, "error": "..."}``.
 
@@ -254,6 +255,246 @@ class Probe:
         return out
 
 
+# -- SVBRDF renders under an environment map (op "svbrdf"; see matremap.renderers.cycles_svbrdf) --------
+
+
+def _float_image(name: str, arr: np.ndarray, repeat: bool = False):
+    """A linear (Non-Color) float image from an array [h, w, 3], row 0 at the top."""
+    a = np.asarray(arr, dtype=np.float32)
+    h, w = a.shape[:2]
+    rgba = np.ones((h, w, 4), dtype=np.float32)
+    rgba[..., :3] = a[::-1]  # Blender stores the bottom row first
+    img = bpy.data.images.new(name, w, h, alpha=True, float_buffer=True)
+    img.colorspace_settings.name = "Non-Color"
+    img.pixels.foreach_set(rgba.ravel())
+    img.update()
+    return img
+
+
+def _uv_sphere(radius: float, segments: int, rings: int):
+    """A smooth UV sphere with its pole along +y and the embedded renderer's UVs:
+    u = 0.5 + atan2(x, z) / 2 pi, v (from the top) = acos(y / r) / pi; Blender's v = 1 - that."""
+    # built from arrays: bpy.ops.mesh.primitive_uv_sphere_add takes 17 s at 512x256
+    S, R = segments, rings
+    theta = math.pi * np.arange(1, R) / R
+    phi = 2.0 * math.pi * np.arange(S) / S
+    st = np.sin(theta)[:, None]
+    ring = radius * np.stack(np.broadcast_arrays(st * np.sin(phi), np.cos(theta)[:, None], st * np.cos(phi)), -1)
+    verts = np.concatenate([[(0.0, radius, 0.0), (0.0, -radius, 0.0)], ring.reshape(-1, 3)])
+
+    def vid(k, j):  # ring k in 1..R-1, segment j (mod S)
+        return 2 + (k - 1) * S + np.mod(j, S)
+
+    j = np.arange(S)
+    top = np.stack([np.zeros(S, dtype=np.int64), vid(1, j), vid(1, j + 1)], -1)
+    bottom = np.stack([vid(R - 1, j), np.ones(S, dtype=np.int64), vid(R - 1, j + 1)], -1)
+    k = np.arange(1, R - 1)[:, None]
+    quads = np.stack([vid(k, j), vid(k + 1, j), vid(k + 1, j + 1), vid(k, j + 1)], -1).reshape(-1, 4)
+    loops = np.concatenate([top.ravel(), quads.ravel(), bottom.ravel()])
+    sizes = np.concatenate([np.full(S, 3), np.full(len(quads), 4), np.full(S, 3)])
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    mesh = bpy.data.meshes.new("sphere")
+    mesh.vertices.add(len(verts))
+    mesh.vertices.foreach_set("co", verts.astype(np.float32).ravel())
+    mesh.loops.add(len(loops))
+    mesh.loops.foreach_set("vertex_index", loops.astype(np.int32))
+    mesh.polygons.add(len(sizes))
+    mesh.polygons.foreach_set("loop_start", starts.astype(np.int32))
+    mesh.update(calc_edges=True)
+    obj = bpy.data.objects.new("sphere", mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    co = np.empty(len(mesh.vertices) * 3)
+    mesh.vertices.foreach_get("co", co)
+    co = co.reshape(-1, 3)
+    vi = np.empty(len(mesh.loops), dtype=np.int64)
+    mesh.loops.foreach_get("vertex_index", vi)
+    start = np.empty(len(mesh.polygons), dtype=np.int64)
+    total = np.empty(len(mesh.polygons), dtype=np.int64)
+    mesh.polygons.foreach_get("loop_start", start)
+    mesh.polygons.foreach_get("loop_total", total)
+    face_of_loop = np.repeat(np.arange(len(start)), total)
+    centre = np.zeros((len(start), 3))
+    np.add.at(centre, face_of_loop, co[vi])
+    centre /= total[:, None]
+    uc = 0.5 + np.arctan2(centre[:, 0], centre[:, 2]) / (2.0 * math.pi)
+    p = co[vi]
+    u = 0.5 + np.arctan2(p[:, 0], p[:, 2]) / (2.0 * math.pi)
+    ucl = uc[face_of_loop]
+    u = ucl + (np.mod(u - ucl + 0.5, 1.0) - 0.5)  # unwrap across the seam at the back
+    pole = np.hypot(p[:, 0], p[:, 2]) < 1e-9 * radius
+    u = np.where(pole, ucl, u)
+    v = np.arccos(np.clip(p[:, 1] / radius, -1.0, 1.0)) / math.pi
+    if not mesh.uv_layers:
+        mesh.uv_layers.new(name="UVMap")
+    uv = mesh.uv_layers.active
+    uv.data.foreach_set("uv", np.stack([u, 1.0 - v], axis=-1).astype(np.float32).ravel())
+    mesh.shade_smooth()
+    mesh.update()
+    return obj, uv.name
+
+
+def render_svbrdf(request: dict, tmp: str) -> np.ndarray:
+    """One textured sphere under an environment map -> float32 [1, res, res, 3]."""
+    s = request["scene"]
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.engine = "CYCLES"
+    cy = scene.cycles
+    cy.device = "CPU"
+    cy.samples = int(request["spp"])
+    cy.use_adaptive_sampling = False
+    cy.use_denoising = False
+    cy.seed = int(request["seed"])
+    cy.use_animated_seed = False
+    cy.filter_width = 0.01  # one ray through each pixel centre, as the embedded renderer
+    cy.film_exposure = 1.0
+    cy.max_bounces = 0  # direct light only: the sphere is convex
+    cy.sample_clamp_direct = 0.0
+    cy.sample_clamp_indirect = 0.0
+    scene.render.use_persistent_data = False
+    res = int(s["resolution"])
+    scene.render.resolution_x = res
+    scene.render.resolution_y = res
+    scene.render.resolution_percentage = 100
+    scene.render.film_transparent = True  # black background (RGB 0 where alpha is 0)
+    scene.render.use_compositing = False
+    scene.render.use_sequencer = False
+    im = scene.render.image_settings
+    im.file_format = "OPEN_EXR"
+    im.color_depth = "32"
+    im.exr_codec = "NONE"
+    im.color_mode = "RGBA"
+    scene.view_settings.view_transform = "Standard"
+    scene.view_settings.look = "None"
+
+    cam_data = bpy.data.cameras.new("camera")
+    cam_data.type = "PERSP"
+    cam_data.sensor_fit = "HORIZONTAL"
+    cam_data.angle = math.radians(float(s["fov"]))
+    cam_data.clip_start = 1e-3
+    cam_data.clip_end = 10.0 * (float(s["camera_distance"]) + float(s["sphere_radius"]))
+    cam = bpy.data.objects.new("camera", cam_data)
+    cam.location = (0.0, 0.0, float(s["camera_distance"]))
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+
+    segments, rings = (int(x) for x in request.get("geometry", "512x256").split("x"))
+    sphere, uv_name = _uv_sphere(float(s["sphere_radius"]), segments, rings)
+
+    def load(name):
+        return np.load(os.path.join(request["dir"], name + ".npy"))
+
+    # -- the material
+    mat = bpy.data.materials.new("svbrdf")
+    mat.use_nodes = True
+    nt = mat.node_tree
+    for n in list(nt.nodes):
+        nt.nodes.remove(n)
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    model = request["model"]
+    options = request.get("options", {})
+    bsdfs = []
+    if model == "cycles:glossy":
+        glossy = nt.nodes.new("ShaderNodeBsdfGlossy")
+        glossy.distribution = DISTRIBUTIONS[options.get("distribution", "ggx")]
+        diffuse = nt.nodes.new("ShaderNodeBsdfDiffuse")
+        diffuse.inputs["Roughness"].default_value = 0.0
+        add = nt.nodes.new("ShaderNodeAddShader")
+        nt.links.new(glossy.outputs[0], add.inputs[0])
+        nt.links.new(diffuse.outputs[0], add.inputs[1])
+        nt.links.new(add.outputs[0], out.inputs["Surface"])
+        sockets = {"Color": glossy.inputs["Color"], "Roughness": glossy.inputs["Roughness"],
+                   "Diffuse Color": diffuse.inputs["Color"]}
+        bsdfs = [glossy, diffuse]
+    elif model == "cycles:diffuse":
+        diffuse = nt.nodes.new("ShaderNodeBsdfDiffuse")
+        diffuse.inputs["Roughness"].default_value = 0.0
+        nt.links.new(diffuse.outputs[0], out.inputs["Surface"])
+        sockets = {"Color": diffuse.inputs["Color"]}
+        bsdfs = [diffuse]
+    else:
+        raise ValueError(f"the Cycles worker has no SVBRDF build of model {model}")
+    uvmap = nt.nodes.new("ShaderNodeUVMap")
+    uvmap.uv_map = uv_name
+
+    def texture(name, arr):
+        node = nt.nodes.new("ShaderNodeTexImage")
+        node.image = _float_image(name, arr if arr.ndim == 3 else np.repeat(arr[..., None], 3, axis=2))
+        node.interpolation = "Linear"
+        node.extension = "EXTEND"
+        nt.links.new(uvmap.outputs["UV"], node.inputs["Vector"])
+        return node
+
+    for name, socket in sockets.items():
+        if name in request["textures"]:
+            node = texture(name, load("tex_" + request["textures"][name]))
+            if socket.type == "RGBA":
+                nt.links.new(node.outputs["Color"], socket)
+            else:  # a scalar: the red channel (R = G = B)
+                sep = nt.nodes.new("ShaderNodeSeparateColor")
+                nt.links.new(node.outputs["Color"], sep.inputs["Color"])
+                nt.links.new(sep.outputs["Red"], socket)
+        else:
+            v = request["consts"][name]
+            if socket.type == "RGBA":
+                socket.default_value = (*([float(x) for x in v] * (3 if len(v) == 1 else 1)), 1.0)
+            else:
+                socket.default_value = float(v[0])
+    if request.get("normal_map"):
+        node = texture("normal_map", load("normal_map"))  # (n + 1) / 2, tangent space, y up
+        nmap = nt.nodes.new("ShaderNodeNormalMap")
+        nmap.space = "TANGENT"
+        nmap.uv_map = uv_name
+        nt.links.new(node.outputs["Color"], nmap.inputs["Color"])
+        for b in bsdfs:
+            nt.links.new(nmap.outputs["Normal"], b.inputs["Normal"])
+    sphere.data.materials.append(mat)
+    if sphere.name not in scene.collection.objects:
+        scene.collection.objects.link(sphere)
+
+    # -- the world: Blender's equirectangular lookup of e = M R_y(-rotation) d, with
+    # M = (-z, -x, y), puts Blender's u on matremap's u and Blender's up (z) on matremap's +y
+    world = bpy.data.worlds.new("env")
+    world.use_nodes = True
+    wt = world.node_tree
+    for n in list(wt.nodes):
+        wt.nodes.remove(n)
+    wout = wt.nodes.new("ShaderNodeOutputWorld")
+    bg = wt.nodes.new("ShaderNodeBackground")
+    bg.inputs["Strength"].default_value = 1.0
+    env = wt.nodes.new("ShaderNodeTexEnvironment")
+    env.image = _float_image("env", load("env"))
+    env.interpolation = "Linear"
+    env.projection = "EQUIRECTANGULAR"
+    coords = wt.nodes.new("ShaderNodeTexCoord")
+    a = math.radians(-float(request["rotation_deg"]))
+    c, si = math.cos(a), math.sin(a)
+    # d' = R_y(a) d: x' = c x + s z, y' = y, z' = -s x + c z
+    rows = ((si, 0.0, -c), (-c, 0.0, -si), (0.0, 1.0, 0.0))  # (-z', -x', y')
+    comb = wt.nodes.new("ShaderNodeCombineXYZ")
+    for k, row in enumerate(rows):
+        dot = wt.nodes.new("ShaderNodeVectorMath")
+        dot.operation = "DOT_PRODUCT"
+        dot.inputs[1].default_value = row
+        wt.links.new(coords.outputs["Generated"], dot.inputs[0])
+        wt.links.new(dot.outputs["Value"], comb.inputs[k])
+    wt.links.new(comb.outputs["Vector"], env.inputs["Vector"])
+    wt.links.new(env.outputs["Color"], bg.inputs["Color"])
+    wt.links.new(bg.outputs["Background"], wout.inputs["Surface"])
+    scene.world = world
+
+    path = os.path.join(tmp, "svbrdf.exr")
+    scene.render.filepath = path
+    bpy.ops.render.render(write_still=True)
+    img = bpy.data.images.load(path, check_existing=False)
+    try:
+        buf = np.empty(res * res * 4, dtype=np.float32)
+        img.pixels.foreach_get(buf)
+    finally:
+        bpy.data.images.remove(img)
+    return buf.reshape(1, res, res, 4)[:, ::-1, :, :3].copy()
+
+
 def main() -> int:
     probe = Probe()
     stdin = sys.stdin.buffer
@@ -275,9 +516,14 @@ def main() -> int:
             if op == "ping":
                 _send({"ok": True, "pid": os.getpid()})
                 continue
-            if op != "render":
+            if op == "svbrdf":
+                probe.key = None  # the probe scene is rebuilt on its next request
+                probe.materials = {}
+                images = render_svbrdf(request, probe.tmp)
+            elif op == "render":
+                images = probe.render(request)
+            else:
                 raise ValueError(f"unknown request {op!r}")
-            images = probe.render(request)
             f = io.BytesIO()
             np.save(f, images)
             payload = f.getvalue()
