@@ -24,7 +24,7 @@ x along u (right), y up the image (OpenGL convention), z along the surface norma
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
@@ -33,7 +33,7 @@ import numpy as np
 
 from .envmap import EnvMap, directional_lights
 from .errors import MatremapError
-from .models import ModelSpec, get_model
+from .models import ModelSpec, ParamSpec, get_model
 from .renderers.embedded.geometry import LocalGeometry
 from .scene import Scene
 
@@ -223,14 +223,59 @@ def _check_params(spec: ModelSpec, params: Mapping[str, Any], options: Mapping[s
     return opts
 
 
-def _shading_normals(surf: SurfacePixels, normal_map: np.ndarray | None) -> np.ndarray:
-    if normal_map is None:
-        return surf.normal
+def check_normal_map(normal_map: Any) -> np.ndarray:
+    """A tangent-space normal map [h, w, 3] in [-1, 1], validated (shared by every SVBRDF renderer)."""
     nm = np.asarray(normal_map, dtype=float)
     if nm.ndim != 3 or nm.shape[2] != 3:
         raise MatremapError(f"a normal map must be [h, w, 3] (tangent space, in [-1, 1]), got shape {nm.shape}")
     if not np.all(np.isfinite(nm)):
         raise MatremapError("the normal map has NaN or infinite values")
+    return nm
+
+
+def split_texture_params(
+    spec: ModelSpec, params: Mapping[str, Any], overrides: Mapping[str, Any],
+    check: Callable[[ParamSpec, np.ndarray], None] | None = None,
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """Every model parameter as a constant ``[channels]`` or a texture (scalar ``[h, w]``, RGB
+    ``[h, w, 3]``), validated; ``overrides`` win over ``params``, defaults fill the rest. ``check``
+    adds a renderer's own rules for a texture. Texture parameters keep their default as constant."""
+    consts: dict[str, np.ndarray] = {}
+    textures: dict[str, np.ndarray] = {}
+    for p in spec.params:
+        raw = overrides[p.name] if p.name in overrides else params.get(p.name, p.default_array)
+        a = np.asarray(raw, dtype=float)
+        if not np.all(np.isfinite(a)):
+            raise MatremapError(f"{spec.id}: {p.name} has NaN or infinite values")
+        if a.ndim <= 1:
+            if a.size not in (1, p.channels):
+                raise MatremapError(f"{spec.id}: {p.name} takes {p.channels} value(s), got {a.size}")
+            consts[p.name] = np.broadcast_to(a.reshape(-1), (p.channels,)).astype(float)
+            continue
+        if a.ndim == 3 and a.shape[2] == 1:
+            a = a[..., 0]
+        if (a.ndim == 3 and a.shape[2] != 3) or a.ndim > 3 or min(a.shape[:2]) < 1:
+            raise MatremapError(f"{spec.id}: texture {p.name} must be [h, w] or [h, w, 3], got shape {a.shape}")
+        if check is not None:
+            check(p, a)
+        if p.channels == 1:
+            if a.ndim == 3:
+                if not np.all(a == a[..., :1]):
+                    raise MatremapError(
+                        f"{spec.id}: {p.name} is a scalar parameter but its texture has different R, G, B; "
+                        "give a single-channel map")
+                a = a[..., 0]
+        elif a.ndim == 2:
+            a = np.repeat(a[..., None], 3, axis=2)
+        textures[p.name] = a
+        consts[p.name] = p.default_array.astype(float)
+    return consts, textures
+
+
+def _shading_normals(surf: SurfacePixels, normal_map: np.ndarray | None) -> np.ndarray:
+    if normal_map is None:
+        return surf.normal
+    nm = check_normal_map(normal_map)
     t = sample_texture(nm, surf.uv, surf.wrap_u)
     n = t[:, :1] * surf.tangent + t[:, 1:2] * surf.bitangent + t[:, 2:3] * surf.normal
     length = np.linalg.norm(n, axis=-1, keepdims=True)

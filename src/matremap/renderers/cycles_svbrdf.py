@@ -56,31 +56,13 @@ def _renderer(renderer: CyclesRenderer | None) -> CyclesRenderer:
 
 def _split_params(spec: ModelSpec, params: Mapping[str, Any],
                   overrides: Mapping[str, Any]) -> tuple[dict[str, list[float]], dict[str, np.ndarray]]:
-    consts: dict[str, list[float]] = {}
-    textures: dict[str, np.ndarray] = {}
-    for p in spec.params:
-        raw = overrides[p.name] if p.name in overrides else params.get(p.name, p.default_array)
-        a = np.asarray(raw, dtype=float)
-        if not np.all(np.isfinite(a)):
-            raise MatremapError(f"{spec.id}: {p.name} has NaN or infinite values")
-        if a.ndim <= 1:
-            if a.size not in (1, p.channels):
-                raise MatremapError(f"{spec.id}: {p.name} takes {p.channels} value(s), got {a.size}")
-            consts[p.name] = [float(x) for x in np.broadcast_to(a.reshape(-1), (p.channels,))]
-            continue
-        if a.ndim == 3 and a.shape[2] == 1:
-            a = a[..., 0]
-        if (a.ndim == 3 and a.shape[2] != 3) or a.ndim > 3 or min(a.shape[:2]) < 1:
-            raise MatremapError(f"{spec.id}: texture {p.name} must be [h, w] or [h, w, 3], got shape {a.shape}")
-        if p.channels == 1 and a.ndim == 3:
-            if not np.all(a == a[..., :1]):
-                raise MatremapError(f"{spec.id}: {p.name} is a scalar parameter but its texture has different "
-                                    "R, G, B; give a single-channel map")
-            a = a[..., 0]
-        if a.ndim == 2:
-            a = np.repeat(a[..., None], 3, axis=2)
-        textures[p.name] = a.astype(np.float32)
-    return consts, textures
+    """Constants as lists (for the worker's JSON) and textures as float32 [h, w, 3] images."""
+    from ..svbrdf_render import split_texture_params
+
+    consts, textures = split_texture_params(spec, params, overrides)
+    images = {k: (t if t.ndim == 3 else np.repeat(t[..., None], 3, axis=2)).astype(np.float32)
+              for k, t in textures.items()}
+    return {k: [float(x) for x in v] for k, v in consts.items() if k not in textures}, images
 
 
 def render_svbrdf_cycles(
@@ -122,13 +104,9 @@ def render_svbrdf_cycles(
     if overrides is None:
         return np.zeros((res, res, 3), dtype=np.float32)
     consts, textures = _split_params(spec, params, overrides)
-    nm = None
-    if normal_map is not None:
-        nm = np.asarray(normal_map, dtype=float)
-        if nm.ndim != 3 or nm.shape[2] != 3:
-            raise MatremapError(f"a normal map must be [h, w, 3] (tangent space, in [-1, 1]), got shape {nm.shape}")
-        if not np.all(np.isfinite(nm)):
-            raise MatremapError("the normal map has NaN or infinite values")
+    from ..svbrdf_render import check_normal_map
+
+    nm = None if normal_map is None else check_normal_map(normal_map)
     scene = Scene(resolution=res)
     r = _renderer(renderer)
     with tempfile.TemporaryDirectory(prefix="matremap-cycles-svbrdf-") as d:

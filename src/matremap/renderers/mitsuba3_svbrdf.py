@@ -40,7 +40,7 @@ import numpy as np
 
 from ..envmap import EnvMap
 from ..errors import MatremapError
-from ..models import Material, ModelSpec, get_model
+from ..models import Material, ModelSpec, ParamSpec, get_model
 from ..scene import Scene
 from .mitsuba3 import MODELS, _bsdf, _call, choose_variant, import_mitsuba, probe_sensor
 
@@ -91,39 +91,17 @@ def _bitmap(mi, arr: np.ndarray) -> dict[str, Any]:
 
 def _split_params(spec: ModelSpec, params: Mapping[str, Any], overrides: Mapping[str, Any],
                   options: Mapping[str, str]) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
-    """(constant values [channels], textures [h, w] or [h, w, 3]) of every model parameter."""
-    consts: dict[str, np.ndarray] = {}
-    textures: dict[str, np.ndarray] = {}
-    for p in spec.params:
-        raw = overrides[p.name] if p.name in overrides else params.get(p.name, p.default_array)
-        a = np.asarray(raw, dtype=float)
-        if not np.all(np.isfinite(a)):
-            raise MatremapError(f"{spec.id}: {p.name} has NaN or infinite values")
-        if a.ndim <= 1:
-            if a.size not in (1, p.channels):
-                raise MatremapError(f"{spec.id}: {p.name} takes {p.channels} value(s), got {a.size}")
-            consts[p.name] = np.broadcast_to(a.reshape(-1), (p.channels,)).astype(float)
-            continue
-        if a.ndim == 3 and a.shape[2] == 1:
-            a = a[..., 0]
-        if (a.ndim == 3 and a.shape[2] != 3) or a.ndim > 3 or min(a.shape[:2]) < 1:
-            raise MatremapError(f"{spec.id}: texture {p.name} must be [h, w] or [h, w, 3], got shape {a.shape}")
+    """(constant values [channels], textures [h, w] or [h, w, 3]) of every model parameter, with
+    Mitsuba 3's own limits on what may be a texture."""
+    from ..svbrdf_render import split_texture_params
+
+    def check(p: ParamSpec, a: np.ndarray) -> None:
         if p.name in _NOT_TEXTURABLE.get(spec.id, ()):
             raise MatremapError(f"{spec.id}: Mitsuba 3 takes {p.name} as a constant, not a texture")
         if p.name in ("eta", "k") and options.get("material", "custom") != "custom":
             raise MatremapError(f"{spec.id}: a texture for {p.name} needs material=custom")
-        if p.channels == 1:
-            if a.ndim == 3:
-                if not np.all(a == a[..., :1]):
-                    raise MatremapError(
-                        f"{spec.id}: {p.name} is a scalar parameter but its texture has different R, G, B; "
-                        "give a single-channel map")
-                a = a[..., 0]
-        elif a.ndim == 2:
-            a = np.repeat(a[..., None], 3, axis=2)
-        textures[p.name] = a
-        consts[p.name] = p.default_array.astype(float)  # placeholder, replaced by the bitmap below
-    return consts, textures
+
+    return split_texture_params(spec, params, overrides, check)
 
 
 def scene_dict(
@@ -160,11 +138,9 @@ def scene_dict(
     for name, tex in textures.items():
         bsdf[name] = _bitmap(mi, tex)
     if normal_map is not None:
-        nm = np.asarray(normal_map, dtype=float)
-        if nm.ndim != 3 or nm.shape[2] != 3:
-            raise MatremapError(f"a normal map must be [h, w, 3] (tangent space, in [-1, 1]), got shape {nm.shape}")
-        if not np.all(np.isfinite(nm)):
-            raise MatremapError("the normal map has NaN or infinite values")
+        from ..svbrdf_render import check_normal_map
+
+        nm = check_normal_map(normal_map)
         bsdf = {"type": "normalmap", "normalmap": _bitmap(mi, (nm + 1.0) / 2.0), "bsdf": bsdf}
 
     scene = Scene(resolution=int(resolution))
