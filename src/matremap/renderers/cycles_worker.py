@@ -101,28 +101,8 @@ class Probe:
         scene.render.use_compositing = False
         scene.render.use_sequencer = False
         scene.world = None  # black background, no environment light
-        im = scene.render.image_settings
-        im.file_format = "OPEN_EXR"
-        im.color_depth = "32"
-        im.exr_codec = "NONE"
-        im.color_mode = "RGBA"
-        scene.view_settings.view_transform = "Standard"
-        scene.view_settings.exposure = 0.0
-        scene.view_settings.gamma = 1.0
-        scene.view_settings.look = "None"
-
-        # camera at (0, 0, d) looking down -z, +y up (Blender's default camera orientation)
-        cam_data = bpy.data.cameras.new("camera")
-        cam_data.type = "PERSP"
-        cam_data.sensor_fit = "HORIZONTAL"
-        cam_data.angle = math.radians(float(s["fov"]))
-        cam_data.clip_start = 1e-3
-        cam_data.clip_end = 10.0 * (float(s["camera_distance"]) + float(s["sphere_radius"]))
-        cam = bpy.data.objects.new("camera", cam_data)
-        cam.location = (0.0, 0.0, float(s["camera_distance"]))
-        cam.rotation_euler = (0.0, 0.0, 0.0)
-        scene.collection.objects.link(cam)
-        scene.camera = cam
+        _exr_output(scene)
+        _add_camera(bpy, scene, s)
 
         self.sphere = self._sphere(float(s["sphere_radius"]), s.get("geometry", "points"))
         scene.collection.objects.link(self.sphere)
@@ -333,6 +313,35 @@ def _uv_sphere(radius: float, segments: int, rings: int):
     return obj, uv.name
 
 
+
+def _exr_output(scene) -> None:  # noqa: ANN001
+    """Linear float pixels: 32-bit uncompressed EXR, no view transform, no exposure."""
+    im = scene.render.image_settings
+    im.file_format = "OPEN_EXR"
+    im.color_depth = "32"
+    im.exr_codec = "NONE"
+    im.color_mode = "RGBA"
+    scene.view_settings.view_transform = "Standard"
+    scene.view_settings.exposure = 0.0
+    scene.view_settings.gamma = 1.0
+    scene.view_settings.look = "None"
+
+
+def _add_camera(bpy, scene, s: dict) -> None:  # noqa: ANN001
+    """The probe camera: at (0, 0, d) looking down -z, +y up (Blender's default camera orientation),
+    the scene's field of view across the image width."""
+    cam_data = bpy.data.cameras.new("camera")
+    cam_data.type = "PERSP"
+    cam_data.sensor_fit = "HORIZONTAL"
+    cam_data.angle = math.radians(float(s["fov"]))
+    cam_data.clip_start = 1e-3
+    cam_data.clip_end = 10.0 * (float(s["camera_distance"]) + float(s["sphere_radius"]))
+    cam = bpy.data.objects.new("camera", cam_data)
+    cam.location = (0.0, 0.0, float(s["camera_distance"]))
+    cam.rotation_euler = (0.0, 0.0, 0.0)
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+
 def render_svbrdf(request: dict, tmp: str) -> np.ndarray:
     """One textured sphere under an environment map -> float32 [1, res, res, 3]."""
     s = request["scene"]
@@ -359,24 +368,8 @@ def render_svbrdf(request: dict, tmp: str) -> np.ndarray:
     scene.render.film_transparent = True  # black background (RGB 0 where alpha is 0)
     scene.render.use_compositing = False
     scene.render.use_sequencer = False
-    im = scene.render.image_settings
-    im.file_format = "OPEN_EXR"
-    im.color_depth = "32"
-    im.exr_codec = "NONE"
-    im.color_mode = "RGBA"
-    scene.view_settings.view_transform = "Standard"
-    scene.view_settings.look = "None"
-
-    cam_data = bpy.data.cameras.new("camera")
-    cam_data.type = "PERSP"
-    cam_data.sensor_fit = "HORIZONTAL"
-    cam_data.angle = math.radians(float(s["fov"]))
-    cam_data.clip_start = 1e-3
-    cam_data.clip_end = 10.0 * (float(s["camera_distance"]) + float(s["sphere_radius"]))
-    cam = bpy.data.objects.new("camera", cam_data)
-    cam.location = (0.0, 0.0, float(s["camera_distance"]))
-    scene.collection.objects.link(cam)
-    scene.camera = cam
+    _exr_output(scene)
+    _add_camera(bpy, scene, s)
 
     segments, rings = (int(x) for x in request.get("geometry", "512x256").split("x"))
     sphere, uv_name = _uv_sphere(float(s["sphere_radius"]), segments, rings)
