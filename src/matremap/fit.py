@@ -122,7 +122,8 @@ def part(material: Material, which: str) -> Material | None:
     """The material restricted to its diffuse or specular part (None if it has no such part)."""
     if which == FULL:
         return material
-    overrides = material.spec.diffuse_only if which == DIFFUSE else material.spec.specular_only
+    spec = material.spec.specialise(material.values)
+    overrides = spec.diffuse_only if which == DIFFUSE else spec.specular_only
     if overrides is None:
         return None
     values = dict(material.values)
@@ -325,6 +326,7 @@ def target_template(spec: ModelSpec, fix: Mapping[str, Any] | None) -> tuple[Mat
     and the parameters a fit adjusts."""
     held = {p.name: p.fit_value for p in spec.params if not p.fit and p.fit_value is not None}
     template = Material.create(spec.id).with_params(held).with_params(dict(fix or {}))
+    spec = spec.specialise(template.values)  # e.g. a metal's base colour is its specular colour
     fixed = set(fix or {})
     free = [p for p in spec.params if p.fit and p.name not in fixed]
     return template, free
@@ -360,6 +362,7 @@ def fit(
         if not r.supports(model):
             raise MatremapError(f"renderer {r.name!r} cannot render model {model}")
     template, free_params = target_template(spec, fix)
+    spec = spec.specialise(template.values)
     for name in free:
         p = spec.param(name)
         if p.name in (fix or {}):
@@ -460,7 +463,7 @@ def _run_stage(
     names = [p.name for p in params]
     name = name or which
     energy = float(np.sum(goal * goal))
-    spec = current.spec
+    spec = current.spec.specialise(current.values)
     has_part = (spec.diffuse_only if which == DIFFUSE else spec.specular_only) is not None or which == FULL
 
     def report(result: Material, loss: float, evaluations: int, message: str) -> None:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import difflib
 import json
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -110,6 +110,24 @@ class ModelSpec:
     doc: str = ""
     channel_separable: bool = True
     reflectance: tuple[str, ...] = ()
+    specialisations: tuple[tuple[str, float, Mapping[str, Any]], ...] = ()
+
+    def specialise(self, values: Mapping[str, Any]) -> ModelSpec:
+        """The spec as a fit sees it when parameters are held at given values.
+
+        ``specialisations`` lists ``(param, value, changes)``: when ``values[param]`` equals
+        ``value``, ``changes`` apply (``roles``: parameter -> new role; ``diffuse_only`` /
+        ``specular_only``: new overrides). A glTF material held at metallic 1 has no diffuse part
+        and its base colour is the specular colour."""
+        spec = self
+        for name, value, changes in self.specialisations:
+            if name not in values or not np.all(np.asarray(values[name], dtype=float) == value):
+                continue
+            roles = changes.get("roles", {})
+            params = tuple(replace(p, role=roles[p.name]) if p.name in roles else p for p in spec.params)
+            extra = {k: changes[k] for k in ("diffuse_only", "specular_only") if k in changes}
+            spec = replace(spec, params=params, **extra)
+        return spec
 
     @property
     def family(self) -> str:

@@ -77,3 +77,10 @@ def ior_from_f0(f0: ArrayLike) -> np.ndarray:
     eta = (1 + sqrt F0) / (1 - sqrt F0)."""
     s = np.sqrt(np.clip(np.asarray(f0, dtype=float), 0.0, 1.0 - 1e-12))
     return (1.0 + s) / (1.0 - s)
+
+
+def dielectric_f0(ior: ArrayLike, specular: ArrayLike = 1.0, specular_color: ArrayLike = 1.0) -> np.ndarray:
+    """F0 of a glTF dielectric (KHR_materials_ior and KHR_materials_specular):
+    min(((ior - 1) / (ior + 1))^2 specularColor, 1) specular."""
+    r = (np.asarray(ior, dtype=float) - 1.0) / (np.asarray(ior, dtype=float) + 1.0)
+    return np.minimum(r * r * np.asarray(specular_color), 1.0) * np.asarray(specular)

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..errors import MatremapError
 from ..models import Material, ModelSpec, ParamSpec
-from ..optics import f0_from_ior, ior_from_f0
+from ..optics import dielectric_f0, f0_from_ior, ior_from_f0
 
 QUANTITIES = ("roughness", "reflectance", "diffuse")
 
@@ -70,11 +70,19 @@ def read(spec: ModelSpec, values: Mapping[str, np.ndarray]) -> dict[str, np.ndar
             eta = _rgb(values[names[0]], ch[names[0]]) / ext
             k = _rgb(values[names[1]], ch[names[1]]) / ext
             out["reflectance"] = f0_from_ior(eta, k)
+        elif kind == "metal-rough":  # glTF: F0 = mix(dielectric f0, baseColor, metallic)
+            base, metallic, ior, specular, tint = names
+            m = as_floats(values[metallic])[..., None]
+            f0_d = dielectric_f0(as_floats(values[ior])[..., None], as_floats(values[specular])[..., None],
+                                 _rgb(values[tint], 3))
+            out["reflectance"] = f0_d * (1.0 - m) + _rgb(values[base], 3) * m
         else:  # pragma: no cover - specs are checked by tests
             raise ValueError(kind)
     dp = diffuse_param(spec)
     if dp is not None:
         out["diffuse"] = as_floats(values[dp.name])
+        if spec.reflectance and spec.reflectance[0] == "metal-rough":  # a metal's base colour is no albedo
+            out["diffuse"] = out["diffuse"] * (1.0 - as_floats(values[spec.reflectance[2]])[..., None])
     return out
 
 
@@ -117,8 +125,10 @@ def write(spec: ModelSpec, quantities: Mapping[str, np.ndarray], template: Mappi
             k2 = (f0 * (eta + 1) ** 2 - (eta - 1) ** 2) / (1.0 - f0)
             out[names[1]] = np.sqrt(np.maximum(k2, 0.0)) * ext
             driven.append(names[1])
+        elif kind == "metal-rough":
+            driven += _write_metal_rough(names, f0, quantities.get("diffuse"), out)
     dp = diffuse_param(spec)
-    if dp is not None and "diffuse" in quantities:
+    if dp is not None and "diffuse" in quantities and spec.reflectance[:1] != ("metal-rough",):
         out[dp.name] = as_floats(quantities["diffuse"])
         driven.append(dp.name)
     bounds = {p.name: p.bounds for p in spec.params}
@@ -128,6 +138,28 @@ def write(spec: ModelSpec, quantities: Mapping[str, np.ndarray], template: Mappi
             a = np.array(a)
         out[name] = np.clip(a, *bounds[name], out=a)
     return out
+
+
+def _write_metal_rough(names: list[str], f0: np.ndarray, diffuse: np.ndarray | None,
+                       out: dict[str, np.ndarray]) -> list[str]:
+    """glTF metallic-roughness from F0 and albedo, the template's metallic deciding per texel:
+    a metal (metallic >= 0.5) takes F0 as base colour; a dielectric takes the albedo as base colour
+    and F0 through specularColor = F0 / f0(ior) / specular (KHR_materials_specular), written only
+    where it differs from the template's."""
+    base, metallic, ior, specular, tint = names
+    metal = (np.asarray(out[metallic]) >= 0.5)[..., None]
+    albedo = np.asarray(out[base]) if diffuse is None else as_floats(diffuse)
+    out[base] = np.where(metal, f0, albedo)
+    driven = [base]
+    if not np.all(metal):
+        f0_ior = dielectric_f0(np.asarray(out[ior])[..., None], 1.0, 1.0)
+        scale = np.maximum(np.asarray(out[specular])[..., None] * f0_ior, 1e-12)
+        current = dielectric_f0(np.asarray(out[ior])[..., None], np.asarray(out[specular])[..., None],
+                                np.asarray(out[tint]))
+        if np.max(np.abs(np.where(metal, current, f0) - current)) > 1e-4 * max(float(np.max(current)), 1e-12):
+            out[tint] = np.where(metal, np.asarray(out[tint]), f0 / scale)
+            driven.append(tint)
+    return driven
 
 
 def material_values(m: Material) -> dict[str, np.ndarray]:

@@ -40,4 +40,4 @@ def energy_clamp(rho_s: np.ndarray, rho_d: np.ndarray) -> np.ndarray:
     return np.where(total > 1.0, 0.99 / np.maximum(total, 1e-300), 1.0)
 
 
-from . import blender27, cycles, mitsuba06  # noqa: E402,F401  (registration)
+from . import blender27, cycles, gltf, mitsuba06  # noqa: E402,F401  (registration)

@@ -1,0 +1,74 @@
+"""Material files in and out: glTF 2.0, MaterialX, Mitsuba 3 XML, Blender .blend.
+
+Every reader has the signature ``read(path, material=None) -> MaterialAsset`` (``material`` picks
+one material of the file by name or index; the first by default) and every writer
+``write(out, result, source=None, force=False) -> Path`` where ``result`` is a uniform
+:class:`~matremap.models.Material` or a :class:`~matremap.textures.MapSet` of converted maps, and
+``source`` the asset it was remapped from (the glTF writer copies the source file with the new
+material). Modules are imported when a format is used.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+from pathlib import Path
+from typing import Any
+
+from ..errors import MatremapError
+from .asset import MaterialAsset, TextureRef
+
+#: file suffix -> (format name, module)
+READERS = {
+    ".gltf": ("gltf", "gltf"),
+    ".glb": ("gltf", "gltf"),
+    ".mtlx": ("mtlx", "materialx"),
+    ".xml": ("mitsuba-xml", "mitsuba_xml"),
+}
+#: format name -> (module, the suffixes it writes)
+WRITERS = {
+    "gltf": ("gltf", (".gltf", ".glb")),
+    "mtlx": ("materialx", (".mtlx",)),
+    "mitsuba-xml": ("mitsuba_xml", (".xml",)),
+    "blend": ("blend", (".blend",)),
+}
+
+
+def _module(name: str):
+    return importlib.import_module(f"{__name__}.{name}")
+
+
+def is_material_file(path: str | os.PathLike) -> bool:
+    return Path(path).suffix.lower() in READERS and Path(path).is_file()
+
+
+def read_asset(path: str | os.PathLike, material: str | int | None = None) -> MaterialAsset:
+    """Read one material of a glTF/.glb, MaterialX or Mitsuba XML file."""
+    p = Path(path)
+    if not p.is_file():
+        raise MatremapError(f"{p} not found")
+    suffix = p.suffix.lower()
+    if suffix not in READERS:
+        raise MatremapError(f"{p}: matremap reads {', '.join(sorted(READERS))} material files, not {suffix or 'this'}")
+    return _module(READERS[suffix][1]).read(p, material)
+
+
+def format_for(out: str | os.PathLike) -> str:
+    """The output format a file name asks for."""
+    suffix = Path(out).suffix.lower()
+    for fmt, (_, suffixes) in WRITERS.items():
+        if suffix in suffixes:
+            return fmt
+    raise MatremapError(f"{out}: matremap writes {', '.join(s for _, ss in WRITERS.values() for s in ss)} files; "
+                        f"give the output one of these suffixes")
+
+
+def write_asset(out: str | os.PathLike, result: Any, source: MaterialAsset | None = None,
+                force: bool = False) -> Path:
+    """Write ``result`` (a Material or a MapSet) in the format ``out``'s suffix names."""
+    module, _ = WRITERS[format_for(out)]
+    return _module(module).write(Path(out), result, source=source, force=force)
+
+
+__all__ = ["READERS", "WRITERS", "MaterialAsset", "TextureRef", "format_for", "is_material_file", "read_asset",
+           "write_asset"]

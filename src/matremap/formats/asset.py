@@ -1,0 +1,149 @@
+"""A material read from a file (glTF, MaterialX, Mitsuba XML): a model, constants and textures.
+
+Readers (one module per format) turn a file into a :class:`MaterialAsset`: the matremap model it
+speaks, its uniform parameter values in that model's units, and the textures that drive parameters
+(a file, the channels to take from it, its colour space, the factor the format multiplies it by).
+:meth:`MaterialAsset.to_map_set` turns the textured parameters into a plain map set (one file per
+parameter, a ``material.json``) that the rest of matremap converts and evaluates; a uniform asset
+is a :class:`~matremap.models.Material`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import MatremapError
+from ..models import Material, get_model
+
+
+@dataclass(frozen=True)
+class TextureRef:
+    """A texture driving one parameter.
+
+    ``channels``: the image channels to take (``(2,)`` for the blue channel of a packed map), or
+    None for all; ``colorspace``: how the file's values are encoded ("srgb" or "linear");
+    ``scale``: a factor (scalar or RGB) the format multiplies the texture by (glTF's factors).
+    """
+
+    path: Path
+    channels: tuple[int, ...] | None = None
+    colorspace: str = "linear"
+    scale: float | tuple[float, ...] = 1.0
+
+    @property
+    def plain(self) -> bool:
+        """Whether the file can be used as the map itself (all channels, no factor)."""
+        return self.channels is None and np.all(np.asarray(self.scale, dtype=float) == 1.0)
+
+
+@dataclass
+class MaterialAsset:
+    """One material of a file, in a matremap model's terms.
+
+    ``constants``: parameter values and options (model units); a parameter named in ``textures``
+    is textured and its constant, if any, is ignored. ``document`` keeps whatever the reader parsed,
+    for writers that copy the input with a new material. ``notes`` are the reader's decisions and
+    the inputs it skipped, for the user to see.
+    """
+
+    path: Path
+    format: str
+    name: str
+    model: str
+    constants: dict[str, Any] = field(default_factory=dict)
+    textures: dict[str, TextureRef] = field(default_factory=dict)
+    normal: TextureRef | None = None
+    notes: list[str] = field(default_factory=list)
+    document: Any = None
+    index: int = 0
+
+    @property
+    def textured(self) -> bool:
+        return bool(self.textures)
+
+    def material(self) -> Material:
+        """The asset as a uniform material (its textures, if any, are not included)."""
+        spec = get_model(self.model)
+        known = set(spec.param_names) | set(spec.option_names)
+        return Material.create(spec.id, {k: v for k, v in self.constants.items() if k in known})
+
+    def to_map_set(self, workdir: str | os.PathLike) -> Path:
+        """Write the textured parameters as a map set in ``workdir`` (one image per parameter,
+        channels picked and factors multiplied in, a ``material.json``); returns the folder.
+
+        A texture used as it is (all channels, factor 1) is referenced where it lies, not copied.
+        """
+        from ..textures import image_info, read_image, write_image_like
+
+        if not self.textures:
+            raise MatremapError(f"{self.path}: material {self.name!r} has no textures; use it as a uniform material")
+        spec = get_model(self.model)
+        out = Path(workdir)
+        out.mkdir(parents=True, exist_ok=True)
+        maps: dict[str, str] = {}
+        colorspace: dict[str, str] = {}
+        sizes: dict[str, tuple[int, int]] = {}
+        for name, ref in self.textures.items():
+            p = spec.param(name)
+            if not ref.path.is_file():
+                raise MatremapError(f"{self.path}: texture {ref.path} for {name} not found; put it beside the file "
+                                    f"or fix its uri")
+            if ref.plain and (p.channels == 3 or image_info(ref.path, ref.colorspace, colour=False).channels == 1):
+                maps[name] = str(ref.path.resolve())
+                colorspace[name] = ref.colorspace
+                info = image_info(ref.path, ref.colorspace, colour=p.channels == 3)
+                sizes[name] = (info.height, info.width)
+                continue
+            image, info = read_image(ref.path, ref.colorspace, colour=True)
+            image = np.atleast_3d(image)
+            if ref.channels is not None:
+                if max(ref.channels) >= image.shape[-1]:
+                    raise MatremapError(f"{ref.path}: has {image.shape[-1]} channel(s); {name} needs channel "
+                                        f"{max(ref.channels)}")
+                image = image[..., list(ref.channels)]
+            elif p.channels == 1:
+                image = image[..., :1]
+            elif image.shape[-1] == 1:
+                image = np.repeat(image, 3, axis=-1)
+            elif image.shape[-1] > 3:
+                image = image[..., :3]
+            scale = np.asarray(ref.scale, dtype=np.float32)
+            image = (image * scale).astype(np.float32)
+            lo, hi = p.bounds
+            image = np.clip(image, lo, hi)
+            fname = f"{name.replace(' ', '_')}.exr"
+            write_image_like(out / fname, image, info.like(format="exr", pixel_type="float", channels=image.shape[-1],
+                                                          colorspace="linear"), force=True)
+            maps[name] = fname
+            colorspace[name] = "linear"
+            sizes[name] = image.shape[:2]
+        if len(set(sizes.values())) > 1:
+            detail = ", ".join(f"{k} {w}x{h}" for k, (h, w) in sizes.items())
+            raise MatremapError(f"{self.path}: material {self.name!r} has textures of different sizes ({detail}); "
+                                f"resize them to one size")
+        manifest: dict[str, Any] = {
+            "model": spec.id,
+            "maps": maps,
+            "params": {k: _jsonable(v) for k, v in self.constants.items() if k not in self.textures},
+            "colorspace": colorspace,
+            "provenance": {"file": str(self.path), "material": self.name, "format": self.format},
+        }
+        if self.normal is not None:
+            manifest["normal"] = str(self.normal.path.resolve())
+        (out / "material.json").write_text(json.dumps(manifest, indent=1))
+        return out
+
+
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, np.ndarray):
+        return v.tolist() if v.size > 1 else float(v.reshape(-1)[0])
+    if isinstance(v, Mapping):
+        return {k: _jsonable(x) for k, x in v.items()}
+    return v
