@@ -21,8 +21,8 @@ light only. Pixels come back through a 32-bit uncompressed EXR.
 =================  =========================================================================
 model              Blender nodes (socket names are the parameter names)
 =================  =========================================================================
-cycles:glossy      Glossy BSDF (distribution GGX, BECKMANN, ASHIKHMIN_SHIRLEY) + Diffuse BSDF
-                   (Roughness 0) through an Add Shader; "Diffuse Color" is the Diffuse's Color
+cycles:glossy      Glossy BSDF (distribution GGX, BECKMANN, ASHIKHMIN_SHIRLEY, MULTI_GGX) + Diffuse
+                   BSDF (Roughness 0) through an Add Shader; "Diffuse Color" is the Diffuse's Color
 cycles:diffuse     Diffuse BSDF, Roughness 0
 cycles:principled  Principled BSDF (multiscatter GGX by default): Base Color, Metallic,
                    Roughness, IOR, Specular IOR Level, Specular Tint
