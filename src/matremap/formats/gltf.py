@@ -1,0 +1,809 @@
+"""glTF 2.0 materials in and out (``.gltf`` JSON and ``.glb`` binary), as ``gltf:metal-rough``.
+
+References are to the glTF 2.0 specification (Khronos, version 2.0.1, 2021) and the Khronos
+extension READMEs:
+
+* §3.9.2 "Metallic-Roughness Material": ``baseColorFactor`` (linear RGBA, default 1) times the
+  ``baseColorTexture`` (sRGB-encoded); ``metallicFactor`` / ``roughnessFactor`` (default 1) times
+  the blue / green channels of the linear ``metallicRoughnessTexture`` (red and alpha unused);
+* §3.9.3 "Additional Textures": ``normalTexture`` (tangent space, ``scale`` scales its x and y),
+  ``occlusionTexture`` and ``emissive*`` (matremap does not remap them: they are noted, and a
+  written copy keeps them);
+* §3.9.4 / §3.9.5 ``alphaMode``, ``doubleSided``; §3.8 "Texture Data" (textures, images, samplers;
+  ``texCoord``); §3.6 "Binary Data Storage" (buffers, buffer views, ``data:`` URIs);
+* §4 "GLB File Format Specification": a 12-byte header (magic ``glTF``, version 2, length), a JSON
+  chunk padded with spaces and an optional BIN chunk padded with zeros, all 4-byte aligned; the
+  BIN chunk is the buffer with index 0 that has no ``uri``;
+* KHR_materials_ior (``ior``, default 1.5) and KHR_materials_specular (``specularFactor`` and the
+  alpha channel of ``specularTexture``; ``specularColorFactor`` and the sRGB RGB of
+  ``specularColorTexture``), which the dialect in
+  :mod:`matremap.renderers.embedded.dialects.gltf` evaluates.
+
+A reader picks one material and returns a :class:`~matremap.formats.asset.MaterialAsset` whose
+``document`` is a :class:`GltfDocument` (the parsed JSON and, for a ``.glb``, its BIN chunk).
+Images stored inside the file (buffer views, ``data:`` URIs) are extracted once to a cache folder,
+``<tempdir>/matremap-gltf-<user>/<hash of the file>``, so that every texture has a real path.
+
+The writer copies the source file with the chosen material replaced, or writes a small file of its
+own (the material on a UV sphere) when there is no glTF source.
+"""
+
+from __future__ import annotations
+
+import base64
+import copy
+import hashlib
+import json
+import math
+import os
+import struct
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+from urllib.parse import quote, unquote, unquote_to_bytes
+
+import numpy as np
+
+from ..errors import MatremapError
+from ..imageio import atomic_output, check_output, linear_to_srgb
+from ..models import Material, get_model
+from .asset import MaterialAsset, TextureRef
+
+MODEL = "gltf:metal-rough"
+IOR = "KHR_materials_ior"
+SPECULAR = "KHR_materials_specular"
+DEFAULT_IOR = 1.5
+#: GLB (§4.4): magic "glTF", chunk types "JSON" and "BIN\0"
+GLB_MAGIC = 0x46546C67
+CHUNK_JSON = 0x4E4F534A
+CHUNK_BIN = 0x004E4942
+_MIME_SUFFIX = {"image/png": ".png", "image/jpeg": ".jpg", "image/webp": ".webp", "image/ktx2": ".ktx2"}
+
+
+@dataclass
+class GltfDocument:
+    """What a reader parsed: the JSON, the GLB BIN chunk (None for a ``.gltf``), whether the file was
+    binary, and the folder its relative URIs resolve against."""
+
+    json: dict[str, Any]
+    bin: bytes | None
+    binary: bool
+    base: Path
+
+
+# ---------------------------------------------------------------------------------------------
+# parsing
+
+
+def _parse(path: Path, data: bytes) -> tuple[dict[str, Any], bytes | None]:
+    """The JSON object and the BIN chunk of a .glb or .gltf file's bytes (§4.4, §3.1)."""
+    suffix = path.suffix.lower()
+    if suffix == ".glb":
+        if data[:4] != b"glTF":
+            if data.lstrip()[:1] == b"{":
+                raise MatremapError(f"{path} holds JSON text, not a binary glTF; rename it to .gltf")
+            raise MatremapError(f"{path} is not a binary glTF: it does not start with the 'glTF' magic; "
+                                f"re-export it as .glb (or give the file its real extension)")
+        if len(data) < 20:
+            raise MatremapError(f"{path} is truncated ({len(data)} bytes, shorter than a GLB header); re-export it")
+        _, version, length = struct.unpack_from("<III", data, 0)
+        if version != 2:
+            raise MatremapError(f"{path} is a GLB version {version} file; matremap reads glTF 2.0 (GLB version 2)")
+        if length > len(data):
+            raise MatremapError(f"{path} is truncated: its header says {length} bytes, the file has {len(data)}; "
+                                f"re-export it")
+        chunks: list[tuple[int, bytes]] = []
+        pos = 12
+        while pos + 8 <= length:
+            clen, ctype = struct.unpack_from("<II", data, pos)
+            if pos + 8 + clen > length:
+                raise MatremapError(f"{path} is truncated: a chunk runs past the end of the file; re-export it")
+            chunks.append((ctype, data[pos + 8:pos + 8 + clen]))
+            pos += 8 + clen
+        if not chunks or chunks[0][0] != CHUNK_JSON:
+            raise MatremapError(f"{path}: the first GLB chunk is not JSON; the file is corrupt, re-export it")
+        text = chunks[0][1]
+        bin_chunk = chunks[1][1] if len(chunks) > 1 and chunks[1][0] == CHUNK_BIN else None
+    elif suffix == ".gltf":
+        if data[:4] == b"glTF":
+            raise MatremapError(f"{path} is a binary glTF (GLB), not JSON; rename it to .glb")
+        text, bin_chunk = data, None
+    else:
+        raise MatremapError(f"{path}: a glTF file ends in .gltf or .glb, not {suffix or 'nothing'}")
+    try:
+        obj = json.loads(text.decode("utf-8-sig"))
+    except UnicodeDecodeError:
+        raise MatremapError(f"{path} is not a JSON glTF: it is not UTF-8 text"
+                            + ("; if it is a binary glTF, name it .glb" if suffix == ".gltf" else "")) from None
+    except json.JSONDecodeError as e:
+        raise MatremapError(f"{path} is not valid glTF JSON: {e.msg} at line {e.lineno}, column {e.colno}; "
+                            f"fix or re-export the file") from None
+    if not isinstance(obj, dict):
+        raise MatremapError(f"{path}: a glTF file is a JSON object with 'asset'; this one is not")
+    asset = obj.get("asset")
+    version = asset.get("version") if isinstance(asset, dict) else None
+    if not isinstance(version, str):
+        raise MatremapError(f"{path} has no asset.version; it is not a glTF 2.0 file (re-export it)")
+    if version.split(".")[0] != "2":
+        raise MatremapError(f"{path} is glTF {version}; matremap reads glTF 2.0 (convert it, e.g. with the Khronos "
+                            f"glTF 1.0 to 2.0 converter)")
+    return obj, bin_chunk
+
+
+def _cache_dir(data: bytes) -> Path:
+    user = os.getuid() if hasattr(os, "getuid") else os.environ.get("USERNAME", "user")
+    return Path(tempfile.gettempdir()) / f"matremap-gltf-{user}" / hashlib.sha256(data).hexdigest()[:20]
+
+
+def _data_uri(uri: str) -> tuple[str, bytes]:
+    """(media type, bytes) of a ``data:`` URI (RFC 2397; base64 or percent-encoded)."""
+    head, _, payload = uri[5:].partition(",")
+    mime = head.split(";")[0]
+    if head.endswith(";base64"):
+        return mime, base64.b64decode(payload)
+    return mime, unquote_to_bytes(payload)
+
+
+def _sniff(data: bytes) -> str:
+    if data[:8] == b"\x89PNG\r\n\x1a\n":
+        return ".png"
+    if data[:3] == b"\xff\xd8\xff":
+        return ".jpg"
+    if data[:4] == b"RIFF" and data[8:12] == b"WEBP":
+        return ".webp"
+    return ".bin"
+
+
+class _Reader:
+    """Resolves the indices of one document (textures, images, buffers) to files and bytes."""
+
+    def __init__(self, path: Path, doc: GltfDocument, data: bytes):
+        self.path, self.doc, self.data = path, doc, data
+        self._buffers: dict[int, bytes] = {}
+        self._images: dict[int, Path] = {}
+
+    def item(self, key: str, index: Any, where: str) -> dict[str, Any]:
+        items = self.doc.json.get(key)
+        n = len(items) if isinstance(items, list) else 0
+        if not isinstance(index, int) or isinstance(index, bool) or not 0 <= index < n:
+            raise MatremapError(f"{self.path}: {where} refers to {key}[{index}], but the file has {n}; the file is "
+                                f"broken, re-export it")
+        obj = items[index]
+        if not isinstance(obj, dict):
+            raise MatremapError(f"{self.path}: {key}[{index}] is not an object; the file is broken, re-export it")
+        return obj
+
+    def buffer(self, index: int, where: str) -> bytes:
+        if index not in self._buffers:
+            buf = self.item("buffers", index, where)
+            uri = buf.get("uri")
+            if uri is None:
+                if index != 0 or self.doc.bin is None:
+                    raise MatremapError(f"{self.path}: buffers[{index}] has no uri and no GLB BIN chunk holds it; "
+                                        f"re-export the file")
+                data = self.doc.bin
+            elif uri.startswith("data:"):
+                data = _data_uri(uri)[1]
+            else:
+                f = self.doc.base / unquote(uri)
+                if not f.is_file():
+                    raise MatremapError(f"{self.path}: buffer file {uri!r} not found at {f}; put it beside "
+                                        f"{self.path.name} or fix its uri")
+                data = f.read_bytes()
+            need = buf.get("byteLength", 0)
+            if len(data) < need:
+                raise MatremapError(f"{self.path}: buffers[{index}] holds {len(data)} bytes but says byteLength "
+                                    f"{need}; the file is truncated, re-export it")
+            self._buffers[index] = data
+        return self._buffers[index]
+
+    def buffer_view(self, index: Any, where: str) -> bytes:
+        bv = self.item("bufferViews", index, where)
+        data = self.buffer(bv.get("buffer"), f"bufferViews[{index}]")
+        off, n = int(bv.get("byteOffset", 0)), int(bv.get("byteLength", 0))
+        if off + n > len(data):
+            raise MatremapError(f"{self.path}: bufferViews[{index}] runs past the end of its buffer; the file is "
+                                f"broken, re-export it")
+        return data[off:off + n]
+
+    def image(self, index: Any, where: str) -> Path:
+        """A file holding image ``index``: the external file itself, or an extracted copy."""
+        if index in self._images:
+            return self._images[index]
+        img = self.item("images", index, where)
+        uri = img.get("uri")
+        if isinstance(uri, str) and not uri.startswith("data:"):
+            f = self.doc.base / unquote(uri)
+            if not f.is_file():
+                raise MatremapError(f"{self.path}: image {uri!r} ({where}) not found at {f}; put it beside "
+                                    f"{self.path.name} or fix its uri")
+            self._images[index] = f
+            return f
+        if isinstance(uri, str):
+            mime, data = _data_uri(uri)
+        elif "bufferView" in img:
+            mime, data = img.get("mimeType", ""), self.buffer_view(img["bufferView"], f"images[{index}]")
+        else:
+            raise MatremapError(f"{self.path}: images[{index}] has neither a uri nor a bufferView; re-export the file")
+        suffix = _MIME_SUFFIX.get(mime) or _sniff(data)
+        folder = _cache_dir(self.data)
+        f = folder / f"image{index}{suffix}"
+        if not (f.is_file() and f.stat().st_size == len(data)):
+            folder.mkdir(parents=True, exist_ok=True)
+            with atomic_output(f) as tmp, open(tmp, "wb") as out:
+                out.write(data)
+        self._images[index] = f
+        return f
+
+
+def _without_alpha(path: Path) -> Path:
+    """A copy of an image with alpha, without it, in the cache folder.
+
+    PNG stores colour unassociated with alpha (§3.8.2 images are PNG or JPEG); OpenImageIO
+    premultiplies colour by alpha on read unless told otherwise, which would darken base colours
+    and packed channels wherever alpha < 1. The copy keeps the stored colour values."""
+    import OpenImageIO as oiio
+
+    folder = _cache_dir(path.read_bytes())
+    out = folder / f"{path.stem}-rgb.png"
+    if out.is_file():
+        return out
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    inp = oiio.ImageInput.open(str(path), config)
+    if inp is None:
+        raise MatremapError(f"cannot read {path}: {oiio.geterror().strip()}; re-export it as PNG or JPEG")
+    spec = inp.spec()
+    fmt = oiio.UINT16 if str(spec.format) == "uint16" else oiio.UINT8
+    pixels = inp.read_image(0, 0, 0, spec.nchannels, fmt)
+    inp.close()
+    if pixels is None:
+        raise MatremapError(f"cannot read {path}: the image is corrupt; re-export it")
+    colour = np.ascontiguousarray(pixels[..., :3] if spec.nchannels == 4 else pixels[..., :1])
+    folder.mkdir(parents=True, exist_ok=True)
+    with atomic_output(out) as tmp:
+        o = oiio.ImageOutput.create(tmp)
+        if o is None or not o.open(tmp, oiio.ImageSpec(spec.width, spec.height, colour.shape[-1], fmt)):
+            raise MatremapError(f"cannot write {out}: {oiio.geterror().strip()}")
+        o.write_image(colour)
+        o.close()
+    return out
+
+
+def _select(path: Path, materials: list[Any], material: str | int | None) -> int:
+    names = [m.get("name") if isinstance(m, dict) else None for m in materials]
+    if material is None:
+        return 0
+    if isinstance(material, str) and material in names:
+        return names.index(material)
+    idx: int | None = None
+    if isinstance(material, int) and not isinstance(material, bool):
+        idx = material
+    elif isinstance(material, str) and material.strip().lstrip("-").isdigit():
+        idx = int(material)
+    if idx is not None and 0 <= idx < len(materials):
+        return idx
+    listing = ", ".join(f"{i}: {n!r}" if n else f"{i}: (unnamed)" for i, n in enumerate(names))
+    raise MatremapError(f"{path} has no material {material!r}; its materials are {listing} (pick one by name or "
+                        f"index)")
+
+
+def _number(path: Path, where: str, value: Any, default: Any, size: int = 1) -> Any:
+    if value is None:
+        return default
+    vals = value if isinstance(value, list) else [value]
+    if len(vals) != size or not all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+                                    for v in vals):
+        raise MatremapError(f"{path}: {where} must be {'a number' if size == 1 else f'{size} numbers'}, got "
+                            f"{value!r}; fix the file")
+    return [float(v) for v in vals] if size > 1 else float(vals[0])
+
+
+def read(path: str | os.PathLike, material: str | int | None = None) -> MaterialAsset:
+    """Read one material of a ``.gltf`` / ``.glb`` file as a ``gltf:metal-rough`` asset.
+
+    ``material``: a name or an index (the first material by default). Textures become
+    :class:`TextureRef`: base colour (sRGB, RGB, times baseColorFactor), roughness and metallic
+    (green and blue of the metallicRoughnessTexture, §3.9.2), specular (alpha of
+    specularTexture) and specularColor (sRGB RGB of specularColorTexture) of
+    KHR_materials_specular; the normal map as ``asset.normal``. Inputs matremap does not remap
+    are listed in ``asset.notes``.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise MatremapError(f"{p} not found")
+    data = p.read_bytes()
+    obj, bin_chunk = _parse(p, data)
+    doc = GltfDocument(obj, bin_chunk, p.suffix.lower() == ".glb", p.parent)
+    mats = obj.get("materials")
+    if not isinstance(mats, list) or not mats:
+        raise MatremapError(f"{p} has no materials; export it with its materials")
+    idx = _select(p, mats, material)
+    m = mats[idx]
+    if not isinstance(m, dict):
+        raise MatremapError(f"{p}: materials[{idx}] is not an object; the file is broken, re-export it")
+    name = m.get("name") or f"material {idx}"
+    r = _Reader(p, doc, data)
+    notes: list[str] = []
+    if material is None and len(mats) > 1:
+        notes.append(f"{p.name} has {len(mats)} materials; using the first, {name!r} (choose another by name or "
+                     f"index)")
+    where = f"material {name!r}"
+    pbr = m.get("pbrMetallicRoughness", {}) or {}
+    ext = m.get("extensions", {}) or {}
+    if not isinstance(pbr, dict) or not isinstance(ext, dict):
+        raise MatremapError(f"{p}: {where} has a malformed pbrMetallicRoughness or extensions; re-export the file")
+
+    base = _number(p, f"{where} baseColorFactor", pbr.get("baseColorFactor"), [1.0] * 4, 4)
+    constants: dict[str, Any] = {
+        "baseColor": base[:3],
+        "metallic": _number(p, f"{where} metallicFactor", pbr.get("metallicFactor"), 1.0),
+        "roughness": _number(p, f"{where} roughnessFactor", pbr.get("roughnessFactor"), 1.0),
+    }
+    if base[3] < 1.0:
+        notes.append(f"baseColorFactor alpha {base[3]:g} ignored (matremap remaps opaque reflectance)")
+    ior_ext = ext.get(IOR) or {}
+    spec_ext = ext.get(SPECULAR) or {}
+    constants["ior"] = _number(p, f"{where} {IOR}.ior", ior_ext.get("ior"), DEFAULT_IOR)
+    if constants["ior"] == 0.0:
+        raise MatremapError(f"{p}: {where} has {IOR} ior 0 (full specular), which gltf:metal-rough cannot express; "
+                            f"give it an ior in [1, 5]")
+    constants["specular"] = _number(p, f"{where} {SPECULAR}.specularFactor", spec_ext.get("specularFactor"), 1.0)
+    constants["specularColor"] = _number(p, f"{where} {SPECULAR}.specularColorFactor",
+                                         spec_ext.get("specularColorFactor"), [1.0] * 3, 3)
+    try:
+        Material.create(MODEL, constants)
+    except MatremapError as e:
+        raise MatremapError(f"{p}: {where}: {e}; fix the value in the file") from None
+
+    def texture(info: Any, slot: str) -> tuple[Path, int]:
+        """The image file of a textureInfo and its channel count; notes what is not honoured."""
+        if not isinstance(info, dict) or "index" not in info:
+            raise MatremapError(f"{p}: {where} {slot} is not a textureInfo with an index; re-export the file")
+        tex = r.item("textures", info["index"], f"{where} {slot}")
+        src = tex.get("source")
+        if src is None:  # an extension may give the only source (EXT_texture_webp, KHR_texture_basisu)
+            src = next((e["source"] for e in (tex.get("extensions") or {}).values()
+                        if isinstance(e, dict) and "source" in e), None)
+        if src is None:
+            raise MatremapError(f"{p}: {where} {slot} uses textures[{info['index']}], which has no image source; "
+                                f"re-export the file")
+        f = r.image(src, f"{where} {slot}")
+        if info.get("texCoord", 0) != 0:
+            notes.append(f"{slot} uses texCoord {info['texCoord']}; the map is taken as it is (UV set ignored)")
+        if "KHR_texture_transform" in (info.get("extensions") or {}):
+            notes.append(f"{slot}: KHR_texture_transform ignored; the map is taken untransformed")
+        from ..textures import image_info
+
+        return f, image_info(f, "linear", colour=False).channels
+
+    def channel(c: int, nch: int) -> int | None:
+        """File channel of glTF channel c (0 R, 1 G, 2 B, 3 A): grey files replicate, no alpha -> None."""
+        if c < 3:
+            return c if nch >= 3 else 0
+        return {4: 3, 2: 1}.get(nch)
+
+    def colour(f: Path, n: int) -> tuple[Path, int]:
+        """The file to take colour channels from: an alpha-free copy when the image has alpha."""
+        return (_without_alpha(f), n - 1) if n in (2, 4) else (f, n)
+
+    textures: dict[str, TextureRef] = {}
+    if "baseColorTexture" in pbr:
+        raw = texture(pbr["baseColorTexture"], "baseColorTexture")
+        f, n = colour(*raw)
+        textures["baseColor"] = TextureRef(f, tuple(channel(c, n) for c in range(3)), "srgb",
+                                           tuple(constants["baseColor"]))
+        if raw[1] in (2, 4):
+            notes.append("baseColorTexture alpha ignored (matremap remaps opaque reflectance)")
+    if "metallicRoughnessTexture" in pbr:
+        f, n = colour(*texture(pbr["metallicRoughnessTexture"], "metallicRoughnessTexture"))
+        textures["roughness"] = TextureRef(f, (channel(1, n),), "linear", constants["roughness"])
+        textures["metallic"] = TextureRef(f, (channel(2, n),), "linear", constants["metallic"])
+    if "specularTexture" in spec_ext:
+        f, n = texture(spec_ext["specularTexture"], "specularTexture")
+        a = channel(3, n)
+        if a is None:
+            notes.append("specularTexture has no alpha channel, so it is 1 everywhere; using specularFactor alone")
+        else:
+            textures["specular"] = TextureRef(f, (a,), "linear", constants["specular"])
+    if "specularColorTexture" in spec_ext:
+        f, n = colour(*texture(spec_ext["specularColorTexture"], "specularColorTexture"))
+        textures["specularColor"] = TextureRef(f, tuple(channel(c, n) for c in range(3)), "srgb",
+                                               tuple(constants["specularColor"]))
+    normal = None
+    if "normalTexture" in m:
+        f, _ = texture(m["normalTexture"], "normalTexture")
+        normal = TextureRef(f, None, "linear", 1.0)
+        scale = m["normalTexture"].get("scale", 1.0)
+        if scale != 1:
+            notes.append(f"normalTexture scale {scale:g} ignored; the normal map is used as stored (scale 1)")
+
+    emissive = m.get("emissiveFactor", [0, 0, 0])
+    if "emissiveTexture" in m or (isinstance(emissive, list) and any(v != 0 for v in emissive)):
+        notes.append("emission (emissiveFactor/emissiveTexture) is not remapped; a written copy keeps it")
+    if "occlusionTexture" in m:
+        notes.append("occlusionTexture is not remapped; a written copy keeps it")
+    mode = m.get("alphaMode", "OPAQUE")
+    if mode != "OPAQUE":
+        notes.append(f"alphaMode {mode} ignored: matremap remaps the material as opaque")
+    for name_ in sorted(set(ext) - {IOR, SPECULAR}):
+        notes.append(f"{name_} is not remapped (matremap fits the base metallic-roughness layer); "
+                     f"a written copy keeps it")
+    required = set(obj.get("extensionsRequired") or []) - {IOR, SPECULAR}
+    if required:
+        notes.append(f"the file requires {', '.join(sorted(required))}; matremap ignores them")
+
+    return MaterialAsset(path=p, format="gltf", name=name, model=MODEL, constants=constants, textures=textures,
+                         normal=normal, notes=notes, document=doc, index=idx)
+
+
+# ---------------------------------------------------------------------------------------------
+# writing
+
+
+def _result_values(result: Any) -> tuple[dict[str, Any], dict[str, np.ndarray], Path | None, list[Path]]:
+    """(constants, maps as linear float arrays, normal map file, input files) of a Material or MapSet."""
+    from ..regress.quantities import material_values
+    from ..textures import MapSet, read_image
+
+    if isinstance(result, Material):
+        model = result.model
+    elif isinstance(result, MapSet):
+        model = result.model
+    else:
+        raise MatremapError(f"cannot write {type(result).__name__} as glTF; give a material or a map set")
+    if get_model(model).id != MODEL:
+        raise MatremapError(f"glTF stores {MODEL} materials, and this result is {model}; remap it onto {MODEL} "
+                            f"first (e.g. matremap remap ... --to {MODEL})")
+    spec = get_model(MODEL)
+    if isinstance(result, Material):
+        return dict(material_values(result)), {}, None, []
+    consts: dict[str, Any] = {p.name: p.default_array if p.channels == 3 else p.default for p in spec.params}
+    for k, v in result.constants.items():
+        if k in spec.param_names:
+            consts[k] = v
+    maps: dict[str, np.ndarray] = {}
+    for name, f in result.maps.items():
+        pspec = spec.param(name)
+        if name == "ior":
+            raise MatremapError(f"{f}: {IOR} has no texture, so a map of ior cannot be written to glTF; use a "
+                                f"uniform ior")
+        img, _ = read_image(f, result.colorspace.get(name), colour=pspec.channels == 3 and pspec.role != "other")
+        if pspec.channels == 3:
+            img = np.repeat(img[..., :1], 3, axis=-1) if img.shape[-1] == 1 else img[..., :3]
+        else:
+            img = img[..., 0]
+        maps[name] = np.clip(img, *pspec.bounds)
+    sizes = {a.shape[:2] for a in maps.values()}
+    if len(sizes) > 1:
+        raise MatremapError("the maps differ in size; resample them to one size before writing glTF")
+    return consts, maps, result.normal, list(result.files)
+
+
+def _png(array: np.ndarray) -> bytes:
+    """8-bit PNG bytes of a uint8 array [H, W, C]."""
+    import OpenImageIO as oiio
+
+    a = np.ascontiguousarray(array, dtype=np.uint8)
+    spec = oiio.ImageSpec(a.shape[1], a.shape[0], a.shape[2], oiio.UINT8)
+    spec.attribute("oiio:UnassociatedAlpha", 1)  # store the values given, not colour / alpha
+    with tempfile.TemporaryDirectory(prefix="matremap-gltf-") as d:
+        f = os.path.join(d, "t.png")
+        out = oiio.ImageOutput.create(f)
+        if out is None or not out.open(f, spec):
+            raise MatremapError(f"cannot encode a PNG texture: {oiio.geterror().strip()}")
+        ok = out.write_image(a)
+        out.close()
+        if not ok:
+            raise MatremapError(f"cannot encode a PNG texture: {oiio.geterror().strip()}")
+        return Path(f).read_bytes()
+
+
+def _code(values: np.ndarray, srgb: bool) -> np.ndarray:
+    v = np.clip(np.asarray(values, dtype=np.float64), 0.0, 1.0)
+    if srgb:
+        v = linear_to_srgb(v)
+    return np.round(v * 255.0).astype(np.uint8)
+
+
+def _split_factor(a: np.ndarray) -> tuple[np.ndarray, list[float]]:
+    """A map [H, W, 3] as (texture in [0, 1], per-channel factor): the factor is 1 unless the map exceeds 1."""
+    factor = np.maximum(a.reshape(-1, 3).max(axis=0), 1.0)
+    return a / factor, [float(x) for x in factor]
+
+
+@dataclass
+class _NewImage:
+    slot: str
+    data: bytes
+    mime: str
+    copy_from: dict[str, Any] | None  # the source textureInfo this replaces (sampler, texCoord, transform)
+
+
+def _uv_sphere(n_lat: int = 16, n_lon: int = 32) -> tuple[dict[str, Any], bytes]:
+    """A unit UV sphere (+Y up, counter-clockwise front faces, v down the image) as glTF JSON + buffer."""
+    t = np.linspace(0.0, np.pi, n_lat + 1)[:, None]
+    ph = np.linspace(0.0, 2.0 * np.pi, n_lon + 1)[None, :]
+    pos = np.stack(np.broadcast_arrays(np.sin(t) * np.sin(ph), np.cos(t), np.sin(t) * np.cos(ph)), -1)
+    pos = pos.reshape(-1, 3).astype(np.float32)
+    uv = np.stack(np.broadcast_arrays(ph / (2 * np.pi), t / np.pi), -1).reshape(-1, 2).astype(np.float32)
+    idx = []
+    for i in range(n_lat):
+        for j in range(n_lon):
+            a, b = i * (n_lon + 1) + j, (i + 1) * (n_lon + 1) + j
+            c, d = b + 1, a + 1
+            if i > 0:
+                idx.append((a, b, d))
+            if i < n_lat - 1:
+                idx.append((d, b, c))
+    ind = np.array(idx, dtype=np.uint16).reshape(-1)
+    blobs = [pos.tobytes(), pos.tobytes(), uv.tobytes(), ind.tobytes()]
+    offsets = np.cumsum([0] + [len(b) for b in blobs])
+    views = [{"buffer": 0, "byteOffset": int(o), "byteLength": len(b), "target": 34963 if k == 3 else 34962}
+             for k, (o, b) in enumerate(zip(offsets, blobs, strict=False))]
+    acc = [
+        {"bufferView": 0, "componentType": 5126, "count": len(pos), "type": "VEC3",
+         "min": [float(x) for x in pos.min(axis=0)], "max": [float(x) for x in pos.max(axis=0)]},
+        {"bufferView": 1, "componentType": 5126, "count": len(pos), "type": "VEC3"},
+        {"bufferView": 2, "componentType": 5126, "count": len(uv), "type": "VEC2"},
+        {"bufferView": 3, "componentType": 5123, "count": len(ind), "type": "SCALAR"},
+    ]
+    data = b"".join(blobs)
+    doc = {
+        "asset": {"version": "2.0", "generator": "matremap"},
+        "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0, "name": "probe sphere"}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2}, "indices": 3,
+                                    "material": 0}]}],
+        "accessors": acc, "bufferViews": views, "buffers": [{"byteLength": len(data)}],
+        "materials": [{}],
+    }
+    return doc, data
+
+
+def _rebase(uri: str, src: Path, out_dir: Path) -> str:
+    """A relative URI of a file beside the source, as seen from ``out_dir``."""
+    if uri.startswith("data:") or "://" in uri:
+        return uri
+    rel = os.path.relpath(src / unquote(uri), out_dir)
+    return quote(rel.replace(os.sep, "/"))
+
+
+def _glb(doc: dict[str, Any], bin_data: bytes | None) -> bytes:
+    """GLB bytes (§4.4): header, JSON chunk padded with spaces, BIN chunk padded with zeros."""
+    text = json.dumps(doc, separators=(",", ":")).encode("utf-8")
+    text += b" " * (-len(text) % 4)
+    chunks = struct.pack("<II", len(text), CHUNK_JSON) + text
+    if bin_data is not None:
+        b = bytes(bin_data) + b"\0" * (-len(bin_data) % 4)
+        chunks += struct.pack("<II", len(b), CHUNK_BIN) + b
+    return struct.pack("<III", GLB_MAGIC, 2, 12 + len(chunks)) + chunks
+
+
+def _uses_extension(doc: dict[str, Any], name: str) -> bool:
+    return any(isinstance(m, dict) and name in (m.get("extensions") or {}) for m in doc.get("materials", []))
+
+
+def write(out: str | os.PathLike, result: Any, source: MaterialAsset | None = None, force: bool = False) -> Path:
+    """Write ``result`` (a ``gltf:metal-rough`` Material or MapSet) as ``out`` (.gltf or .glb).
+
+    With a glTF ``source``: a copy of the source file (as ``out``'s kind) with its material replaced.
+    Factors carry the uniform values; maps become new textures (PNG files beside a .gltf, buffer views
+    in the BIN chunk of a .glb): baseColor (sRGB), roughness and metallic packed into one
+    metallicRoughnessTexture (G and B, §3.9.2), specular (alpha) and specularColor (sRGB RGB) of
+    KHR_materials_specular. KHR_materials_ior / KHR_materials_specular are written only where they
+    differ from their defaults. The source's normal, occlusion and emissive textures are kept unless
+    the result brings a normal map. Without a glTF source, the material is written on a UV sphere.
+
+    Every file is written under a temporary name and renamed; existing files are replaced only with
+    ``force``, and input files never.
+    """
+    out = Path(out)
+    kind = out.suffix.lower()
+    if kind not in (".gltf", ".glb"):
+        raise MatremapError(f"cannot write {out} as glTF: name it .gltf or .glb")
+    consts, maps, normal, inputs = _result_values(result)
+    check_output(out, force)
+    out_dir = out.parent
+
+    gdoc = source.document if source is not None and isinstance(source.document, GltfDocument) else None
+    if gdoc is not None:
+        doc = copy.deepcopy(gdoc.json)
+        bin_data: bytes | None = gdoc.bin
+        src_base: Path | None = gdoc.base
+        index = source.index  # type: ignore[union-attr]
+        inputs = [*inputs, source.path, *(t.path for t in source.textures.values()),  # type: ignore[union-attr]
+                  *([source.normal.path] if source.normal else [])]  # type: ignore[union-attr]
+        for key in ("buffers", "images"):
+            for item in doc.get(key, []):
+                uri = item.get("uri") if isinstance(item, dict) else None
+                if isinstance(uri, str) and not uri.startswith("data:") and "://" not in uri:
+                    inputs.append(gdoc.base / unquote(uri))
+    else:
+        doc, bin_data = _uv_sphere()
+        src_base, index = None, 0
+        if source is not None:
+            doc["materials"][0]["name"] = source.name
+    mat = doc["materials"][index]
+    pbr = mat.setdefault("pbrMetallicRoughness", {})
+    exts = mat.setdefault("extensions", {})
+    old_spec = dict(exts.get(SPECULAR) or {})
+
+    # --- the new textures, encoded in memory before anything is written
+    new: list[_NewImage] = []
+    old_base = pbr.pop("baseColorTexture", None)
+    alpha = float((pbr.get("baseColorFactor") or [1, 1, 1, 1])[3])
+    if "baseColor" in maps:
+        tex, factor = _split_factor(maps["baseColor"])
+        new.append(_NewImage("baseColor", _png(_code(tex, True)), "image/png", old_base))
+        pbr["baseColorFactor"] = [*factor, alpha]
+    else:
+        pbr["baseColorFactor"] = [*(float(x) for x in np.broadcast_to(consts["baseColor"], (3,))), alpha]
+    old_mr = pbr.pop("metallicRoughnessTexture", None)
+    if "roughness" in maps or "metallic" in maps:
+        shape = next(a.shape[:2] for k, a in maps.items() if k in ("roughness", "metallic"))
+        packed = np.ones((*shape, 3))
+        for k, c in (("roughness", 1), ("metallic", 2)):
+            if k in maps:
+                packed[..., c] = maps[k]
+        new.append(_NewImage("metallicRoughness", _png(_code(packed, False)), "image/png", old_mr))
+    for k in ("roughness", "metallic"):
+        pbr[f"{k}Factor"] = 1.0 if k in maps else float(np.asarray(consts[k]).reshape(-1)[0])
+
+    spec_f = 1.0 if "specular" in maps else float(np.asarray(consts["specular"]).reshape(-1)[0])
+    if "specularColor" in maps:
+        tint_tex, tint_f = _split_factor(maps["specularColor"])
+    else:
+        tint_tex, tint_f = None, [float(x) for x in np.broadcast_to(consts["specularColor"], (3,))]
+    spec_ext: dict[str, Any] = {}
+    if "specular" in maps or tint_tex is not None:
+        shape = next(a.shape[:2] for k, a in maps.items() if k in ("specular", "specularColor"))
+        rgba = np.full((*shape, 4), 255, dtype=np.uint8)
+        if tint_tex is not None:
+            rgba[..., :3] = _code(tint_tex, True)
+        if "specular" in maps:
+            rgba[..., 3] = _code(maps["specular"], False)
+        else:
+            rgba = rgba[..., :3]
+        new.append(_NewImage("specular", _png(rgba), "image/png",
+                             old_spec.get("specularColorTexture") or old_spec.get("specularTexture")))
+    if spec_f != 1.0 or any(v != 1.0 for v in tint_f) or "specular" in maps or tint_tex is not None:
+        spec_ext = {"specularFactor": spec_f, "specularColorFactor": tint_f}
+    if normal is not None and not (source is not None and source.normal is not None
+                                   and Path(normal).resolve() == source.normal.path.resolve()):
+        old_normal = mat.pop("normalTexture", None)
+        nsuffix = Path(normal).suffix.lower()
+        if nsuffix in (".png", ".jpg", ".jpeg"):
+            ndata, nmime = Path(normal).read_bytes(), "image/png" if nsuffix == ".png" else "image/jpeg"
+        else:
+            from ..textures import read_image
+
+            nimg, _ = read_image(normal, "linear", colour=False)
+            ndata, nmime = _png(_code(nimg[..., :3], False)), "image/png"
+        new.append(_NewImage("normal", ndata, nmime, old_normal))
+
+    # --- output files: refuse to clobber inputs, or existing files without force
+    files: dict[Path, bytes] = {}
+    image_names = {im.slot: f"{out.stem}_{im.slot}{'.jpg' if im.mime == 'image/jpeg' else '.png'}" for im in new}
+    bin_name = f"{out.stem}.bin"
+    planned = [out]
+    if kind == ".gltf":
+        planned += [out_dir / n for n in image_names.values()]
+        if bin_data is not None:
+            planned.append(out_dir / bin_name)
+    inputs_resolved = {Path(f).resolve() for f in inputs}
+    for f in planned:
+        if f.resolve() in inputs_resolved:
+            raise MatremapError(f"writing {out} would overwrite the input {f}; choose another output name")
+        if f != out:
+            check_output(f, force)
+
+    # --- buffers and URIs
+    if src_base is not None and src_base.resolve() != out_dir.resolve():
+        for key in ("buffers", "images"):
+            for item in doc.get(key, []):
+                if isinstance(item, dict) and isinstance(item.get("uri"), str):
+                    item["uri"] = _rebase(item["uri"], src_base, out_dir)
+    if kind == ".glb" and new and bin_data is None:
+        doc.setdefault("buffers", []).insert(0, {"byteLength": 0})
+        bin_data = b""
+        for bv in doc.get("bufferViews", []):
+            bv["buffer"] += 1
+            meshopt = (bv.get("extensions") or {}).get("EXT_meshopt_compression")
+            if isinstance(meshopt, dict) and "buffer" in meshopt:
+                meshopt["buffer"] += 1
+    blob = bytearray(bin_data or b"")
+    images = doc.setdefault("images", [])
+    textures = doc.setdefault("textures", [])
+    infos: dict[str, dict[str, Any]] = {}
+    for im in new:
+        image: dict[str, Any] = {"name": f"{out.stem}_{im.slot}"}
+        if kind == ".glb":
+            blob += b"\0" * (-len(blob) % 4)
+            doc.setdefault("bufferViews", []).append({"buffer": 0, "byteOffset": len(blob),
+                                                      "byteLength": len(im.data)})
+            blob += im.data
+            image.update(bufferView=len(doc["bufferViews"]) - 1, mimeType=im.mime)
+        else:
+            image["uri"] = quote(image_names[im.slot])
+            files[out_dir / image_names[im.slot]] = im.data
+        images.append(image)
+        texture: dict[str, Any] = {"source": len(images) - 1}
+        info: dict[str, Any] = {"index": len(textures)}
+        if isinstance(im.copy_from, dict):  # keep the replaced texture's sampler, UV set and transform
+            old = im.copy_from.get("index")
+            old_tex = textures[old] if isinstance(old, int) and 0 <= old < len(textures) else {}
+            if isinstance(old_tex, dict) and "sampler" in old_tex:
+                texture["sampler"] = old_tex["sampler"]
+            info.update({k: v for k, v in im.copy_from.items() if k != "index"})
+        textures.append(texture)
+        infos[im.slot] = info
+    if not images:
+        doc.pop("images")
+    if not textures:
+        doc.pop("textures")
+    if bin_data is not None:
+        doc["buffers"][0]["byteLength"] = len(blob)
+        if kind == ".gltf":
+            doc["buffers"][0]["uri"] = quote(bin_name)
+            files[out_dir / bin_name] = bytes(blob)
+        else:
+            doc["buffers"][0].pop("uri", None)
+
+    # --- the material
+    if "baseColor" in infos:
+        pbr["baseColorTexture"] = infos["baseColor"]
+    if "metallicRoughness" in infos:
+        pbr["metallicRoughnessTexture"] = {k: v for k, v in infos["metallicRoughness"].items() if k != "strength"}
+    if "normal" in infos:
+        mat["normalTexture"] = infos["normal"]
+    ior = float(np.asarray(consts["ior"]).reshape(-1)[0])
+    if abs(ior - DEFAULT_IOR) > 1e-6:
+        exts[IOR] = {"ior": ior}
+    else:
+        exts.pop(IOR, None)
+    if spec_ext:
+        if "specular" in infos:
+            slot = {k: v for k, v in infos["specular"].items() if k != "scale"}
+            if "specular" in maps:
+                spec_ext["specularTexture"] = dict(slot)
+            if tint_tex is not None:
+                spec_ext["specularColorTexture"] = dict(slot)
+        exts[SPECULAR] = spec_ext
+    else:
+        exts.pop(SPECULAR, None)
+    if not exts:
+        mat.pop("extensions")
+    used = [e for e in doc.get("extensionsUsed", []) if e not in (IOR, SPECULAR)]
+    used += [e for e in (IOR, SPECULAR) if _uses_extension(doc, e)]
+    if used:
+        doc["extensionsUsed"] = used
+    else:
+        doc.pop("extensionsUsed", None)
+    if "extensionsRequired" in doc:
+        doc["extensionsRequired"] = [e for e in doc["extensionsRequired"] if e in used]
+        if not doc["extensionsRequired"]:
+            doc.pop("extensionsRequired")
+
+    if kind == ".glb":
+        files[out] = _glb(doc, bytes(blob) if bin_data is not None else None)
+    else:
+        files[out] = (json.dumps(doc, indent=1) + "\n").encode("utf-8")
+    done: list[Path] = []
+    try:
+        for f, data in files.items():  # the main file last: dict order puts it after its textures
+            if f == out:
+                continue
+            with atomic_output(f) as tmp, open(tmp, "wb") as fh:
+                fh.write(data)
+            done.append(f)
+        with atomic_output(out) as tmp, open(tmp, "wb") as fh:
+            fh.write(files[out])
+    except BaseException:
+        for f in done:
+            f.unlink(missing_ok=True)
+        raise
+    return out
+
+
+__all__ = ["GltfDocument", "read", "write"]
