@@ -184,3 +184,23 @@ def test_chunked_apply_equals_one_pass(ward_to_as, monkeypatch):
         np.testing.assert_array_equal(chunked[k], whole[k])
     np.testing.assert_array_equal(outside_chunked, outside)
     assert chunked["F0"].dtype == np.float32
+
+
+def test_uniform_inputs_stay_views_and_equal_full_maps(ward_to_as, monkeypatch):
+    """A constant map (a broadcast) is evaluated once and stays a view; results equal a real map of
+    that value, and an outside-domain texel is still flagged in the chunked path."""
+    import matremap.regress.transform as transform_module
+
+    monkeypatch.setattr(transform_module, "CHUNK", 64)
+    rng = np.random.default_rng(4)
+    alpha = rng.uniform(0.1, 0.8, (20, 30))
+    alpha[3, 4] = 0.99  # outside the training domain
+    rho = np.broadcast_to(np.array([0.05, 0.1, 0.15]), (20, 30, 3))
+    as_view, outside_view = ward_to_as.apply({"alpha": alpha, "specularReflectance": rho})
+    as_map, outside_map = ward_to_as.apply({"alpha": alpha, "specularReflectance": np.array(rho)})
+    for k in as_map:
+        np.testing.assert_allclose(as_view[k], as_map[k], rtol=1e-12)
+    np.testing.assert_array_equal(outside_view, outside_map)
+    assert outside_view.sum() == 1 and outside_view[3, 4]
+    flat, _ = ward_to_as.apply({"alpha": np.broadcast_to(0.3, (20, 30)), "specularReflectance": rho})
+    assert flat["F0"].strides[:2] == (0, 0)  # computed once, no memory per texel

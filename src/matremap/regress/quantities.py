@@ -110,7 +110,7 @@ def write(spec: ModelSpec, quantities: Mapping[str, np.ndarray], template: Mappi
         out[rp.name] = as_floats(quantities["roughness"])
         driven.append(rp.name)
     if spec.reflectance and "reflectance" in quantities:
-        f0 = np.clip(as_floats(quantities["reflectance"]), 0.0, 1.0 - 1e-7)
+        f0 = clip(as_floats(quantities["reflectance"]), 0.0, 1.0 - 1e-7)
         kind, *names = spec.reflectance
         ch = {p.name: p.channels for p in spec.params}
         if kind == "param":
@@ -134,6 +134,9 @@ def write(spec: ModelSpec, quantities: Mapping[str, np.ndarray], template: Mappi
     bounds = {p.name: p.bounds for p in spec.params}
     for name in driven:  # stay inside what the renderer accepts (in place: these arrays are ours)
         a = out[name]
+        if uniform(a):
+            out[name] = clip(a, *bounds[name])
+            continue
         if not a.flags.writeable or not a.flags.owndata:
             a = np.array(a)
         out[name] = np.clip(a, *bounds[name], out=a)
@@ -160,6 +163,16 @@ def _write_metal_rough(names: list[str], f0: np.ndarray, diffuse: np.ndarray | N
             out[tint] = np.where(metal, np.asarray(out[tint]), f0 / scale)
             driven.append(tint)
     return driven
+
+
+def uniform(a: np.ndarray) -> bool:
+    """Whether an array is one value broadcast along its first (element) axis."""
+    return a.ndim > 0 and a.shape[0] > 1 and a.strides[0] == 0
+
+
+def clip(a: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """np.clip that keeps a broadcast of one value a broadcast (no memory per element)."""
+    return np.broadcast_to(np.clip(a[:1], lo, hi), a.shape) if uniform(a) else np.clip(a, lo, hi)
 
 
 def material_values(m: Material) -> dict[str, np.ndarray]:

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -136,19 +136,21 @@ class Transform:
         n = int(np.prod(shape))
         if n <= CHUNK:
             return self._apply(arrays, shape)
-        # large inputs (texture maps) in cache-sized chunks of texels: same results, less memory traffic
-        flat = {k: a.reshape(n, *a.shape[len(shape):]) if a.shape[:len(shape)] == shape
-                else np.broadcast_to(a, (*shape, *a.shape[len(shape):])).reshape(n, *a.shape[len(shape):])
-                for k, a in arrays.items()}
+        # large inputs (texture maps) in cache-sized chunks of texels: same results, less memory traffic;
+        # a uniform input (a broadcast template value) stays a broadcast view of one element
+        flat = {k: _flatten(a, shape, n) for k, a in arrays.items()}
         out: dict[str, np.ndarray] = {}
         outside = np.empty(n, dtype=bool)
         for start in range(0, n, CHUNK):
             part = slice(start, min(start + CHUNK, n))
-            o, off = self._apply({k: a[part] for k, a in flat.items()}, (part.stop - part.start,))
+            m = part.stop - part.start
+            chunk = {k: (a[part] if a.shape[0] == n else np.broadcast_to(a[0], (m, *a.shape[1:])))
+                     for k, a in flat.items()}
+            o, off = self._apply(chunk, (m,))
             outside[part] = off
             for k, a in o.items():
                 if k not in out:
-                    if a.strides and a.strides[0] == 0:  # a template value: keep it a broadcast view
+                    if qty.uniform(a):  # a template value: keep it a broadcast view
                         out[k] = np.broadcast_to(a[0], (n, *a.shape[1:]))
                         continue
                     out[k] = np.empty((n, *a.shape[1:]), dtype=a.dtype)
@@ -165,19 +167,34 @@ class Transform:
             return out, outside
         src = get_model(self.source)
         x = qty.read(src, arrays)
-        for name, v in x.items():
-            if not np.isfinite(v.sum()):  # one pass; a NaN or inf anywhere makes the sum non-finite
-                if not np.all(np.isfinite(v)):
-                    raise MatremapError(
-                        f"{self.source} input {name} holds NaN or infinite values; fix or mask them first"
-                    )
         outside = np.zeros(shape, dtype=bool)
-        for name, (lo, hi) in self.domain.items():
-            if name in x:
-                slack = DOMAIN_SLACK * max(abs(hi), abs(lo), 1.0)
-                off = (x[name] < lo - slack) | (x[name] > hi + slack)
-                outside |= off if off.ndim == outside.ndim else off.any(axis=-1)
-        y = {name: _evaluate(self.method, m, x) for name, m in self.mappings.items()}
+        for name, v in x.items():
+            # two reductions settle the common case: everything finite and inside the domain
+            probe = v[:1] if qty.uniform(v) else v
+            vmin, vmax = float(np.min(probe)) if probe.size else 0.0, float(np.max(probe)) if probe.size else 0.0
+            lo, hi = self.domain.get(name, (-np.inf, np.inf))
+            slack = DOMAIN_SLACK * max(abs(hi), abs(lo), 1.0) if np.isfinite([lo, hi]).all() else 0.0
+            if np.isfinite(vmin) and np.isfinite(vmax) and lo - slack <= vmin and vmax <= hi + slack:
+                continue
+            if not np.all(np.isfinite(probe)):
+                raise MatremapError(
+                    f"{self.source} input {name} holds NaN or infinite values; fix or mask them first"
+                )
+            off = (v < lo - slack) | (v > hi + slack)
+            if off.ndim == outside.ndim:
+                outside |= off
+            else:  # per channel: or the columns (any(axis=-1) over 3 channels is several times slower)
+                for c in range(off.shape[-1]):
+                    outside |= off[..., c]
+        y = {}
+        for name, m in self.mappings.items():
+            used = _inputs(m, x)
+            if shape and shape[0] > 1 and used and all(qty.uniform(x[k]) for k in used):
+                # the same input everywhere (a constant map): evaluate once, broadcast the result
+                one = _evaluate(self.method, m, {k: v[:1] for k, v in x.items()})
+                y[name] = np.broadcast_to(one, (shape[0], *one.shape[1:]))
+            else:
+                y[name] = _evaluate(self.method, m, x)
         return qty.write(get_model(self.target), y, self.template), outside
 
     # -- composition -----------------------------------------------------------------------------
@@ -209,6 +226,28 @@ class Transform:
         if self.method == "chain":
             return " -> ".join([self.steps[0].source] + [s.target for s in self.steps]) + " (chain)"
         return f"{self.source} -> {self.target} ({self.method})"
+
+
+def _flatten(a: np.ndarray, shape: tuple[int, ...], n: int) -> np.ndarray:
+    """``a`` with its element axes ``shape`` flattened into one axis of length n; an array holding
+    one value for every element (a broadcast) becomes length 1 instead, without a copy."""
+    k = len(shape)
+    if a.shape[:k] != shape:  # given without the element axes: one value for all
+        return np.asarray(a)[None]
+    if k and all(s == 0 for s in a.strides[:k]):
+        return a[(0,) * k][None]
+    return a.reshape(n, *a.shape[k:])
+
+
+def _inputs(mapping: Mapping[str, Any], available: Iterable[str]) -> list[str]:
+    """The source quantities a mapping reads."""
+    if mapping["kind"] == "svr":
+        return list(mapping["inputs"])
+    if mapping["kind"] == "k_alpha":
+        return ["reflectance", "roughness"] if mapping.get("roughness", True) else ["reflectance"]
+    if mapping["kind"] == "constant":
+        return []
+    return [mapping["input"]] if "input" in mapping else list(available)
 
 
 def _complete(spec, values: Mapping[str, Any], defaults: Mapping[str, Any]) -> dict[str, np.ndarray]:
