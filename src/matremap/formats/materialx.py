@@ -164,6 +164,11 @@ def _texture(ctx: _Ctx, node, param: str, colour: bool) -> TextureRef:
     if factor is not None and factor.getValueString():
         nums = _parse(factor.getValueString(), f"{ctx.path}: {node.getName()}.factor", 3)
         scale = nums[0] if len(nums) == 1 else tuple(nums)
+        if channels is not None and len(nums) > 1:  # extract after the factor: the picked channel's factor
+            if channels[0] >= len(nums):
+                raise MatremapError(f"{ctx.path}: extract index {channels[0]} for {param} is beyond the "
+                                    f"{node.getType()} image")
+            scale = nums[channels[0]]
     for unsupported in ("texcoord", "scale", "rotate", "offset", "uvtiling", "uvoffset"):
         i = node.getInput(unsupported)
         if i is not None and (i.getValueString() or i.getConnectedNode() is not None) and \
@@ -323,7 +328,7 @@ def read(path: str | Path, material: str | int | None = None) -> MaterialAsset:
     try:
         mx.readFromXmlFile(doc, str(p))
     except Exception as e:  # MaterialX raises its own ExceptionParseError / ExceptionFileMissing
-        raise MatremapError(f"{p} is not a readable MaterialX document: {str(e).strip() or type(e).__name__}") \
+        raise MatremapError(f"{p} is not a MaterialX document ({str(e).strip() or type(e).__name__})") \
             from None
     if not re.search(rb"<\s*materialx[\s>]", head):
         raise MatremapError(f"{p} is not a MaterialX document: its root element is not <materialx>")

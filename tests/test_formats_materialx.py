@@ -1,0 +1,245 @@
+"""MaterialX documents: gltf_pbr, standard_surface and open_pbr_surface read as gltf:metal-rough,
+textures and their colour spaces, the hand-made translation's warning, written documents that
+MaterialX validates, round trips and error messages."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+mx = pytest.importorskip("MaterialX", reason="MaterialX not installed: pip install 'matremap[materialx]'")
+
+from matremap.errors import MatremapError  # noqa: E402
+from matremap.formats.materialx import read, write  # noqa: E402
+from matremap.models import Material  # noqa: E402
+from matremap.textures import ImageInfo, load_map_set, read_image, write_image_like  # noqa: E402
+
+
+def doc(tmp_path: Path, body: str, name: str = "m.mtlx") -> Path:
+    p = tmp_path / name
+    p.write_text(f'<?xml version="1.0"?>\n<materialx version="1.39" colorspace="lin_rec709">\n{body}\n'
+                 f'</materialx>\n')
+    return p
+
+
+def png(path: Path, values: np.ndarray, colorspace: str) -> Path:
+    return write_image_like(path, values, ImageInfo("png", "uint8", values.shape[-1], 0, 0, colorspace), force=True)
+
+
+def validates(path: Path) -> bool:
+    d = mx.createDocument()
+    mx.readFromXmlFile(d, str(path))
+    lib = mx.createDocument()
+    mx.loadLibraries(mx.getDefaultDataLibraryFolders(), mx.getDefaultDataSearchPath(), lib)
+    d.importLibrary(lib)
+    ok, why = d.validate()
+    assert ok, why
+    return ok
+
+
+# -- reading -----------------------------------------------------------------------------------------
+
+
+def test_gltf_pbr_values_textures_and_normal(tmp_path):
+    rng = np.random.default_rng(0)
+    png(tmp_path / "base.png", rng.uniform(0.05, 0.95, (8, 8, 3)).astype(np.float32), "srgb")
+    png(tmp_path / "orm.png", rng.uniform(0.05, 0.95, (8, 8, 3)).astype(np.float32), "linear")
+    png(tmp_path / "n.png", np.tile(np.array([0.5, 0.5, 1.0], np.float32), (8, 8, 1)), "linear")
+    p = doc(tmp_path, """
+  <image name="base" type="color3"><input name="file" type="filename" value="base.png" colorspace="srgb_texture"/>
+  </image>
+  <gltf_image name="orm" type="color3"><input name="file" type="filename" value="orm.png"/>
+    <input name="factor" type="color3" value="1, 0.5, 1"/></gltf_image>
+  <extract name="rough" type="float"><input name="in" type="color3" nodename="orm"/>
+    <input name="index" type="integer" value="1"/></extract>
+  <nodegraph name="NG">
+    <image name="nimg" type="vector3"><input name="file" type="filename" value="n.png"/></image>
+    <normalmap name="nmap" type="vector3"><input name="in" type="vector3" nodename="nimg"/></normalmap>
+    <output name="out" type="vector3" nodename="nmap"/>
+  </nodegraph>
+  <gltf_pbr name="SR" type="surfaceshader">
+    <input name="base_color" type="color3" nodename="base"/>
+    <input name="roughness" type="float" nodename="rough"/>
+    <input name="metallic" type="float" value="0"/>
+    <input name="ior" type="float" value="1.45"/>
+    <input name="specular_color" type="color3" value="1, 0.9, 0.8"/>
+    <input name="normal" type="vector3" nodegraph="NG" output="out"/>
+    <input name="clearcoat" type="float" value="0.3"/>
+  </gltf_pbr>
+  <surfacematerial name="Painted" type="material"><input name="surfaceshader" type="surfaceshader" nodename="SR"/>
+  </surfacematerial>""")
+    a = read(p)
+    assert (a.name, a.model, a.format) == ("Painted", "gltf:metal-rough", "mtlx")
+    assert a.constants["metallic"] == 0.0 and a.constants["ior"] == 1.45 and a.constants["specular"] == 1.0
+    assert a.constants["specularColor"] == [1.0, 0.9, 0.8]
+    base, rough = a.textures["baseColor"], a.textures["roughness"]
+    assert base.path == (tmp_path / "base.png").resolve() and base.colorspace == "srgb" and base.plain
+    assert rough.path == (tmp_path / "orm.png").resolve() and rough.channels == (1,)
+    assert rough.colorspace == "linear" and rough.scale == 0.5  # the factor of the channel taken
+    assert a.normal is not None and a.normal.path == (tmp_path / "n.png").resolve()
+    assert any("clearcoat=0.3" in n for n in a.notes)
+    assert not any("WARNING" in n for n in a.notes)  # gltf_pbr maps one to one
+    # the map set applies the channel and the factor
+    ms = load_map_set(a.to_map_set(tmp_path / "ms"))
+    got, _ = read_image(ms.maps["roughness"], ms.colorspace["roughness"])
+    orm, _ = read_image(tmp_path / "orm.png", "linear")
+    assert np.allclose(got[..., 0], orm[..., 1] * 0.5, atol=1e-6)
+
+
+def test_colour_spaces(tmp_path):
+    png(tmp_path / "c.png", np.full((4, 4, 3), 0.5, np.float32), "srgb")
+    body = """
+  <image name="img" type="color3"><input name="file" type="filename" value="c.png" {cs}/></image>
+  <gltf_pbr name="SR" type="surfaceshader"><input name="base_color" type="color3" nodename="img"/></gltf_pbr>
+  <surfacematerial name="M" type="material"><input name="surfaceshader" type="surfaceshader" nodename="SR"/>
+  </surfacematerial>"""
+    expect = {'colorspace="srgb_texture"': "srgb", 'colorspace="lin_rec709"': "linear", 'colorspace="raw"': "linear",
+              "": "linear"}  # no attribute: the document's lin_rec709
+    for cs, want in expect.items():
+        assert read(doc(tmp_path, body.format(cs=cs))).textures["baseColor"].colorspace == want, cs
+    with pytest.raises(MatremapError, match="colour space 'acescg'"):
+        read(doc(tmp_path, body.format(cs='colorspace="acescg"')))
+
+
+def test_standard_surface_translation_warns_about_what_it_drops(tmp_path):
+    p = doc(tmp_path, """
+  <standard_surface name="SS" type="surfaceshader">
+    <input name="base" type="float" value="0.5"/>
+    <input name="base_color" type="color3" value="0.8, 0.6, 0.4"/>
+    <input name="metalness" type="float" value="1"/>
+    <input name="specular_roughness" type="float" value="0.35"/>
+    <input name="specular_IOR" type="float" value="1.6"/>
+    <input name="coat" type="float" value="0.5"/>
+    <input name="sheen" type="float" value="0"/>
+    <input name="emission" type="float" value="0.2"/>
+    <input name="specular_anisotropy" type="float" value="0.4"/>
+  </standard_surface>
+  <surfacematerial name="Brass" type="material">
+    <input name="surfaceshader" type="surfaceshader" nodename="SS"/></surfacematerial>""")
+    a = read(p)
+    assert a.constants["baseColor"] == pytest.approx([0.4, 0.3, 0.2])
+    assert a.constants["metallic"] == 1.0 and a.constants["roughness"] == 0.35 and a.constants["ior"] == 1.6
+    assert a.constants["specular"] == 1.0 and a.constants["specularColor"] == [1.0, 1.0, 1.0]  # library defaults
+    warning = a.notes[0]
+    assert warning.startswith("WARNING") and "hand-made translation" in warning
+    for dropped in ("coat=0.5", "emission=0.2", "specular_anisotropy=0.4"):
+        assert dropped in warning
+    assert "sheen" not in warning  # at its default
+
+
+def test_open_pbr_surface(tmp_path):
+    p = doc(tmp_path, """
+  <open_pbr_surface name="OP" type="surfaceshader">
+    <input name="base_weight" type="float" value="0.5"/>
+    <input name="base_color" type="color3" value="0.2, 0.4, 0.6"/>
+    <input name="specular_roughness" type="float" value="0.2"/>
+    <input name="fuzz_weight" type="float" value="0.3"/>
+  </open_pbr_surface>
+  <surfacematerial name="M" type="material"><input name="surfaceshader" type="surfaceshader" nodename="OP"/>
+  </surfacematerial>""")
+    a = read(p)
+    assert a.constants["baseColor"] == pytest.approx([0.1, 0.2, 0.3]) and a.constants["roughness"] == 0.2
+    assert a.constants["metallic"] == 0.0 and a.constants["ior"] == 1.5
+    assert "OpenPBR" in a.notes[0] and "fuzz_weight=0.3" in a.notes[0]
+
+
+def test_material_selection(tmp_path):
+    p = doc(tmp_path, """
+  <gltf_pbr name="A" type="surfaceshader"><input name="roughness" type="float" value="0.1"/></gltf_pbr>
+  <gltf_pbr name="B" type="surfaceshader"><input name="roughness" type="float" value="0.2"/></gltf_pbr>
+  <surfacematerial name="first" type="material"><input name="surfaceshader" type="surfaceshader" nodename="A"/>
+  </surfacematerial>
+  <surfacematerial name="second" type="material"><input name="surfaceshader" type="surfaceshader" nodename="B"/>
+  </surfacematerial>""")
+    assert read(p).constants["roughness"] == 0.1
+    assert read(p, "second").constants["roughness"] == 0.2 and read(p, 1).index == 1
+    with pytest.raises(MatremapError, match="no material named 'third'; its materials are 'first', 'second'"):
+        read(p, "third")
+    with pytest.raises(MatremapError, match="index 2 is out of range"):
+        read(p, 2)
+
+
+@pytest.mark.parametrize("text, words", [
+    ("not xml at all", "not a MaterialX document"),
+    ('<?xml version="1.0"?><scene version="3.0.0"><bsdf type="diffuse"/></scene>', "not a MaterialX document"),
+    ('<?xml version="1.0"?><materialx version="1.39"><UsdPreviewSurface name="U" type="surfaceshader"/>'
+     '<surfacematerial name="M" type="material"><input name="surfaceshader" type="surfaceshader" nodename="U"/>'
+     '</surfacematerial></materialx>', "'UsdPreviewSurface' shader"),
+    ('<?xml version="1.0"?><materialx version="1.39"><image name="i" type="color3">'
+     '<input name="file" type="filename" value="missing.png"/></image><gltf_pbr name="S" type="surfaceshader">'
+     '<input name="base_color" type="color3" nodename="i"/></gltf_pbr><surfacematerial name="M" type="material">'
+     '<input name="surfaceshader" type="surfaceshader" nodename="S"/></surfacematerial></materialx>',
+     "texture missing.png for base_color not found"),
+    ('<?xml version="1.0"?><materialx version="1.39"><nodedef name="ND_x" node="x"/></materialx>',
+     "holds no surfacematerial"),
+    ('<?xml version="1.0"?><materialx version="1.39"><gltf_pbr name="S" type="surfaceshader">'
+     '<input name="roughness" type="float" value="2"/></gltf_pbr></materialx>', "outside its range"),
+])
+def test_bad_inputs_say_what_is_wrong(tmp_path, text, words):
+    p = tmp_path / "bad.mtlx"
+    p.write_text(text)
+    with pytest.raises(MatremapError) as e:
+        read(p)
+    assert words in str(e.value) and str(p) in str(e.value)
+
+
+# -- writing -----------------------------------------------------------------------------------------
+
+
+def test_uniform_round_trip_and_validation(tmp_path):
+    m = Material.create("gltf:metal-rough", {"baseColor": [0.1, 0.2, 0.30000000000000004], "metallic": 0.25,
+                                             "roughness": 0.123456789, "ior": 1.45, "specular": 0.7,
+                                             "specularColor": [1.0, 0.9, 0.8]})
+    out = write(tmp_path / "m.mtlx", m)
+    assert validates(out)
+    a = read(out)
+    assert a.material() == m and not a.textures and a.notes == []
+    with pytest.raises(MatremapError, match="already exists"):
+        write(out, m.with_params({"roughness": 0.5}))
+    assert read(out).material() == m
+    write(out, m.with_params({"roughness": 0.5}), force=True)
+    assert read(out).constants["roughness"] == 0.5
+
+
+def test_map_set_round_trip(tmp_path):
+    rng = np.random.default_rng(2)
+    d = tmp_path / "maps"
+    d.mkdir()
+    png(d / "base.png", rng.uniform(0.05, 0.95, (8, 8, 3)).astype(np.float32), "srgb")
+    png(d / "lin_base.png", rng.uniform(0.05, 0.95, (8, 8, 3)).astype(np.float32), "linear")
+    png(d / "rough.png", rng.uniform(0.1, 0.9, (8, 8, 1)).astype(np.float32), "linear")
+    png(d / "normal.png", np.tile(np.array([0.5, 0.5, 1.0], np.float32), (8, 8, 1)), "linear")
+    (d / "material.json").write_text('{"model": "gltf:metal-rough", "maps": {"baseColor": "base.png", '
+                                     '"roughness": "rough.png"}, "normal": "normal.png", '
+                                     '"params": {"metallic": 0, "ior": 1.4}}')
+    ms = load_map_set(d)
+    (tmp_path / "out").mkdir()
+    out = write(tmp_path / "out" / "mat.mtlx", ms)
+    assert validates(out)
+    text = out.read_text()
+    assert 'colorspace="srgb_texture"' in text and 'value="mat_baseColor.png"' in text  # relative file names
+    a = read(out)
+    assert a.constants["metallic"] == 0.0 and a.constants["ior"] == 1.4
+    assert a.textures["baseColor"].colorspace == "srgb" and a.textures["roughness"].colorspace == "linear"
+    for name in ("baseColor", "roughness"):
+        ref = a.textures[name]
+        assert ref.path.parent == out.parent
+        back, _ = read_image(ref.path, ref.colorspace)
+        orig, _ = read_image(ms.maps[name], ms.colorspace[name])
+        assert np.array_equal(back, orig)
+    assert a.normal is not None and a.normal.path.read_bytes() == (d / "normal.png").read_bytes()
+    # a linear colour PNG is declared lin_rec709
+    (d / "material.json").write_text('{"model": "gltf:metal-rough", "maps": {"baseColor": "lin_base.png"}, '
+                                     '"colorspace": {"lin_base.png": "linear"}}')
+    out2 = write(tmp_path / "lin.mtlx", load_map_set(d))
+    assert 'colorspace="lin_rec709"' in out2.read_text() and read(out2).textures["baseColor"].colorspace == "linear"
+
+
+def test_writer_refuses_other_models_and_writes_nothing(tmp_path):
+    with pytest.raises(MatremapError, match="writes gltf:metal-rough materials, not mitsuba3:diffuse"):
+        write(tmp_path / "x.mtlx", Material.create("mitsuba3:diffuse"))
+    with pytest.raises(MatremapError, match="unknown file type"):
+        write(tmp_path / "x.xml", Material.create("gltf:metal-rough"))
+    assert list(tmp_path.iterdir()) == []
