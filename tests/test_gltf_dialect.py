@@ -4,8 +4,9 @@ The reference below is scalar ``math`` code taken from the glTF 2.0 specificatio
 "BRDF Implementation" (B.2.1 Specular BRDF with the Trowbridge-Reitz D and the Smith joint
 visibility V in the form the appendix simplifies it to; B.2.2 Diffuse; B.2.3 Fresnel; B.3 the
 metal / dielectric mix) with KHR_materials_ior (F0 of the IOR instead of 0.04) and
-KHR_materials_specular in its F0/F90 form (dielectricSpecularF0 = min(f0(ior) specularColor, 1)
-specular, F90 = specular, per channel), and the height-correlated visibility in Heitz's closed
+KHR_materials_specular as ratified (fr = f0 + (1 - f0)(1 - V.H)^5 per channel with
+f0 = min(f0(ior) specularColor, 1); the layer weighted by specular fr, the diffuse base by
+1 - specular max(fr), one number for all channels), and the height-correlated visibility in Heitz's closed
 form (2014, eq. 99), which the Khronos sample viewer evaluates. None of matremap's microfacet
 helpers is used by the reference.
 """
@@ -68,11 +69,13 @@ def reference(params: dict, L, V, visibility: str) -> list[float]:
     specular_brdf = D * vis
     out = []
     m, ior, s = params["metallic"], params["ior"], params["specular"]
+    fr = []
+    for c in range(3):
+        f0 = min(((ior - 1.0) / (ior + 1.0)) ** 2 * params["specularColor"][c], 1.0)
+        fr.append(f0 + (1.0 - f0) * (1.0 - abs(VdotH)) ** 5)
     for c in range(3):
         base = params["baseColor"][c]
-        f0_d = min(((ior - 1.0) / (ior + 1.0)) ** 2 * params["specularColor"][c], 1.0) * s
-        F_d = f0_d + (s - f0_d) * (1.0 - abs(VdotH)) ** 5
-        dielectric = (1.0 - F_d) * base / math.pi + F_d * specular_brdf
+        dielectric = (1.0 - s * max(fr)) * base / math.pi + s * fr[c] * specular_brdf
         F_m = base + (1.0 - base) * (1.0 - abs(VdotH)) ** 5
         metal = F_m * specular_brdf
         out.append(((1.0 - m) * dielectric + m * metal) * NdotL)

@@ -213,3 +213,22 @@ def test_truncated_and_non_finite_files_fail_when_read(tmp_path):
     p = write_image_like(tmp_path / "inf.exr", a, ImageInfo("exr", "float", 3, 0, 0, "linear"))
     with pytest.raises(MatremapError, match=r"inf.exr holds NaN or infinite texels \(first in row 50\)"):
         read_image(p)
+
+
+def test_rgba_colour_is_not_multiplied_by_alpha(tmp_path):
+    """An RGBA PNG's colour comes back as stored (OpenImageIO would premultiply it by alpha)."""
+    import OpenImageIO as oiio
+
+    from matremap.textures import read_image
+
+    path = str(tmp_path / "rgba.png")
+    pixels = np.zeros((4, 4, 4), np.uint8)
+    pixels[..., :3] = (200, 100, 50)
+    pixels[..., 3] = 64
+    out = oiio.ImageOutput.create(path)
+    spec = oiio.ImageSpec(4, 4, 4, oiio.UINT8)
+    spec.attribute("oiio:UnassociatedAlpha", 1)
+    assert out.open(path, spec) and out.write_image(pixels)
+    out.close()
+    image, _ = read_image(path, "linear")
+    np.testing.assert_allclose(image[0, 0] * 255, [200, 100, 50, 64], atol=1e-3)

@@ -138,7 +138,9 @@ def _open_input(path: str | os.PathLike):
     p = Path(path)
     if not p.is_file():
         raise MatremapError(f"map {p} not found; check the file name")
-    inp = oiio.ImageInput.open(str(p))
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)  # maps are data: colour must not be multiplied by alpha
+    inp = oiio.ImageInput.open(str(p), config)
     if inp is None:
         msg = oiio.geterror().strip().splitlines()
         raise MatremapError(f"cannot read {p}: it is not a readable image ({msg[0] if msg else 'unknown error'}); "
@@ -252,6 +254,7 @@ class MapWriter:
             spec.attribute("compression", info.compression)
         if info.format == "png" and info.colorspace == "srgb":
             spec.attribute("oiio:ColorSpace", "sRGB")
+        spec.attribute("oiio:UnassociatedAlpha", 1)  # write colour as given, not divided by alpha
         self._out = oiio.ImageOutput.create(self.path)
         if self._out is None or not self._out.open(self.path, spec):
             raise MatremapError(f"cannot write {path}: {oiio.geterror().strip()}")

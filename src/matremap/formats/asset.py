@@ -114,7 +114,12 @@ class MaterialAsset:
                 image = np.repeat(image, 3, axis=-1)
             elif image.shape[-1] > 3:
                 image = image[..., :3]
-            scale = np.asarray(ref.scale, dtype=np.float32)
+            scale = np.asarray(ref.scale, dtype=np.float32).reshape(-1)
+            if scale.size not in (1, image.shape[-1]):  # an RGB factor on picked channels: their factors
+                if ref.channels is None or max(ref.channels) >= scale.size:
+                    raise MatremapError(f"{self.path}: {name}: a factor of {scale.size} values does not fit a "
+                                        f"texture of {image.shape[-1]} channel(s)")
+                scale = scale[list(ref.channels)]
             image = (image * scale).astype(np.float32)
             lo, hi = p.bounds
             image = np.clip(image, lo, hi)

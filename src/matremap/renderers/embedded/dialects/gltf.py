@@ -12,10 +12,11 @@ H half vector, all dot products clamped to [0, 1]):
   appendix writes out);
 * Schlick's Fresnel F(f0, f90) = f0 + (f90 - f0) (1 - |V.H|)^5;
 * metal_brdf = F(baseColor, 1) D V;
-* dielectric_brdf = mix(baseColor / pi, D V, F(f0_d, f90_d)) per channel, where
-  f0_d = min(((ior - 1)/(ior + 1))^2 specularColor, 1) specular and f90_d = specular
-  (KHR_materials_ior and KHR_materials_specular; without them ior = 1.5 gives f0 = 0.04 and
-  specular = specularColor = 1);
+* dielectric_brdf = (1 - specular max_c(fr)) baseColor / pi + specular fr D V, where
+  fr = F(min(((ior - 1)/(ior + 1))^2 specularColor, 1), 1) per channel: KHR_materials_ior and
+  the ratified KHR_materials_specular (its ``fresnel_mix``: the diffuse base is weighted by one
+  number, the largest channel of fr). Without the extensions ior = 1.5 gives f0 = 0.04 and
+  specular = specularColor = 1, the core spec's mix(diffuse, specular, F(0.04, 1));
 * material = mix(dielectric_brdf, metal_brdf, metallic).
 
 The parameter names are the glTF JSON property names without ``Factor``.
@@ -67,9 +68,10 @@ def metal_rough(p, opt, g):
     lobe = np.where(alpha * alpha <= 1e-14, 0.0, d * gg / (4.0 * np.maximum(g.cos_o, 1e-12)))  # D V cos(L)
     w = g.schlick_weight
     base, metallic = p["baseColor"], p["metallic"]
-    f0 = dielectric_f0(p["ior"], p["specular"], p["specularColor"])
-    f_d = f0 + (p["specular"] - f0) * w
-    dielectric = (1.0 - f_d) * base * g.lambert + f_d * lobe
+    f0 = dielectric_f0(p["ior"], 1.0, p["specularColor"])
+    fr = f0 + (1.0 - f0) * w
+    weight = p["specular"]
+    dielectric = (1.0 - weight * np.max(fr, axis=1, keepdims=True)) * base * g.lambert + (weight * fr) * lobe
     metal = (base + (1.0 - base) * w) * lobe
     return (1.0 - metallic) * dielectric + metallic * metal
 
