@@ -233,6 +233,18 @@ class CyclesRenderer:
             self._log = None
 
     def _request(self, request: dict[str, Any]) -> np.ndarray:
+        """Send a request whose reply carries images; returns them."""
+        header, payload = self._exchange(request)
+        if not header.get("nbytes"):
+            raise MatremapError(f"the Cycles worker sent no images for {request.get('op')!r}")
+        return np.load(io.BytesIO(payload))
+
+    def call(self, request: dict[str, Any]) -> dict[str, Any]:
+        """Send a request whose reply is data (``write_blend``, ``inspect_blend``); returns its ``info``."""
+        header, _ = self._exchange(request)
+        return header.get("info", {})
+
+    def _exchange(self, request: dict[str, Any]) -> tuple[dict[str, Any], bytes]:
         body = json.dumps(request).encode()
         for attempt in (1, 2):
             try:
@@ -249,7 +261,7 @@ class CyclesRenderer:
                 continue
             if not header.get("ok"):
                 raise MatremapError(f"Cycles failed to render: {header.get('error')}")
-            return np.load(io.BytesIO(payload))
+            return header, payload
         raise AssertionError("unreachable")
 
     def _read(self, n: int, deadline: float) -> bytes:

@@ -9,9 +9,14 @@ Protocol (binary, over the worker's stdin/stdout):
 * request: 4-byte big-endian length, then that many bytes of UTF-8 JSON,
   ``{"op": "render", "scene": {...}, "materials": [{"model", "options", "values"}, ...]}``
   or ``{"op": "ping"}`` / ``{"op": "quit"}``, or ``{"op": "svbrdf", ...}`` (a textured sphere under an
-  environment map, arrays passed as ``.npy`` files in ``dir``: see ``matremap.renderers.cycles_svbrdf``);
+  environment map, arrays passed as ``.npy`` files in ``dir``: see ``matremap.renderers.cycles_svbrdf``),
+  ``{"op": "write_blend", ...}`` (save a material on a UV sphere as a .blend: see
+  ``matremap.formats.blend``), ``{"op": "inspect_blend", "path"}`` (what a .blend's materials and
+  objects hold, as JSON) or ``{"op": "render_blend", "path", "scene"}`` (the probe scene's camera and
+  lights around the object named ``sphere`` of a .blend, with its own material);
 * reply: 4-byte big-endian length, then JSON ``{"ok": true, "nbytes": n}`` followed by ``n`` bytes
-  of a ``.npy`` file (float32 [N, H, W, 3]), or ``{"ok": false, "error": "..."}``.
+  of a ``.npy`` file (float32 [N, H, W, 3]), or ``{"ok": true, "info": {...}}`` with no payload
+  (``write_blend``, ``inspect_blend``), or ``{"ok": false, "error": "..."}``.
 
 Blender prints to stdout (``Saved: ...`` after each ``write_still``, and more from C code), so the
 reply channel is a duplicate of the original fd 1 and fd 1 itself is pointed at stderr before
@@ -76,49 +81,10 @@ class Probe:
         bpy.ops.wm.read_factory_settings(use_empty=True)
         self.materials = {}
         scene = bpy.context.scene
-        scene.render.engine = "CYCLES"
-        cy = scene.cycles
-        cy.device = "CPU"
-        cy.samples = 1
-        cy.use_adaptive_sampling = False
-        cy.use_denoising = False
-        cy.seed = 0
-        cy.use_animated_seed = False
-        cy.filter_width = 0.01
-        cy.film_exposure = 1.0
-        cy.max_bounces = 0  # direct light only: the probe sphere is convex
-        cy.light_sampling_threshold = 0.0  # no stochastic termination of dim light samples
-        cy.sample_clamp_direct = 0.0
-        cy.sample_clamp_indirect = 0.0
-        if hasattr(cy, "use_light_tree"):
-            cy.use_light_tree = False
-        scene.render.use_persistent_data = True
-        res = int(s["resolution"])
-        scene.render.resolution_x = res
-        scene.render.resolution_y = res
-        scene.render.resolution_percentage = 100
-        scene.render.film_transparent = False
-        scene.render.use_compositing = False
-        scene.render.use_sequencer = False
-        scene.world = None  # black background, no environment light
-        _exr_output(scene)
-        _add_camera(bpy, scene, s)
-
+        self.res = _probe_settings(scene, s)
         self.sphere = self._sphere(float(s["sphere_radius"]), s.get("geometry", "points"))
         scene.collection.objects.link(self.sphere)
-
-        # one point light, moved and re-powered per scene light (renders are summed): Cycles
-        # samples one light per sample, which would make multi-light renders noisy
-        light_data = bpy.data.lights.new("light", type="POINT")
-        light_data.shadow_soft_size = 0.0
-        if hasattr(light_data, "use_soft_falloff"):
-            light_data.use_soft_falloff = False
-        light_data.color = (1.0, 1.0, 1.0)
-        self.light = bpy.data.objects.new("light", light_data)
-        scene.collection.objects.link(self.light)
-        self.lights = [(tuple(map(float, lt["position"])), 4.0 * math.pi * float(lt["intensity"]))
-                       for lt in s["lights"]]
-        self.res = res
+        self.light, self.lights = _probe_light(scene, s)
         self.key = key
 
     def _sphere(self, radius: float, geometry: str):
@@ -220,19 +186,73 @@ class Probe:
                 else:
                     socket.default_value = float(v[0])
             self.assign(mat)
-            for pos, power in self.lights:
-                self.light.location = pos
-                self.light.data.energy = power
-                scene.render.filepath = path
-                bpy.ops.render.render(write_still=True)
-                img = bpy.data.images.load(path, check_existing=False)
-                try:
-                    buf = np.empty(res * res * 4, dtype=np.float32)
-                    img.pixels.foreach_get(buf)
-                finally:
-                    bpy.data.images.remove(img)
-                out[i] += buf.reshape(res, res, 4)[::-1, :, :3]
+            out[i] = _render_lights(scene, self.light, self.lights, res, path)
         return out
+
+
+def _probe_settings(scene, s: dict) -> int:  # noqa: ANN001
+    """Cycles set up for the probe scene (CPU, 1 spp through pixel centres, direct light only, no
+    world, EXR output) and its camera; returns the resolution."""
+    scene.render.engine = "CYCLES"
+    cy = scene.cycles
+    cy.device = "CPU"
+    cy.samples = 1
+    cy.use_adaptive_sampling = False
+    cy.use_denoising = False
+    cy.seed = 0
+    cy.use_animated_seed = False
+    cy.filter_width = 0.01
+    cy.film_exposure = 1.0
+    cy.max_bounces = 0  # direct light only: the probe sphere is convex
+    cy.light_sampling_threshold = 0.0  # no stochastic termination of dim light samples
+    cy.sample_clamp_direct = 0.0
+    cy.sample_clamp_indirect = 0.0
+    if hasattr(cy, "use_light_tree"):
+        cy.use_light_tree = False
+    scene.render.use_persistent_data = True
+    res = int(s["resolution"])
+    scene.render.resolution_x = res
+    scene.render.resolution_y = res
+    scene.render.resolution_percentage = 100
+    scene.render.film_transparent = False
+    scene.render.use_compositing = False
+    scene.render.use_sequencer = False
+    scene.world = None  # black background, no environment light
+    _exr_output(scene)
+    _add_camera(bpy, scene, s)
+    return res
+
+
+def _probe_light(scene, s: dict):  # noqa: ANN001
+    """One point light, moved and re-powered per scene light (renders are summed): Cycles samples one
+    light per sample, which would make multi-light renders noisy. Returns (object, [(position, power)])."""
+    light_data = bpy.data.lights.new("light", type="POINT")
+    light_data.shadow_soft_size = 0.0
+    if hasattr(light_data, "use_soft_falloff"):
+        light_data.use_soft_falloff = False
+    light_data.color = (1.0, 1.0, 1.0)
+    light = bpy.data.objects.new("light", light_data)
+    scene.collection.objects.link(light)
+    lights = [(tuple(map(float, lt["position"])), 4.0 * math.pi * float(lt["intensity"])) for lt in s["lights"]]
+    return light, lights
+
+
+def _render_lights(scene, light, lights, res: int, path: str) -> np.ndarray:  # noqa: ANN001
+    """The sum of one render per (position, power) of the light -> float32 [res, res, 3]."""
+    out = np.zeros((res, res, 3), dtype=np.float32)
+    for pos, power in lights:
+        light.location = pos
+        light.data.energy = power
+        scene.render.filepath = path
+        bpy.ops.render.render(write_still=True)
+        img = bpy.data.images.load(path, check_existing=False)
+        try:
+            buf = np.empty(res * res * 4, dtype=np.float32)
+            img.pixels.foreach_get(buf)
+        finally:
+            bpy.data.images.remove(img)
+        out += buf.reshape(res, res, 4)[::-1, :, :3]
+    return out
 
 
 # -- SVBRDF renders under an environment map (op "svbrdf"; see matremap.renderers.cycles_svbrdf) --------
@@ -488,6 +508,166 @@ def render_svbrdf(request: dict, tmp: str) -> np.ndarray:
     return buf.reshape(1, res, res, 4)[:, ::-1, :, :3].copy()
 
 
+# -- .blend files (ops "write_blend", "inspect_blend", "render_blend"; see matremap.formats.blend) ------
+
+
+def _material_nodes(nt, model: str, options: dict) -> tuple[dict, list]:  # noqa: ANN001
+    """Build a model's BSDF nodes into an emptied node tree, wired to a Material Output; returns
+    (parameter name -> input socket, the BSDF nodes that take a normal)."""
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    out.location = (400, 0)
+    if model == "cycles:principled":
+        p = nt.nodes.new("ShaderNodeBsdfPrincipled")
+        p.distribution = DISTRIBUTIONS[options.get("distribution", "multi_ggx")]
+        nt.links.new(p.outputs[0], out.inputs["Surface"])
+        sockets = {n: p.inputs[n] for n in ("Base Color", "Metallic", "Roughness", "IOR", "Specular IOR Level",
+                                             "Specular Tint")}
+        return sockets, [p]
+    if model == "cycles:glossy":
+        glossy = nt.nodes.new("ShaderNodeBsdfGlossy")
+        glossy.distribution = DISTRIBUTIONS[options.get("distribution", "ggx")]
+        glossy.location = (0, 150)
+        diffuse = nt.nodes.new("ShaderNodeBsdfDiffuse")
+        diffuse.inputs["Roughness"].default_value = 0.0
+        diffuse.location = (0, -150)
+        add = nt.nodes.new("ShaderNodeAddShader")
+        add.location = (200, 0)
+        nt.links.new(glossy.outputs[0], add.inputs[0])
+        nt.links.new(diffuse.outputs[0], add.inputs[1])
+        nt.links.new(add.outputs[0], out.inputs["Surface"])
+        return ({"Color": glossy.inputs["Color"], "Roughness": glossy.inputs["Roughness"],
+                 "Diffuse Color": diffuse.inputs["Color"]}, [glossy, diffuse])
+    if model == "cycles:diffuse":
+        diffuse = nt.nodes.new("ShaderNodeBsdfDiffuse")
+        diffuse.inputs["Roughness"].default_value = 0.0
+        nt.links.new(diffuse.outputs[0], out.inputs["Surface"])
+        return {"Color": diffuse.inputs["Color"]}, [diffuse]
+    raise ValueError(f"the Cycles worker cannot build model {model}")
+
+
+def _set_socket(socket, v) -> None:  # noqa: ANN001
+    if socket.type == "RGBA":
+        socket.default_value = (*([float(x) for x in v] * (3 if len(v) == 1 else 1)), 1.0)
+    else:
+        socket.default_value = float(v[0])
+
+
+def write_blend(request: dict) -> dict:
+    """A new file holding one material (``name``) on a smooth UV sphere (the SVBRDF renders' sphere:
+    pole along +y, matremap's UVs) and the probe camera; image textures are packed into the file."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.engine = "CYCLES"
+    s = request["scene"]
+    scene.render.resolution_x = scene.render.resolution_y = int(s["resolution"])
+    _add_camera(bpy, scene, s)
+    segments, rings = (int(x) for x in request.get("geometry", "128x64").split("x"))
+    sphere, uv_name = _uv_sphere(float(s["sphere_radius"]), segments, rings)
+
+    mat = bpy.data.materials.new(request["name"])
+    mat.use_nodes = True
+    nt = mat.node_tree
+    for n in list(nt.nodes):
+        nt.nodes.remove(n)
+    sockets, bsdfs = _material_nodes(nt, request["model"], request.get("options", {}))
+    y = 300
+    uvmap = None
+
+    def texture(label: str, tex: dict):
+        nonlocal y, uvmap
+        if uvmap is None:
+            uvmap = nt.nodes.new("ShaderNodeUVMap")
+            uvmap.uv_map = uv_name
+            uvmap.location = (-900, 0)
+        img = bpy.data.images.load(tex["path"], check_existing=False)
+        img.name = label
+        img.colorspace_settings.name = tex["colorspace"]
+        img.pack()
+        node = nt.nodes.new("ShaderNodeTexImage")
+        node.name = node.label = label
+        node.image = img
+        node.interpolation = "Linear"
+        node.extension = "EXTEND"
+        node.location = (-600, y)
+        y -= 300
+        nt.links.new(uvmap.outputs["UV"], node.inputs["Vector"])
+        return node
+
+    for name, socket in sockets.items():
+        if name in request["textures"]:
+            node = texture(name, request["textures"][name])
+            nt.links.new(node.outputs["Color"], socket)
+        elif name in request["consts"]:
+            _set_socket(socket, request["consts"][name])
+    if request.get("normal"):
+        node = texture("Normal", request["normal"])
+        nmap = nt.nodes.new("ShaderNodeNormalMap")
+        nmap.space = "TANGENT"
+        nmap.uv_map = uv_name
+        nmap.location = (-250, y + 300)
+        nt.links.new(node.outputs["Color"], nmap.inputs["Color"])
+        for b in bsdfs:
+            nt.links.new(nmap.outputs["Normal"], b.inputs["Normal"])
+    sphere.data.materials.append(mat)
+    bpy.context.preferences.filepaths.save_version = 0  # no ".blend1" backup of the file replaced
+    bpy.ops.wm.save_as_mainfile(filepath=request["path"], check_existing=False, compress=True, copy=True)
+    return {"material": mat.name, "object": sphere.name, "vertices": len(sphere.data.vertices)}
+
+
+def _value(v):  # noqa: ANN001
+    try:
+        return [float(x) for x in v]
+    except TypeError:
+        return float(v) if isinstance(v, (int, float)) else str(v)
+
+
+def inspect_blend(request: dict) -> dict:
+    """What a .blend holds: per material its nodes (type, settings, unlinked input values, image
+    colour space and packing) and links; per mesh object its material slots and UV layers."""
+    bpy.ops.wm.open_mainfile(filepath=request["path"])
+    materials = {}
+    for mat in bpy.data.materials:
+        if mat.node_tree is None:
+            continue
+        nodes = {}
+        for n in mat.node_tree.nodes:
+            d = {"type": n.bl_idname,
+                 "inputs": {i.identifier: _value(i.default_value) for i in n.inputs
+                            if not i.is_linked and hasattr(i, "default_value")}}
+            for attr in ("distribution", "space", "uv_map", "interpolation", "extension"):
+                if hasattr(n, attr):
+                    d[attr] = getattr(n, attr)
+            if getattr(n, "image", None) is not None:
+                img = n.image
+                d["image"] = {"name": img.name, "colorspace": img.colorspace_settings.name,
+                              "packed": img.packed_file is not None, "size": list(img.size)}
+            nodes[n.name] = d
+        links = [[lk.from_node.name, lk.from_socket.identifier, lk.to_node.name, lk.to_socket.identifier]
+                 for lk in mat.node_tree.links]
+        materials[mat.name] = {"nodes": nodes, "links": links}
+    objects = {o.name: {"type": o.type, "materials": [m.name for m in o.data.materials if m is not None],
+                        "uv_layers": [uv.name for uv in o.data.uv_layers],
+                        "vertices": len(o.data.vertices)}
+               for o in bpy.data.objects if o.type == "MESH"}
+    return {"materials": materials, "objects": objects}
+
+
+def render_blend(request: dict, tmp: str) -> np.ndarray:
+    """Open a .blend and render its object ``sphere`` (with the file's own material) in the probe
+    set-up: the probe camera and point lights, Cycles as for the probe -> float32 [1, res, res, 3]."""
+    bpy.ops.wm.open_mainfile(filepath=request["path"])
+    scene = bpy.context.scene
+    for o in list(scene.objects):  # keep the sphere only: the probe brings its own camera and lights
+        if o.name != "sphere":
+            bpy.data.objects.remove(o)
+    if "sphere" not in scene.objects:
+        raise ValueError(f"{request['path']} has no object named 'sphere'")
+    s = request["scene"]
+    res = _probe_settings(scene, s)
+    light, lights = _probe_light(scene, s)
+    return _render_lights(scene, light, lights, res, os.path.join(tmp, "blend.exr"))[None]
+
+
 def main() -> int:
     probe = Probe()
     stdin = sys.stdin.buffer
@@ -509,10 +689,16 @@ def main() -> int:
             if op == "ping":
                 _send({"ok": True, "pid": os.getpid()})
                 continue
-            if op == "svbrdf":
-                probe.key = None  # the probe scene is rebuilt on its next request
+            if op in ("svbrdf", "write_blend", "inspect_blend", "render_blend"):
+                probe.key = None  # these replace Blender's data: the probe scene is rebuilt on its next request
                 probe.materials = {}
+            if op in ("write_blend", "inspect_blend"):
+                _send({"ok": True, "info": (write_blend if op == "write_blend" else inspect_blend)(request)})
+                continue
+            if op == "svbrdf":
                 images = render_svbrdf(request, probe.tmp)
+            elif op == "render_blend":
+                images = render_blend(request, probe.tmp)
             elif op == "render":
                 images = probe.render(request)
             else:
