@@ -902,7 +902,7 @@ def test_roughplastic_nonlinear_option_changes_the_diffuse_term():
         ("blender27:ward", {"specular_intensity": 1.1}),
         ("cycles:glossy", {"Roughness": 1.2}),
         ("cycles:glossy", {"Roughness": -0.01}),
-        ("cycles:glossy", {"distribution": "multi_ggx"}),
+        ("cycles:glossy", {"distribution": "multiscatter_ggx"}),  # Blender's enum name is not ours
         ("cycles:diffuse", {"Color": 1.5}),
     ],
 )

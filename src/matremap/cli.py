@@ -52,12 +52,19 @@ EXAMPLES = {
   matremap apply ward2as.json --source mitsuba06:ward,variant=ward,alpha=0.3,specularReflectance=0.12""",
     "convert": """examples:
   matremap convert examples/bronze --transform ward2as.json -o out/bronze-as
-  matremap convert maps/ --model mitsuba06:ward --transform a.json --transform b.json -o out/""",
+  matremap convert maps/ --model mitsuba06:ward --transform a.json --transform b.json -o out/
+  matremap convert examples/bronze --to cycles:glossy --fix distribution=ggx -o out/  (fails: bronze is
+      variant=ward, the library's Ward transforms are trained on variant=balanced)""",
     "evaluate": """examples:
   matremap evaluate examples/bronze out/bronze-as --envmap builtin --rotations 0:360:12 -o out/eval""",
     "remap": """examples:
   matremap remap examples/blue-plastic --from mitsuba06:ward --to mitsuba06:pbr --fix distribution=as -o out/plastic
-  (a second run reuses the cached transform)""",
+  (a second run reuses the cached transform)
+  matremap remap helmet.glb --to mitsuba3:roughconductor -o out/helmet      (writes out/helmet/helmet.xml)
+  matremap remap scene.xml --material gold --to gltf:metal-rough -o out/gold  (writes out/gold/scene.gltf)""",
+    "transforms": """examples:
+  matremap transforms
+  matremap transforms --route blender27:ward cycles:glossy --fix distribution=ggx""",
     "models": """examples:
   matremap models
   matremap models mitsuba06:roughconductor
@@ -329,8 +336,28 @@ def cmd_convert(args: argparse.Namespace) -> int:
     from .svbrdf import convert
     from .textures import load_map_set
 
-    transforms = [Transform.load(p) for p in args.transform]
     map_set = load_map_set(args.maps, args.model)
+    if args.transform:
+        if args.target:
+            raise MatremapError("give either --transform files or --to MODEL (a route through the library), not both")
+        transforms = [Transform.load(p) for p in args.transform]
+    elif args.target:
+        from .library import find_route
+        from .remap import complete_fix, load_arrays
+
+        target = get_model(args.target).id
+        params, _ = load_arrays(map_set)
+        fix = complete_fix(map_set.model, {**map_set.constants, **params}, target,
+                           parse_assignments(args.fix, "--fix"))
+        held = {n: params[n] for n, _, _ in map_set.spec.specialisations if n in params}
+        found = find_route(map_set.model, map_set.options, target, fix, source_values=held)
+        if found is None:
+            raise MatremapError(f"no route from {map_set.model} to {target} in the transform library "
+                                f"(`matremap transforms` lists it); run `matremap remap` to sweep one")
+        print(f"matremap: route {found.describe()}", file=sys.stderr)
+        transforms = [found.transform]
+    else:
+        raise MatremapError("name the transform(s) with --transform T.json, or a target model with --to MODEL")
     for note in map_set.notes:
         print(f"matremap: note: {note}", file=sys.stderr)
     import warnings
@@ -346,6 +373,35 @@ def cmd_convert(args: argparse.Namespace) -> int:
               f"({100 * report.outside_fraction:.2f}%) lie outside the transform's training domain; "
               f"see {Path(args.output) / 'outside_domain.png'}", file=sys.stderr)
     print(f"wrote {args.output}: {report.model}, {report.texels} texels in {report.seconds:.2f} s", file=sys.stderr)
+    return 0
+
+
+def cmd_transforms(args: argparse.Namespace) -> int:
+    from .library import find_route, listing
+
+    if args.route:
+        source, target = args.route
+        fix = parse_assignments(args.fix, "--fix")
+        found = find_route(get_model(source).id, parse_assignments(args.source_option, "--source-option"),
+                           get_model(target).id, fix)
+        if found is None:
+            raise MatremapError(f"no route from {source} to {target} in the library; `matremap remap` sweeps instead")
+        print(found.describe())
+        return 0
+    rows = listing()
+    if args.json:
+        print(json.dumps(rows, indent=1))
+        return 0
+    print(f"{'name':<30} {'source -> target':<78} {'held-out RMSE (roughness, F0, diffuse)':<36}")
+    for r in rows:
+        errs = ", ".join("-" if r["heldout_rmse"].get(q) is None else f"{r['heldout_rmse'][q]:.2g}"
+                         for q in ("roughness", "reflectance", "diffuse") if q in r["heldout_rmse"])
+        print(f"{r['name']:<30} {r['source'] + ' -> ' + r['target']:<78} {errs}")
+        dom = ", ".join(f"{k} {lo:.3g}..{hi:.3g}" for k, (lo, hi) in r["domain"].items())
+        rend = r["renderers"]
+        how = "embedded" if set(rend.values()) <= {"embedded"} else f"source {rend.get('source')}, target " \
+            f"{rend.get('target')}"
+        print(f"{'':<30} trained on {dom} ({how})")
     return 0
 
 
@@ -371,14 +427,32 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def cmd_remap(args: argparse.Namespace) -> int:
-    from .remap import remap
+    from .formats import is_material_file
+    from .remap import remap, remap_file
 
+    if is_material_file(args.maps):
+        if args.source:
+            raise MatremapError(f"{args.maps} names its own model; drop --from")
+        fres = remap_file(
+            args.maps, args.target, args.output, material=args.material, fix=parse_assignments(args.fix, "--fix"),
+            write=args.write, force=args.force, log=lambda m: print(m, file=sys.stderr),
+            strategy=args.strategy, envmap=args.envmap, rotations=args.rotations, resolution=args.size,
+            lights=args.lights, workers=args.workers, cache=Path(args.cache) if args.cache else None,
+            evaluate=not args.no_evaluate, target_renderer=args.target_renderer, library=not args.sweep,
+        )
+        print(f"done: {fres.source_model} -> {fres.target_model}" + (f", wrote {fres.file}" if fres.file else "")
+              + (f", mean 1-SSIM {fres.remap.mean_dssim:.4f}" if fres.remap and fres.remap.mean_dssim is not None
+                 else ""))
+        return 0
+    if args.material is not None or args.write is not None:
+        raise MatremapError("--material and --write apply to material files (.gltf, .glb, .mtlx, .xml)")
     result = remap(
         args.maps, args.source, args.target, args.output, fix=parse_assignments(args.fix, "--fix"),
         strategy=args.strategy, envmap=args.envmap, rotations=args.rotations, resolution=args.size,
         lights=args.lights, workers=args.workers, cache=Path(args.cache) if args.cache else None,
         evaluate=not args.no_evaluate, force=args.force, log=lambda m: print(m, file=sys.stderr),
-        scene=Scene.probe(lights=parse_lights(args.light)), target_renderer=args.target_renderer,
+        scene=Scene.probe(lights=parse_lights(args.light)) if args.light else None,
+        target_renderer=args.target_renderer, library=not args.sweep,
     )
     print(f"done in {result.seconds['total']:.1f} s: maps {result.maps}"
           + (f", report {result.report}" if result.report else "")
@@ -507,14 +581,27 @@ def build_parser() -> argparse.ArgumentParser:
                        formatter_class=fmt)
     p.add_argument("maps", metavar="MAPS", help="folder of maps (material.json, or *_diffuse/_specular/"
                    "_roughness/_normal file names)")
-    p.add_argument("--transform", action="append", required=True, metavar="T.json",
+    p.add_argument("--transform", action="append", default=[], metavar="T.json",
                    help="transform to apply; several are chained in order")
+    p.add_argument("--to", dest="target", metavar="MODEL",
+                   help="instead of --transform: find a route to MODEL through the transform library")
+    p.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
+                   help="with --to: target options/held values the route must have")
     p.add_argument("-o", "--output", required=True, metavar="OUT", help="output folder")
-    p.add_argument("--model", help="source model, when the folder has no manifest")
+    p.add_argument("--model", "--from", dest="model", help="source model, when the folder has no manifest")
     p.add_argument("--format", help="output format instead of the inputs' (e.g. exr, png16)")
     p.add_argument("--workers", type=int, default=2, metavar="N")
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
     p.set_defaults(func=cmd_convert)
+
+    p = sub.add_parser("transforms", help="list the shipped transform library, or find a route through it",
+                       epilog=EXAMPLES["transforms"], formatter_class=fmt)
+    p.add_argument("--route", nargs=2, metavar=("FROM", "TO"), help="show the route between two models")
+    p.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE", help="with --route: target values")
+    p.add_argument("--source-option", action="append", default=[], metavar="NAME=VALUE",
+                   help="with --route: source options")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_transforms)
 
     p = sub.add_parser("evaluate", help="compare two map sets under an environment map (SSIM, HTML report)",
                        epilog=EXAMPLES["evaluate"], formatter_class=fmt)
@@ -533,8 +620,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("remap", help="the main job: sweep, learn, convert and evaluate a map set",
                        epilog=EXAMPLES["remap"], formatter_class=fmt)
-    p.add_argument("maps", metavar="MAPS")
+    p.add_argument("maps", metavar="MAPS|FILE", help="a map set folder, or a .gltf/.glb/.mtlx/Mitsuba .xml file")
     p.add_argument("--from", dest="source", metavar="MODEL", help="source model (default: the manifest's)")
+    p.add_argument("--material", metavar="NAME|INDEX", help="which material of the file (default: the first)")
+    p.add_argument("--write", metavar="NAME.EXT", help="the file to write into OUT (default: the input's name with "
+                   "the target format's suffix: .gltf/.glb/.mtlx for gltf:*, .xml for mitsuba3:*, .blend for cycles:*)")
+    p.add_argument("--sweep", action="store_true", help="always sweep, even when the transform library has a route")
     p.add_argument("--to", dest="target", required=True, metavar="MODEL", help="target model")
     p.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE", help="target options/held values")
     p.add_argument("--strategy", choices=("simple", "two-stage", "three-stage"), default="two-stage")
@@ -547,8 +638,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--cache", metavar="DIR", help="transform cache (default ~/.cache/matremap/transforms)")
     p.add_argument("--light", nargs="+", metavar="DEG",
                    help="light angles of the sweep's probe scene (default 0: headlight)")
-    p.add_argument("--target-renderer", default="embedded", metavar="NAME",
-                   help="renderer of the target model in the sweep (embedded, mitsuba3, cycles)")
+    p.add_argument("--target-renderer", metavar="NAME",
+                   help="renderer of the target model in the sweep (embedded, mitsuba3, cycles; default: embedded "
+                   "where it emulates the model, else the model's own renderer)")
     p.add_argument("--no-evaluate", action="store_true", help="skip the evaluation renders")
     p.add_argument("--force", action="store_true", help="write into an existing output folder")
     p.set_defaults(func=cmd_remap)

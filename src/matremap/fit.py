@@ -122,8 +122,7 @@ def part(material: Material, which: str) -> Material | None:
     """The material restricted to its diffuse or specular part (None if it has no such part)."""
     if which == FULL:
         return material
-    spec = material.spec.specialise(material.values)
-    overrides = spec.diffuse_only if which == DIFFUSE else spec.specular_only
+    overrides = material.spec.part_overrides(which, material.values)
     if overrides is None:
         return None
     values = dict(material.values)
@@ -463,8 +462,7 @@ def _run_stage(
     names = [p.name for p in params]
     name = name or which
     energy = float(np.sum(goal * goal))
-    spec = current.spec.specialise(current.values)
-    has_part = (spec.diffuse_only if which == DIFFUSE else spec.specular_only) is not None or which == FULL
+    has_part = current.spec.part_overrides(which, current.values) is not None
 
     def report(result: Material, loss: float, evaluations: int, message: str) -> None:
         stages.append(

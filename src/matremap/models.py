@@ -149,6 +149,12 @@ class ModelSpec:
                 return o
         raise KeyError(name)
 
+    def part_overrides(self, part: str, values: Mapping[str, Any] | None = None) -> Mapping[str, float] | None:
+        """The overrides that draw one part ("full", "specular", "diffuse") of a material with these
+        ``values`` (constants or per-texel maps; see :meth:`specialise`); None when it has no such part."""
+        spec = self.specialise(values or {})
+        return {"full": {}, "specular": spec.specular_only, "diffuse": spec.diffuse_only}[part]
+
     @property
     def param_names(self) -> tuple[str, ...]:
         return tuple(p.name for p in self.params)

@@ -39,7 +39,7 @@ ROUGHNESS_POINTS, SPECULAR_POINTS, DIFFUSE_LEVELS = 10, 6, (0.0, 0.9)
 
 @dataclass
 class RemapResult:
-    transform: Path
+    transform: Path | None  # the cached transform file; None when the library served it
     cached: bool
     maps: Path
     report: Path | None
@@ -100,6 +100,57 @@ def _range(values: Any, bounds: tuple[float, float]) -> tuple[float, float]:
     return round(lo, 6), round(hi, 6)
 
 
+def complete_fix(source_model: str, values: Mapping[str, Any], target: str, fix: Mapping[str, Any]) -> dict[str, Any]:
+    """The user's target fixes, plus a choice for each target parameter that decides what the
+    target's parameters mean and that the user left open: a glTF ``metallic`` is 1 for a source
+    without a diffuse part (a metal), else 0."""
+    out = dict(fix)
+    for name, value, _ in get_model(target).specialisations:
+        if name not in out:
+            out[name] = value if _no_diffuse(source_model, values) else 0.0
+    return out
+
+
+def _no_diffuse(model: str, values: Mapping[str, Any]) -> bool:
+    spec = get_model(model)
+    dp = qty.diffuse_param(spec)
+    if dp is None or spec.specialise(values).diffuse_only is None:
+        return True
+    v = values.get(dp.name, spec.param(dp.name).default)
+    return float(np.max(np.asarray(v, dtype=float))) <= 0.0
+
+
+#: a library route is used when at most this fraction of the texels lie outside its training domain
+LIBRARY_MAX_OUTSIDE = 0.01
+
+
+def library_transform(map_set: MapSet, params: Mapping[str, Any], target: str, fix: Mapping[str, Any],
+                      log: Callable[[str], None]) -> Transform | None:
+    """A transform from the shipped library (direct or chained) that covers these maps, or None."""
+    from .library import find_route
+
+    spec = map_set.spec
+    held = {name: params[name] for name, _, _ in spec.specialisations if name in params}
+    found = find_route(spec.id, map_set.options, target, fix, source_values=held)
+    if found is None:
+        log(f"library: no route from {spec.id} to {target} with {_fmt_fix(fix)}; sweeping")
+        return None
+    transform = found.transform
+    sample = {k: (np.asarray(v)[::4, ::4] if np.ndim(v) >= 2 else v) for k, v in params.items()
+              if k in spec.param_names}
+    _, outside = transform.apply(sample)
+    share = float(np.mean(outside)) if np.size(outside) else 0.0
+    if share > LIBRARY_MAX_OUTSIDE:
+        log(f"library: {found.describe()} covers only {100 * (1 - share):.1f}% of the texels; sweeping instead")
+        return None
+    log(f"library: {found.describe()}")
+    return transform
+
+
+def _fmt_fix(fix: Mapping[str, Any]) -> str:
+    return ", ".join(f"{k}={v}" for k, v in fix.items()) or "no fixed values"
+
+
 def cached_transform(
     map_set: MapSet, params: Mapping[str, Any], target: str, fix: Mapping[str, Any], strategy: str,
     cache: Path, workers: int | None, log: Callable[[str], None], scene: Scene | None = None,
@@ -114,8 +165,11 @@ def cached_transform(
     spec = map_set.spec
     base = Material.create(spec.id, {k: v for k, v in map_set.constants.items() if k not in map_set.maps})
     grid_text = sweep_grid(map_set, params)
+    from .renderers.base import renderer_for
+
     config = SweepConfig(source=base, target=get_model(target).id, fix=dict(fix), strategy=strategy,
-                         scene=scene or Scene(), target_renderer=target_renderer)
+                         scene=scene or Scene(), source_renderer=renderer_for(spec.id),
+                         target_renderer=target_renderer)
     key_doc = {"config": config.to_dict(), "grid": grid_text, "version": __version__}
     key = hashlib.sha256(json.dumps(key_doc, sort_keys=True).encode()).hexdigest()[:16]
     cache.mkdir(parents=True, exist_ok=True)
@@ -145,11 +199,14 @@ def remap(
     fix: Mapping[str, Any] | None = None, strategy: str = "two-stage", envmap: str = "builtin",
     rotations: str = "0:360:6", resolution: int = 160, lights: int = 128, workers: int | None = None,
     cache: Path | None = None, evaluate: bool = True, force: bool = False, scene: Scene | None = None,
-    target_renderer: str = "embedded", log: Callable[[str], None] = print,
+    target_renderer: str | None = None, library: bool = True, log: Callable[[str], None] = print,
 ) -> RemapResult:
     """Remap the map set ``maps`` onto ``target_model``; write ``OUT/maps`` and ``OUT/report``.
     ``scene`` is the probe scene of the sweep (default: the paper's, with a headlight);
-    ``target_renderer`` draws the target model in the sweep (e.g. "mitsuba3", "cycles")."""
+    ``target_renderer`` draws the target model in the sweep (e.g. "mitsuba3", "cycles").
+    ``library``: first look for a route through the shipped transform library (used when the
+    default probe, two-stage fits and the embedded renderer are asked for, and when it covers the
+    maps' values); otherwise, or when it finds none, sweep and learn (cached)."""
     from .envmap import resolve
     from .evaluate import evaluate as run_evaluation
     from .evaluate import parse_rotations
@@ -159,6 +216,9 @@ def remap(
     seconds: dict[str, float] = {}
     map_set = load_map_set(maps, source_model)
     target = get_model(target_model).id
+    from .renderers.base import renderer_for
+
+    target_renderer = target_renderer or renderer_for(target)
     out = Path(out)
     if out.exists() and any(out.iterdir()) and not force:
         raise MatremapError(f"{out} exists and is not empty; pass --force to write into it")
@@ -171,8 +231,18 @@ def remap(
     seconds["load"] = time.perf_counter() - t0
 
     t = time.perf_counter()
-    transform, tpath, cached = cached_transform(map_set, params, target, fix or {}, strategy,
-                                                cache or default_cache(), workers, log, scene, target_renderer)
+    fix = complete_fix(map_set.model, {**map_set.constants, **params}, target, fix or {})
+    transform = None
+    if library and scene is None and target_renderer == renderer_for(target) and strategy == "two-stage":
+        transform = library_transform(map_set, params, target, fix, log)
+    elif library:
+        log("library: not used (its transforms are two-stage fits on the default probe, each model drawn by its "
+            "default renderer)")
+    if transform is not None:
+        tpath, cached = None, True
+    else:
+        transform, tpath, cached = cached_transform(map_set, params, target, fix, strategy,
+                                                    cache or default_cache(), workers, log, scene, target_renderer)
     seconds["transform"] = time.perf_counter() - t
 
     t = time.perf_counter()
@@ -180,6 +250,7 @@ def remap(
     with warnings.catch_warnings():  # the outside-domain count is logged below
         warnings.simplefilter("ignore", UserWarning)
         report = convert(map_set, [transform], out / "maps", workers=workers or 2, force=force)
+    transform.save(out / "transform.json", force=True)  # what was applied, with its provenance
     seconds["convert"] = time.perf_counter() - t
     log(f"convert: {report.texels} texels into {out / 'maps'}"
         + (f"; {report.outside} outside the training domain (see outside_domain.png)" if report.outside else ""))
@@ -203,3 +274,93 @@ def remap(
             f"{len(angles)} rotations; {html}")
     seconds["total"] = time.perf_counter() - t0
     return RemapResult(tpath, cached, out / "maps", html, int(report.outside), int(report.texels), mean, seconds)
+
+
+# ---------------------------------------------------------------------------------------------
+# material files
+
+@dataclass
+class FileRemapResult:
+    file: Path | None
+    source_model: str
+    target_model: str
+    textured: bool
+    remap: RemapResult | None = None
+    material: Material | None = None
+    loss: float | None = None
+    notes: list[str] = field(default_factory=list)
+
+
+def default_suffix(target: str, source_format: str) -> str | None:
+    """The file a target model's users read: glTF (or MaterialX when the input was one) for
+    ``gltf:*``, Mitsuba 3 XML for ``mitsuba3:*``, a .blend for ``cycles:*``; None otherwise."""
+    family = target.split(":", 1)[0]
+    if family == "gltf":
+        return {"gltf": None, "mtlx": ".mtlx"}.get(source_format, ".gltf")
+    return {"mitsuba3": ".xml", "cycles": ".blend"}.get(family)
+
+
+def remap_file(
+    path: str | Path, target_model: str, out: str | Path, *, material: str | int | None = None,
+    fix: Mapping[str, Any] | None = None, write: str | None = None, force: bool = False,
+    log: Callable[[str], None] = print, **options: Any,
+) -> FileRemapResult:
+    """Remap one material of a glTF/.glb, MaterialX or Mitsuba XML file onto ``target_model`` and
+    write it in the target's own format into ``out`` (``write`` names the file; default: the
+    input's name with the target format's suffix). A textured material goes through :func:`remap`
+    (``out/source`` holds its maps as matremap reads them, ``out/maps`` the converted ones); a
+    uniform one is fitted directly. ``options`` go to :func:`remap`."""
+    from .fit import fit
+    from .formats import format_for, read_asset, write_asset
+    from .renderers.base import renderer_for
+
+    p = Path(path)
+    asset = read_asset(p, material)
+    for note in asset.notes:
+        log(f"note: {note}")
+    target = get_model(target_model).id
+    out = Path(out)
+    if out.exists() and any(out.iterdir()) and not force:
+        raise MatremapError(f"{out} exists and is not empty; pass --force to write into it")
+    if out.resolve() == p.resolve().parent:
+        raise MatremapError(f"{out} is the input file's folder; choose another output folder")
+    if write is None:
+        suffix = default_suffix(target, asset.format) or None
+        if suffix is None and target.split(":", 1)[0] == "gltf":
+            suffix = p.suffix.lower()
+        name = f"{p.stem}{suffix}" if suffix else None
+    else:
+        name = write
+    if name is not None:
+        format_for(name)  # fails early on a suffix no writer takes
+        if (out / name).resolve() == p.resolve():
+            raise MatremapError(f"{out / name} would overwrite the input; choose another name")
+    else:
+        log(f"note: no material file format for {target}; writing its parameters only")
+    result = FileRemapResult(None, asset.model, target, asset.textured, notes=list(asset.notes))
+    if asset.textured:
+        out.mkdir(parents=True, exist_ok=True)
+        source_dir = asset.to_map_set(out / "source")
+        result.remap = remap(source_dir, None, target, out, fix=fix, force=True, log=log, **options)
+        produced: Any = load_map_set(out / "maps")
+    else:
+        source = asset.material()
+        full_fix = complete_fix(source.model, qty.material_values(source), target, fix or {})
+        r = fit(source, target, source_renderer=renderer_for(source.model),
+                target_renderer=options.get("target_renderer") or renderer_for(target), fix=full_fix,
+                strategy=options.get("strategy", "two-stage"))
+        for w in r.warnings:
+            log(f"warning: {w}")
+        log(f"fit: {target} {json.dumps(r.target.to_dict()['params'])}; relative L2 error {r.loss:.4f}")
+        out.mkdir(parents=True, exist_ok=True)
+        from .imageio import write_text
+
+        write_text(out / "material.json", json.dumps(r.target.to_dict(), indent=1) + "\n")
+        result.material, result.loss = r.target, r.loss
+        produced = r.target
+    if name is not None:
+        source_for_writer = asset if format_for(name) in ("gltf", "mtlx") and asset.format == format_for(name) \
+            else None
+        result.file = write_asset(out / name, produced, source=source_for_writer, force=force)
+        log(f"wrote {result.file}")
+    return result

@@ -311,7 +311,7 @@ class SVBRDFRender:
         self.evaluator = EVALUATORS[spec.id]
         self.options = _check_params(spec, params, options or {})
         self.surface = surface_pixels(geometry, int(resolution))
-        overrides = {"full": {}, "specular": spec.specular_only, "diffuse": spec.diffuse_only}[part]
+        overrides = spec.part_overrides(part, params)
         # a model without that part renders black
         self.black = overrides is None
         self.params = {} if self.black else _per_pixel_params(spec, params, self.surface, overrides)

@@ -62,8 +62,8 @@ def read(spec: ModelSpec, values: Mapping[str, np.ndarray]) -> dict[str, np.ndar
         ch = {p.name: p.channels for p in spec.params}
         if kind == "param":
             out["reflectance"] = _rgb(values[names[0]], ch[names[0]])
-        elif kind == "dielectric":
-            eta = as_floats(values[names[0]]) / as_floats(values[names[1]])
+        elif kind == "dielectric":  # (interior IOR[, exterior IOR])
+            eta = as_floats(values[names[0]]) / (as_floats(values[names[1]]) if len(names) > 1 else 1.0)
             out["reflectance"] = _rgb(f0_from_ior(eta), 1)
         elif kind == "conductor":  # (eta, k) or (eta, k, exterior IOR)
             ext = as_floats(values[names[2]])[..., None] if len(names) > 2 else 1.0
@@ -117,7 +117,7 @@ def write(spec: ModelSpec, quantities: Mapping[str, np.ndarray], template: Mappi
             out[names[0]] = f0 if ch[names[0]] == 3 else f0.mean(axis=-1)
             driven.append(names[0])
         elif kind == "dielectric":
-            out[names[0]] = ior_from_f0(f0.mean(axis=-1)) * out[names[1]]
+            out[names[0]] = ior_from_f0(f0.mean(axis=-1)) * (out[names[1]] if len(names) > 1 else 1.0)
             driven.append(names[0])
         elif kind == "conductor":
             ext = out[names[2]][..., None] if len(names) > 2 else 1.0

@@ -93,3 +93,16 @@ def _load_builtin() -> None:
         from .cycles import CyclesRenderer  # bpy runs in a worker process of its own venv
 
         register_renderer("cycles", CyclesRenderer)
+
+
+def renderer_for(model_id: str) -> str:
+    """The renderer that draws a model by default: the embedded one when it emulates the model,
+    else the real renderer of the model's family (``mitsuba3:*`` -> mitsuba3)."""
+    embedded = get_renderer("embedded")
+    if embedded.supports(model_id):
+        return "embedded"
+    family = model_id.split(":", 1)[0]
+    _load_builtin()
+    if family in _FACTORIES:
+        return family
+    raise MatremapError(f"no renderer draws model {model_id}")

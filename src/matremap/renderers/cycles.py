@@ -85,6 +85,8 @@ PRINCIPLED = register(
         # with Metallic = 0 (held in fits) a black base leaves the dielectric specular lobe alone;
         # a metal's lobe takes Base Color's colour, so this isolates nothing when Metallic > 0
         specular_only={"Base Color": 0.0},
+        # F0 of the IOR, with Specular IOR Level held at 0.5 (where Cycles leaves F0 as the IOR gives it)
+        reflectance=("dielectric", "IOR"),
         channel_separable=False,
     )
 )

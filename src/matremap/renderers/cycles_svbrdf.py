@@ -100,7 +100,7 @@ def render_svbrdf_cycles(
         raise MatremapError(f"spp must be a positive integer, got {spp!r}")
     opts = _check_params(spec, params, options or {})
     res = int(resolution)
-    overrides = {"full": {}, "specular": spec.specular_only, "diffuse": spec.diffuse_only}[part]
+    overrides = spec.part_overrides(part, params)
     if overrides is None:
         return np.zeros((res, res, 3), dtype=np.float32)
     consts, textures = _split_params(spec, params, overrides)

@@ -130,7 +130,7 @@ def scene_dict(
     if not (isinstance(spp, (int, np.integer)) and spp >= 1):
         raise MatremapError(f"spp must be a positive integer, got {spp!r}")
     opts = _check_params(spec, params, options or {})
-    overrides = {"full": {}, "specular": spec.specular_only, "diffuse": spec.diffuse_only}[part]
+    overrides = spec.part_overrides(part, params)
     if overrides is None:
         return None
     consts, textures = _split_params(spec, params, overrides, opts)

@@ -43,7 +43,7 @@ METAL_ROUGH = ModelSpec(
         ParamSpec("ior", "fresnel", 1.5, (1.0, 5.0), fit=False, doc="KHR_materials_ior: dielectric F0 of an IOR"),
         ParamSpec("specular", "other", 1.0, (0.0, 1.0), fit=False,
                   doc="KHR_materials_specular specularFactor: scales the dielectric F0 and F90"),
-        ParamSpec("specularColor", "specular", (1.0,) * 3, (0.0, 25.0), channels=3, fit=False, linear=True,
+        ParamSpec("specularColor", "fresnel", (1.0,) * 3, (0.0, 25.0), channels=3, fit=False, linear=True,
                   doc="KHR_materials_specular specularColorFactor: tints the dielectric F0 (clamped to 1)"),
     ),
     options=(OptionSpec("visibility", ("height-correlated", "separable"), "height-correlated",

@@ -1,0 +1,86 @@
+"""The shipped transform library: its files, routes through it, and that a sample still reproduces."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from matremap import library
+from matremap.cli import main
+from matremap.library import PAIRS, build_pair, entries, find_route, max_prediction_difference, node_key, route
+from matremap.models import get_model
+from matremap.regress.transform import Transform
+
+
+def test_every_pair_is_shipped_in_both_directions_with_provenance():
+    names = {e.name for e in entries()}
+    for pair in PAIRS:
+        assert pair.name in names, f"{pair.name} missing: run tools/make_transform_library.py {pair.name}"
+        if pair.reverse:
+            assert library._reverse_name(pair.name) in names
+    for e in entries():
+        t = e.transform
+        get_model(t.source), get_model(t.target)  # ids that exist
+        assert t.provenance["library"]["pair"] in {p.name for p in PAIRS}
+        assert t.domain and all(lo <= hi for lo, hi in t.domain.values())
+        assert e.error < 0.02, f"{e.name}: held-out RMSE {e.error}"
+
+
+def test_a_direct_route_is_preferred_and_options_must_match():
+    direct = find_route("mitsuba06:ward", {}, "mitsuba06:pbr", {"distribution": "as"})
+    assert [e.name for e in direct.steps] == ["ward-as"]
+    ggx = find_route("mitsuba06:ward", {}, "mitsuba06:pbr", {"distribution": "ggx"})
+    assert [e.name for e in ggx.steps] == ["ward-ggx"]
+    # the library's Ward is the balanced variant: another variant has no route
+    assert find_route("mitsuba06:ward", {"variant": "ward"}, "mitsuba06:pbr", {"distribution": "as"}) is None
+
+
+def test_a_chain_is_found_when_no_direct_transform_exists():
+    found = find_route("blender27:ward", {}, "gltf:metal-rough", {"metallic": 1.0})
+    assert [e.name for e in found.steps] == ["blender27ward-ward", "ward-gltf-metal"]
+    assert found.error == pytest.approx(np.hypot(*(e.error for e in found.steps)))
+    t = found.transform
+    assert t.method == "chain" and t.source == "blender27:ward" and t.target == "gltf:metal-rough"
+    out, outside = t.apply({"specular_slope": np.array([0.1, 0.2]), "specular_color": np.array([0.1, 0.3]),
+                            "specular_intensity": np.array([1.0, 1.0]), "diffuse_color": np.zeros((2, 3))})
+    assert not outside.any() and np.all(out["metallic"] == 1.0)
+    assert "blender27:ward -> mitsuba06:ward -> gltf:metal-rough" in found.describe()
+
+
+def test_held_values_pick_the_metal_or_the_dielectric_entry():
+    metal = find_route("mitsuba06:ward", {}, "gltf:metal-rough", {"metallic": 1.0})
+    dielectric = find_route("mitsuba06:ward", {}, "gltf:metal-rough", {"metallic": 0.0})
+    assert metal.steps[0].name == "ward-gltf-metal" and dielectric.steps[0].name == "ward-gltf-dielectric"
+    # a source glTF with metallic 0 has no way back to Ward in the library (no reverse of the dielectric pair)
+    assert route(node_key("gltf:metal-rough", {}, {"metallic": 0.0}), node_key("mitsuba06:ward", {})) is None
+
+
+def test_no_route_is_none_and_the_cli_says_so(capsys):
+    assert find_route("mitsuba06:phong", {}, "cycles:glossy", {}) is None
+    assert main(["transforms", "--route", "mitsuba06:phong", "cycles:glossy"]) == 2
+    assert "no route" in capsys.readouterr().err
+
+
+def test_cli_lists_the_library(capsys):
+    assert main(["transforms"]) == 0
+    text = capsys.readouterr().out
+    assert "ward-as" in text and "trained on roughness" in text
+    assert main(["transforms", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert {r["name"] for r in rows} == {e.name for e in entries()}
+    assert main(["transforms", "--route", "blender27:ward", "cycles:glossy", "--fix", "distribution=ggx"]) == 0
+    assert "blender27ward-ward, ward-cycles" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_a_shipped_transform_still_reproduces(tmp_path):
+    """Regenerate one library pair and compare its predictions with the shipped file's: a change
+    in a dialect, the fitter or the learner that moves the library fails here."""
+    pair = next(p for p in PAIRS if p.name == "ward-as")
+    written = build_pair(pair, tmp_path, workers=1, log=lambda m: None)
+    fresh = Transform.load(written[0])
+    shipped = next(e.transform for e in entries() if e.name == "ward-as")
+    diff = max_prediction_difference(shipped, fresh)
+    assert diff["roughness"] < 2e-3 and diff["reflectance"] < 2e-3, diff

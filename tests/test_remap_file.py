@@ -1,0 +1,152 @@
+"""`matremap remap FILE`: a glTF, MaterialX or Mitsuba XML material in, the target's own file out."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from matremap.cli import main
+from matremap.formats import read_asset
+from matremap.remap import remap_file
+from matremap.textures import ImageInfo, write_image_like
+
+needs_mitsuba = pytest.mark.skipif(
+    importlib.util.find_spec("mitsuba") is None, reason="Mitsuba 3 not installed: pip install 'matremap[mitsuba]'"
+)
+needs_materialx = pytest.mark.skipif(
+    importlib.util.find_spec("MaterialX") is None, reason="MaterialX not installed: pip install 'matremap[materialx]'"
+)
+
+
+def png(path: Path, values: np.ndarray, colorspace: str) -> Path:
+    return write_image_like(path, values, ImageInfo("png", "uint8", values.shape[-1], 0, 0, colorspace), force=True)
+
+
+def gltf(folder: Path, textured: bool, metallic: float = 1.0, roughness: float = 0.5,
+         base=(0.9, 0.6, 0.3)) -> Path:
+    """A one-material glTF (no mesh needed: matremap reads materials)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    pbr: dict = {"baseColorFactor": [*base, 1.0], "metallicFactor": metallic, "roughnessFactor": roughness}
+    doc: dict = {"asset": {"version": "2.0"}, "materials": [{"name": "brass", "pbrMetallicRoughness": pbr}]}
+    if textured:
+        y, x = np.mgrid[0:16, 0:16] / 15.0
+        png(folder / "base.png", np.stack([0.7 + 0.2 * x, 0.5 + 0.2 * y, 0.2 + 0 * x], -1).astype(np.float32), "srgb")
+        mr = np.stack([0 * x, 0.25 + 0.5 * x, np.full_like(x, metallic)], -1).astype(np.float32)
+        png(folder / "mr.png", mr, "linear")
+        doc["images"] = [{"uri": "base.png"}, {"uri": "mr.png"}]
+        doc["textures"] = [{"source": 0}, {"source": 1}]
+        pbr.update(baseColorFactor=[1, 1, 1, 1], roughnessFactor=1.0,
+                   baseColorTexture={"index": 0}, metallicRoughnessTexture={"index": 1})
+    path = folder / "brass.gltf"
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def test_a_uniform_gltf_remapped_onto_its_own_model_comes_back(tmp_path):
+    src = gltf(tmp_path / "in", textured=False)
+    res = remap_file(src, "gltf:metal-rough", tmp_path / "out", log=lambda m: None)
+    assert res.file == tmp_path / "out" / "brass.gltf" and not res.textured
+    back = read_asset(res.file)
+    np.testing.assert_allclose(back.constants["baseColor"], [0.9, 0.6, 0.3], atol=2e-3)
+    assert back.constants["roughness"] == pytest.approx(0.5, abs=2e-3)
+    assert back.constants["metallic"] == 1.0
+    saved = json.loads((tmp_path / "out" / "material.json").read_text())
+    assert saved["model"] == "gltf:metal-rough"
+    assert src.read_text() == gltf(tmp_path / "again", textured=False).read_text()  # the input is untouched
+
+
+def test_a_uniform_metal_onto_a_model_without_a_file_format_writes_its_parameters(tmp_path, capsys):
+    src = gltf(tmp_path / "in", textured=False, roughness=0.4)
+    assert main(["remap", str(src), "--to", "mitsuba06:pbr", "--fix", "distribution=ggx", "-o",
+                 str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err
+    assert "no material file format for mitsuba06:pbr" in err
+    m = json.loads((tmp_path / "out" / "material.json").read_text())
+    assert m["model"] == "mitsuba06:pbr"
+    # the same GGX: alpha = roughness^2, F0 close to the base colour (Schlick on both sides)
+    assert m["params"]["alpha"] == pytest.approx(0.16, rel=0.02)
+    np.testing.assert_allclose(m["params"]["F0"], [0.9, 0.6, 0.3], atol=0.02)
+
+
+@needs_mitsuba
+def test_a_textured_gltf_becomes_a_mitsuba_scene_through_the_library(tmp_path):
+    import mitsuba as mi
+
+    src = gltf(tmp_path / "in", textured=True)
+    logs: list[str] = []
+    res = remap_file(src, "mitsuba3:roughconductor", tmp_path / "out", fix={"distribution": "ggx"},
+                     log=logs.append, rotations="0:360:2", resolution=96, lights=64)
+    assert any(m.startswith("library: gltf:metal-rough (metallic=1) -> mitsuba3:roughconductor") for m in logs)
+    assert res.file.suffix == ".xml" and res.textured and res.remap.outside == 0
+    assert (tmp_path / "out" / "maps" / "material.json").is_file() and (tmp_path / "out" / "transform.json").is_file()
+    assert res.remap.mean_dssim < 0.15
+    mi.set_variant("scalar_rgb")
+    scene = mi.load_file(str(res.file), spp=4, resolution=32)
+    image = np.array(mi.render(scene))
+    assert np.isfinite(image).all() and image.mean() > 0.01
+
+
+@needs_mitsuba
+def test_a_mitsuba_conductor_becomes_a_gltf_metal(tmp_path):
+    xml = tmp_path / "gold.xml"
+    xml.write_text("""<scene version="3.0.0">
+  <bsdf type="roughconductor" id="gold">
+    <string name="distribution" value="ggx"/>
+    <float name="alpha" value="0.09"/>
+    <rgb name="eta" value="0.18, 0.42, 1.37"/>
+    <rgb name="k" value="3.42, 2.35, 1.77"/>
+  </bsdf>
+</scene>""")
+    res = remap_file(xml, "gltf:metal-rough", tmp_path / "out", log=lambda m: None)
+    assert res.file.name == "gold.gltf"
+    back = read_asset(res.file)
+    assert back.constants["metallic"] == 1.0
+    assert back.constants["roughness"] == pytest.approx(0.3, abs=0.03)  # alpha = roughness^2
+    base = np.asarray(back.constants["baseColor"])
+    assert base[0] > base[1] > base[2] > 0.2  # gold: red > green > blue
+
+
+@needs_materialx
+def test_a_materialx_gltf_pbr_comes_back_as_materialx(tmp_path):
+    import MaterialX as mx
+
+    doc = tmp_path / "plastic.mtlx"
+    doc.write_text("""<?xml version="1.0"?>
+<materialx version="1.39">
+  <gltf_pbr name="SR" type="surfaceshader">
+    <input name="base_color" type="color3" value="0.2, 0.4, 0.7"/>
+    <input name="metallic" type="float" value="0"/>
+    <input name="roughness" type="float" value="0.45"/>
+  </gltf_pbr>
+  <surfacematerial name="plastic" type="material">
+    <input name="surfaceshader" type="surfaceshader" nodename="SR"/>
+  </surfacematerial>
+</materialx>""")
+    res = remap_file(doc, "gltf:metal-rough", tmp_path / "out", log=lambda m: None)
+    assert res.file.name == "plastic.mtlx"
+    d = mx.createDocument()
+    mx.readFromXmlFile(d, str(res.file))
+    assert d.validate()[0]
+    back = read_asset(res.file)
+    assert back.constants["metallic"] == 0.0
+    np.testing.assert_allclose(back.constants["baseColor"], [0.2, 0.4, 0.7], atol=5e-3)
+    assert back.constants["roughness"] == pytest.approx(0.45, abs=5e-3)
+
+
+def test_bad_files_and_flags_fail_cleanly(tmp_path, capsys):
+    src = gltf(tmp_path / "in", textured=False)
+    out = tmp_path / "out"
+    assert main(["remap", str(src), "--to", "gltf:metal-rough", "--write", "x.txt", "-o", str(out)]) == 2
+    assert "suffix" in capsys.readouterr().err and not out.exists()
+    assert main(["remap", str(src), "--from", "mitsuba06:ward", "--to", "gltf:metal-rough", "-o", str(out)]) == 2
+    assert "drop --from" in capsys.readouterr().err and not out.exists()
+    fake = tmp_path / "fake.glb"
+    fake.write_text('{"asset": {"version": "2.0"}}')
+    assert main(["remap", str(fake), "--to", "gltf:metal-rough", "-o", str(out)]) == 2
+    assert "glb" in capsys.readouterr().err.lower() and not out.exists()
+    assert main(["remap", str(src), "--to", "gltf:metal-rough", "--material", "nope", "-o", str(out)]) == 2
+    assert "nope" in capsys.readouterr().err and not out.exists()
