@@ -27,8 +27,8 @@ def make_asset(folder: Path, side: int) -> Path:
     rng = np.random.default_rng(0)
     y, x = np.mgrid[0:side, 0:side] / (side - 1)
     noise = rng.uniform(-0.05, 0.05, (side, side))
-    base = np.stack([0.75 + 0.15 * x + noise, 0.55 + 0.1 * y + noise, 0.25 + noise], -1).astype(np.float32)
-    mr = np.stack([0 * x, np.clip(0.2 + 0.5 * x + noise, 0, 1), np.ones_like(x)], -1).astype(np.float32)
+    base = np.stack([0.7 + 0.15 * x + noise, 0.55 + 0.1 * y + noise, 0.4 + noise], -1).astype(np.float32)
+    mr = np.stack([0 * x, np.clip(0.3 + 0.5 * x + noise, 0, 1), np.ones_like(x)], -1).astype(np.float32)
     write_image_like(folder / "base.png", base, ImageInfo("png", "uint8", 3, 0, 0, "srgb"))
     write_image_like(folder / "mr.png", mr, ImageInfo("png", "uint8", 3, 0, 0, "linear"))
     doc = {"asset": {"version": "2.0"}, "images": [{"uri": "base.png"}, {"uri": "mr.png"}],

@@ -94,7 +94,10 @@ def test_convert_matches_transform_apply(tmp_path, ward_to_as):
     assert again.model == "mitsuba06:pbr" and again.colorspace == {"alpha": "linear", "F0": "srgb"}
 
 
-def test_float_maps_stay_float_and_two_workers_agree(tmp_path, ward_to_as):
+def test_float_maps_stay_float_and_two_workers_agree(tmp_path, ward_to_as, monkeypatch):
+    import matremap.svbrdf
+
+    monkeypatch.setattr(matremap.svbrdf, "PARALLEL_MIN_TEXELS", 0)  # a pool even for small maps
     alpha, rho, normal = fields(1)
     ms = make_set(tmp_path / "in", alpha, rho, normal, ImageInfo("exr", "float", 1, 0, 0, "linear"),
                   ImageInfo("exr", "float", 3, 0, 0, "linear"))
@@ -125,7 +128,10 @@ def test_a_chain_is_applied_per_texel(tmp_path, ward_db, ward_to_as):
     np.testing.assert_allclose(alpha, expected["alpha"], atol=0.02)  # and it is nearly a round trip
 
 
-def test_nan_in_the_last_band_leaves_nothing_behind(tmp_path, ward_to_as):
+def test_nan_in_the_last_band_leaves_nothing_behind(tmp_path, ward_to_as, monkeypatch):
+    import matremap.svbrdf
+
+    monkeypatch.setattr(matremap.svbrdf, "PARALLEL_MIN_TEXELS", 0)  # a pool even for small maps
     alpha, rho, normal = fields()
     alpha[H - 1, 3] = np.nan
     ms = make_set(tmp_path / "in", alpha, rho, normal, ImageInfo("exr", "float", 1, 0, 0, "linear"))

@@ -150,3 +150,15 @@ def test_bad_files_and_flags_fail_cleanly(tmp_path, capsys):
     assert "glb" in capsys.readouterr().err.lower() and not out.exists()
     assert main(["remap", str(src), "--to", "gltf:metal-rough", "--material", "nope", "-o", str(out)]) == 2
     assert "nope" in capsys.readouterr().err and not out.exists()
+
+
+def test_a_textured_gltf_metal_is_swept_when_asked(tmp_path):
+    """--sweep: the grid runs over the maps' roughness and base colour (the metal's F0), once each."""
+    src = gltf(tmp_path / "in", textured=True)
+    logs: list[str] = []
+    res = remap_file(src, "mitsuba06:pbr", tmp_path / "out", fix={"distribution": "ggx"}, library=False,
+                     evaluate=False, cache=tmp_path / "cache", log=logs.append)
+    sweep = next(m for m in logs if m.startswith("sweep:") and "fits over" in m)
+    assert "roughness=" in sweep and sweep.count("baseColor=") == 1
+    assert res.remap.outside == 0 and res.file is None
+    assert (tmp_path / "out" / "maps" / "material.json").is_file()

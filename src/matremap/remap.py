@@ -78,14 +78,22 @@ def sweep_grid(map_set: MapSet, params: Mapping[str, Any]) -> str:
     if rp is not None and rp.name in map_set.maps:
         lo, hi = _range(params[rp.name], rp.bounds)
         axes.append(f"{rp.name}={lo!r}:{hi!r}:{ROUGHNESS_POINTS}")
+    metal = spec.specialise({**map_set.constants, **params}).diffuse_only is None  # e.g. glTF with metallic 1
     if spec.reflectance:
         kind, *names = spec.reflectance
-        name = names[1] if kind == "conductor" else names[0]  # the parameter a map of F0 drives (k for metals)
+        # the parameter a map of F0 drives: k for conductors, a glTF metal's base colour or a glTF
+        # dielectric's specular colour
+        if kind == "conductor":
+            name = names[1]
+        elif kind == "metal-rough":
+            name = names[0] if metal else names[4]
+        else:
+            name = names[0]
         if name in map_set.maps:
             lo, hi = _range(params[name], spec.param(name).bounds)
             axes.append(f"{name}={lo!r}:{hi!r}:{SPECULAR_POINTS}")
     dp = qty.diffuse_param(spec)
-    if dp is not None and dp.name in map_set.maps:
+    if dp is not None and dp.name in map_set.maps and not metal:
         axes.append(f"{dp.name}={';'.join(repr(v) for v in DIFFUSE_LEVELS)}")
     if not axes:
         raise MatremapError(f"the map set gives no roughness, specular or diffuse map of {spec.id} to remap")

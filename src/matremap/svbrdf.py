@@ -257,6 +257,10 @@ def convert(map_set: MapSet, transforms: Transform | Sequence[Transform], out_di
             colorspace="srgb" if any_info.integer and q != "roughness" else "linear")
         p = tgt.param(name)
         info = output_info(base.like(channels=p.channels, width=width, height=height, path=""), out_format)
+        if out_format is None and info.integer and p.role == "fresnel" and p.bounds[1] > 1.0:
+            # an IOR or absorption coefficient does not fit an 8/16-bit file: write floats
+            info = output_info(info.like(colorspace="linear"), "exr")
+            notes.append(f"{name} takes values above 1: written as float EXR")
         fname = f"{prefix}_{_CONVENTION[q] if name == target_param(tgt, q) and q in _CONVENTION else name}"
         planned.append((name, out / (fname + info.suffix), info))
     planned.append((None, out / MASK_NAME, ImageInfo("png", "uint8", 1, width, height, "linear")))
@@ -363,7 +367,14 @@ def _check_out_dir(map_set: MapSet, out: Path) -> None:
         raise MatremapError(f"{out} exists and is not a folder; choose an output folder")
 
 
+#: below this many texels one process converts faster than a pool (starting a spawned worker costs
+#: about a second; measured on 2048^2 maps: 1.9 s in one process, 3.1 s on two)
+PARALLEL_MIN_TEXELS = 8_000_000
+
+
 def _execute(plan: _Plan, outputs: list[_Output], workers: int, progress) -> list[dict[str, Any]]:
+    if plan.size[0] * plan.size[1] < PARALLEL_MIN_TEXELS:
+        workers = 1
     groups = _split(outputs, max(1, min(workers, len(outputs))))
     if len(groups) == 1:
         return [_run(plan, groups[0], progress=progress)]

@@ -38,9 +38,14 @@ class TextureRef:
     scale: float | tuple[float, ...] = 1.0
 
     @property
+    def plain_factor(self) -> bool:
+        """Whether the format's factor leaves the texture as it is."""
+        return bool(np.all(np.asarray(self.scale, dtype=float) == 1.0))
+
+    @property
     def plain(self) -> bool:
         """Whether the file can be used as the map itself (all channels, no factor)."""
-        return self.channels is None and np.all(np.asarray(self.scale, dtype=float) == 1.0)
+        return self.channels is None and self.plain_factor
 
 
 @dataclass
@@ -95,7 +100,9 @@ class MaterialAsset:
             if not ref.path.is_file():
                 raise MatremapError(f"{self.path}: texture {ref.path} for {name} not found; put it beside the file "
                                     f"or fix its uri")
-            if ref.plain and (p.channels == 3 or image_info(ref.path, ref.colorspace, colour=False).channels == 1):
+            file_channels = image_info(ref.path, ref.colorspace, colour=False).channels
+            whole = ref.channels is None or tuple(ref.channels) == tuple(range(file_channels))
+            if ref.plain_factor and whole and (p.channels == 3 or file_channels == 1):
                 maps[name] = str(ref.path.resolve())
                 colorspace[name] = ref.colorspace
                 info = image_info(ref.path, ref.colorspace, colour=p.channels == 3)
