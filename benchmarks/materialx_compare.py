@@ -59,14 +59,22 @@ from matremap.svbrdf_render import SVBRDFRender, object_mask  # noqa: E402
 
 TARGET = "gltf:metal-rough"
 FIT_LIGHTS = (0.0,)
+#: a second fit scene for dielectric variants: headlight and a light 60 degrees off
+FIT_LIGHTS_2 = (0.0, 60.0)
 CHECK_LIGHTS = (0.0, 45.0, 70.0)
 ENV_LIGHTS = 256
 #: a metal whose listed colour is this far (max over RGB) from the F0 of its n, k is coloured by something else
 DYE_GAP = 0.15
 IMG_DIR = Path(__file__).resolve().parent.parent / "docs" / "img" / "materials"
 VIEWS = ("probe", "lights3", "env")
-#: fit variants: name -> (extra fix, free); "b" is the default remap
-VARIANTS = {"b": ((), ()), "b_ior": ((), ("ior",)), "b_spec": ((), ("specularColor",))}
+#: fit variants for dielectrics: name -> (strategy, parameters freed); "b" is the default remap (and the
+#: only one for metals, whose glTF form has no diffuse part, so every strategy is the same there)
+VARIANTS = {"b": ("two-stage", (), FIT_LIGHTS), "b_ior": ("two-stage", ("ior",), FIT_LIGHTS),
+            "b3": ("three-stage", (), FIT_LIGHTS), "b3_ior": ("three-stage", ("ior",), FIT_LIGHTS),
+            "b3_spec": ("three-stage", ("specularColor",), FIT_LIGHTS),
+            "b_ior_2L": ("two-stage", ("ior",), FIT_LIGHTS_2), "b3_ior_2L": ("three-stage", ("ior",), FIT_LIGHTS_2)}
+#: every candidate, in table order: (a) as shipped, (a) with F0 computed from n,k (metals), the fits
+CANDIDATES = ("a", "a_nk", *VARIANTS)
 
 
 def data_dir() -> Path:
@@ -100,6 +108,7 @@ class Entry:
     roughness: float = 0.0
     truth: Material | None = None
     hand: Material | None = None
+    hand_nk: Material | None = None  # metals: the hand-made glTF with baseColor = F0 of the database's n, k
     hand_how: str = ""
     notes: list[str] = field(default_factory=list)
     fits: dict[str, Any] = field(default_factory=dict)  # variant -> FitResult
@@ -199,6 +208,10 @@ def hand_made(e: Entry, path: Path, index: dict[str, tuple[str, Any]]) -> None:
     if abs(r - e.roughness_db) > 1e-6:
         e.notes.append(f"hand-made roughness {r} differs from the database's {e.roughness_db}")
     e.hand = m.with_params({"roughness": max(r, e.roughness)})
+    if e.kind == "metal":
+        v = e.truth.values
+        f0 = conductor_f0(v["eta"] / v["extEta"], v["k"] / v["extEta"])
+        e.hand_nk = e.hand.with_params({"baseColor": np.clip(f0, 0.0, 1.0).tolist()})
 
 
 # ---------------------------------------------------------------------------------------------
@@ -251,9 +264,13 @@ def run_entry(e: Entry, views: Views, variants: dict[str, Any], keep_images: boo
     metallic = 1.0 if e.kind == "metal" else 0.0
     names = ["b"] if e.kind == "metal" else list(variants)
     for name in names:
-        _, free = variants[name]
-        e.fits[name] = fit(e.truth, TARGET, scene=views.scenes["probe"], fix={"metallic": metallic}, free=free)
-    cands = {"a": e.hand, **{k: f.target for k, f in e.fits.items()}}
+        strategy, free, lights = variants[name]
+        e.fits[name] = fit(e.truth, TARGET, strategy=strategy, scene=Scene.probe(lights, views.size),
+                           fix={"metallic": metallic}, free=free)
+    cands = {"a": e.hand}
+    if e.hand_nk is not None:
+        cands["a_nk"] = e.hand_nk
+    cands.update({k: f.target for k, f in e.fits.items()})
     for view in VIEWS:
         imgs = views.render([e.truth, *cands.values()], view)
         truth, mask = imgs[0], views.masks[view]
@@ -263,7 +280,7 @@ def run_entry(e: Entry, views: Views, variants: dict[str, Any], keep_images: boo
             if view == "env":
                 e.err[who]["env_dssim"] = dssim(img, truth, mask)
     if not keep_images:
-        e.images = {v: {k: im for k, im in d.items()} for v, d in e.images.items()}
+        e.images = {v: {"truth": d["truth"]} for v, d in e.images.items()}  # the Mitsuba 3 check needs the truth
 
 
 # ---------------------------------------------------------------------------------------------
@@ -283,11 +300,11 @@ def fmt_params(m: Material) -> str:
 
 def summary(entries: list[Entry], cand: str, view: str, kind: str | None = None) -> dict[str, Any]:
     rows = [e for e in entries if cand in e.err and (kind is None or e.kind == kind)]
+    if not rows:
+        return {"n": 0}
     a = np.array([e.err["a"][view] for e in rows])
     b = np.array([e.err[cand][view] for e in rows])
     ratio = b / a
-    better = "env_dssim" if view == "env_dssim" else view
-    del better
     return {
         "n": len(rows), "wins": int(np.sum(b < a)), "median_a": float(np.median(a)), "median_b": float(np.median(b)),
         "median_ratio": float(np.median(ratio)), "worst_ratio": float(np.max(ratio)),
@@ -299,20 +316,28 @@ def print_report(entries: list[Entry], skipped: list[Entry], seconds: float) -> 
     done = [e for e in entries if e.err]
     print(f"# {len(done)} materials compared ({sum(e.kind == 'metal' for e in done)} metals, "
           f"{sum(e.kind == 'dielectric' for e in done)} dielectrics), {len(skipped)} skipped, {seconds:.0f} s\n")
-    print("| material | kind | r (db -> used) | probe a | probe b | 3 lights a | 3 lights b | env a | env b | "
-          "env DSSIM a | env DSSIM b | hand-made (a) | matremap (b) |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
-    for e in done:
-        a, b = e.err["a"], e.err["b"]
-        print(f"| {e.name} | {e.kind} | {e.roughness_db:g} -> {e.roughness:g} | {a['probe']:.3f} | {b['probe']:.3f} | "
-              f"{a['lights3']:.3f} | {b['lights3']:.3f} | {a['env']:.3f} | {b['env']:.3f} | {a['env_dssim']:.4f} | "
-              f"{b['env_dssim']:.4f} | {fmt_params(e.hand)} | {fmt_params(e.fits['b'].target)} |")
-    print("\n## summary (b = matremap's default remap; wins = materials where b's error < a's)\n")
-    print("| candidate | materials | view | wins | median a | median b | median b/a | worst b/a (material) |")
+    cells = {"metal": ("a", "a_nk", "b"), "dielectric": ("a", "b", "b_ior", "b3", "b3_ior", "b3_ior_2L")}
+    for kind, cands in cells.items():
+        rows = [e for e in done if e.kind == kind]
+        if not rows:
+            continue
+        cands = tuple(c for c in cands if c in rows[0].err)
+        print(f"### {kind}s: relative RMSE in % (probe / 3 lights / env map), env DSSIM x100 in brackets\n")
+        print("| material | roughness db -> used | " + " | ".join(cands) + " | (a) hand-made | (b) matremap |")
+        print("|---|---|" + "---|" * (len(cands) + 2))
+        for e in rows:
+            errs = " | ".join(
+                f"{100 * e.err[c]['probe']:.1f} / {100 * e.err[c]['lights3']:.1f} / {100 * e.err[c]['env']:.1f} "
+                f"[{100 * e.err[c]['env_dssim']:.2f}]" for c in cands)
+            print(f"| {e.name} | {e.roughness_db:g} -> {e.roughness:g} | {errs} | {fmt_params(e.hand)} | "
+                  f"{fmt_params(e.fits['b'].target)} |")
+        print()
+    print("## summary (x = a candidate; wins = materials where x's error < a's, the shipped hand-made glTF)\n")
+    print("| x | materials | view | wins | median a | median x | median x/a | worst x/a (material) |")
     print("|---|---|---|---|---|---|---|---|")
-    for cand in VARIANTS:
+    for cand in CANDIDATES[1:]:
         for kind in (None, "metal", "dielectric"):
-            if cand != "b" and kind != "dielectric":
+            if (cand == "a_nk" and kind != "metal") or (cand != "b" and cand.startswith("b") and kind != "dielectric"):
                 continue
             for view in ("probe", "lights3", "env", "env_dssim"):
                 s = summary(done, cand, view, kind)
@@ -468,8 +493,8 @@ def main() -> None:
     ap.add_argument("--env", default="builtin", help="environment map for the third view (default builtin)")
     ap.add_argument("--only", default="", help="comma-separated material names")
     ap.add_argument("--no-mitsuba3", action="store_true", help="skip the real Mitsuba 3 check of the metals")
-    ap.add_argument("--dielectric-variants", action="store_true",
-                    help="also fit dielectrics with ior / specularColor freed")
+    ap.add_argument("--default-only", action="store_true",
+                    help="fit only the default remap (no three-stage / ior / specularColor variants for dielectrics)")
     ap.add_argument("--plots", action="store_true", help=f"write plots into {IMG_DIR}")
     ap.add_argument("--json", help="write every figure to this JSON file")
     args = ap.parse_args()
@@ -489,13 +514,12 @@ def main() -> None:
             hand_made(e, gltf, index)
         (skipped if e.skip else entries).append(e)
 
-    variants = VARIANTS if args.dielectric_variants else {"b": VARIANTS["b"]}
+    variants = {"b": VARIANTS["b"]} if args.default_only else VARIANTS
     views = Views(args.size, args.env)
-    m3 = not args.no_mitsuba3 and get_renderer("mitsuba3").available() if hasattr(get_renderer("mitsuba3"),
-                                                                                   "available") else True
+    m3 = not args.no_mitsuba3
     for e in entries:
         run_entry(e, views, variants, keep_images=args.plots)
-        if e.kind == "metal" and m3 and not args.no_mitsuba3:
+        if e.kind == "metal" and m3:
             try:
                 mitsuba3_check(e, views)
             except MatremapError as err:
