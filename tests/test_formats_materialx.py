@@ -243,3 +243,13 @@ def test_writer_refuses_other_models_and_writes_nothing(tmp_path):
     with pytest.raises(MatremapError, match="unknown file type"):
         write(tmp_path / "x.xml", Material.create("gltf:metal-rough"))
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_colour_just_above_one_is_clamped_with_a_note(tmp_path):
+    p = doc(tmp_path, '<gltf_pbr name="S" type="surfaceshader">'
+                      '<input name="base_color" type="color3" value="1.059, 0.773, 0.307"/></gltf_pbr>'
+                      '<surfacematerial name="Gold" type="material">'
+                      '<input name="surfaceshader" type="surfaceshader" nodename="S"/></surfacematerial>')
+    asset = read(p)
+    np.testing.assert_allclose(asset.constants["baseColor"], [1.0, 0.773, 0.307])
+    assert any("clamped" in n for n in asset.notes)

@@ -70,7 +70,7 @@ PAIRS: tuple[Pair, ...] = (
          fix={"metallic": 1.0}),
     Pair("ward-gltf-dielectric", "mitsuba06:ward", "gltf:metal-rough",
          "alpha=0.03:0.7:10,specularReflectance=0.02:0.3:6,diffuseReflectance=0.1;0.6",
-         fix={"metallic": 0.0}, free=("specularColor",), reverse=False),
+         fix={"metallic": 0.0}, reverse=False),
     Pair("ggx-gltf-metal", "mitsuba06:pbr", "gltf:metal-rough", "alpha=0.03:0.9:10,F0=0.03:0.98:6",
          source_params={"distribution": "ggx"}, fix={"metallic": 1.0}),
     Pair("conductor-cycles", "mitsuba06:roughconductor", "cycles:glossy", "alpha=0.03:0.9:10,k=0.4:14:6",

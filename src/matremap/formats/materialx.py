@@ -296,6 +296,15 @@ def _shader_asset(ctx: _Ctx, shader, name: str, index: int, doc) -> MaterialAsse
                         f"(base_color x {weight} -> baseColor, {names}); it is approximate"
                         + (f". Inputs NOT remapped: {', '.join(skipped)}" if skipped else
                            "; every other input is at its default"))
+    spec = get_model(MODEL)
+    for k, v in list(constants.items()):  # a colour past the model's range (e.g. gold's base colour 1.059)
+        if k in spec.param_names and k not in textures and spec.param(k).channels == 3:
+            lo, hi = spec.param(k).bounds
+            arr = np.asarray(v, dtype=float)
+            if np.all(np.isfinite(arr)) and (np.any(arr < lo) or np.any(arr > hi)):
+                clipped = np.clip(arr, lo, hi)
+                constants[k] = clipped.tolist() if clipped.ndim else float(clipped)
+                notes.append(f"{k}={v} lies outside [{lo:g}, {hi:g}] and was clamped to {constants[k]}")
     uniform = {k: v for k, v in constants.items() if k not in textures}
     try:
         Material.create(MODEL, uniform)  # ranges, with the model's messages

@@ -40,7 +40,7 @@ METAL_ROUGH = ModelSpec(
         ParamSpec("metallic", "other", 1.0, (0.0, 1.0), fit=False,
                   doc="0 dielectric, 1 metal (held in fits: fix it to 0 or 1)"),
         ParamSpec("roughness", "roughness", 1.0, (0.0, 1.0), doc="perceptual roughness, alpha = roughness^2"),
-        ParamSpec("ior", "fresnel", 1.5, (1.0, 5.0), fit=False, doc="KHR_materials_ior: dielectric F0 of an IOR"),
+        ParamSpec("ior", "fresnel", 1.5, (1.0, 5.0), doc="KHR_materials_ior: sets a dielectric's F0"),
         ParamSpec("specular", "other", 1.0, (0.0, 1.0), fit=False,
                   doc="KHR_materials_specular specularFactor: scales the dielectric F0 and F90"),
         ParamSpec("specularColor", "fresnel", (1.0,) * 3, (0.0, 25.0), channels=3, fit=False, linear=True,
@@ -48,9 +48,10 @@ METAL_ROUGH = ModelSpec(
     ),
     options=(OptionSpec("visibility", ("height-correlated", "separable"), "height-correlated",
                         "Smith GGX visibility: height-correlated (sample viewer) or separable (spec appendix)"),),
-    diffuse_only={"metallic": 0.0, "specular": 0.0},
+    # the diffuse part keeps its Fresnel weight (1 - specular max F): roughness 0 switches the lobe off
+    diffuse_only={"metallic": 0.0, "roughness": 0.0},
     specular_only={"baseColor": 0.0},
-    specialisations=(("metallic", 1.0, {"roles": {"baseColor": "specular"}, "diffuse_only": None,
+    specialisations=(("metallic", 1.0, {"roles": {"baseColor": "specular", "ior": "other"}, "diffuse_only": None,
                                          "specular_only": {}}),),
     reflectance=("metal-rough", "baseColor", "metallic", "ior", "specular", "specularColor"),
 )
