@@ -162,3 +162,30 @@ def test_a_textured_gltf_metal_is_swept_when_asked(tmp_path):
     assert "roughness=" in sweep and sweep.count("baseColor=") == 1
     assert res.remap.outside == 0 and res.file is None
     assert (tmp_path / "out" / "maps" / "material.json").is_file()
+
+
+def _bpy_available() -> bool:
+    from matremap.renderers.cycles import bpy_available
+
+    return bpy_available()
+
+
+@pytest.mark.skipif(not _bpy_available(), reason="no bpy venv: python3.11 -m venv .venv-bpy && "
+                    ".venv-bpy/bin/pip install bpy==5.0.1")
+def test_a_gltf_dielectric_becomes_a_blend_file_fitted_with_real_cycles(tmp_path):
+    from matremap.renderers.cycles import CyclesRenderer
+
+    src = gltf(tmp_path / "in", textured=False, metallic=0.0, roughness=0.5, base=(0.6, 0.3, 0.1))
+    logs: list[str] = []
+    res = remap_file(src, "cycles:principled", tmp_path / "out", log=logs.append)
+    assert res.file == tmp_path / "out" / "brass.blend" and res.loss < 0.05
+    fitted = res.material.to_dict()["params"]
+    np.testing.assert_allclose(fitted["Base Color"], [0.6, 0.3, 0.1], rtol=0.1)
+    r = CyclesRenderer(timeout=600.0)
+    try:
+        info = r.call({"op": "inspect_blend", "path": str(res.file)})
+    finally:
+        r.close()
+    node = info["materials"]["brass"]["nodes"]["Principled BSDF"]["inputs"]
+    np.testing.assert_allclose(node["Base Color"][:3], fitted["Base Color"], rtol=1e-5)
+    assert node["Roughness"] == pytest.approx(fitted["Roughness"], rel=1e-5)
