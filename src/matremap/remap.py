@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import time
 import warnings
 from collections.abc import Callable, Mapping
@@ -50,7 +49,9 @@ class RemapResult:
 
 
 def default_cache() -> Path:
-    return Path(os.environ.get("MATREMAP_CACHE_DIR") or Path.home() / ".cache" / "matremap") / "transforms"
+    from .diskcache import cache_dir
+
+    return cache_dir() / "transforms"
 
 
 def load_arrays(map_set: MapSet) -> tuple[dict[str, Any], np.ndarray | None]:

@@ -243,16 +243,21 @@ def _render_lights(scene, light, lights, res: int, path: str) -> np.ndarray:  # 
     for pos, power in lights:
         light.location = pos
         light.data.energy = power
-        scene.render.filepath = path
-        bpy.ops.render.render(write_still=True)
-        img = bpy.data.images.load(path, check_existing=False)
-        try:
-            buf = np.empty(res * res * 4, dtype=np.float32)
-            img.pixels.foreach_get(buf)
-        finally:
-            bpy.data.images.remove(img)
-        out += buf.reshape(res, res, 4)[::-1, :, :3]
+        out += _render_still(scene, path, res)
     return out
+
+
+def _render_still(scene, path: str, res: int) -> np.ndarray:  # noqa: ANN001
+    """Render ``scene`` to the EXR ``path`` and read it back: linear RGB float32 [res, res, 3], top row first."""
+    scene.render.filepath = path
+    bpy.ops.render.render(write_still=True)
+    img = bpy.data.images.load(path, check_existing=False)
+    try:
+        buf = np.empty(res * res * 4, dtype=np.float32)
+        img.pixels.foreach_get(buf)
+    finally:
+        bpy.data.images.remove(img)
+    return buf.reshape(res, res, 4)[::-1, :, :3]
 
 
 # -- SVBRDF renders under an environment map (op "svbrdf"; see matremap.renderers.cycles_svbrdf) --------
@@ -496,16 +501,7 @@ def render_svbrdf(request: dict, tmp: str) -> np.ndarray:
     wt.links.new(bg.outputs["Background"], wout.inputs["Surface"])
     scene.world = world
 
-    path = os.path.join(tmp, "svbrdf.exr")
-    scene.render.filepath = path
-    bpy.ops.render.render(write_still=True)
-    img = bpy.data.images.load(path, check_existing=False)
-    try:
-        buf = np.empty(res * res * 4, dtype=np.float32)
-        img.pixels.foreach_get(buf)
-    finally:
-        bpy.data.images.remove(img)
-    return buf.reshape(1, res, res, 4)[:, ::-1, :, :3].copy()
+    return _render_still(scene, os.path.join(tmp, "svbrdf.exr"), res)[None].copy()
 
 
 # -- .blend files (ops "write_blend", "inspect_blend", "render_blend"; see matremap.formats.blend) ------

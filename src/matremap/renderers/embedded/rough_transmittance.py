@@ -62,13 +62,13 @@ import functools
 import hashlib
 import json
 import os
-import tempfile
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from ...diskcache import cache_dir, save_tables
 from ...optics import fresnel_dielectric
 from .microfacet import ALPHA_MIN, g1_beckmann_rational, g1_ggx, phong_exponent
 
@@ -398,14 +398,9 @@ def _spec(d: str) -> str:
     )
 
 
-def _cache_dir() -> Path:
-    env = os.environ.get("MATREMAP_CACHE_DIR")
-    return Path(env) if env else Path.home() / ".cache" / "matremap"
-
-
 def _cache_path(d: str) -> Path:
     digest = hashlib.sha256(_spec(d).encode()).hexdigest()[:12]
-    return _cache_dir() / f"rough_transmittance_{d}_{digest}.npz"
+    return cache_dir() / f"rough_transmittance_{d}_{digest}.npz"
 
 
 def _fdr_table(d: str, side: str, t_pad: np.ndarray) -> np.ndarray:
@@ -455,28 +450,8 @@ def _load(path: Path, d: str) -> dict[str, np.ndarray] | None:
 
 
 def _save(path: Path, d: str, data: dict[str, np.ndarray]) -> None:
-    """Write atomically (temporary file + os.replace) and drop tables of other grid versions; give
-    up silently if that fails."""
-    tmp = None
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.stem + ".", suffix=".tmp")
-        with os.fdopen(fd, "wb") as f:
-            np.savez(f, spec=np.array(_spec(d)), **data)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-        tmp = None
-        for stale in path.parent.glob(f"rough_transmittance_{d}_*.npz"):  # from other grid versions
-            if stale != path:
-                stale.unlink(missing_ok=True)
-    except OSError:
-        pass
-    finally:
-        if tmp is not None:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
+    """Write the tables to the cache, dropping tables of other grid versions."""
+    save_tables(path, f"rough_transmittance_{d}_*.npz", spec=np.array(_spec(d)), **data)
 
 
 @functools.cache  # = lru_cache(maxsize=None)

@@ -47,12 +47,11 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from ....diskcache import cache_dir, save_tables
 from ....models import ModelSpec, OptionSpec, ParamSpec, register_white_reference
 from .. import microfacet as mf
 from . import dialect
@@ -167,9 +166,8 @@ def _albedo_spec() -> str:
 
 
 def _albedo_cache_path() -> Path:
-    root = os.environ.get("MATREMAP_CACHE_DIR")
     digest = hashlib.sha256(_albedo_spec().encode()).hexdigest()[:12]
-    return (Path(root) if root else Path.home() / ".cache" / "matremap") / f"cycles_ggx_albedo_{digest}.npz"
+    return cache_dir() / f"cycles_ggx_albedo_{digest}.npz"
 
 
 def _build_albedo_tables() -> tuple[np.ndarray, np.ndarray]:
@@ -206,28 +204,8 @@ def _load_albedo_tables(path: Path) -> tuple[np.ndarray, np.ndarray] | None:
 
 
 def _save_albedo_tables(path: Path, e: np.ndarray, e_avg: np.ndarray) -> None:
-    """Atomic write (temporary file, then rename); tables of other versions are removed; any
-    failure to write is ignored (the tables are rebuilt next time)."""
-    tmp = None
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.stem + ".", suffix=".tmp")
-        with os.fdopen(fd, "wb") as f:
-            np.savez(f, spec=np.array(_albedo_spec()), E=e, E_avg=e_avg)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-        tmp = None
-        for stale in path.parent.glob("cycles_ggx_albedo_*.npz"):
-            if stale != path:
-                stale.unlink(missing_ok=True)
-    except OSError:
-        pass
-    finally:
-        if tmp is not None:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
+    """Write the tables to the cache (tables of other versions are removed)."""
+    save_tables(path, "cycles_ggx_albedo_*.npz", spec=np.array(_albedo_spec()), E=e, E_avg=e_avg)
 
 
 @functools.cache
