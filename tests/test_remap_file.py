@@ -189,3 +189,18 @@ def test_a_gltf_dielectric_becomes_a_blend_file_fitted_with_real_cycles(tmp_path
     node = info["materials"]["brass"]["nodes"]["Principled BSDF"]["inputs"]
     np.testing.assert_allclose(node["Base Color"][:3], fitted["Base Color"], rtol=1e-5)
     assert node["Roughness"] == pytest.approx(fitted["Roughness"], rel=1e-5)
+
+
+def test_a_glb_written_by_matremap_is_remapped_and_written_back_as_glb(tmp_path):
+    from matremap.formats import write_asset
+    from matremap.models import Material
+
+    (tmp_path / "in").mkdir()
+    glb = write_asset(tmp_path / "in" / "copper.glb", Material.create(
+        "gltf:metal-rough", {"baseColor": [0.95, 0.64, 0.54], "metallic": 1.0, "roughness": 0.35}))
+    assert glb.read_bytes()[:4] == b"glTF"
+    res = remap_file(glb, "gltf:metal-rough", tmp_path / "out", log=lambda m: None)
+    assert res.file.name == "copper.glb" and res.file.read_bytes()[:4] == b"glTF"
+    back = read_asset(res.file)
+    np.testing.assert_allclose(back.constants["baseColor"], [0.95, 0.64, 0.54], atol=2e-3)
+    assert back.constants["roughness"] == pytest.approx(0.35, abs=2e-3)
