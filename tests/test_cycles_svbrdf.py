@@ -112,14 +112,28 @@ def test_normal_map_orientation_matches_embedded(cycles, env, tilt):
     img = render_svbrdf_cycles("cycles:diffuse", {"Color": 0.7}, None, env, resolution=RES, spp=64,
                                normal_map=nmap(*tilt), renderer=cycles)
 
-    def err(x, y):
+    def err(x, y, where=core):
         ref = render_svbrdf("cycles:diffuse", {"Color": 0.7}, None, env, resolution=RES, lights=1024,
                             normal_map=nmap(x, y))
-        return np.mean(np.abs(img[core] - ref[core])) / np.mean(ref[core])
+        return np.mean(np.abs(img[where] - ref[where])) / np.mean(ref[where])
 
-    # Cycles' handling of shading normals (shadowing term, geometric-normal cut) leaves ~7-8 % here
-    assert err(*tilt) < 0.12
+    # the emulation follows Cycles' bump shadowing term and geometric cut: what is left is noise
+    assert err(*tilt) < 0.05 and err(*tilt, where=mask) < 0.06
     assert err(-tilt[0], -tilt[1]) > 3 * err(*tilt)
+
+
+@needs_bpy
+def test_normal_mapped_diffuse_has_no_bias_against_cycles(cycles, env):
+    """A 30-degree bent normal: Cycles darkens the diffuse closure by its bump shadowing term, cuts
+    light from below the smooth surface and keeps rim pixels whose bent normal faces away from the
+    camera; the emulation does the same, so the mean agrees to well under the 6-8 % it was off."""
+    nm = np.zeros((16, 32, 3))
+    nm[..., 0], nm[..., 2] = 0.5, np.sqrt(0.75)
+    mask = object_mask("sphere", RES)
+    img = render_svbrdf_cycles("cycles:diffuse", {"Color": 0.7}, None, env, resolution=RES, spp=128,
+                               normal_map=nm, renderer=cycles)
+    ref = render_svbrdf("cycles:diffuse", {"Color": 0.7}, None, env, resolution=RES, lights=2048, normal_map=nm)
+    assert abs(img[mask].mean() / ref[mask].mean() - 1.0) < 0.01
 
 
 @needs_bpy

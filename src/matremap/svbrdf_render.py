@@ -317,6 +317,14 @@ class SVBRDFRender:
         self.params = {} if self.black else _per_pixel_params(spec, params, self.surface, overrides)
         self.normals = _shading_normals(self.surface, normal_map)
         self.resolution = int(resolution)
+        # Cycles softens diffuse closures whose normal a normal map bends (bump_shadowing_term)
+        self.bump_alpha2 = None
+        self.specular_params = None
+        if spec.family == "cycles" and normal_map is not None and part != "specular" and not self.black:
+            self.bump_alpha2 = bump_alpha2(self.surface.normal, self.normals)
+            spec_over = spec.part_overrides("specular", params)
+            if part == "full" and spec_over is not None:
+                self.specular_params = _per_pixel_params(spec, params, self.surface, spec_over)
 
     def render(self, directions: np.ndarray, intensities: np.ndarray) -> np.ndarray:
         """Radiance float32 [res, res, 3] under directional lights (unit directions [L, 3] towards
@@ -339,19 +347,55 @@ class SVBRDFRender:
             cos_i = wi @ n.T  # [L, p]
             cos_o = np.broadcast_to(np.sum(n * wo, axis=-1), cos_i.shape)
             i_dot_o = wi @ wo.T
-            lit = (cos_i > 0.0) & (cos_o > 0.0)
-            geo = LocalGeometry(np.where(lit, cos_i, 1.0), np.where(lit, cos_o, 1.0), np.where(lit, i_dot_o, 1.0))
-            params = {k: (v[..., sl] if v.shape[-1] > 1 else v) for k, v in self.params.items()}
-            fcos = np.asarray(self.evaluator(params, self.options, geo))
-            channels = fcos.shape[-3] if fcos.ndim >= 3 else 1
-            fcos = np.broadcast_to(fcos, (1, channels) + cos_i.shape)[0]
-            # unlit points have finite stand-in geometry: zero them
-            fcos = np.where(lit, fcos, 0.0)  # [C, L, p]
+            # light from below the geometric surface is blocked by the object itself, whatever the
+            # shading normal says (as in a path tracer: the sphere occludes it)
+            cos_g = wi @ surf.normal[sl].T
+            lit = (cos_i > 0.0) & (cos_o > 0.0) & (cos_g > 0.0)
+            if self.bump_alpha2 is None:
+                geo = LocalGeometry(np.where(lit, cos_i, 1.0), np.where(lit, cos_o, 1.0), np.where(lit, i_dot_o, 1.0))
+                fcos = np.where(lit, self._evaluate(self.params, sl, geo, cos_i.shape), 0.0)  # [C, L, p]
+            else:
+                # Cycles with a normal map: a diffuse closure is lit wherever the light is above both
+                # the bent and the smooth normal, seen from either side, and softened by the bump
+                # shadowing term; a glossy one also needs the viewer above the bent normal
+                lit_d = (cos_i > 0.0) & (cos_g > 0.0)
+                geo = LocalGeometry(np.where(lit_d, cos_i, 1.0), np.where(lit, cos_o, 1.0), np.where(lit, i_dot_o, 1.0))
+                full = self._evaluate(self.params, sl, geo, cos_i.shape)
+                glossy = 0.0 if self.specular_params is None else \
+                    self._evaluate(self.specular_params, sl, geo, cos_i.shape)  # at stand-in geometry where unlit
+                term = bump_shadowing(self.bump_alpha2[sl], cos_g)
+                fcos = np.where(lit, glossy, 0.0) + np.where(lit_d, full - glossy, 0.0) * term
             for c in range(3):
                 f = fcos[min(c, fcos.shape[0] - 1)]  # [L, p]
                 radiance[sl, c] = np.sum(f * inten[:, c, None], axis=0)
         out[surf.pixels] = radiance
         return out.reshape(res, res, 3)
+
+    def _evaluate(self, per_pixel: Mapping[str, np.ndarray], sl: slice, geo: LocalGeometry,
+                  shape: tuple[int, int]) -> np.ndarray:
+        """f cos(theta_i) [C, L, p] of the pixels ``sl``."""
+        params = {k: (v[..., sl] if v.shape[-1] > 1 else v) for k, v in per_pixel.items()}
+        fcos = np.asarray(self.evaluator(params, self.options, geo))
+        channels = fcos.shape[-3] if fcos.ndim >= 3 else 1
+        return np.broadcast_to(fcos, (1, channels) + shape)[0]
+
+
+def bump_alpha2(smooth: np.ndarray, bumped: np.ndarray) -> np.ndarray:
+    """Cycles' bump-shadowing roughness of a bent normal [p]: alpha^2 = min(tan^2(d) / 8, 1), d the
+    angle between the smooth and the normal-mapped normal (``bump_shadowing_term`` in Cycles'
+    ``kernel/closure/bsdf.h``, after Conty Estevez et al. 2019, "A Microfacet-Based Shadowing
+    Function to Solve the Bump Terminator Problem")."""
+    cos_d = np.clip(np.abs(np.sum(smooth * bumped, axis=-1)), 1e-6, 1.0)
+    return np.clip(0.125 * (1.0 / (cos_d * cos_d) - 1.0), 0.0, 1.0)
+
+
+def bump_shadowing(alpha2: np.ndarray, cos_light: np.ndarray) -> np.ndarray:
+    """The factor [L, p] Cycles puts on a diffuse closure with a bent normal: Smith's GGX G1 of
+    ``alpha2`` [p] at the light's angle to the smooth normal (cos [L, p]); 0 below 1e-6."""
+    c = np.clip(np.abs(cos_light), 1e-6, 1.0)
+    tan2 = 1.0 / (c * c) - 1.0
+    g1 = 2.0 / (1.0 + np.sqrt(1.0 + alpha2[None, :] * tan2))
+    return np.where(np.abs(cos_light) < 1e-6, 0.0, g1)
 
 
 def render_svbrdf(
