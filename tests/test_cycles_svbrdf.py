@@ -219,3 +219,20 @@ def test_evaluate_falls_back_to_the_emulation_without_bpy(env, tmp_path, monkeyp
     with pytest.warns(RuntimeWarning, match="sphere only"):
         r = _prepare(*source, "plane", 32, "full", None, env)
     assert r.label == "embedded emulation"
+
+
+@needs_bpy
+def test_principled_maps_render_in_cycles_and_without_specular_are_its_diffuse(cycles, env):
+    """cycles:principled maps are drawn by the worker's Principled node: with Specular IOR Level 0
+    and Metallic 0 it is the Lambertian of its base colour, as a Diffuse BSDF of that colour."""
+    rng = np.random.default_rng(3)
+    base = rng.uniform(0.2, 0.8, (16, 32, 3))
+    mask = object_mask("sphere", RES)
+    p = render_svbrdf_cycles("cycles:principled", {"Base Color": base, "Specular IOR Level": 0.0, "Metallic": 0.0,
+                                                   "Roughness": 0.5}, None, env, resolution=RES, spp=64,
+                             renderer=cycles)
+    d = render_svbrdf_cycles("cycles:diffuse", {"Color": base}, None, env, resolution=RES, spp=64, renderer=cycles)
+    assert abs(p[mask].mean() / d[mask].mean() - 1.0) < 0.01
+    glossy = render_svbrdf_cycles("cycles:principled", {"Base Color": base, "Roughness": 0.2}, None, env,
+                                  resolution=RES, spp=64, renderer=cycles)
+    assert glossy[mask].mean() > 1.02 * p[mask].mean()  # the default specular adds light

@@ -36,7 +36,7 @@ from ..models import ModelSpec, get_model
 from ..scene import Scene
 from .cycles import CyclesRenderer
 
-MODELS = ("cycles:glossy", "cycles:diffuse")
+MODELS = ("cycles:glossy", "cycles:diffuse", "cycles:principled")
 PARTS = ("full", "specular", "diffuse")
 
 #: default samples per pixel

@@ -408,30 +408,7 @@ def render_svbrdf(request: dict, tmp: str) -> np.ndarray:
     nt = mat.node_tree
     for n in list(nt.nodes):
         nt.nodes.remove(n)
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
-    model = request["model"]
-    options = request.get("options", {})
-    bsdfs = []
-    if model == "cycles:glossy":
-        glossy = nt.nodes.new("ShaderNodeBsdfGlossy")
-        glossy.distribution = DISTRIBUTIONS[options.get("distribution", "ggx")]
-        diffuse = nt.nodes.new("ShaderNodeBsdfDiffuse")
-        diffuse.inputs["Roughness"].default_value = 0.0
-        add = nt.nodes.new("ShaderNodeAddShader")
-        nt.links.new(glossy.outputs[0], add.inputs[0])
-        nt.links.new(diffuse.outputs[0], add.inputs[1])
-        nt.links.new(add.outputs[0], out.inputs["Surface"])
-        sockets = {"Color": glossy.inputs["Color"], "Roughness": glossy.inputs["Roughness"],
-                   "Diffuse Color": diffuse.inputs["Color"]}
-        bsdfs = [glossy, diffuse]
-    elif model == "cycles:diffuse":
-        diffuse = nt.nodes.new("ShaderNodeBsdfDiffuse")
-        diffuse.inputs["Roughness"].default_value = 0.0
-        nt.links.new(diffuse.outputs[0], out.inputs["Surface"])
-        sockets = {"Color": diffuse.inputs["Color"]}
-        bsdfs = [diffuse]
-    else:
-        raise ValueError(f"the Cycles worker has no SVBRDF build of model {model}")
+    sockets, bsdfs = _material_nodes(nt, request["model"], request.get("options", {}))
     uvmap = nt.nodes.new("ShaderNodeUVMap")
     uvmap.uv_map = uv_name
 
