@@ -14,6 +14,10 @@ each a folder with a ``material.json`` and four 8-bit PNG maps named by the conv
 ``blue-plastic``    blue diffuse base, grey low specular, blotchy roughness, small bumps;
 ``bronze``          hammered bronze with patches of green patina (rougher, less specular).
 
+and one glTF 2.0 file (``brass-gltf/brass.gltf``, model ``gltf:metal-rough``) for ``matremap remap
+FILE``: a hammered brass metal with a base-colour map (sRGB), the packed metallic-roughness map
+(G = perceptual roughness, B = metallic = 1) and a normal map, as external PNGs.
+
 Roughness stays in alpha 0.03..0.6 and rho_s mostly inside a Ward -> AS sweep's training domain
 (rho_s 0.02..0.232) — except gold, whose red and green rho_s exceed 0.232 on purpose: converting
 it with such a transform flags those texels in ``outside_domain.png``. Note that a transform
@@ -165,6 +169,46 @@ def write_set(folder: Path, prefix: str, maps: dict[str, np.ndarray], force: boo
     return written
 
 
+def brass(size: int) -> dict[str, np.ndarray]:
+    """A glTF metal: base colour (F0 of brass, worn), perceptual roughness, normal map."""
+    rng = np.random.default_rng(20190404)
+    n = fbm(rng, size, 4, 4)
+    wear = np.clip((fbm(rng, size, 3, 3) - 0.4) * 3, 0, 1)
+    base = np.array([0.91, 0.78, 0.42]) * (0.92 + 0.08 * n)[..., None] * (1 - 0.15 * wear)[..., None]
+    roughness = 0.3 + 0.15 * n + 0.25 * wear
+    h = dimples(rng, size, 80, (6.0, 14.0)) * 2.0
+    return {"base": base, "roughness": roughness, "normal": normal_map(h, 0.6)}
+
+
+def write_gltf(folder: Path, maps: dict[str, np.ndarray], force: bool) -> list[Path]:
+    """One glTF 2.0 material (no mesh: matremap reads materials) with its three PNG textures."""
+    import json
+
+    folder.mkdir(parents=True, exist_ok=True)
+    size = maps["roughness"].shape[0]
+    mr = np.stack([np.zeros((size, size)), maps["roughness"], np.ones((size, size))], axis=-1)
+    images = {"brass_basecolor.png": (maps["base"], "srgb"), "brass_metalrough.png": (mr, "linear"),
+              "brass_normal.png": (maps["normal"], "linear")}
+    written = []
+    for name, (a, cs) in images.items():
+        info = ImageInfo("png", "uint8", 3, size, size, cs)
+        written.append(write_image_like(folder / name, np.asarray(a, dtype=np.float32), info, force=force))
+    doc = {
+        "asset": {"version": "2.0", "generator": "matremap examples/make_examples.py"},
+        "images": [{"uri": n} for n in images],
+        "textures": [{"source": i} for i in range(len(images))],
+        "materials": [{"name": "brass", "normalTexture": {"index": 2},
+                       "pbrMetallicRoughness": {"baseColorTexture": {"index": 0},
+                                                "metallicRoughnessTexture": {"index": 1}}}],
+    }
+    path = folder / "brass.gltf"
+    if path.exists() and not force:
+        raise SystemExit(f"{path} exists; pass --force to regenerate")
+    path.write_text(json.dumps(doc, indent=1) + "\n")
+    written.append(path)
+    return written
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--size", type=int, default=256, help="texels per side (default 256)")
@@ -180,6 +224,12 @@ def main(argv: list[str] | None = None) -> int:
         a, s = maps["roughness"], maps["specular"]
         print(f"{name:15s} {size / 1024:7.1f} KiB  alpha {a.min():.3f}..{a.max():.3f}  "
               f"rho_s {s.min():.3f}..{s.max():.3f}")
+    maps = brass(args.size)
+    files = write_gltf(args.out / "brass-gltf", maps, args.force)
+    size = sum(f.stat().st_size for f in files)
+    total += size
+    print(f"{'brass-gltf':15s} {size / 1024:7.1f} KiB  roughness {maps['roughness'].min():.3f}.."
+          f"{maps['roughness'].max():.3f} (glTF, alpha = roughness^2)")
     print(f"total {total / 1024:.1f} KiB (budget {BUDGET / 1024:.0f} KiB)")
     if total > BUDGET:
         print("over budget: use a smaller --size", file=sys.stderr)

@@ -204,3 +204,16 @@ def test_a_glb_written_by_matremap_is_remapped_and_written_back_as_glb(tmp_path)
     back = read_asset(res.file)
     np.testing.assert_allclose(back.constants["baseColor"], [0.95, 0.64, 0.54], atol=2e-3)
     assert back.constants["roughness"] == pytest.approx(0.35, abs=2e-3)
+
+
+def test_the_shipped_gltf_example_reads_and_routes_through_the_library(tmp_path):
+    """examples/brass-gltf: a textured glTF metal, remapped onto GGX through the library."""
+    src = Path(__file__).resolve().parents[1] / "examples" / "brass-gltf" / "brass.gltf"
+    asset = read_asset(src)
+    assert asset.model == "gltf:metal-rough" and set(asset.textures) == {"baseColor", "roughness", "metallic"}
+    assert asset.normal is not None
+    logs: list[str] = []
+    res = remap_file(src, "mitsuba06:pbr", tmp_path / "out", fix={"distribution": "ggx"}, evaluate=False,
+                     log=logs.append)
+    assert any(m.startswith("library: gltf:metal-rough (metallic=1) -> mitsuba06:pbr") for m in logs)
+    assert res.remap.outside == 0 and (tmp_path / "out" / "maps" / "material.json").is_file()

@@ -388,13 +388,22 @@ def evaluate(
     dssim = {p: [] for p in PARTS}
     dssim_img = {p: [] for p in PARTS}
     exposure: dict[str, float] = {}
+    # a part whose overrides change nothing (a conductor's specular part) is the full render: reuse it
+    same_as_full = {who: get_model(m.model).part_overrides("specular", m.params) == {}
+                    for who, m in (("source", src), ("target", tgt))}
     for k, rot in enumerate(rotations):
         d, i = directional_lights(env, lights, rot)
+        drawn: dict[tuple[str, str], np.ndarray] = {}
         for part in PARTS:
-            s_img = prepared[("source", part)].render_at(d, i, rot)
+            for who in ("source", "target"):
+                key = (who, "full" if part == "specular" and same_as_full[who] else part)
+                if key not in drawn:
+                    drawn[key] = prepared[key].render_at(d, i, rot)
+                drawn[(who, part)] = drawn[key]
+            s_img = drawn[("source", part)]
             if scale != 1.0:
                 s_img = (s_img.astype(np.float64) * scale).astype(np.float32)
-            t_img = prepared[("target", part)].render_at(d, i, rot)
+            t_img = drawn[("target", part)]
             mssim, smap = ssim_map(s_img, t_img)
             dmap = 1.0 - smap
             dssim[part].append(float(dmap[mask].mean()) if mask.any() else float(1.0 - mssim))

@@ -33,6 +33,7 @@ environment orientation, so that the two renderers' images can be compared pixel
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Mapping
 from typing import Any
 
@@ -177,12 +178,14 @@ def render_svbrdf_mitsuba3(
     model's parameter names to constants or textures ``[h, w]`` / ``[h, w, 3]`` (row 0 at the top,
     in the model's units). ``spp`` samples per pixel, ``seed`` the sampler's seed (same seed, same
     image), ``variant`` as :class:`~matremap.renderers.mitsuba3.Mitsuba3Renderer` (default
-    ``scalar_rgb`` or ``$MATREMAP_MITSUBA_VARIANT``; ``auto`` picks ``llvm_ad_rgb`` when usable).
+    ``$MATREMAP_MITSUBA_VARIANT``, else ``auto``: ``llvm_ad_rgb`` when usable, 0.7 s instead of 5 s
+    for 160² at 256 spp, else ``scalar_rgb``).
     Note that Mitsuba's variant is process-wide. Returns linear radiance float32 [res, res, 3],
     black off the sphere.
     """
     mi = import_mitsuba()
-    v = choose_variant(mi, variant)
+    # many samples per pixel: the LLVM variant is ~8x faster here than scalar_rgb when it works
+    v = choose_variant(mi, variant or os.environ.get("MATREMAP_MITSUBA_VARIANT") or "auto")
     if mi.variant() != v:
         mi.set_variant(v)
     d = scene_dict(mi, model, params, options, env, rotation_deg, resolution, part, normal_map, spp, seed)
