@@ -236,3 +236,43 @@ def test_principled_maps_render_in_cycles_and_without_specular_are_its_diffuse(c
     glossy = render_svbrdf_cycles("cycles:principled", {"Base Color": base, "Roughness": 0.2}, None, env,
                                   resolution=RES, spp=64, renderer=cycles)
     assert glossy[mask].mean() > 1.02 * p[mask].mean()  # the default specular adds light
+
+
+def test_raised_glossy_normals_keep_the_mirror_direction_above_the_surface():
+    from matremap.svbrdf_render import ensure_valid_specular_reflection
+
+    rng = np.random.default_rng(5)
+    ng = np.tile([0.0, 0.0, 1.0], (500, 1))
+    view = rng.normal(size=(500, 3))
+    view[:, 2] = np.abs(view[:, 2]) + 0.02
+    view /= np.linalg.norm(view, axis=1, keepdims=True)
+    n = rng.normal(size=(500, 3)) * [0.8, 0.8, 1.0]
+    n[:, 2] = np.abs(n[:, 2]) + 0.05
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    out = ensure_valid_specular_reflection(ng, view, n)
+    r = 2 * np.sum(out * view, 1)[:, None] * out - view
+    threshold = np.minimum(0.9 * view[:, 2], 0.01)
+    assert np.all(r[:, 2] >= threshold - 1e-6)
+    np.testing.assert_allclose(np.linalg.norm(out, axis=1), 1.0, atol=1e-9)
+    r_in = 2 * np.sum(n * view, 1)[:, None] * n - view
+    kept = r_in[:, 2] >= threshold
+    assert kept.any() and (~kept).any()
+    np.testing.assert_array_equal(out[kept], n[kept])  # valid normals are left alone
+
+
+@needs_bpy
+def test_normal_mapped_glossy_agrees_with_cycles(cycles, env):
+    """Glossy + Diffuse with a 30-degree bent normal: Cycles raises the glossy normal
+    (ensure_valid_specular_reflection) and softens the diffuse one; without the raise the
+    emulation was 6 % bright overall and 13-20 % on the rim."""
+    nm = np.zeros((16, 32, 3))
+    nm[..., 0], nm[..., 2] = 0.5, np.sqrt(0.75)
+    params = {"Color": 0.8, "Roughness": 0.3, "Diffuse Color": 0.2}
+    mask = object_mask("sphere", RES)
+    yy, xx = np.mgrid[:RES, :RES]
+    rim = mask & (np.hypot(xx - (RES - 1) / 2, yy - (RES - 1) / 2) > 0.8 * RES / 2)
+    img = render_svbrdf_cycles("cycles:glossy", params, None, env, resolution=RES, spp=128, normal_map=nm,
+                               renderer=cycles)
+    ref = render_svbrdf("cycles:glossy", params, None, env, resolution=RES, lights=2048, normal_map=nm)
+    assert abs(img[mask].mean() / ref[mask].mean() - 1.0) < 0.015
+    assert abs(img[rim].mean() / ref[rim].mean() - 1.0) < 0.03

@@ -318,12 +318,18 @@ class SVBRDFRender:
         self.normals = _shading_normals(self.surface, normal_map)
         self.resolution = int(resolution)
         # Cycles softens diffuse closures whose normal a normal map bends (bump_shadowing_term)
+        # and raises the normal of glossy closures so that the mirror direction stays above the surface
         self.bump_alpha2 = None
         self.specular_params = None
-        if spec.family == "cycles" and normal_map is not None and part != "specular" and not self.black:
+        self.glossy_normals = self.normals
+        if spec.family == "cycles" and normal_map is not None and not self.black:
+            self.glossy_normals = ensure_valid_specular_reflection(self.surface.normal, self.surface.view,
+                                                                   self.normals)
             self.bump_alpha2 = bump_alpha2(self.surface.normal, self.normals)
             spec_over = spec.part_overrides("specular", params)
-            if part == "full" and spec_over is not None:
+            if part == "specular":
+                self.specular_params = self.params
+            elif part == "full" and spec_over is not None:
                 self.specular_params = _per_pixel_params(spec, params, self.surface, spec_over)
 
     def render(self, directions: np.ndarray, intensities: np.ndarray) -> np.ndarray:
@@ -357,14 +363,24 @@ class SVBRDFRender:
             else:
                 # Cycles with a normal map: a diffuse closure is lit wherever the light is above both
                 # the bent and the smooth normal, seen from either side, and softened by the bump
-                # shadowing term; a glossy one also needs the viewer above the bent normal
+                # shadowing term; a glossy closure shades with its raised normal
                 lit_d = (cos_i > 0.0) & (cos_g > 0.0)
                 geo = LocalGeometry(np.where(lit_d, cos_i, 1.0), np.where(lit, cos_o, 1.0), np.where(lit, i_dot_o, 1.0))
-                full = self._evaluate(self.params, sl, geo, cos_i.shape)
-                glossy = 0.0 if self.specular_params is None else \
-                    self._evaluate(self.specular_params, sl, geo, cos_i.shape)  # at stand-in geometry where unlit
+                full = self._evaluate(self.params, sl, geo, cos_i.shape) if part_has_diffuse(self) else 0.0
+                fcos = 0.0
+                if self.specular_params is not None:
+                    # the diffuse part is the full model less its glossy part, at the same geometry
+                    full = full - self._evaluate(self.specular_params, sl, geo, cos_i.shape) \
+                        if part_has_diffuse(self) else 0.0
+                    ng = self.glossy_normals[sl]
+                    gi = wi @ ng.T
+                    go = np.broadcast_to(np.sum(ng * wo, axis=-1), gi.shape)
+                    lit_g = (gi > 0.0) & (go > 0.0) & (cos_g > 0.0)
+                    ggeo = LocalGeometry(np.where(lit_g, gi, 1.0), np.where(lit_g, go, 1.0),
+                                         np.where(lit_g, i_dot_o, 1.0))
+                    fcos = np.where(lit_g, self._evaluate(self.specular_params, sl, ggeo, gi.shape), 0.0)
                 term = bump_shadowing(self.bump_alpha2[sl], cos_g)
-                fcos = np.where(lit, glossy, 0.0) + np.where(lit_d, full - glossy, 0.0) * term
+                fcos = fcos + np.where(lit_d, full, 0.0) * term
             for c in range(3):
                 f = fcos[min(c, fcos.shape[0] - 1)]  # [L, p]
                 radiance[sl, c] = np.sum(f * inten[:, c, None], axis=0)
@@ -378,6 +394,34 @@ class SVBRDFRender:
         fcos = np.asarray(self.evaluator(params, self.options, geo))
         channels = fcos.shape[-3] if fcos.ndim >= 3 else 1
         return np.broadcast_to(fcos, (1, channels) + shape)[0]
+
+
+def part_has_diffuse(r: SVBRDFRender) -> bool:
+    """Whether a Cycles render's part includes diffuse closures (not a specular-only render)."""
+    return r.specular_params is not r.params
+
+
+def ensure_valid_specular_reflection(ng: np.ndarray, view: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Cycles' raising of a glossy closure's normal ``n`` [p, 3] towards the geometric normal
+    ``ng`` just enough that the mirror direction of ``view`` lies min(0.9 cos, 0.01) above the
+    surface (``ensure_valid_specular_reflection`` in Cycles' ``kernel/closure/bsdf_util.h``): in the
+    plane of ng and n, the normal's height solves a quadratic in n_z^2."""
+    dot = lambda a, b: np.sum(a * b, axis=-1)  # noqa: E731
+    r = 2.0 * dot(n, view)[:, None] * n - view
+    iz = dot(view, ng)
+    t = np.minimum(0.9 * iz, 0.01)
+    valid = dot(ng, r) >= t
+    x = n - dot(n, ng)[:, None] * ng
+    length = np.linalg.norm(x, axis=-1, keepdims=True)
+    x = np.where(length > 1e-12, x / np.maximum(length, 1e-12), n)
+    ix = dot(view, x)
+    a = ix * ix + iz * iz
+    b = 2.0 * (a + iz * t)
+    c = (t + iz) ** 2
+    root = np.sqrt(np.maximum(b * b - 4.0 * a * c, 0.0))
+    nz2 = np.where(ix < 0.0, 0.25 * (b + root), 0.25 * (b - root)) / np.maximum(a, 1e-30)
+    raised = np.sqrt(np.maximum(1.0 - nz2, 0.0))[:, None] * x + np.sqrt(np.maximum(nz2, 0.0))[:, None] * ng
+    return np.where(valid[:, None], n, raised)
 
 
 def bump_alpha2(smooth: np.ndarray, bumped: np.ndarray) -> np.ndarray:
