@@ -183,12 +183,10 @@ def _colormap(values: np.ndarray, vmax: float = SSIM_MAP_MAX) -> np.ndarray:
 
 
 def _png_bytes(rgb8: np.ndarray) -> bytes:
-    """Encode an 8-bit RGB image as PNG in memory (matplotlib's writer, no temporary file)."""
-    from matplotlib import image as mimage
+    """Encode an 8-bit RGB image as PNG."""
+    from .imageio import png_bytes
 
-    buf = io.BytesIO()
-    mimage.imsave(buf, rgb8, format="png")
-    return buf.getvalue()
+    return png_bytes(rgb8)
 
 
 def _write_bytes(path: Path, data: bytes) -> None:

@@ -120,3 +120,25 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     if buf.has_error:
         raise MatremapError(f"cannot read {p}: {buf.geterror()}")
     return buf.get_pixels(oiio.FLOAT)
+
+
+def png_bytes(array: np.ndarray) -> bytes:
+    """8-bit PNG bytes of a uint8 array [H, W, C] (C = 1..4), values stored as given (an alpha
+    channel does not scale the colour)."""
+    import OpenImageIO as oiio
+
+    a = np.ascontiguousarray(array, dtype=np.uint8)
+    if a.ndim == 2:
+        a = a[..., None]
+    spec = oiio.ImageSpec(a.shape[1], a.shape[0], a.shape[2], oiio.UINT8)
+    spec.attribute("oiio:UnassociatedAlpha", 1)
+    with tempfile.TemporaryDirectory(prefix="matremap-png-") as d:
+        f = os.path.join(d, "t.png")
+        out = oiio.ImageOutput.create(f)
+        if out is None or not out.open(f, spec):
+            raise MatremapError(f"cannot encode a PNG image: {oiio.geterror().strip()}")
+        ok = out.write_image(a)
+        out.close()
+        if not ok:
+            raise MatremapError(f"cannot encode a PNG image: {oiio.geterror().strip()}")
+        return Path(f).read_bytes()

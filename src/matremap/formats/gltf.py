@@ -483,21 +483,9 @@ def _result_values(result: Any) -> tuple[dict[str, Any], dict[str, np.ndarray], 
 
 def _png(array: np.ndarray) -> bytes:
     """8-bit PNG bytes of a uint8 array [H, W, C]."""
-    import OpenImageIO as oiio
+    from ..imageio import png_bytes
 
-    a = np.ascontiguousarray(array, dtype=np.uint8)
-    spec = oiio.ImageSpec(a.shape[1], a.shape[0], a.shape[2], oiio.UINT8)
-    spec.attribute("oiio:UnassociatedAlpha", 1)  # store the values given, not colour / alpha
-    with tempfile.TemporaryDirectory(prefix="matremap-gltf-") as d:
-        f = os.path.join(d, "t.png")
-        out = oiio.ImageOutput.create(f)
-        if out is None or not out.open(f, spec):
-            raise MatremapError(f"cannot encode a PNG texture: {oiio.geterror().strip()}")
-        ok = out.write_image(a)
-        out.close()
-        if not ok:
-            raise MatremapError(f"cannot encode a PNG texture: {oiio.geterror().strip()}")
-        return Path(f).read_bytes()
+    return png_bytes(array)
 
 
 def _code(values: np.ndarray, srgb: bool) -> np.ndarray:
