@@ -127,32 +127,7 @@ class Probe:
         nt = mat.node_tree
         for n in list(nt.nodes):
             nt.nodes.remove(n)
-        out = nt.nodes.new("ShaderNodeOutputMaterial")
-        sockets: dict[str, object] = {}
-        if model == "cycles:glossy":
-            glossy = nt.nodes.new("ShaderNodeBsdfGlossy")
-            glossy.distribution = DISTRIBUTIONS[options.get("distribution", "ggx")]
-            diffuse = nt.nodes.new("ShaderNodeBsdfDiffuse")
-            diffuse.inputs["Roughness"].default_value = 0.0
-            add = nt.nodes.new("ShaderNodeAddShader")
-            nt.links.new(glossy.outputs[0], add.inputs[0])
-            nt.links.new(diffuse.outputs[0], add.inputs[1])
-            nt.links.new(add.outputs[0], out.inputs["Surface"])
-            sockets = {"Color": glossy.inputs["Color"], "Roughness": glossy.inputs["Roughness"],
-                       "Diffuse Color": diffuse.inputs["Color"]}
-        elif model == "cycles:diffuse":
-            diffuse = nt.nodes.new("ShaderNodeBsdfDiffuse")
-            diffuse.inputs["Roughness"].default_value = 0.0
-            nt.links.new(diffuse.outputs[0], out.inputs["Surface"])
-            sockets = {"Color": diffuse.inputs["Color"]}
-        elif model == "cycles:principled":
-            p = nt.nodes.new("ShaderNodeBsdfPrincipled")
-            p.distribution = DISTRIBUTIONS[options.get("distribution", "multi_ggx")]
-            nt.links.new(p.outputs[0], out.inputs["Surface"])
-            sockets = {n: p.inputs[n] for n in ("Base Color", "Metallic", "Roughness", "IOR",
-                                                 "Specular IOR Level", "Specular Tint")}
-        else:
-            raise ValueError(f"the Cycles worker cannot build model {model}")
+        sockets, _ = _material_nodes(nt, model, options)
         hit = (mat, sockets)
         self.materials[key] = hit
         return hit
