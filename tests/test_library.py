@@ -53,8 +53,11 @@ def test_held_values_pick_the_metal_or_the_dielectric_entry():
     metal = find_route("mitsuba06:ward", {}, "gltf:metal-rough", {"metallic": 1.0})
     dielectric = find_route("mitsuba06:ward", {}, "gltf:metal-rough", {"metallic": 0.0})
     assert metal.steps[0].name == "ward-gltf-metal" and dielectric.steps[0].name == "ward-gltf-dielectric"
-    # a source glTF with metallic 0 has no way back to Ward in the library (no reverse of the dielectric pair)
-    assert route(node_key("gltf:metal-rough", {}, {"metallic": 0.0}), node_key("mitsuba06:ward", {})) is None
+    # and back: a glTF dielectric reaches Ward by the dielectric entry's reverse, not the metal one's
+    back = route(node_key("gltf:metal-rough", {}, {"metallic": 0.0}), node_key("mitsuba06:ward", {}))
+    assert [e.name for e in back.steps] == ["gltf-dielectric-ward"]
+    # a model the library does not know has no route at all
+    assert route(node_key("mitsuba06:phong", {}), node_key("mitsuba06:ward", {})) is None
 
 
 def test_no_route_is_none_and_the_cli_says_so(capsys):

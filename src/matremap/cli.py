@@ -661,6 +661,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("matremap: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the reader went away (`matremap transforms | head`): stop quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
 
 
 if __name__ == "__main__":  # pragma: no cover

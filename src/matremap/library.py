@@ -70,7 +70,7 @@ PAIRS: tuple[Pair, ...] = (
          fix={"metallic": 1.0}),
     Pair("ward-gltf-dielectric", "mitsuba06:ward", "gltf:metal-rough",
          "alpha=0.03:0.7:10,specularReflectance=0.02:0.3:6,diffuseReflectance=0.1;0.6",
-         fix={"metallic": 0.0}, reverse=False),
+         fix={"metallic": 0.0}),
     Pair("plastic-gltf-dielectric", "mitsuba06:roughplastic", "gltf:metal-rough",
          "alpha=0.03:0.7:10,intIOR=1.3:2.0:6,diffuseReflectance=0.1;0.6", source_params={"distribution": "ggx"},
          fix={"metallic": 0.0}),
