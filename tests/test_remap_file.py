@@ -56,6 +56,7 @@ def test_a_uniform_gltf_remapped_onto_its_own_model_comes_back(tmp_path):
     assert back.constants["metallic"] == 1.0
     saved = json.loads((tmp_path / "out" / "material.json").read_text())
     assert saved["model"] == "gltf:metal-rough"
+    assert (tmp_path / "out" / "compare.png").stat().st_size > 1000  # the source | target | difference strip
     assert src.read_text() == gltf(tmp_path / "again", textured=False).read_text()  # the input is untouched
 
 

@@ -365,6 +365,11 @@ def remap_file(
         from .imageio import write_text
 
         write_text(out / "material.json", json.dumps(r.target.to_dict(), indent=1) + "\n")
+        from .imageio import write_image
+        from .report import comparison_strip
+
+        write_image(out / "compare.png", comparison_strip(r), force=True)  # source | target | difference x10
+        log(f"wrote {out / 'compare.png'} (source | target | difference x10 on the probe)")
         result.material, result.loss = r.target, r.loss
         produced = r.target
     if name is not None:
