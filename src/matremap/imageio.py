@@ -88,25 +88,28 @@ def write_image(path: str | os.PathLike, image: np.ndarray, force: bool = False)
 
 
 def _write_oiio(path: str, image: np.ndarray, suffix: str) -> None:
+    if suffix == ".png":
+        _oiio_write(path, np.round(linear_to_srgb(image) * 255.0).astype(np.uint8))
+    else:
+        _oiio_write(path, np.ascontiguousarray(image, dtype=np.float32))
+
+
+def _oiio_write(path: str, data: np.ndarray) -> None:
+    """Write uint8 or float32 pixels [H, W, C] as they are (colour not scaled by an alpha channel)."""
     try:
         import OpenImageIO as oiio
     except ImportError:  # pragma: no cover - it is a dependency
         raise MatremapError("writing EXR/PNG needs OpenImageIO: pip install openimageio") from None
-    h, w, c = image.shape
-    if suffix == ".png":
-        data = np.round(linear_to_srgb(image) * 255.0).astype(np.uint8)
-        fmt = oiio.UINT8
-    else:
-        data = np.ascontiguousarray(image, dtype=np.float32)
-        fmt = oiio.FLOAT
-    spec = oiio.ImageSpec(w, h, c, fmt)
+    h, w, c = data.shape
+    spec = oiio.ImageSpec(w, h, c, oiio.UINT8 if data.dtype == np.uint8 else oiio.FLOAT)
+    spec.attribute("oiio:UnassociatedAlpha", 1)
     out = oiio.ImageOutput.create(path)
     if out is None or not out.open(path, spec):
-        raise MatremapError(f"cannot write {path}: {oiio.geterror()}")
+        raise MatremapError(f"cannot write {path}: {oiio.geterror().strip()}")
     ok = out.write_image(data)
     out.close()
     if not ok:
-        raise MatremapError(f"cannot write {path}: {oiio.geterror()}")
+        raise MatremapError(f"cannot write {path}: {oiio.geterror().strip()}")
 
 
 def read_image(path: str | os.PathLike) -> np.ndarray:
@@ -125,20 +128,10 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
 def png_bytes(array: np.ndarray) -> bytes:
     """8-bit PNG bytes of a uint8 array [H, W, C] (C = 1..4), values stored as given (an alpha
     channel does not scale the colour)."""
-    import OpenImageIO as oiio
-
     a = np.ascontiguousarray(array, dtype=np.uint8)
     if a.ndim == 2:
         a = a[..., None]
-    spec = oiio.ImageSpec(a.shape[1], a.shape[0], a.shape[2], oiio.UINT8)
-    spec.attribute("oiio:UnassociatedAlpha", 1)
     with tempfile.TemporaryDirectory(prefix="matremap-png-") as d:
         f = os.path.join(d, "t.png")
-        out = oiio.ImageOutput.create(f)
-        if out is None or not out.open(f, spec):
-            raise MatremapError(f"cannot encode a PNG image: {oiio.geterror().strip()}")
-        ok = out.write_image(a)
-        out.close()
-        if not ok:
-            raise MatremapError(f"cannot encode a PNG image: {oiio.geterror().strip()}")
+        _oiio_write(f, a)
         return Path(f).read_bytes()
