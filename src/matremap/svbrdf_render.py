@@ -320,7 +320,8 @@ class SVBRDFRender:
         # Cycles softens diffuse closures whose normal a normal map bends (bump_shadowing_term)
         # and raises the normal of glossy closures so that the mirror direction stays above the surface
         self.bump_alpha2 = None
-        self.specular_params = None
+        self.specular_params = None  # per-pixel parameters of the glossy closures, when drawn apart
+        self.has_diffuse = part != "specular"
         self.glossy_normals = self.normals
         if spec.family == "cycles" and normal_map is not None and not self.black:
             self.glossy_normals = ensure_valid_specular_reflection(self.surface.normal, self.surface.view,
@@ -366,12 +367,13 @@ class SVBRDFRender:
                 # shadowing term; a glossy closure shades with its raised normal
                 lit_d = (cos_i > 0.0) & (cos_g > 0.0)
                 geo = LocalGeometry(np.where(lit_d, cos_i, 1.0), np.where(lit, cos_o, 1.0), np.where(lit, i_dot_o, 1.0))
-                full = self._evaluate(self.params, sl, geo, cos_i.shape) if part_has_diffuse(self) else 0.0
+                diffuse = 0.0  # the diffuse closures: the model less its glossy part, at the same geometry
+                if self.has_diffuse:
+                    diffuse = self._evaluate(self.params, sl, geo, cos_i.shape)
+                    if self.specular_params is not None:
+                        diffuse = diffuse - self._evaluate(self.specular_params, sl, geo, cos_i.shape)
                 fcos = 0.0
                 if self.specular_params is not None:
-                    # the diffuse part is the full model less its glossy part, at the same geometry
-                    full = full - self._evaluate(self.specular_params, sl, geo, cos_i.shape) \
-                        if part_has_diffuse(self) else 0.0
                     ng = self.glossy_normals[sl]
                     gi = wi @ ng.T
                     go = np.broadcast_to(np.sum(ng * wo, axis=-1), gi.shape)
@@ -380,7 +382,7 @@ class SVBRDFRender:
                                          np.where(lit_g, i_dot_o, 1.0))
                     fcos = np.where(lit_g, self._evaluate(self.specular_params, sl, ggeo, gi.shape), 0.0)
                 term = bump_shadowing(self.bump_alpha2[sl], cos_g)
-                fcos = fcos + np.where(lit_d, full, 0.0) * term
+                fcos = fcos + np.where(lit_d, diffuse, 0.0) * term
             for c in range(3):
                 f = fcos[min(c, fcos.shape[0] - 1)]  # [L, p]
                 radiance[sl, c] = np.sum(f * inten[:, c, None], axis=0)
@@ -394,11 +396,6 @@ class SVBRDFRender:
         fcos = np.asarray(self.evaluator(params, self.options, geo))
         channels = fcos.shape[-3] if fcos.ndim >= 3 else 1
         return np.broadcast_to(fcos, (1, channels) + shape)[0]
-
-
-def part_has_diffuse(r: SVBRDFRender) -> bool:
-    """Whether a Cycles render's part includes diffuse closures (not a specular-only render)."""
-    return r.specular_params is not r.params
 
 
 def ensure_valid_specular_reflection(ng: np.ndarray, view: np.ndarray, n: np.ndarray) -> np.ndarray:
