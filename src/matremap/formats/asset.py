@@ -100,13 +100,12 @@ class MaterialAsset:
             if not ref.path.is_file():
                 raise MatremapError(f"{self.path}: texture {ref.path} for {name} not found; put it beside the file "
                                     f"or fix its uri")
-            file_channels = image_info(ref.path, ref.colorspace, colour=False).channels
-            whole = ref.channels is None or tuple(ref.channels) == tuple(range(file_channels))
-            if ref.plain_factor and whole and (p.channels == 3 or file_channels == 1):
+            header = image_info(ref.path, ref.colorspace, colour=False)
+            whole = ref.channels is None or tuple(ref.channels) == tuple(range(header.channels))
+            if ref.plain_factor and whole and (p.channels == 3 or header.channels == 1):
                 maps[name] = str(ref.path.resolve())
                 colorspace[name] = ref.colorspace
-                info = image_info(ref.path, ref.colorspace, colour=p.channels == 3)
-                sizes[name] = (info.height, info.width)
+                sizes[name] = (header.height, header.width)
                 continue
             image, info = read_image(ref.path, ref.colorspace, colour=True)
             image = np.atleast_3d(image)
