@@ -343,10 +343,14 @@ def cmd_convert(args: argparse.Namespace) -> int:
         transforms = [Transform.load(p) for p in args.transform]
     elif args.target:
         from .library import find_route
+        from .regress.quantities import diffuse_param
         from .remap import complete_fix, load_arrays
 
         target = get_model(args.target).id
-        params, _ = load_arrays(map_set)
+        # what decides the route: whether the source has a diffuse part, and its held values (metallic)
+        spec = map_set.spec
+        dp = diffuse_param(spec)
+        params, _ = load_arrays(map_set, only={n for n, _, _ in spec.specialisations} | ({dp.name} if dp else set()))
         fix = complete_fix(map_set.model, {**map_set.constants, **params}, target,
                            parse_assignments(args.fix, "--fix"))
         held = {n: params[n] for n, _, _ in map_set.spec.specialisations if n in params}

@@ -17,7 +17,7 @@ import hashlib
 import json
 import time
 import warnings
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -54,16 +54,19 @@ def default_cache() -> Path:
     return cache_dir() / "transforms"
 
 
-def load_arrays(map_set: MapSet) -> tuple[dict[str, Any], np.ndarray | None]:
+def load_arrays(map_set: MapSet, only: Collection[str] | None = None) -> tuple[dict[str, Any], np.ndarray | None]:
     """Every map of a set as parameter arrays (model units), constants as they are, and the
-    normal map decoded to [-1, 1] (or None)."""
+    normal map decoded to [-1, 1] (or None). ``only``: read just these parameters' maps (and no
+    normal map)."""
     spec = map_set.spec
     params: dict[str, Any] = {k: v for k, v in map_set.constants.items() if k in spec.param_names}
     for name, path in map_set.maps.items():
+        if only is not None and name not in only:
+            continue
         image, _ = read_image(path, map_set.colorspace.get(name))
         params[name] = map_values(spec, name, image, path, 0)
     normal = None
-    if map_set.normal is not None:
+    if map_set.normal is not None and only is None:
         from .svbrdf_render import decode_normal_map
 
         normal = decode_normal_map(read_image(map_set.normal, "linear", colour=False)[0])
