@@ -18,7 +18,7 @@ from __future__ import annotations
 import heapq
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -122,17 +122,17 @@ class Entry:
     path: Path
     transform: Transform
 
-    @property
+    @cached_property  # routes ask for these in their inner loop
     def source(self) -> tuple:
         t = self.transform
         return node_key(t.source, t.source_options, t.source_template)
 
-    @property
+    @cached_property
     def target(self) -> tuple:
         t = self.transform
         return node_key(t.target, t.target_options, t.template)
 
-    @property
+    @cached_property
     def error(self) -> float:
         """The largest held-out RMSE of its mappings (quantity units: roughness, F0, albedo)."""
         errs = [v.get("heldout_rmse") for v in self.transform.errors.values()]
