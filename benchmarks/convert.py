@@ -10,7 +10,7 @@ For each format it prints, measured side by side in one run:
 * ``numpy copy``: ``np.copy`` of the decoded file contents already in memory (the bytes the maps hold);
 * ``file copy``: the same files read and written back unchanged with OpenImageIO, one process,
   no transform (the I/O floor for this format);
-* ``convert``: ``matremap.svbrdf.convert`` (read, transform, write the target maps and mask, copy the
+* ``convert``: ``matremap.svbrdf.convert.convert`` (read, transform, write the target maps and mask, copy the
   normal map), ``--workers`` processes;
 
 and the ratios convert / numpy copy and convert / file copy. The transform is learned from a small
@@ -35,18 +35,18 @@ from pathlib import Path
 
 import numpy as np
 
-from matremap.textures import ImageInfo, MapWriter, load_map_set
+from matremap.svbrdf.textures import ImageInfo, MapWriter, load_map_set
 
 FORMATS = {"png8": ("png", "uint8"), "png16": ("png", "uint16"), "exr": ("exr", "float")}
 
 
 def learn(tmp: Path):
-    from matremap.executors import InlineExecutor
-    from matremap.grid import parse_grid
-    from matremap.models import Material
+    from matremap.core.models import Material
+    from matremap.core.scene import Scene
     from matremap.regress.transform import learn_transform
-    from matremap.scene import Scene
-    from matremap.sweep import SweepConfig, run_sweep
+    from matremap.sweep.executors import InlineExecutor
+    from matremap.sweep.grid import parse_grid
+    from matremap.sweep.run import SweepConfig, run_sweep
 
     src = Material.create("mitsuba06:ward", {"variant": "ward", "diffuseReflectance": 0.0})
     cfg = SweepConfig(source=src, target="mitsuba06:pbr", fix={"distribution": "as"}, scene=Scene(resolution=48))
@@ -130,7 +130,7 @@ def numpy_copy(files: list[Path]) -> float:
 
 def run_convert(folder: Path, transform: Path, out: Path, workers: int) -> tuple[float, int]:
     from matremap.regress.transform import Transform
-    from matremap.svbrdf import convert
+    from matremap.svbrdf.convert import convert
 
     ms = load_map_set(folder)
     t = time.perf_counter()
@@ -143,8 +143,8 @@ def run_convert(folder: Path, transform: Path, out: Path, workers: int) -> tuple
 BIG_CHILD = """
 import json, resource, sys, time, warnings
 from matremap.regress.transform import Transform
-from matremap.svbrdf import convert
-from matremap.textures import load_map_set
+from matremap.svbrdf.convert import convert
+from matremap.svbrdf.textures import load_map_set
 warnings.simplefilter("ignore")
 t = time.perf_counter()
 r = convert(load_map_set(sys.argv[1]), Transform.load(sys.argv[2]), sys.argv[3], workers=int(sys.argv[4]), force=True)

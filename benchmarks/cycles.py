@@ -9,11 +9,11 @@ import time
 
 import numpy as np
 
-from matremap.fit import fit
-from matremap.models import Material
+from matremap.core.fit import fit
+from matremap.core.models import Material
+from matremap.core.scene import Scene
 from matremap.renderers import get_renderer
-from matremap.renderers.cycles import CyclesRenderer
-from matremap.scene import Scene
+from matremap.renderers.cycles.probe import CyclesRenderer
 
 
 def rel(a, b, mask):

@@ -20,9 +20,9 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from matremap.fit import STRATEGIES, fit  # noqa: E402
-from matremap.models import Material  # noqa: E402
-from matremap.scene import Scene  # noqa: E402
+from matremap.core.fit import STRATEGIES, fit  # noqa: E402
+from matremap.core.models import Material  # noqa: E402
+from matremap.core.scene import Scene  # noqa: E402
 
 
 def sources(model: str, n: int, rng: np.random.Generator) -> list[Material]:

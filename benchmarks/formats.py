@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from matremap.remap import remap_file
-from matremap.textures import ImageInfo, write_image_like
+from matremap.svbrdf.textures import ImageInfo, write_image_like
 
 
 def make_asset(folder: Path, side: int) -> Path:

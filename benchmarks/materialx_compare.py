@@ -47,15 +47,15 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from matremap.envmap import directional_lights, resolve  # noqa: E402
+from matremap.core.envmap import directional_lights, resolve  # noqa: E402
+from matremap.core.fit import fit  # noqa: E402
+from matremap.core.imageio import linear_to_srgb  # noqa: E402
+from matremap.core.models import Material, get_model  # noqa: E402
+from matremap.core.scene import Scene  # noqa: E402
 from matremap.errors import MatremapError  # noqa: E402
-from matremap.evaluate import ssim_map  # noqa: E402
-from matremap.fit import fit  # noqa: E402
-from matremap.imageio import linear_to_srgb  # noqa: E402
-from matremap.models import Material, get_model  # noqa: E402
 from matremap.renderers.base import get_renderer  # noqa: E402
-from matremap.scene import Scene  # noqa: E402
-from matremap.svbrdf_render import SVBRDFRender, object_mask  # noqa: E402
+from matremap.renderers.embedded.environment import SVBRDFRender, object_mask  # noqa: E402
+from matremap.svbrdf.evaluate import ssim_map  # noqa: E402
 
 TARGET = "gltf:metal-rough"
 FIT_LIGHTS = (0.0,)

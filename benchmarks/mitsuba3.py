@@ -10,8 +10,8 @@ each) and median loss. The issue's target: a two-stage fit with Mitsuba 3 as tar
     python benchmarks/mitsuba3.py --autodiff [--size 128] [--count 10] [--lights 0]
 
 ``--autodiff`` compares, for ``mitsuba3:roughconductor`` targets, the finite-difference two-stage
-fit (:func:`matremap.fit.fit`, llvm_ad_rgb renderer) with the gradient-based fit through Mitsuba's
-autodiff (:func:`matremap.renderers.mitsuba3.fit_roughconductor_autodiff`): seconds, renders and
+fit (:func:`matremap.core.fit.fit`, llvm_ad_rgb renderer) with the gradient-based fit through Mitsuba's
+autodiff (:func:`matremap.renderers.mitsuba3.probe.fit_roughconductor_autodiff`): seconds, renders and
 the relative RMSE of the fitted material's image against the source image (sphere pixels).
 
 Needs ``pip install 'matremap[mitsuba]'``.
@@ -25,10 +25,10 @@ import time
 
 import numpy as np
 
-from matremap.fit import fit
-from matremap.models import Material
-from matremap.renderers.mitsuba3 import Mitsuba3Renderer
-from matremap.scene import Scene
+from matremap.core.fit import fit
+from matremap.core.models import Material
+from matremap.core.scene import Scene
+from matremap.renderers.mitsuba3.probe import Mitsuba3Renderer
 
 
 def sources(model: str, n: int, rng: np.random.Generator) -> list[Material]:
@@ -73,7 +73,7 @@ def relative_rmse(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
 
 def autodiff(args: argparse.Namespace) -> None:
     from matremap.renderers.base import get_renderer
-    from matremap.renderers.mitsuba3 import fit_roughconductor_autodiff, llvm_renders
+    from matremap.renderers.mitsuba3.probe import fit_roughconductor_autodiff, llvm_renders
 
     if not llvm_renders():
         raise SystemExit("llvm_ad_rgb does not render here: install Debian libllvm19")

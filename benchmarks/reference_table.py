@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from matremap.fit import fit
-from matremap.models import Material
-from matremap.scene import Scene
+from matremap.core.fit import fit
+from matremap.core.models import Material
+from matremap.core.scene import Scene
 
 TABLE = Path(__file__).resolve().parents[2] / "shared" / "reference" / "mitsuba-ward2mitsuba-as.csv"
 

@@ -26,15 +26,15 @@ from pathlib import Path
 
 import numpy as np
 
+from matremap.core.models import Material
+from matremap.core.scene import Scene
 from matremap.errors import MatremapError
-from matremap.executors import make_executor
-from matremap.grid import parse_grid
-from matremap.models import Material
 from matremap.regress import parametric
 from matremap.regress.data import TrainingData, load_training_data
 from matremap.regress.transform import Transform, _evaluate, transform_from_data
-from matremap.scene import Scene
-from matremap.sweep import SweepConfig, run_sweep
+from matremap.sweep.executors import make_executor
+from matremap.sweep.grid import parse_grid
+from matremap.sweep.run import SweepConfig, run_sweep
 
 ROOT = Path(__file__).resolve().parents[1]
 TABLE = ROOT.parent / "shared" / "reference" / "mitsuba-ward2mitsuba-as.csv"

@@ -25,13 +25,13 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import least_squares, minimize
 
-from matremap.envmap import directional_lights, resolve
-from matremap.evaluate import evaluate, ssim_map
-from matremap.fit import fit
-from matremap.models import Material
+from matremap.core.envmap import directional_lights, resolve
+from matremap.core.fit import fit
+from matremap.core.models import Material
 from matremap.remap import load_arrays, remap
-from matremap.svbrdf_render import SVBRDFRender, object_mask
-from matremap.textures import load_map_set
+from matremap.renderers.embedded.environment import SVBRDFRender, object_mask
+from matremap.svbrdf.evaluate import evaluate, ssim_map
+from matremap.svbrdf.textures import load_map_set
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ("bronze", "blue-plastic", "scratched-gold")

@@ -17,12 +17,12 @@ from pathlib import Path
 
 import numpy as np
 
-from matremap.executors import make_executor
-from matremap.grid import parse_grid
-from matremap.models import Material
-from matremap.scene import Scene
-from matremap.store import SweepStore
-from matremap.sweep import SweepConfig, run_sweep
+from matremap.core.models import Material
+from matremap.core.scene import Scene
+from matremap.sweep.executors import make_executor
+from matremap.sweep.grid import parse_grid
+from matremap.sweep.run import SweepConfig, run_sweep
+from matremap.sweep.store import SweepStore
 
 TABLE = Path(__file__).resolve().parents[2] / "shared" / "reference" / "mitsuba-ward2mitsuba-as.csv"
 SOURCE = Material.create("mitsuba06:ward", {"variant": "ward", "diffuseReflectance": 0.0})

@@ -21,13 +21,13 @@ from pathlib import Path
 
 import numpy as np
 
-from matremap.envmap import resolve
-from matremap.evaluate import evaluate
-from matremap.imageio import write_image
+from matremap.core.envmap import resolve
+from matremap.core.imageio import write_image
 from matremap.regress.transform import Transform
 from matremap.remap import load_arrays, remap
-from matremap.svbrdf import convert
-from matremap.textures import load_map_set
+from matremap.svbrdf.convert import convert
+from matremap.svbrdf.evaluate import evaluate
+from matremap.svbrdf.textures import load_map_set
 
 ROOT = Path(__file__).resolve().parents[1]
 IMG = ROOT / "docs" / "img" / "chain"

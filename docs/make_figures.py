@@ -7,11 +7,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from matremap.fit import fit
-from matremap.imageio import write_image
-from matremap.models import parse_material
-from matremap.report import comparison_strip
-from matremap.scene import Scene
+from matremap.core.compare import comparison_strip
+from matremap.core.fit import fit
+from matremap.core.imageio import write_image
+from matremap.core.models import parse_material
+from matremap.core.scene import Scene
 
 OUT = Path(__file__).resolve().parent / "img"
 

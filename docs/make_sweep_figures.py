@@ -17,13 +17,13 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from matremap.executors import make_executor  # noqa: E402
-from matremap.grid import parse_grid  # noqa: E402
-from matremap.models import parse_material  # noqa: E402
-from matremap.scene import Scene  # noqa: E402
-from matremap.store import SweepStore  # noqa: E402
-from matremap.sweep import SweepConfig, run_sweep  # noqa: E402
-from matremap.sweep_report import write_report  # noqa: E402
+from matremap.core.models import parse_material  # noqa: E402
+from matremap.core.scene import Scene  # noqa: E402
+from matremap.sweep.executors import make_executor  # noqa: E402
+from matremap.sweep.grid import parse_grid  # noqa: E402
+from matremap.sweep.report import write_report  # noqa: E402
+from matremap.sweep.run import SweepConfig, run_sweep  # noqa: E402
+from matremap.sweep.store import SweepStore  # noqa: E402
 
 IMG = Path(__file__).resolve().parent / "img"
 

@@ -35,7 +35,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "src"))
 
-from matremap.textures import ImageInfo, write_image_like  # noqa: E402
+from matremap.svbrdf.textures import ImageInfo, write_image_like  # noqa: E402
 
 BUDGET = 1 << 20  # bytes for all example files together
 

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
+from matremap.core.scene import Scene
 from matremap.renderers import get_renderer
-from matremap.scene import Scene
 
 REFERENCE = Path(__file__).resolve().parents[2] / "shared" / "reference" / "mitsuba-ward2mitsuba-as.csv"
 

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from matremap.cli import main
-from matremap.models import Material
+from matremap.core.models import Material
+from matremap.core.scene import Scene
 from matremap.renderers import get_renderer
-from matremap.scene import Scene
 
 WARD = (
     '{"model": "mitsuba06:ward", "params": '
@@ -47,11 +47,11 @@ def test_render_writes_the_image(capsys, tmp_path, suffix):
     if suffix == ".npy":
         np.testing.assert_array_equal(np.load(out), expected)
     elif suffix == ".exr":
-        from matremap.imageio import read_image
+        from matremap.core.imageio import read_image
 
         np.testing.assert_array_equal(read_image(out), expected)
     else:
-        from matremap.imageio import read_image
+        from matremap.core.imageio import read_image
 
         assert read_image(out).shape == (32, 32, 3)
 
@@ -124,7 +124,7 @@ def test_console_script_runs():
 
 
 def test_fit_compare_writes_source_target_difference(capsys, tmp_path):
-    from matremap.imageio import read_image
+    from matremap.core.imageio import read_image
 
     out = tmp_path / "cmp.exr"
     code, stdout, _ = run(capsys, "fit", "--source", WARD, "--target", "cycles:glossy", "--size", "48",

@@ -4,15 +4,15 @@ import warnings
 import numpy as np
 import pytest
 
+from matremap.core.models import Material
+from matremap.core.scene import Scene
 from matremap.errors import MatremapError
-from matremap.executors import InlineExecutor
-from matremap.grid import parse_grid
-from matremap.models import Material
 from matremap.regress.transform import Transform, learn_transform
-from matremap.scene import Scene
-from matremap.svbrdf import MASK_NAME, convert
-from matremap.sweep import SweepConfig, run_sweep
-from matremap.textures import ImageInfo, load_map_set, read_image, write_image_like
+from matremap.svbrdf.convert import MASK_NAME, convert
+from matremap.svbrdf.textures import ImageInfo, load_map_set, read_image, write_image_like
+from matremap.sweep.executors import InlineExecutor
+from matremap.sweep.grid import parse_grid
+from matremap.sweep.run import SweepConfig, run_sweep
 
 H, W = 23, 17
 
@@ -95,9 +95,9 @@ def test_convert_matches_transform_apply(tmp_path, ward_to_as):
 
 
 def test_float_maps_stay_float_and_two_workers_agree(tmp_path, ward_to_as, monkeypatch):
-    import matremap.svbrdf
+    import matremap.svbrdf.convert
 
-    monkeypatch.setattr(matremap.svbrdf, "PARALLEL_MIN_TEXELS", 0)  # a pool even for small maps
+    monkeypatch.setattr(matremap.svbrdf.convert, "PARALLEL_MIN_TEXELS", 0)  # a pool even for small maps
     alpha, rho, normal = fields(1)
     ms = make_set(tmp_path / "in", alpha, rho, normal, ImageInfo("exr", "float", 1, 0, 0, "linear"),
                   ImageInfo("exr", "float", 3, 0, 0, "linear"))
@@ -129,9 +129,9 @@ def test_a_chain_is_applied_per_texel(tmp_path, ward_db, ward_to_as):
 
 
 def test_nan_in_the_last_band_leaves_nothing_behind(tmp_path, ward_to_as, monkeypatch):
-    import matremap.svbrdf
+    import matremap.svbrdf.convert
 
-    monkeypatch.setattr(matremap.svbrdf, "PARALLEL_MIN_TEXELS", 0)  # a pool even for small maps
+    monkeypatch.setattr(matremap.svbrdf.convert, "PARALLEL_MIN_TEXELS", 0)  # a pool even for small maps
     alpha, rho, normal = fields()
     alpha[H - 1, 3] = np.nan
     ms = make_set(tmp_path / "in", alpha, rho, normal, ImageInfo("exr", "float", 1, 0, 0, "linear"))

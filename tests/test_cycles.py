@@ -13,12 +13,12 @@ import time
 import numpy as np
 import pytest
 
+from matremap.core.fit import fit
+from matremap.core.models import Material, get_model
+from matremap.core.scene import Scene
 from matremap.errors import MatremapError
-from matremap.fit import fit
-from matremap.models import Material, get_model
 from matremap.renderers.base import register_renderer
-from matremap.renderers.cycles import ENV_PYTHON, CyclesRenderer, bpy_available, find_python
-from matremap.scene import Scene
+from matremap.renderers.cycles.probe import ENV_PYTHON, CyclesRenderer, bpy_available, find_python
 
 needs_bpy = pytest.mark.skipif(
     not bpy_available(),
@@ -54,7 +54,7 @@ def test_missing_bpy_venv_says_how_to_set_it_up(monkeypatch, tmp_path):
     with pytest.raises(MatremapError, match=r"pip install bpy==5\.0\.1"):
         CyclesRenderer()
     monkeypatch.delenv(ENV_PYTHON)
-    monkeypatch.setattr("matremap.renderers.cycles.DEFAULT_PYTHON", tmp_path / "python")
+    monkeypatch.setattr("matremap.renderers.cycles.probe.DEFAULT_PYTHON", tmp_path / "python")
     with pytest.raises(MatremapError, match=r"\.venv-bpy"):
         find_python()
 
@@ -62,8 +62,7 @@ def test_missing_bpy_venv_says_how_to_set_it_up(monkeypatch, tmp_path):
 def test_multiscatter_tables_match_direct_integration_and_are_cached(tmp_path, monkeypatch):
     """The E / E_avg tables hold the numerically integrated single-scatter albedo on Cycles' nodes,
     are read back bilinearly, and come from the disk cache the second time."""
-    from matremap.renderers.embedded.dialects import cycles as dc
-
+    from matremap.renderers.embedded.evaluators import cycles as dc
     monkeypatch.setenv("MATREMAP_CACHE_DIR", str(tmp_path))
     dc.albedo_tables.cache_clear()
     try:
@@ -94,7 +93,7 @@ def test_white_multiscatter_glossy_conserves_energy(rough):
     """A white Multiscatter GGX Glossy reflects all light: f_ss / E integrates to 1 over the
     hemisphere of light directions (up to the table's interpolation between mu nodes), while the
     single-scatter lobe loses 1 - E."""
-    from matremap.renderers.embedded.dialects import EVALUATORS
+    from matremap.renderers.embedded.evaluators import EVALUATORS
     from matremap.renderers.embedded.geometry import from_directions
 
     n_t, n_p = 400, 200

@@ -1,17 +1,17 @@
 """Textured spheres under an environment map rendered by the real Blender Cycles
-(:func:`matremap.renderers.cycles_svbrdf.render_svbrdf_cycles`), checked against the embedded
-:func:`matremap.svbrdf_render.render_svbrdf`. Skip without the bpy venv (see tests/test_cycles.py)."""
+(:func:`matremap.renderers.cycles.environment.render_svbrdf_cycles`), checked against the embedded
+:func:`matremap.renderers.embedded.environment.render_svbrdf`. Skip without the bpy venv (see tests/test_cycles.py)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from matremap import envmap
+from matremap.core import envmap
 from matremap.errors import MatremapError
-from matremap.renderers.cycles import ENV_PYTHON, CyclesRenderer, bpy_available
-from matremap.renderers.cycles_svbrdf import render_svbrdf_cycles
-from matremap.svbrdf_render import object_mask, render_svbrdf
+from matremap.renderers.cycles.environment import render_svbrdf_cycles
+from matremap.renderers.cycles.probe import ENV_PYTHON, CyclesRenderer, bpy_available
+from matremap.renderers.embedded.environment import object_mask, render_svbrdf
 
 needs_bpy = pytest.mark.skipif(
     not bpy_available(),
@@ -138,8 +138,8 @@ def test_normal_mapped_diffuse_has_no_bias_against_cycles(cycles, env):
 
 @needs_bpy
 def test_probe_renders_still_work_after_an_svbrdf_request(cycles):
-    from matremap.models import Material
-    from matremap.scene import Scene
+    from matremap.core.models import Material
+    from matremap.core.scene import Scene
 
     scene = Scene.probe(resolution=32)
     mats = [Material("cycles:diffuse", {"Color": np.array([0.5] * 3)}, {})]
@@ -169,8 +169,8 @@ def test_evaluate_draws_cycles_maps_with_real_cycles(env, tmp_path, monkeypatch)
     pytest.importorskip("skimage", reason="evaluate needs scikit-image")
     import json
 
-    import matremap.renderers.cycles_svbrdf as cs
-    from matremap.evaluate import evaluate
+    import matremap.renderers.cycles.environment as cs
+    from matremap.svbrdf.evaluate import evaluate
 
     drawn = []
     real = cs.render_svbrdf_cycles
@@ -206,8 +206,8 @@ def test_evaluate_falls_back_to_the_emulation_without_bpy(env, tmp_path, monkeyp
     pytest.importorskip("skimage", reason="evaluate needs scikit-image")
     import json
 
-    import matremap.renderers.cycles as cycles_module
-    from matremap.evaluate import _prepare, evaluate
+    import matremap.renderers.cycles.probe as cycles_module
+    from matremap.svbrdf.evaluate import _prepare, evaluate
 
     monkeypatch.setattr(cycles_module, "bpy_available", lambda: False)
     source = _glossy_maps()
@@ -239,7 +239,7 @@ def test_principled_maps_render_in_cycles_and_without_specular_are_its_diffuse(c
 
 
 def test_raised_glossy_normals_keep_the_mirror_direction_above_the_surface():
-    from matremap.svbrdf_render import ensure_valid_specular_reflection
+    from matremap.renderers.embedded.environment import ensure_valid_specular_reflection
 
     rng = np.random.default_rng(5)
     ng = np.tile([0.0, 0.0, 1.0], (500, 1))

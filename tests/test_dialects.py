@@ -17,9 +17,9 @@ import math
 import numpy as np
 import pytest
 
+from matremap.core.models import Material
 from matremap.errors import MatremapError
-from matremap.models import Material
-from matremap.renderers.embedded.dialects import EVALUATORS
+from matremap.renderers.embedded.evaluators import EVALUATORS
 from matremap.renderers.embedded.geometry import from_directions
 
 PI = math.pi

@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from matremap import envmap
+from matremap.core import envmap
+from matremap.core.imageio import write_image
 from matremap.errors import MatremapError
-from matremap.imageio import write_image
-from matremap.svbrdf_render import decode_normal_map, object_mask, render_svbrdf, sample_texture
+from matremap.renderers.embedded.environment import decode_normal_map, object_mask, render_svbrdf, sample_texture
 
 RES = 48
 LIGHTS = 64

@@ -16,7 +16,7 @@ pytest.importorskip("skimage", reason="scikit-image is needed by matremap evalua
 
 from matremap import envmap  # noqa: E402
 from matremap.errors import MatremapError  # noqa: E402
-from matremap.evaluate import SVMaterial, _irradiance_scale, evaluate, parse_rotations, ssim_map  # noqa: E402
+from matremap.svbrdf.evaluate import SVMaterial, _irradiance_scale, evaluate, parse_rotations, ssim_map  # noqa: E402
 
 CHROMIUM = Path("/usr/bin/chromium")
 KW = dict(resolution=32, lights=48)
@@ -176,8 +176,7 @@ def test_report_shows_its_images_in_headless_chromium(report, tmp_path):
 
 def test_mitsuba3_materials_are_drawn_by_mitsuba3_and_compare_with_their_emulation(tmp_path):
     pytest.importorskip("mitsuba", reason="Mitsuba 3 not installed: pip install 'matremap[mitsuba]'")
-    from matremap import envmap as envmap_module
-
+    from matremap.core import envmap as envmap_module
     rng = np.random.default_rng(0)
     alpha = rng.uniform(0.2, 0.4, (16, 32))
     k = np.stack([np.full((16, 32), v) for v in (3.0, 2.0, 1.0)], axis=-1)

@@ -3,12 +3,12 @@ import math
 import numpy as np
 import pytest
 
+from matremap.core.fit import fit, part
+from matremap.core.models import Material
+from matremap.core.optics import f0_from_ior
+from matremap.core.scene import Scene
 from matremap.errors import MatremapError
-from matremap.fit import fit, part
-from matremap.models import Material
-from matremap.optics import f0_from_ior
 from matremap.renderers import get_renderer
-from matremap.scene import Scene
 
 
 def rel(a, b):

@@ -10,11 +10,11 @@ import json
 import numpy as np
 import pytest
 
+from matremap.core.models import Material
+from matremap.core.scene import Scene
 from matremap.errors import MatremapError
 from matremap.formats import format_for, write_asset
-from matremap.models import Material
-from matremap.renderers.cycles import ENV_PYTHON, CyclesRenderer, bpy_available
-from matremap.scene import Scene
+from matremap.renderers.cycles.probe import ENV_PYTHON, CyclesRenderer, bpy_available
 
 needs_bpy = pytest.mark.skipif(
     not bpy_available(),
@@ -67,7 +67,7 @@ def test_refuses_other_models_and_existing_files(tmp_path):
 
 
 def test_without_bpy_says_how_to_set_it_up(tmp_path, monkeypatch):
-    import matremap.renderers.cycles_svbrdf as cs
+    import matremap.renderers.cycles.environment as cs
 
     monkeypatch.setattr(cs, "_shared", None)
     monkeypatch.setenv(ENV_PYTHON, str(tmp_path / "no-python"))
@@ -143,7 +143,7 @@ def test_map_set_becomes_packed_image_textures_with_their_colour_spaces(cycles, 
     """Constant maps in each encoding (8-bit sRGB colour, 8-bit grey data, float EXR colour, an EXR normal
     map) give the nodes asked for, and the file renders as the uniform material the maps decode to
     (measured 1.2e-3 relative RMSE); with every image Non-Color it would be 0.38 off, all sRGB 4.6."""
-    from matremap.textures import load_map_set
+    from matremap.svbrdf.textures import load_map_set
 
     maps = tmp_path / "maps"
     maps.mkdir()
@@ -184,7 +184,7 @@ def test_map_set_becomes_packed_image_textures_with_their_colour_spaces(cycles, 
     assert linked(mat, "Normal Map", "Color") == ("Normal", "Color")
     assert linked(mat, "Glossy BSDF", "Normal") == linked(mat, "Diffuse BSDF", "Normal") == ("Normal Map", "Normal")
 
-    from matremap.imageio import srgb_to_linear
+    from matremap.core.imageio import srgb_to_linear
 
     uniform = Material.create("cycles:glossy", {"distribution": "multi_ggx",
                                                 "Color": srgb_to_linear(np.array([230, 160, 60]) / 255.0),

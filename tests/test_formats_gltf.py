@@ -16,12 +16,12 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 
+from matremap.core.imageio import linear_to_srgb, srgb_to_linear
+from matremap.core.models import Material
 from matremap.errors import MatremapError
 from matremap.formats import read_asset, write_asset
 from matremap.formats.gltf import read, write
-from matremap.imageio import linear_to_srgb, srgb_to_linear
-from matremap.models import Material
-from matremap.textures import load_map_set, read_image
+from matremap.svbrdf.textures import load_map_set, read_image
 
 MR = "gltf:metal-rough"
 

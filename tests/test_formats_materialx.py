@@ -11,10 +11,10 @@ import pytest
 
 mx = pytest.importorskip("MaterialX", reason="MaterialX not installed: pip install 'matremap[materialx]'")
 
+from matremap.core.models import Material  # noqa: E402
 from matremap.errors import MatremapError  # noqa: E402
 from matremap.formats.materialx import read, write  # noqa: E402
-from matremap.models import Material  # noqa: E402
-from matremap.textures import ImageInfo, load_map_set, read_image, write_image_like  # noqa: E402
+from matremap.svbrdf.textures import ImageInfo, load_map_set, read_image, write_image_like  # noqa: E402
 
 
 def doc(tmp_path: Path, body: str, name: str = "m.mtlx") -> Path:

@@ -12,12 +12,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from matremap.core.models import Material
+from matremap.core.scene import Scene
 from matremap.errors import MatremapError
 from matremap.formats import mitsuba_xml
 from matremap.formats.mitsuba_xml import IOR_TABLE, read, write
-from matremap.models import Material
-from matremap.scene import Scene
-from matremap.textures import ImageInfo, load_map_set, read_image, write_image_like
+from matremap.svbrdf.textures import ImageInfo, load_map_set, read_image, write_image_like
 
 needs_mitsuba = pytest.mark.skipif(
     importlib.util.find_spec("mitsuba") is None, reason="Mitsuba 3 not installed: pip install 'matremap[mitsuba]'"
@@ -346,7 +346,7 @@ def _as_probe_scene(xml: Path, scene: Scene, out: Path) -> Path:
 
 @needs_mitsuba
 def test_written_conductor_renders_as_matremaps_mitsuba3_renderer(tmp_path):
-    from matremap.renderers.mitsuba3 import Mitsuba3Renderer
+    from matremap.renderers.mitsuba3.probe import Mitsuba3Renderer
 
     mi = _mitsuba()
     m = MATERIALS[1]

@@ -18,14 +18,14 @@ import math
 import numpy as np
 import pytest
 
-from matremap.fit import fit
-from matremap.models import Material, get_model, white_reference
-from matremap.optics import f0_from_ior
+from matremap.core.fit import fit
+from matremap.core.models import Material, get_model, white_reference
+from matremap.core.optics import f0_from_ior
+from matremap.core.scene import PointLight, Scene
 from matremap.regress import quantities as q
 from matremap.renderers import get_renderer
-from matremap.renderers.embedded.dialects import EVALUATORS
+from matremap.renderers.embedded.evaluators import EVALUATORS
 from matremap.renderers.embedded.geometry import from_directions
-from matremap.scene import PointLight, Scene
 
 MR = "gltf:metal-rough"
 

@@ -7,10 +7,10 @@ import json
 import numpy as np
 import pytest
 
-from matremap import library
 from matremap.cli import main
-from matremap.library import PAIRS, build_pair, entries, find_route, max_prediction_difference, node_key, route
-from matremap.models import get_model
+from matremap.core.models import get_model
+from matremap.regress import library
+from matremap.regress.library import PAIRS, build_pair, entries, find_route, max_prediction_difference, node_key, route
 from matremap.regress.transform import Transform
 
 
@@ -90,7 +90,7 @@ def test_a_shipped_transform_still_reproduces(tmp_path):
 
 
 def _ward_maps(folder, variant: str):
-    from matremap.textures import ImageInfo, write_image_like
+    from matremap.svbrdf.textures import ImageInfo, write_image_like
 
     folder.mkdir()
     y, x = np.mgrid[0:8, 0:8] / 7.0
@@ -105,7 +105,7 @@ def _ward_maps(folder, variant: str):
 
 
 def test_convert_to_a_model_takes_the_library_route(tmp_path, capsys):
-    from matremap.textures import read_image
+    from matremap.svbrdf.textures import read_image
 
     x, y = _ward_maps(tmp_path / "in", "balanced")
     out = tmp_path / "out"

@@ -1,5 +1,5 @@
 """Textured materials under an environment map rendered by the real Mitsuba 3, checked against the
-embedded renderer's :func:`matremap.svbrdf_render.render_svbrdf`. Rendering tests skip without
+embedded renderer's :func:`matremap.renderers.embedded.environment.render_svbrdf`. Rendering tests skip without
 Mitsuba 3; the llvm_ad_rgb test skips unless that variant renders here (Debian ``libllvm19``)."""
 
 from __future__ import annotations
@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from scipy.ndimage import binary_erosion
 
-from matremap.envmap import EnvMap, builtin
+from matremap.core.envmap import EnvMap, builtin
 from matremap.errors import MatremapError
-from matremap.renderers.mitsuba3_svbrdf import envmap_vertex_rows, render_svbrdf_mitsuba3
-from matremap.svbrdf_render import object_mask, render_svbrdf
+from matremap.renderers.embedded.environment import object_mask, render_svbrdf
+from matremap.renderers.mitsuba3.environment import envmap_vertex_rows, render_svbrdf_mitsuba3
 
 needs_mitsuba = pytest.mark.skipif(
     importlib.util.find_spec("mitsuba") is None, reason="Mitsuba 3 not installed: pip install 'matremap[mitsuba]'"
@@ -156,7 +156,7 @@ def test_errors(env):
 def test_scalar_and_llvm_variants_agree(env, inner):
     """Skips unless llvm_ad_rgb renders (Debian libllvm19; LLVM 15/16 abort Mitsuba). Different
     random streams: the two agree to the noise (measured 0.9 % mean relative at 256 spp, 128^2)."""
-    from matremap.renderers.mitsuba3 import llvm_renders
+    from matremap.renderers.mitsuba3.probe import llvm_renders
 
     if not llvm_renders():
         pytest.skip("Mitsuba's llvm_ad_rgb variant does not render here: install Debian libllvm19")

@@ -3,8 +3,8 @@ import json
 import numpy as np
 import pytest
 
+from matremap.core.models import Material, get_model, list_models, parse_material
 from matremap.errors import MatremapError
-from matremap.models import Material, get_model, list_models, parse_material
 
 
 def test_every_embedded_dialect_is_registered():

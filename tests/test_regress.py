@@ -4,17 +4,17 @@ import numpy as np
 import pytest
 
 from matremap.cli import main
+from matremap.core.models import Material
+from matremap.core.optics import f0_from_ior
+from matremap.core.scene import Scene
 from matremap.errors import MatremapError
-from matremap.executors import InlineExecutor
-from matremap.grid import parse_grid
-from matremap.models import Material
-from matremap.optics import f0_from_ior
 from matremap.regress import quantities as qty
 from matremap.regress.parametric import k_alpha
 from matremap.regress.transform import Transform, learn_transform
-from matremap.scene import Scene
-from matremap.store import SweepStore
-from matremap.sweep import SweepConfig, run_sweep
+from matremap.sweep.executors import InlineExecutor
+from matremap.sweep.grid import parse_grid
+from matremap.sweep.run import SweepConfig, run_sweep
+from matremap.sweep.store import SweepStore
 
 WARD = Material.create("mitsuba06:ward", {"variant": "ward", "diffuseReflectance": 0.0})
 

@@ -9,7 +9,7 @@ import pytest
 
 from matremap.cli import main
 from matremap.remap import remap
-from matremap.textures import load_map_set, read_image
+from matremap.svbrdf.textures import load_map_set, read_image
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 FAST = dict(rotations="0:360:2", resolution=48, lights=16, workers=1)

@@ -12,7 +12,7 @@ import pytest
 from matremap.cli import main
 from matremap.formats import read_asset
 from matremap.remap import remap_file
-from matremap.textures import ImageInfo, write_image_like
+from matremap.svbrdf.textures import ImageInfo, write_image_like
 
 needs_mitsuba = pytest.mark.skipif(
     importlib.util.find_spec("mitsuba") is None, reason="Mitsuba 3 not installed: pip install 'matremap[mitsuba]'"
@@ -166,7 +166,7 @@ def test_a_textured_gltf_metal_is_swept_when_asked(tmp_path):
 
 
 def _bpy_available() -> bool:
-    from matremap.renderers.cycles import bpy_available
+    from matremap.renderers.cycles.probe import bpy_available
 
     return bpy_available()
 
@@ -174,7 +174,7 @@ def _bpy_available() -> bool:
 @pytest.mark.skipif(not _bpy_available(), reason="no bpy venv: python3.11 -m venv .venv-bpy && "
                     ".venv-bpy/bin/pip install bpy==5.0.1")
 def test_a_gltf_dielectric_becomes_a_blend_file_fitted_with_real_cycles(tmp_path):
-    from matremap.renderers.cycles import CyclesRenderer
+    from matremap.renderers.cycles.probe import CyclesRenderer
 
     src = gltf(tmp_path / "in", textured=False, metallic=0.0, roughness=0.5, base=(0.6, 0.3, 0.1))
     logs: list[str] = []
@@ -193,8 +193,8 @@ def test_a_gltf_dielectric_becomes_a_blend_file_fitted_with_real_cycles(tmp_path
 
 
 def test_a_glb_written_by_matremap_is_remapped_and_written_back_as_glb(tmp_path):
+    from matremap.core.models import Material
     from matremap.formats import write_asset
-    from matremap.models import Material
 
     (tmp_path / "in").mkdir()
     glb = write_asset(tmp_path / "in" / "copper.glb", Material.create(

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import matremap.renderers.embedded.rough_transmittance as rt
-from matremap.optics import fresnel_dielectric
+from matremap.core.optics import fresnel_dielectric
 from matremap.renderers.embedded import microfacet as mf
 
 # tables are built once per distribution into a throw-away cache directory; phong is only

@@ -3,9 +3,9 @@ import math
 import numpy as np
 import pytest
 
+from matremap.core.models import Material
+from matremap.core.scene import PointLight, Scene
 from matremap.errors import MatremapError
-from matremap.models import Material
-from matremap.scene import PointLight, Scene
 
 
 def test_sphere_fills_the_frame_with_a_small_margin(scene):

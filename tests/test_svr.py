@@ -7,15 +7,15 @@ pytest.importorskip("sklearn")
 
 from sklearn.svm import SVR  # noqa: E402
 
-from matremap.executors import InlineExecutor  # noqa: E402
-from matremap.grid import parse_grid  # noqa: E402
-from matremap.models import Material  # noqa: E402
+from matremap.core.models import Material  # noqa: E402
+from matremap.core.scene import Scene  # noqa: E402
 from matremap.regress import svr  # noqa: E402
 from matremap.regress.data import load_training_data  # noqa: E402
 from matremap.regress.transform import Transform, learn_transform  # noqa: E402
-from matremap.scene import Scene  # noqa: E402
-from matremap.store import SweepStore  # noqa: E402
-from matremap.sweep import SweepConfig, run_sweep  # noqa: E402
+from matremap.sweep.executors import InlineExecutor  # noqa: E402
+from matremap.sweep.grid import parse_grid  # noqa: E402
+from matremap.sweep.run import SweepConfig, run_sweep  # noqa: E402
+from matremap.sweep.store import SweepStore  # noqa: E402
 
 WARD = Material.create("mitsuba06:ward", {"variant": "ward", "diffuseReflectance": 0.0})
 GRID = "alpha=0.05:0.9:8,specularReflectance=0.02:0.25:6"

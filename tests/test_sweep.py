@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from matremap.cli import main
+from matremap.core.models import Material, get_model
 from matremap.errors import MatremapError
-from matremap.executors import InlineExecutor, make_executor
-from matremap.grid import parse_grid
-from matremap.models import Material, get_model
-from matremap.store import SweepStore
-from matremap.sweep import SweepConfig, run_sweep
+from matremap.sweep.executors import InlineExecutor, make_executor
+from matremap.sweep.grid import parse_grid
+from matremap.sweep.run import SweepConfig, run_sweep
+from matremap.sweep.store import SweepStore
 
 SOURCE = Material.create("mitsuba06:ward", {"variant": "ward", "diffuseReflectance": 0.0})
 GRID = "alpha=0.05:0.8:4,specularReflectance=0.02:0.2:3"
@@ -23,7 +23,7 @@ def config(**kw):
     base = dict(source=SOURCE, target="mitsuba06:pbr", fix={"distribution": "as"}, scene=None)
     base.update(kw)
     if base["scene"] is None:
-        from matremap.scene import Scene
+        from matremap.core.scene import Scene
 
         base["scene"] = Scene(resolution=48)
     return SweepConfig(**base)
@@ -99,7 +99,7 @@ def test_a_database_with_another_configuration_is_refused(tmp_path):
     before = db.read_bytes()
     with pytest.raises(MatremapError, match="different configuration .*strategy"):
         run_sweep(config(strategy="simple"), grid, str(db), InlineExecutor())
-    from matremap.scene import Scene
+    from matremap.core.scene import Scene
 
     with pytest.raises(MatremapError, match="scene.resolution"):
         run_sweep(config(scene=Scene(resolution=64)), grid, str(db), InlineExecutor())
@@ -145,8 +145,7 @@ def test_round_trip_fits_back_onto_the_source_model(tmp_path):
 def test_a_failing_point_is_recorded_and_the_sweep_goes_on(tmp_path):
     # Blender's specular_color cannot exceed 1: fitting a bright Ward lobe hits the bound but does not
     # fail; a failure comes from a renderer error, simulated with a model the target renderer lacks
-    from matremap import sweep as sweep_mod
-
+    from matremap.sweep.run import run as sweep_mod
     grid = parse_grid("alpha=0.1:0.2:2", SOURCE.spec)
     real_fit = sweep_mod.fit
     calls = []

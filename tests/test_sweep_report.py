@@ -9,14 +9,14 @@ import sys
 import numpy as np
 import pytest
 
+from matremap.core.models import Material
 from matremap.errors import MatremapError
-from matremap.executors import InlineExecutor
-from matremap.grid import Grid, parse_grid
-from matremap.models import Material
-from matremap.stability import analyse, line_jumps
-from matremap.store import SweepStore, point_key
-from matremap.sweep import SweepConfig, run_sweep
-from matremap.sweep_report import export_table, round_trip_stats, write_report
+from matremap.sweep.executors import InlineExecutor
+from matremap.sweep.grid import Grid, parse_grid
+from matremap.sweep.report import export_table, round_trip_stats, write_report
+from matremap.sweep.run import SweepConfig, run_sweep
+from matremap.sweep.stability import analyse, line_jumps
+from matremap.sweep.store import SweepStore, point_key
 
 PLOTS = ("specular.png", "roughness.png", "loss.png", "roundtrip.png")
 

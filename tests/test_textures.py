@@ -5,7 +5,7 @@ import OpenImageIO as oiio
 import pytest
 
 from matremap.errors import MatremapError
-from matremap.textures import (
+from matremap.svbrdf.textures import (
     ImageInfo,
     MapReader,
     load_map_set,
@@ -219,7 +219,7 @@ def test_rgba_colour_is_not_multiplied_by_alpha(tmp_path):
     """An RGBA PNG's colour comes back as stored (OpenImageIO would premultiply it by alpha)."""
     import OpenImageIO as oiio
 
-    from matremap.textures import read_image
+    from matremap.svbrdf.textures import read_image
 
     path = str(tmp_path / "rgba.png")
     pixels = np.zeros((4, 4, 4), np.uint8)

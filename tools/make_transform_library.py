@@ -1,6 +1,6 @@
 """Regenerate matremap's transform library (src/matremap/transforms/*.json).
 
-Runs every sweep of matremap.library.PAIRS (or the ones named) and learns the forward and reverse
+Runs every sweep of matremap.regress.library.PAIRS (or the ones named) and learns the forward and reverse
 transforms of each. Usage:
 
     python tools/make_transform_library.py                 # all pairs
@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from matremap.library import LIBRARY_DIR, PAIRS, build_pair
+from matremap.regress.library import LIBRARY_DIR, PAIRS, build_pair
 
 
 def main() -> None:

@@ -6,17 +6,17 @@ material appearance", JCGT 8(4), 2019.
 
 __version__ = "0.1.0"
 
-from .errors import MatremapError  # noqa: E402
-from .models import Material, get_model, list_models  # noqa: E402
-from .scene import PointLight, Scene  # noqa: E402
+from matremap.core.models import Material, get_model, list_models  # noqa: E402
+from matremap.core.scene import PointLight, Scene  # noqa: E402
+from matremap.errors import MatremapError  # noqa: E402
 
 
 def fit(*args, **kwargs):  # noqa: D103 - thin lazy wrapper
-    from .fit import fit as _fit
+    from matremap.core.fit import fit as _fit
 
     return _fit(*args, **kwargs)
 
 
-fit.__doc__ = "Uniform remapping; see :func:`matremap.fit.fit`."
+fit.__doc__ = "Uniform remapping; see :func:`matremap.core.fit.fit`."
 
 __all__ = ["Material", "MatremapError", "PointLight", "Scene", "__version__", "fit", "get_model", "list_models"]

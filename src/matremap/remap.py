@@ -6,9 +6,9 @@ sweep -> learn -> convert -> evaluate (paper §4-6):
    value ranges, and two diffuse levels), fitted onto the target model on the probe scene;
 2. a parametric transform learned from it, cached by everything that decides it, so a second run
    with the same maps and models reuses it;
-3. the transform applied to every texel (:func:`matremap.svbrdf.convert`);
+3. the transform applied to every texel (:func:`matremap.svbrdf.convert.convert`);
 4. source and result rendered under an environment map at several rotations and compared with SSIM
-   (:func:`matremap.evaluate.evaluate`), into a self-contained HTML report.
+   (:func:`matremap.svbrdf.evaluate.evaluate`), into a self-contained HTML report.
 """
 
 from __future__ import annotations
@@ -24,13 +24,13 @@ from typing import Any
 
 import numpy as np
 
-from . import __version__
-from .errors import MatremapError
-from .models import Material, get_model
-from .regress import quantities as qty
-from .regress.transform import Transform
-from .scene import Scene
-from .textures import MapSet, load_map_set, map_values, read_image
+from matremap import __version__
+from matremap.core.models import Material, get_model
+from matremap.core.scene import Scene
+from matremap.errors import MatremapError
+from matremap.regress import quantities as qty
+from matremap.regress.transform import Transform
+from matremap.svbrdf.textures import MapSet, load_map_set, map_values, read_image
 
 #: grid points along the roughness and the specular axes of the sweep, and the diffuse levels
 ROUGHNESS_POINTS, SPECULAR_POINTS, DIFFUSE_LEVELS = 10, 6, (0.0, 0.9)
@@ -49,7 +49,7 @@ class RemapResult:
 
 
 def default_cache() -> Path:
-    from .diskcache import cache_dir
+    from matremap.core.diskcache import cache_dir
 
     return cache_dir() / "transforms"
 
@@ -67,7 +67,7 @@ def load_arrays(map_set: MapSet, only: Collection[str] | None = None) -> tuple[d
         params[name] = map_values(spec, name, image, path, 0)
     normal = None
     if map_set.normal is not None and only is None:
-        from .svbrdf_render import decode_normal_map
+        from matremap.renderers.embedded.environment import decode_normal_map
 
         normal = decode_normal_map(read_image(map_set.normal, "linear", colour=False)[0])
     return params, normal
@@ -139,7 +139,7 @@ LIBRARY_MAX_OUTSIDE = 0.01
 def library_transform(map_set: MapSet, params: Mapping[str, Any], target: str, fix: Mapping[str, Any],
                       log: Callable[[str], None]) -> Transform | None:
     """A transform from the shipped library (direct or chained) that covers these maps, or None."""
-    from .library import find_route
+    from matremap.regress.library import find_route
 
     spec = map_set.spec
     held = {name: params[name] for name, _, _ in spec.specialisations if name in params}
@@ -169,15 +169,15 @@ def cached_transform(
     target_renderer: str = "embedded",
 ) -> tuple[Transform, Path, bool]:
     """The transform for these maps and models: from the cache, or swept and learned now."""
-    from .executors import make_executor
-    from .grid import parse_grid
-    from .regress.transform import learn_transform
-    from .sweep import SweepConfig, describe, run_sweep
+    from matremap.regress.transform import learn_transform
+    from matremap.sweep.executors import make_executor
+    from matremap.sweep.grid import parse_grid
+    from matremap.sweep.run import SweepConfig, describe, run_sweep
 
     spec = map_set.spec
     base = Material.create(spec.id, {k: v for k, v in map_set.constants.items() if k not in map_set.maps})
     grid_text = sweep_grid(map_set, params)
-    from .renderers.base import renderer_for
+    from matremap.renderers.base import renderer_for
 
     config = SweepConfig(source=base, target=get_model(target).id, fix=dict(fix), strategy=strategy,
                          scene=scene or Scene(), source_renderer=renderer_for(spec.id),
@@ -219,16 +219,16 @@ def remap(
     ``library``: first look for a route through the shipped transform library (used when the
     default probe, two-stage fits and the embedded renderer are asked for, and when it covers the
     maps' values); otherwise, or when it finds none, sweep and learn (cached)."""
-    from .envmap import resolve
-    from .evaluate import evaluate as run_evaluation
-    from .evaluate import parse_rotations
-    from .svbrdf import convert
+    from matremap.core.envmap import resolve
+    from matremap.svbrdf.convert import convert
+    from matremap.svbrdf.evaluate import evaluate as run_evaluation
+    from matremap.svbrdf.evaluate import parse_rotations
 
     t0 = time.perf_counter()
     seconds: dict[str, float] = {}
     map_set = load_map_set(maps, source_model)
     target = get_model(target_model).id
-    from .renderers.base import renderer_for
+    from matremap.renderers.base import renderer_for
 
     target_renderer = target_renderer or renderer_for(target)
     out = Path(out)
@@ -322,9 +322,9 @@ def remap_file(
     input's name with the target format's suffix). A textured material goes through :func:`remap`
     (``out/source`` holds its maps as matremap reads them, ``out/maps`` the converted ones); a
     uniform one is fitted directly. ``options`` go to :func:`remap`."""
-    from .fit import fit
-    from .formats import format_for, read_asset, write_asset
-    from .renderers.base import renderer_for
+    from matremap.core.fit import fit
+    from matremap.formats import format_for, read_asset, write_asset
+    from matremap.renderers.base import renderer_for
 
     p = Path(path)
     asset = read_asset(p, material)
@@ -365,11 +365,11 @@ def remap_file(
             log(f"warning: {w}")
         log(f"fit: {target} {json.dumps(r.target.to_dict()['params'])}; relative L2 error {r.loss:.4f}")
         out.mkdir(parents=True, exist_ok=True)
-        from .imageio import write_text
+        from matremap.core.imageio import write_text
 
         write_text(out / "material.json", json.dumps(r.target.to_dict(), indent=1) + "\n")
-        from .imageio import write_image
-        from .report import comparison_strip
+        from matremap.core.compare import comparison_strip
+        from matremap.core.imageio import write_image
 
         write_image(out / "compare.png", comparison_strip(r), force=True)  # source | target | difference x10
         log(f"wrote {out / 'compare.png'} (source | target | difference x10 on the probe)")

@@ -5,7 +5,7 @@ speaks, its uniform parameter values in that model's units, and the textures tha
 (a file, the channels to take from it, its colour space, the factor the format multiplies it by).
 :meth:`MaterialAsset.to_map_set` turns the textured parameters into a plain map set (one file per
 parameter, a ``material.json``) that the rest of matremap converts and evaluates; a uniform asset
-is a :class:`~matremap.models.Material`.
+is a :class:`~matremap.core.models.Material`.
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import MatremapError
-from ..models import Material, get_model
+from matremap.core.models import Material, get_model
+from matremap.errors import MatremapError
 
 
 @dataclass(frozen=True)
@@ -85,7 +85,7 @@ class MaterialAsset:
 
         A texture used as it is (all channels, factor 1) is referenced where it lies, not copied.
         """
-        from ..textures import image_info, read_image, write_image_like
+        from matremap.svbrdf.textures import image_info, read_image, write_image_like
 
         if not self.textures:
             raise MatremapError(f"{self.path}: material {self.name!r} has no textures; use it as a uniform material")

@@ -1,9 +1,9 @@
 """Blender .blend output: a converted material as Cycles nodes on a sphere, written by Blender itself.
 
-``write(out, result, source=None, force=False)`` takes a uniform :class:`~matremap.models.Material`
-or a :class:`~matremap.textures.MapSet` of converted maps of ``cycles:principled``,
+``write(out, result, source=None, force=False)`` takes a uniform :class:`~matremap.core.models.Material`
+or a :class:`~matremap.svbrdf.textures.MapSet` of converted maps of ``cycles:principled``,
 ``cycles:glossy`` or ``cycles:diffuse`` and asks the bpy worker of
-:class:`~matremap.renderers.cycles.CyclesRenderer` (request ``{"op": "write_blend"}``, see
+:class:`~matremap.renderers.cycles.probe.CyclesRenderer` (request ``{"op": "write_blend"}``, see
 ``cycles_worker.py``) to build and save the file; it needs the bpy venv (docs/cycles.md).
 
 The file holds:
@@ -23,7 +23,7 @@ The file holds:
   UV map; matremap's convention, x along u and y up the image, is Blender's) feeding every BSDF's
   Normal;
 * the object ``sphere``: a smooth 128 x 64 UV sphere of the probe scene's radius with its pole
-  along +y and matremap's UVs (as in :mod:`matremap.renderers.cycles_svbrdf`), and the probe camera
+  along +y and matremap's UVs (as in :mod:`matremap.renderers.cycles.environment`), and the probe camera
   on +z, so that a render from the file's camera frames the sphere as matremap's renders do.
 
 Writing is atomic (Blender saves under a temporary name beside ``out``, which then replaces it);
@@ -38,10 +38,10 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import MatremapError
-from ..imageio import atomic_output, check_output
-from ..models import Material, get_model
-from ..scene import Scene
+from matremap.core.imageio import atomic_output, check_output
+from matremap.core.models import Material, get_model
+from matremap.core.scene import Scene
+from matremap.errors import MatremapError
 
 #: models this writer knows the Blender nodes of
 MODELS = ("cycles:principled", "cycles:glossy", "cycles:diffuse")
@@ -64,7 +64,7 @@ def _colorspace(spec, name: str, colorspace: str) -> str:
 
 
 def _request(out_tmp: str, result: Any, source: Any, out: Path) -> dict[str, Any]:
-    from ..textures import MapSet
+    from matremap.svbrdf.textures import MapSet
 
     if isinstance(result, Material):
         spec = get_model(result.model)
@@ -115,9 +115,9 @@ def _request(out_tmp: str, result: Any, source: Any, out: Path) -> dict[str, Any
 def write(out: str | os.PathLike, result: Any, source: Any = None, force: bool = False,
           renderer: Any = None) -> Path:
     """Write ``result`` (a ``cycles:*`` Material or MapSet) as a .blend at ``out``; returns its path.
-    ``renderer``: the :class:`~matremap.renderers.cycles.CyclesRenderer` whose worker writes (default:
-    the one shared with :mod:`matremap.renderers.cycles_svbrdf`)."""
-    from ..renderers.cycles_svbrdf import _renderer
+    ``renderer``: the :class:`~matremap.renderers.cycles.probe.CyclesRenderer` whose worker writes (default:
+    the one shared with :mod:`matremap.renderers.cycles.environment`)."""
+    from matremap.renderers.cycles.environment import _renderer
 
     p = check_output(out, force, (".blend",))
     r = _renderer(renderer)  # raises with the set-up instructions when there is no bpy venv

@@ -17,7 +17,7 @@ extension READMEs:
 * KHR_materials_ior (``ior``, default 1.5) and KHR_materials_specular (``specularFactor`` and the
   alpha channel of ``specularTexture``; ``specularColorFactor`` and the sRGB RGB of
   ``specularColorTexture``), which the dialect in
-  :mod:`matremap.renderers.embedded.dialects.gltf` evaluates.
+  :mod:`matremap.renderers.embedded.evaluators.gltf` evaluates.
 
 A reader picks one material and returns a :class:`~matremap.formats.asset.MaterialAsset` whose
 ``document`` is a :class:`GltfDocument` (the parsed JSON and, for a ``.glb``, its BIN chunk).
@@ -45,10 +45,10 @@ from urllib.parse import quote, unquote, unquote_to_bytes
 
 import numpy as np
 
-from ..errors import MatremapError
-from ..imageio import atomic_output, check_output, linear_to_srgb
-from ..models import Material, get_model
-from .asset import MaterialAsset, TextureRef
+from matremap.core.imageio import atomic_output, check_output, linear_to_srgb
+from matremap.core.models import Material, get_model
+from matremap.errors import MatremapError
+from matremap.formats.asset import MaterialAsset, TextureRef
 
 MODEL = "gltf:metal-rough"
 IOR = "KHR_materials_ior"
@@ -374,7 +374,7 @@ def read(path: str | os.PathLike, material: str | int | None = None) -> Material
             notes.append(f"{slot} uses texCoord {info['texCoord']}; the map is taken as it is (UV set ignored)")
         if "KHR_texture_transform" in (info.get("extensions") or {}):
             notes.append(f"{slot}: KHR_texture_transform ignored; the map is taken untransformed")
-        from ..textures import image_info
+        from matremap.svbrdf.textures import image_info
 
         return f, image_info(f, "linear", colour=False).channels
 
@@ -444,8 +444,8 @@ def read(path: str | os.PathLike, material: str | int | None = None) -> Material
 
 def _result_values(result: Any) -> tuple[dict[str, Any], dict[str, np.ndarray], Path | None, list[Path]]:
     """(constants, maps as linear float arrays, normal map file, input files) of a Material or MapSet."""
-    from ..regress.quantities import material_values
-    from ..textures import MapSet, read_image
+    from matremap.regress.quantities import material_values
+    from matremap.svbrdf.textures import MapSet, read_image
 
     if isinstance(result, Material):
         model = result.model
@@ -483,7 +483,7 @@ def _result_values(result: Any) -> tuple[dict[str, Any], dict[str, np.ndarray], 
 
 def _png(array: np.ndarray) -> bytes:
     """8-bit PNG bytes of a uint8 array [H, W, C]."""
-    from ..imageio import png_bytes
+    from matremap.core.imageio import png_bytes
 
     return png_bytes(array)
 
@@ -664,7 +664,7 @@ def write(out: str | os.PathLike, result: Any, source: MaterialAsset | None = No
         if nsuffix in (".png", ".jpg", ".jpeg"):
             ndata, nmime = Path(normal).read_bytes(), "image/png" if nsuffix == ".png" else "image/jpeg"
         else:
-            from ..textures import read_image
+            from matremap.svbrdf.textures import read_image
 
             nimg, _ = read_image(normal, "linear", colour=False)
             ndata, nmime = _png(_code(nimg[..., :3], False)), "image/png"

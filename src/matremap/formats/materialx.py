@@ -52,11 +52,11 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import MatremapError
-from ..imageio import atomic_output, check_output
-from ..models import Material, get_model
-from .asset import MaterialAsset, TextureRef
-from .mitsuba_xml import _check_targets, _map_dest, _split, place_map
+from matremap.core.imageio import atomic_output, check_output
+from matremap.core.models import Material, get_model
+from matremap.errors import MatremapError
+from matremap.formats.asset import MaterialAsset, TextureRef
+from matremap.formats.mitsuba_xml import _check_targets, _map_dest, _split, place_map
 
 FORMAT = "mtlx"
 MODEL = "gltf:metal-rough"
@@ -427,7 +427,7 @@ def write(out: str | Path, result: Any, source: MaterialAsset | None = None, for
     m, maps, cs, normal = _split(result, "the MaterialX writer", (MODEL,))
     check_output(out, force, (".mtlx",))
     _check_targets(out, [*maps, *(["normal"] if normal else [])], force)
-    from ..textures import image_info
+    from matremap.svbrdf.textures import image_info
 
     name = "material"
     if source is not None and re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", source.name or ""):

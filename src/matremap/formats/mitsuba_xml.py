@@ -37,7 +37,7 @@ image (``sample_visible``, a texture's filter and wrap mode) are noted.
 BSDF ``material`` (inside a ``normalmap`` wrapper when the map set has a normal map), its maps
 copied beside the XML as ``bitmap`` textures (``raw`` for data maps; files converted to linear
 EXR where their encoding is not what Mitsuba would assume), and the probe sphere of
-:mod:`matremap.scene` (radius 2, turned so that Mitsuba's UVs are matremap's) under a constant
+:mod:`matremap.core.scene` (radius 2, turned so that Mitsuba's UVs are matremap's) under a constant
 white environment, seen by the probe camera; ``$spp``, ``$resolution`` and ``$max_depth`` are
 ``<default>`` parameters, so ``mitsuba file.xml`` or ``mi.load_file(file)`` renders it as it is.
 """
@@ -54,10 +54,10 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import MatremapError
-from ..imageio import atomic_output, check_output
-from ..models import Material, get_model
-from .asset import MaterialAsset, TextureRef
+from matremap.core.imageio import atomic_output, check_output
+from matremap.core.models import Material, get_model
+from matremap.errors import MatremapError
+from matremap.formats.asset import MaterialAsset, TextureRef
 
 FORMAT = "mitsuba-xml"
 
@@ -245,7 +245,7 @@ class _Reader:
         return el, normal
 
     def texture(self, el: ET.Element, param: str, colour: bool) -> TextureRef:
-        from ..textures import image_info
+        from matremap.svbrdf.textures import image_info
 
         kind = el.get("type")
         what = f"texture for {param}"
@@ -496,7 +496,7 @@ def place_map(src: Path, dest_stem: Path, keep: bool, colorspace: str, channels:
     """Put map ``src`` at ``dest_stem`` + suffix: copied as it is when ``keep`` (and it is a PNG or
     EXR with the right channel count), else converted to a linear float EXR (decoded with
     ``colorspace``; ``channels`` 1 keeps the first channel). Written atomically; returns the file."""
-    from ..textures import image_info, read_image, write_image_like
+    from matremap.svbrdf.textures import image_info, read_image, write_image_like
 
     info = image_info(src, colorspace)
     if keep and info.format in ("png", "exr") and (channels is None or info.channels == channels):
@@ -522,7 +522,7 @@ def place_map(src: Path, dest_stem: Path, keep: bool, colorspace: str, channels:
 def _split(result: Any, what: str, models: tuple[str, ...]) -> tuple[Material, dict[str, Path], dict[str, str],
                                                                          Path | None]:
     """(material with the uniform values, maps, their colour spaces, normal map) of a Material or MapSet."""
-    from ..textures import MapSet
+    from matremap.svbrdf.textures import MapSet
 
     if isinstance(result, Material):
         if result.model not in models:
@@ -549,7 +549,7 @@ def _split(result: Any, what: str, models: tuple[str, ...]) -> tuple[Material, d
 
 
 def _default_cs(path: Path, colour: bool) -> str:
-    from ..textures import image_info
+    from matremap.svbrdf.textures import image_info
 
     return image_info(path, colour=colour).colorspace
 
@@ -617,7 +617,7 @@ def _bitmap(name: str, filename: str, raw: bool) -> ET.Element:
 
 def _probe_scene(bsdf: ET.Element) -> ET.Element:
     """The scene around the BSDF: probe sphere, probe camera, constant white environment."""
-    from ..scene import Scene
+    from matremap.core.scene import Scene
 
     probe = Scene()
     scene = ET.Element("scene", {"version": "3.0.0"})
@@ -669,7 +669,7 @@ def write(out: str | Path, result: Any, source: MaterialAsset | None = None, for
         if name in ("eta", "k") and m.options.get("material") != "custom":
             raise MatremapError(f"{spec.id}: a map for {name} needs material=custom")
     _check_targets(out, [*maps, *(["normal"] if normal else [])], force)
-    from ..textures import image_info
+    from matremap.svbrdf.textures import image_info
 
     written: list[Path] = []
     try:

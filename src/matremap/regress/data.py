@@ -8,10 +8,10 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import MatremapError
-from ..models import Material, ModelSpec, get_model
-from ..store import SweepStore
-from . import quantities as qty
+from matremap.core.models import Material, ModelSpec, get_model
+from matremap.errors import MatremapError
+from matremap.regress import quantities as qty
+from matremap.sweep.store import SweepStore
 
 
 @dataclass
@@ -47,9 +47,9 @@ def _values(spec: ModelSpec, params: list[dict[str, Any]]) -> dict[str, np.ndarr
 def load_training_data(db: str | Path, reverse: bool = False, exclude_flagged: bool = True) -> TrainingData:
     """Rows of a sweep database as quantities. ``reverse`` swaps source and target (learning the
     way back); ``exclude_flagged`` leaves out points the stability analysis flags."""
-    from ..grid import Grid
-    from ..stability import analyse
-    from ..sweep import SweepConfig
+    from matremap.sweep.grid import Grid
+    from matremap.sweep.run import SweepConfig
+    from matremap.sweep.stability import analyse
 
     with SweepStore.open(db) as store:
         rows = store.rows()

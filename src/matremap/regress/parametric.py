@@ -17,8 +17,8 @@ from typing import Any
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..errors import MatremapError
-from .data import TrainingData
+from matremap.errors import MatremapError
+from matremap.regress.data import TrainingData
 
 MAX_DEGREE = 4
 MIN_POINTS = 6

@@ -19,9 +19,9 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import MatremapError
-from ..models import Material, ModelSpec, ParamSpec
-from ..optics import dielectric_f0, f0_from_ior, ior_from_f0
+from matremap.core.models import Material, ModelSpec, ParamSpec
+from matremap.core.optics import dielectric_f0, f0_from_ior, ior_from_f0
+from matremap.errors import MatremapError
 
 QUANTITIES = ("roughness", "reflectance", "diffuse")
 

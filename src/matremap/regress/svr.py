@@ -21,8 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import MatremapError
-from .data import TrainingData
+from matremap.errors import MatremapError
+from matremap.regress.data import TrainingData
 
 MIN_POINTS = 6
 #: most training points (after pooling channels and dropping duplicates) an SVR is fitted on

@@ -24,10 +24,10 @@ from typing import Any
 
 import numpy as np
 
-from .. import __version__
-from ..errors import MatremapError
-from ..models import get_model
-from . import quantities as qty
+from matremap import __version__
+from matremap.core.models import get_model
+from matremap.errors import MatremapError
+from matremap.regress import quantities as qty
 
 SCHEMA = "matremap.transform/1"
 METHODS = ("parametric", "svr", "chain")
@@ -72,7 +72,7 @@ class Transform:
         return d
 
     def save(self, path: str | Path, force: bool = False) -> Path:
-        from ..imageio import check_output, write_text
+        from matremap.core.imageio import check_output, write_text
 
         p = check_output(path, force, (".json",))
         write_text(p, json.dumps(self.to_dict(), indent=1) + "\n")
@@ -121,7 +121,7 @@ class Transform:
 
     @classmethod
     def load(cls, path: str | Path) -> Transform:
-        from ..documents import read_document
+        from matremap.core.documents import read_document
 
         return cls.from_dict(read_document(path, "transform"), str(path))
 
@@ -285,10 +285,10 @@ def _shape(spec, arrays: Mapping[str, np.ndarray]) -> tuple[int, ...]:
 
 def _evaluate(method: str, mapping: dict[str, Any], x: dict[str, np.ndarray]) -> np.ndarray:
     if mapping["kind"] == "svr":
-        from .svr import evaluate as svr_evaluate
+        from matremap.regress.svr import evaluate as svr_evaluate
 
         return svr_evaluate(mapping, x)
-    from .parametric import evaluate
+    from matremap.regress.parametric import evaluate
 
     return evaluate(mapping, x)
 
@@ -297,7 +297,7 @@ def _evaluate(method: str, mapping: dict[str, Any], x: dict[str, np.ndarray]) ->
 def learn_transform(db: str | Path, method: str = "parametric", reverse: bool = False, holdout: float = 0.2,
                     seed: int = 0, exclude_flagged: bool = True) -> Transform:
     """Learn a transform from a sweep database (``reverse``: the target -> source direction)."""
-    from .data import load_training_data
+    from matremap.regress.data import load_training_data
 
     if method not in ("parametric", "svr"):
         raise MatremapError(f"unknown method {method!r}; choose parametric or svr")
@@ -308,9 +308,9 @@ def learn_transform(db: str | Path, method: str = "parametric", reverse: bool = 
 def transform_from_data(data: Any, method: str = "parametric", holdout: float = 0.2, seed: int = 0) -> Transform:
     """Learn a transform from training data in memory (:class:`.data.TrainingData`, e.g. a subset)."""
     if method == "parametric":
-        from .parametric import learn
+        from matremap.regress.parametric import learn
     elif method == "svr":
-        from .svr import learn
+        from matremap.regress.svr import learn
     else:
         raise MatremapError(f"unknown method {method!r}; choose parametric or svr")
     mappings = learn(data, holdout=holdout, seed=seed)

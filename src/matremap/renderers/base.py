@@ -1,6 +1,6 @@
 """The renderer protocol, and the registry of renderer backends.
 
-A renderer turns a batch of materials and a :class:`~matremap.scene.Scene` into linear HDR RGB
+A renderer turns a batch of materials and a :class:`~matremap.core.scene.Scene` into linear HDR RGB
 images, float32 ``[N, H, W, 3]``. The fitter only ever calls :meth:`Renderer.render`: a renderer
 is a black box, and a new one is a module implementing this protocol.
 """
@@ -13,9 +13,9 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from ..errors import MatremapError
-from ..models import Material
-from ..scene import Scene
+from matremap.core.models import Material
+from matremap.core.scene import Scene
+from matremap.errors import MatremapError
 
 
 @runtime_checkable
@@ -82,15 +82,15 @@ def check_supported(renderer: Renderer, materials: Sequence[Material]) -> None:
 
 def _load_builtin() -> None:
     if "embedded" not in _FACTORIES:
-        from .embedded import EmbeddedRenderer
+        from matremap.renderers.embedded import EmbeddedRenderer
 
         register_renderer("embedded", EmbeddedRenderer)
     if "mitsuba3" not in _FACTORIES:
-        from .mitsuba3 import Mitsuba3Renderer  # imports Mitsuba itself only when first used
+        from matremap.renderers.mitsuba3.probe import Mitsuba3Renderer  # imports Mitsuba itself only when first used
 
         register_renderer("mitsuba3", Mitsuba3Renderer)
     if "cycles" not in _FACTORIES:
-        from .cycles import CyclesRenderer  # bpy runs in a worker process of its own venv
+        from matremap.renderers.cycles.probe import CyclesRenderer  # bpy runs in a worker process of its own venv
 
         register_renderer("cycles", CyclesRenderer)
 

@@ -68,9 +68,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ...diskcache import cache_dir, save_tables
-from ...optics import fresnel_dielectric
-from .microfacet import ALPHA_MIN, g1_beckmann_rational, g1_ggx, phong_exponent
+from matremap.core.diskcache import cache_dir, save_tables
+from matremap.core.optics import fresnel_dielectric
+from matremap.renderers.embedded.microfacet import ALPHA_MIN, g1_beckmann_rational, g1_ggx, phong_exponent
 
 __all__ = [
     "ALPHA_MAX",

@@ -1,0 +1,3 @@
+from matremap.cli import main
+
+raise SystemExit(main())

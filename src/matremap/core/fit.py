@@ -1,0 +1,490 @@
+"""Uniform remapping: fit a target model's parameters so that its render matches a source render.
+
+Sztrajman et al. 2019, §3: render the probe scene with the source material, then minimise the
+L2 difference of linear HDR images over the target's parameters with SciPy's trust-region
+reflective least squares (``least_squares(method="trf")``) inside the parameter bounds. The
+target renderer is a black box; the Jacobian is taken by forward differences, all columns in one
+batched render.
+
+Strategies:
+
+``simple``       all free parameters at once against the full render;
+``two-stage``    diffuse parameters against the diffuse-only render and specular parameters
+                 (roles specular, roughness, fresnel) against the specular-only render, merged
+                 (the robust default);
+``three-stage``  two-stage, then all parameters jointly from that start.
+
+The loss reported is the relative RMSE over sphere pixels, ||t - s|| / ||s||.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from matremap.core.calibrate import irradiance_scale
+from matremap.core.models import SPECULAR_ROLES, Material, ModelSpec, ParamSpec, get_model
+from matremap.core.scene import Scene
+from matremap.errors import MatremapError
+from matremap.renderers.base import Renderer, get_renderer, render_pixels
+
+STRATEGIES = ("simple", "two-stage", "three-stage")
+DIFFUSE, SPECULAR, FULL = "diffuse", "specular", "full"
+
+#: relative forward-difference step (images are float32, so well above sqrt(eps64))
+FD_STEP = 1e-4
+#: a source part whose energy is below this fraction of the full render counts as absent
+ABSENT = 1e-9
+#: a relative RMSE this small is float32 round-off: the images match
+EXACT = 1e-6
+#: cap on residual evaluations per stage (a converging fit needs 3-10; more means it is lost)
+MAX_EVALUATIONS = 50
+#: least_squares ftol / xtol / gtol
+FIT_TOL = 1e-4
+
+
+@dataclass
+class StageReport:
+    name: str
+    params: list[str]
+    start: dict[str, Any]
+    result: dict[str, Any]
+    loss: float
+    renders: int
+    evaluations: int
+    seconds: float
+    message: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return dict(self.__dict__)
+
+
+@dataclass
+class FitResult:
+    source: Material
+    target: Material
+    strategy: str
+    loss: float
+    renders: int
+    seconds: float
+    irradiance_scale: float
+    scene: Scene
+    source_renderer: str
+    target_renderer: str
+    stages: list[StageReport] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def params(self) -> dict[str, Any]:
+        return self.target.to_dict()["params"]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "model": self.target.model,
+            "params": self.params,
+            "loss": self.loss,
+            "renders": self.renders,
+            "seconds": self.seconds,
+            "strategy": self.strategy,
+            "irradiance_scale": self.irradiance_scale,
+            "source": self.source.to_dict(),
+            "scene": self.scene.to_dict(),
+            "renderers": {"source": self.source_renderer, "target": self.target_renderer},
+            "stages": [s.to_dict() for s in self.stages],
+            "warnings": list(self.warnings),
+        }
+
+
+class _Counter:
+    """Renders through a renderer and counts every image made."""
+
+    def __init__(self, scene: Scene) -> None:
+        self.scene = scene
+        self.indices = scene.pixel_indices()
+        self.images = 0
+
+    def pixels(self, renderer: Renderer, materials: Sequence[Material]) -> np.ndarray:
+        """Sphere pixels [N, P, 3] as float64."""
+        self.images += len(materials)
+        return render_pixels(renderer, list(materials), self.scene).astype(np.float64)
+
+    def images_of(self, renderer: Renderer, materials: Sequence[Material]) -> np.ndarray:
+        self.images += len(materials)
+        return renderer.render(list(materials), self.scene)
+
+
+def part(material: Material, which: str) -> Material | None:
+    """The material restricted to its diffuse or specular part (None if it has no such part)."""
+    if which == FULL:
+        return material
+    overrides = material.spec.part_overrides(which, material.values)
+    if overrides is None:
+        return None
+    values = dict(material.values)
+    for name, v in overrides.items():
+        values[name] = np.full_like(values[name], v)
+    return Material(material.model, values, material.options)
+
+
+class _Problem:
+    """Least-squares problem over the free parameters of a target template.
+
+    In ``grey`` mode (the source image has equal RGB channels and every target value is grey)
+    each RGB parameter is one grey variable and only the first image channel is compared: the
+    same optimum at a fraction of the cost.
+    """
+
+    def __init__(
+        self,
+        template: Material,
+        free: Sequence[ParamSpec],
+        which: str,
+        goal: np.ndarray,
+        renderer: Renderer,
+        counter: _Counter,
+        grey: bool = False,
+    ) -> None:
+        self.template = template
+        self.free = list(free)
+        self.which = which
+        self.grey = grey
+        self.goal = goal[:, :1] if grey else goal
+        self.norm = float(np.linalg.norm(self.goal))
+        self.renderer = renderer
+        self.counter = counter
+        self.width = [1 if grey else p.channels for p in self.free]
+        self.slices: list[slice] = []
+        i = 0
+        for w in self.width:
+            self.slices.append(slice(i, i + w))
+            i += w
+        self.size = i
+        lo, hi = [], []
+        for p, w in zip(self.free, self.width, strict=True):
+            a, b = p.bounds
+            if p.log:
+                a, b = np.log(max(a, 1e-300)), np.log(b)
+            lo += [a] * w
+            hi += [b] * w
+        self.lower, self.upper = np.array(lo), np.array(hi)
+        self._last: tuple[np.ndarray, np.ndarray] | None = None
+        self.evaluations = 0
+
+    def encode(self, m: Material) -> np.ndarray:
+        parts = []
+        for p, w in zip(self.free, self.width, strict=True):
+            v = m.values[p.name]
+            v = np.array([v.mean()]) if w < p.channels else v
+            parts.append(np.log(np.maximum(v, 1e-300)) if p.log else v)
+        return np.clip(np.concatenate(parts), self.lower, self.upper)
+
+    def decode(self, x: np.ndarray) -> Material:
+        values = dict(self.template.values)
+        for p, s in zip(self.free, self.slices, strict=True):
+            v = np.exp(x[s]) if p.log else x[s]
+            values[p.name] = np.broadcast_to(np.clip(v, *p.bounds), (p.channels,)).copy()
+        return Material(self.template.model, values, self.template.options)
+
+    def _pixels(self, xs: Sequence[np.ndarray]) -> np.ndarray:
+        mats = [part(self.decode(x), self.which) for x in xs]
+        pix = self.counter.pixels(self.renderer, mats)
+        return pix[:, :, :1] if self.grey else pix
+
+    def residual(self, x: np.ndarray) -> np.ndarray:
+        if self._last is not None and np.array_equal(self._last[0], x):
+            return self._last[1]
+        self.evaluations += 1
+        r = ((self._pixels([x])[0] - self.goal) / self.norm).ravel()
+        self._last = (x.copy(), r)
+        return r
+
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
+        if self._last is not None and np.array_equal(self._last[0], x):
+            r0 = self._last[1]
+        else:
+            r0 = self.residual(x)
+        # one perturbed render per scalar variable; one per RGB parameter when the model's
+        # channels are independent (channel c of the image depends on channel c only)
+        separable = self.template.spec.channel_separable
+        columns: list[tuple[np.ndarray, list[int], np.ndarray]] = []
+        for p, s in zip(self.free, self.slices, strict=True):
+            idx = list(range(s.start, s.stop))
+            groups = [idx] if (separable and len(idx) == 3) else [[i] for i in idx]
+            for g in groups:
+                h = FD_STEP * np.maximum(np.abs(x[g]), 1.0 if p.log else 1e-2)
+                h = np.where(x[g] + h > self.upper[g], -h, h)
+                xp = x.copy()
+                xp[g] += h
+                columns.append((xp, g, h))
+        pix = self._pixels([c[0] for c in columns])
+        jac = np.zeros((r0.size, self.size))
+        for (_, g, h), img in zip(columns, pix, strict=True):
+            diff = ((img - self.goal) / self.norm).ravel() - r0
+            if len(g) == 1:
+                jac[:, g[0]] = diff / h[0]
+            else:  # an RGB parameter perturbed at once: channel k of the image is its column k
+                for k, var in enumerate(g):
+                    jac[k::3, var] = diff[k::3] / h[k]
+        return jac
+
+    def initial_guess(self, x0: np.ndarray) -> np.ndarray:
+        """A start near the optimum, from one batched render: a few values of the first roughness
+        parameter are tried, and the parameters the image scales with (albedos, F0) are multiplied
+        by the least-squares intensity ratio of the best candidate."""
+        rough = next((i for i, p in enumerate(self.free) if p.role == "roughness"), None)
+        linear = [i for i, p in enumerate(self.free) if p.scales_image]
+        candidates = [x0] if rough is None else []
+        if rough is not None:
+            p, sl = self.free[rough], self.slices[rough]
+            for v in roughness_candidates(p):
+                xc = x0.copy()
+                xc[sl] = np.log(v) if p.log else v
+                candidates.append(xc)
+        if rough is None and not linear:
+            return x0
+        best, best_err, best_k = x0, np.inf, 1.0
+        for xc, img in zip(candidates, self._pixels(candidates), strict=True):
+            tt = float(np.sum(img * img))
+            k = float(np.sum(img * self.goal)) / tt if (linear and tt > 0) else 1.0
+            k = k if k > 0 else 1.0
+            err = float(np.sum((k * img - self.goal) ** 2))
+            if err < best_err:
+                best, best_err, best_k = xc, err, k
+        x = best.copy()
+        for i in linear:
+            sl, p = self.slices[i], self.free[i]
+            x[sl] = x[sl] + np.log(best_k) if p.log else x[sl] * best_k
+        return np.clip(x, self.lower, self.upper)
+
+    def solve(self, start: Material, coarse: bool = True) -> tuple[Material, Any]:
+        x0 = self.encode(start)
+        # a start on a bound (e.g. a diffuse albedo of 0) stalls the trust region: move inside
+        span = np.minimum(self.upper - self.lower, 1.0)
+        x0 = np.where((x0 <= self.lower) | (x0 >= self.upper), self.lower + 0.5 * span, x0)
+        if coarse:
+            x0 = self.initial_guess(x0)
+            x0 = np.where((x0 <= self.lower) | (x0 >= self.upper), self.lower + 0.5 * span, x0)
+            # the start may already match to float32 precision (e.g. one Lambertian onto another):
+            # nothing left to descend
+            r0 = self.residual(x0)
+            if float(np.sqrt(r0 @ r0)) < EXACT:
+                return self.decode(x0), _Solved(x0, 0.5 * float(r0 @ r0), "the start matches the source exactly")
+        sol = least_squares(
+            self.residual,
+            x0,
+            jac=self.jacobian,
+            bounds=(self.lower, self.upper),
+            method="trf",
+            x_scale="jac",
+            ftol=FIT_TOL,
+            xtol=FIT_TOL,
+            gtol=FIT_TOL,
+            max_nfev=MAX_EVALUATIONS,
+        )
+        return self.decode(sol.x), sol
+
+
+@dataclass
+class _Solved:
+    """The part of scipy's OptimizeResult a stage reads, for a stage finished without descent."""
+
+    x: np.ndarray
+    cost: float
+    message: str
+
+
+def roughness_candidates(p: ParamSpec, count: int = 5) -> np.ndarray:
+    """Values tried for a roughness parameter before the least-squares descent: geometric steps
+    over the parameter's range (an exponent's range is capped at [1, 1e4])."""
+    lo, hi = p.bounds
+    if p.log:
+        lo, hi = max(lo, 1.0), min(hi, 1e4)
+    else:
+        lo, hi = max(lo, 0.03 * hi), 0.9 * hi
+    return np.geomspace(lo, hi, count)
+
+
+def is_grey(pixels: np.ndarray) -> bool:
+    """Whether an image's three channels are equal (to float32 precision)."""
+    scale = float(np.max(np.abs(pixels))) or 1.0
+    return bool(np.max(np.abs(pixels - pixels[:, :1])) <= 1e-6 * scale)
+
+
+def _values_dict(m: Material, names: Sequence[str]) -> dict[str, Any]:
+    d = m.to_dict()["params"]
+    return {n: d[n] for n in names}
+
+
+def target_template(spec: ModelSpec, fix: Mapping[str, Any] | None) -> tuple[Material, list[ParamSpec]]:
+    """Target material to start from (defaults, ``fit_value`` for held parameters, then ``fix``)
+    and the parameters a fit adjusts."""
+    held = {p.name: p.fit_value for p in spec.params if not p.fit and p.fit_value is not None}
+    template = Material.create(spec.id).with_params(held).with_params(dict(fix or {}))
+    spec = spec.specialise(template.values)  # e.g. a metal's base colour is its specular colour
+    fixed = set(fix or {})
+    free = [p for p in spec.params if p.fit and p.name not in fixed]
+    return template, free
+
+
+def fit(
+    source: Material,
+    target_model: str | ModelSpec,
+    strategy: str = "two-stage",
+    scene: Scene | None = None,
+    source_renderer: str | Renderer | None = None,
+    target_renderer: str | Renderer | None = None,
+    *,
+    fix: Mapping[str, Any] | None = None,
+    free: Sequence[str] = (),
+    start: Mapping[str, Any] | None = None,
+    coarse: bool | None = None,
+) -> FitResult:
+    """Remap a uniform ``source`` material onto ``target_model`` (see the module docstring).
+
+    ``fix`` sets target options or holds parameters at given values; ``free`` also fits parameters
+    that are held by default (e.g. ``eta`` of a conductor); ``start`` gives starting values (a warm
+    start). ``coarse`` (default: only without ``start``) tries a few roughness values and an
+    intensity ratio in one batched render before the descent.
+    """
+    t0 = time.perf_counter()
+    if strategy not in STRATEGIES:
+        raise MatremapError(f"unknown strategy {strategy!r}; choose one of {', '.join(STRATEGIES)}")
+    spec = target_model if isinstance(target_model, ModelSpec) else get_model(target_model)
+    scene = scene or Scene()
+    src_r, tgt_r = get_renderer(source_renderer), get_renderer(target_renderer)
+    for r, model in ((src_r, source.model), (tgt_r, spec.id)):
+        if not r.supports(model):
+            raise MatremapError(f"renderer {r.name!r} cannot render model {model}")
+    template, free_params = target_template(spec, fix)
+    spec = spec.specialise(template.values)
+    for name in free:
+        p = spec.param(name)
+        if p.name in (fix or {}):
+            raise MatremapError(f"{name} is both fixed and freed; drop one of --fix {name}=... / --free {name}")
+        if p not in free_params:
+            free_params.append(p)
+    if start:
+        template = template.with_params({k: v for k, v in start.items() if k not in (fix or {})})
+    if coarse is None:
+        coarse = not start
+    if not free_params:
+        raise MatremapError(f"nothing to fit: every parameter of {spec.id} is fixed")
+
+    counter = _Counter(scene)
+    scale = irradiance_scale(
+        source, src_r, spec.id, tgt_r, scene, render=lambda r, ms: counter.images_of(r, ms)
+    )
+
+    which = [FULL] if strategy == "simple" else [DIFFUSE, SPECULAR, FULL]
+    src_parts = [part(source, w) for w in which]
+    rendered = counter.pixels(src_r, [m for m in src_parts if m is not None])
+    goals: dict[str, np.ndarray] = {}
+    it = iter(rendered)
+    for w, m in zip(which, src_parts, strict=True):
+        goals[w] = scale * next(it) if m is not None else np.zeros((counter.indices.size, 3))
+
+    warnings = _check_resolution(goals[SPECULAR if strategy != "simple" else FULL], scene)
+    stages: list[StageReport] = []
+    current = template
+    if strategy in ("two-stage", "three-stage"):
+        total = float(np.sum(goals[FULL] ** 2)) or 1.0
+        diffuse_free = [p for p in free_params if p.role == "diffuse"]
+        specular_free = [p for p in free_params if p.role in SPECULAR_ROLES]
+        for which_part, params in ((DIFFUSE, diffuse_free), (SPECULAR, specular_free)):
+            current = _run_stage(
+                which_part, params, current, goals[which_part], total, tgt_r, counter, stages, coarse=coarse
+            )
+    if strategy in ("simple", "three-stage"):
+        name = "joint" if strategy == "three-stage" else FULL
+        current = _run_stage(
+            FULL, free_params, current, goals[FULL], 1.0, tgt_r, counter, stages, name=name,
+            coarse=coarse and strategy == "simple",
+        )
+
+    final = counter.pixels(tgt_r, [current])[0]
+    goal = goals[FULL]
+    norm = float(np.linalg.norm(goal))
+    loss = float(np.linalg.norm(final - goal) / norm) if norm > 0 else float(np.linalg.norm(final))
+    return FitResult(
+        source=source,
+        target=current,
+        strategy=strategy,
+        loss=loss,
+        renders=counter.images,
+        seconds=time.perf_counter() - t0,
+        irradiance_scale=scale,
+        scene=scene,
+        source_renderer=src_r.name,
+        target_renderer=tgt_r.name,
+        stages=stages,
+        warnings=warnings,
+    )
+
+
+#: a highlight must cover at least this many pixels (above half its peak, a 3x3 block) to be fitted
+MIN_HIGHLIGHT_PIXELS = 9
+
+
+def _check_resolution(specular: np.ndarray, scene: Scene) -> list[str]:
+    """Warn when the source highlight is too small for the image to resolve it."""
+    luminance = specular.sum(axis=1)
+    peak = float(luminance.max()) if luminance.size else 0.0
+    if peak <= 0:
+        return []
+    covered = int(np.count_nonzero(luminance >= 0.5 * peak))
+    if covered >= MIN_HIGHLIGHT_PIXELS:
+        return []
+    return [
+        f"the source highlight covers {covered} pixel(s) at {scene.resolution}x{scene.resolution}: "
+        f"too few to fit its shape; raise the resolution (--size {4 * scene.resolution})"
+    ]
+
+
+def _run_stage(
+    which: str,
+    params: list[ParamSpec],
+    current: Material,
+    goal: np.ndarray,
+    total_energy: float,
+    renderer: Renderer,
+    counter: _Counter,
+    stages: list[StageReport],
+    name: str | None = None,
+    coarse: bool = True,
+) -> Material:
+    t0 = time.perf_counter()
+    renders0 = counter.images
+    names = [p.name for p in params]
+    name = name or which
+    energy = float(np.sum(goal * goal))
+    has_part = current.spec.part_overrides(which, current.values) is not None
+
+    def report(result: Material, loss: float, evaluations: int, message: str) -> None:
+        stages.append(
+            StageReport(
+                name, names, _values_dict(current, names), _values_dict(result, names), loss,
+                counter.images - renders0, evaluations, time.perf_counter() - t0, message,
+            )
+        )
+
+    if energy <= ABSENT * total_energy:
+        # the source has no such part: switch the target's part off (lowest allowed values)
+        off = {p.name: p.bounds[0] for p in params if p.role in ("diffuse", "specular")}
+        result = current.with_params(off)
+        report(result, 0.0, 0, "source part is black; target part set to its minimum")
+        return result
+    if not has_part or not params:
+        why = "target model has no such part" if not has_part else "no free parameter for this part"
+        report(current, 1.0, 0, f"{why}; {100 * energy / total_energy:.3g}% of the source energy is unmatched")
+        return current
+    # grey goal and grey parameters (grey parameters render grey images in an RGB renderer)
+    grey = is_grey(goal) and all(np.all(v == v[0]) for v in current.values.values())
+    problem = _Problem(current, params, which, goal, renderer, counter, grey=grey)
+    result, sol = problem.solve(current, coarse=coarse)
+    report(result, float(np.sqrt(2.0 * sol.cost)), problem.evaluations, str(sol.message))
+    return result

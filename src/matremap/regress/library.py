@@ -1,0 +1,318 @@
+"""The transform library: learned transforms shipped with matremap, and routes through them.
+
+Each library entry is a parametric transform (JSON, :mod:`matremap.regress.transform`) learned
+from a sweep between two models; :data:`PAIRS` says which sweeps (source template, target fixes,
+grid, renderer), and ``tools/make_transform_library.py`` runs them and writes the files into
+``matremap/transforms/``. Each sweep gives two entries: the forward transform and the reverse one
+learned from the same database (paper §5: a renderer that can only be a source still gets
+remappings out of it).
+
+A *node* of the library is a model with the options its transforms were trained on and the values
+of the parameters that change what its parameters mean (a glTF material's ``metallic``).
+:func:`route` finds the chain of entries with the fewest steps (then the least accumulated
+held-out error) from a source node to a target node.
+"""
+
+from __future__ import annotations
+
+import heapq
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from functools import cached_property, lru_cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from matremap.core.models import get_model
+from matremap.regress.transform import Transform
+
+LIBRARY_DIR = Path(__file__).with_name("transforms")
+#: the longest chain a route may take
+MAX_STEPS = 4
+
+
+@dataclass(frozen=True)
+class Pair:
+    """One library sweep: ``source`` (model id and the options/constants of its template) onto
+    ``target`` with ``fix``, over ``grid`` (the sweep grid's command-line form)."""
+
+    name: str
+    source: str
+    target: str
+    grid: str
+    source_params: Mapping[str, Any] = field(default_factory=dict)
+    fix: Mapping[str, Any] = field(default_factory=dict)
+    free: tuple[str, ...] = ()
+    renderer: str = "embedded"
+    source_renderer: str = "embedded"
+    reverse: bool = True
+
+
+_WARD_GRID = "alpha=0.03:0.7:10,specularReflectance=0.02:0.5:6,diffuseReflectance=0;0.5"
+_ALPHA_F0 = "alpha=0.03:0.9:10,F0=0.02:0.9:6,diffuseReflectance=0;0.5"
+_CYCLES_GRID = "Roughness=0.15:0.95:10,Color=0.02:0.9:6,Diffuse Color=0;0.5"
+
+#: the sweeps the library is made of (``tools/make_transform_library.py`` runs them)
+PAIRS: tuple[Pair, ...] = (
+    Pair("ward-as", "mitsuba06:ward", "mitsuba06:pbr", _WARD_GRID, fix={"distribution": "as"}),
+    Pair("ward-ggx", "mitsuba06:ward", "mitsuba06:pbr", _WARD_GRID, fix={"distribution": "ggx"}),
+    Pair("blender27ward-ward", "blender27:ward", "mitsuba06:ward",
+         "specular_slope=0.03:0.4:10,specular_color=0.02:0.5:6,diffuse_color=0;0.5",
+         source_params={"specular_intensity": 1.0, "diffuse_intensity": 1.0}),
+    Pair("ward-cycles", "mitsuba06:ward", "cycles:glossy", _WARD_GRID, fix={"distribution": "ggx"}),
+    Pair("as-cycles", "mitsuba06:pbr", "cycles:glossy", _ALPHA_F0, source_params={"distribution": "as"},
+         fix={"distribution": "ggx"}),
+    Pair("ggx-cycles", "mitsuba06:pbr", "cycles:glossy", _ALPHA_F0, source_params={"distribution": "ggx"},
+         fix={"distribution": "ggx"}),
+    Pair("ward-gltf-metal", "mitsuba06:ward", "gltf:metal-rough",
+         "alpha=0.03:0.7:10,specularReflectance=0.02:0.98:6", source_params={"diffuseReflectance": 0.0},
+         fix={"metallic": 1.0}),
+    Pair("ward-gltf-dielectric", "mitsuba06:ward", "gltf:metal-rough",
+         "alpha=0.03:0.7:10,specularReflectance=0.02:0.3:6,diffuseReflectance=0.1;0.6",
+         fix={"metallic": 0.0}),
+    Pair("plastic-gltf-dielectric", "mitsuba06:roughplastic", "gltf:metal-rough",
+         "alpha=0.03:0.7:10,intIOR=1.3:2.0:6,diffuseReflectance=0.1;0.6", source_params={"distribution": "ggx"},
+         fix={"metallic": 0.0}),
+    Pair("ggx-gltf-metal", "mitsuba06:pbr", "gltf:metal-rough", "alpha=0.03:0.9:10,F0=0.03:0.98:6",
+         source_params={"distribution": "ggx"}, fix={"metallic": 1.0}),
+    Pair("conductor-cycles", "mitsuba06:roughconductor", "cycles:glossy", "alpha=0.03:0.9:10,k=0.4:14:6",
+         source_params={"distribution": "ggx", "eta": 1.0}, fix={"distribution": "ggx"}),
+    Pair("conductor-gltf-metal", "mitsuba06:roughconductor", "gltf:metal-rough", "alpha=0.03:0.9:10,k=0.4:14:6",
+         source_params={"distribution": "ggx", "eta": 1.0}, fix={"metallic": 1.0}),
+    # measured with the real renderers
+    Pair("mitsuba3conductor-gltf-metal", "mitsuba3:roughconductor", "gltf:metal-rough",
+         "alpha=0.03:0.9:10,k=0.4:14:6", source_params={"distribution": "ggx", "eta": 1.0}, fix={"metallic": 1.0},
+         source_renderer="mitsuba3"),
+    Pair("ward-cyclesprincipled", "mitsuba06:ward", "cycles:principled", _WARD_GRID.replace(":10,", ":6,"),
+         fix={"distribution": "ggx"}, renderer="cycles"),
+    Pair("cycles-gltf-metal", "cycles:glossy", "gltf:metal-rough", "Roughness=0.15:0.95:10,Color=0.03:0.98:6",
+         source_params={"distribution": "ggx"}, fix={"metallic": 1.0}),
+)
+
+
+# ---------------------------------------------------------------------------------------------
+# nodes and entries
+
+def node_key(model: str, options: Mapping[str, Any], values: Mapping[str, Any] | None = None) -> tuple:
+    """A library node: the model, its options, and the values of the parameters its spec
+    specialises on (``metallic`` of a glTF material), as given in ``values``."""
+    spec = get_model(model)
+    opts = {o.name: str(options.get(o.name, o.default)) for o in spec.options}
+    held = []
+    for name, _, _ in spec.specialisations:
+        v = (values or {}).get(name)
+        held.append((name, None if v is None else float(np.mean(np.asarray(v, dtype=float)))))
+    return (spec.id, tuple(sorted(opts.items())), tuple(held))
+
+
+def describe_node(key: tuple) -> str:
+    model, opts, held = key
+    spec = get_model(model)
+    shown = [f"{k}={v}" for k, v in opts if v != spec.option(k).default] + [f"{k}={v:g}" for k, v in held
+                                                                              if v is not None]
+    return model + (f" ({', '.join(shown)})" if shown else "")
+
+
+@dataclass(frozen=True)
+class Entry:
+    """A library transform and where it leads."""
+
+    name: str
+    path: Path
+    transform: Transform
+
+    @cached_property  # routes ask for these in their inner loop
+    def source(self) -> tuple:
+        t = self.transform
+        return node_key(t.source, t.source_options, t.source_template)
+
+    @cached_property
+    def target(self) -> tuple:
+        t = self.transform
+        return node_key(t.target, t.target_options, t.template)
+
+    @cached_property
+    def error(self) -> float:
+        """The largest held-out RMSE of its mappings (quantity units: roughness, F0, albedo)."""
+        errs = [v.get("heldout_rmse") for v in self.transform.errors.values()]
+        return float(max((e for e in errs if e is not None), default=0.0))
+
+
+@lru_cache(maxsize=4)
+def _load(directory: str) -> tuple[Entry, ...]:
+    d = Path(directory)
+    if not d.is_dir():
+        return ()
+    return tuple(Entry(p.stem, p, Transform.load(p)) for p in sorted(d.glob("*.json")))
+
+
+def entries(directory: str | Path | None = None) -> tuple[Entry, ...]:
+    """Every transform of the library (``directory``: another library folder)."""
+    return _load(str(directory or LIBRARY_DIR))
+
+
+def listing(directory: str | Path | None = None) -> list[dict[str, Any]]:
+    """The library as rows for ``matremap transforms``."""
+    rows = []
+    for e in entries(directory):
+        t = e.transform
+        rows.append({
+            "name": e.name,
+            "source": describe_node(e.source),
+            "target": describe_node(e.target),
+            "method": t.method,
+            "heldout_rmse": {k: v.get("heldout_rmse") for k, v in t.errors.items()},
+            "domain": t.domain,
+            "renderers": _renderers(t),
+        })
+    return rows
+
+
+def _renderers(t: Transform) -> dict[str, str]:
+    """Which renderer drew each side of a transform's sweep (swapped for a reverse transform)."""
+    r = dict((t.provenance.get("sweep") or {}).get("renderers", {}))
+    if (t.provenance.get("library") or {}).get("reverse"):
+        r = {"source": r.get("target", "embedded"), "target": r.get("source", "embedded")}
+    return r
+
+
+# ---------------------------------------------------------------------------------------------
+# routes
+
+@dataclass
+class Route:
+    steps: list[Entry]
+
+    @property
+    def transform(self) -> Transform:
+        ts = [e.transform for e in self.steps]
+        return ts[0] if len(ts) == 1 else Transform.chain(ts)
+
+    @property
+    def error(self) -> float:
+        """Accumulated held-out error: the root of the summed squares of the steps' errors (errors of
+        independent steps, each in the quantity units of its own step)."""
+        return float(np.sqrt(sum(e.error ** 2 for e in self.steps)))
+
+    def describe(self) -> str:
+        nodes = [describe_node(self.steps[0].source)] + [describe_node(e.target) for e in self.steps]
+        return " -> ".join(nodes) + f"  ({len(self.steps)} step{'s' * (len(self.steps) > 1)}, " \
+            f"accumulated held-out RMSE {self.error:.3g}; " + ", ".join(e.name for e in self.steps) + ")"
+
+
+def _matches(node: tuple, want: tuple) -> bool:
+    """Whether a library node serves a wanted node: same model and options; held values equal where
+    the wanted one names them."""
+    if node[0] != want[0] or node[1] != want[1]:
+        return False
+    return all(w is None or (v is not None and abs(v - w) < 1e-9) for (_, v), (_, w) in zip(node[2], want[2],
+                                                                                               strict=True))
+
+
+def route(source: tuple, target: tuple, directory: str | Path | None = None,
+          max_steps: int = MAX_STEPS) -> Route | None:
+    """The shortest chain of library transforms from ``source`` to ``target`` (node keys, see
+    :func:`node_key`; ties broken by accumulated error), or None."""
+    lib = entries(directory)
+    heap: list[tuple[int, float, int, list[Entry]]] = []
+    counter = 0
+    for e in lib:
+        if _matches(e.source, source):
+            heapq.heappush(heap, (1, e.error ** 2, counter, [e]))
+            counter += 1
+    seen: set[tuple] = set()
+    while heap:
+        n, err2, _, path = heapq.heappop(heap)
+        end = path[-1].target
+        if _matches(end, target):
+            return Route(path)
+        if end in seen or n >= max_steps:
+            continue
+        seen.add(end)
+        for e in lib:
+            if e.source == end and e not in path:
+                heapq.heappush(heap, (n + 1, err2 + e.error ** 2, counter, [*path, e]))
+                counter += 1
+    return None
+
+
+def find_route(source_model: str, source_options: Mapping[str, Any], target_model: str,
+               fix: Mapping[str, Any], directory: str | Path | None = None,
+               source_values: Mapping[str, Any] | None = None) -> Route | None:
+    """The route for remapping ``source_model`` (with its options, and ``source_values`` for the
+    parameters its spec specialises on) onto ``target_model`` with the user's ``fix`` (options and
+    held values)."""
+    return route(node_key(source_model, source_options, source_values or source_options),
+                 node_key(target_model, fix, fix), directory)
+
+
+# ---------------------------------------------------------------------------------------------
+# building
+
+def build_pair(pair: Pair, out_dir: str | Path, workers: int | None = None, size: int | None = None,
+               log=print) -> list[Path]:
+    """Sweep one pair and write its transform(s) into ``out_dir``; returns the files written."""
+    from matremap.core.models import Material
+    from matremap.core.scene import Scene
+    from matremap.regress.transform import learn_transform
+    from matremap.sweep.executors import make_executor
+    from matremap.sweep.grid import parse_grid
+    from matremap.sweep.run import SweepConfig, describe, run_sweep
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    source = Material.create(pair.source, dict(pair.source_params))
+    scene = Scene(resolution=size) if size else Scene()
+    config = SweepConfig(source=source, target=pair.target, fix=dict(pair.fix), free=pair.free, strategy="two-stage",
+                         scene=scene,
+                         source_renderer=pair.source_renderer, target_renderer=pair.renderer)
+    grid = parse_grid(pair.grid, source.spec)
+    db = out / f".{pair.name}.sqlite"
+    with make_executor(workers) as (executor, desc):
+        summary = run_sweep(config, grid, str(db), executor, executor_name=desc,
+                            in_flight=2 * getattr(executor, "slots", 1))
+    log(f"{pair.name}: {describe(summary)}")
+    written = []
+    directions = [(False, pair.name)] + ([(True, _reverse_name(pair.name))] if pair.reverse else [])
+    for reverse, name in directions:
+        t = learn_transform(db, reverse=reverse)
+        t.provenance["library"] = {"pair": pair.name, "grid": pair.grid, "reverse": reverse}
+        path = out / f"{name}.json"
+        t.save(path, force=True)
+        written.append(path)
+        log(f"  {name}: {t.describe()}; held-out RMSE "
+            + ", ".join(f"{k} {v['heldout_rmse']:.3g}" for k, v in t.errors.items() if "heldout_rmse" in v))
+    db.unlink(missing_ok=True)
+    for extra in ("-wal", "-shm"):
+        Path(str(db) + extra).unlink(missing_ok=True)
+    _load.cache_clear()
+    return written
+
+
+def _reverse_name(name: str) -> str:
+    a, sep, b = name.partition("-")
+    return f"{b}-{a}" if sep else f"{name}-reverse"
+
+
+def max_prediction_difference(a: Transform, b: Transform, samples: int = 200, seed: int = 0) -> dict[str, float]:
+    """How far two transforms of the same models disagree inside ``a``'s training domain: the largest
+    absolute difference of each target quantity over random inputs."""
+    from matremap.regress import quantities as qty
+
+    rng = np.random.default_rng(seed)
+    spec = get_model(a.source)
+    x = {}
+    for name, (lo, hi) in a.domain.items():
+        shape = (samples,) if name == "roughness" else (samples, 3)
+        x[name] = rng.uniform(lo, hi, shape)
+    values = qty.write(spec, x, a.source_template)
+    ya, _ = a.apply(values)
+    yb, _ = b.apply(values)
+    tspec = get_model(a.target)
+    qa, qb = qty.read(tspec, ya), qty.read(tspec, yb)
+    return {k: float(np.max(np.abs(qa[k] - qb[k]))) for k in qa}
+
+
+__all__ = ["LIBRARY_DIR", "PAIRS", "Entry", "Pair", "Route", "build_pair", "entries", "find_route", "listing",
+           "node_key", "route"]

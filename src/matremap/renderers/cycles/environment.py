@@ -1,0 +1,142 @@
+"""Spatially-varying materials rendered by the real Blender Cycles under an environment map.
+
+The Cycles counterpart of :func:`matremap.renderers.embedded.environment.render_svbrdf` (sphere geometry only) for
+``cycles:glossy`` and ``cycles:diffuse``, rendered by the bpy worker of
+:class:`~matremap.renderers.cycles.probe.CyclesRenderer` (request ``{"op": "svbrdf"}``; the arrays go
+through ``.npy`` files in a temporary directory). Same camera, sphere, UVs, normal-map convention and
+environment orientation as the embedded renderer, so the images compare pixel by pixel.
+
+* **camera**: the probe scene's pinhole; ``filter_width = 0.01`` (one ray through each pixel
+  centre, as the embedded renderer), CPU, ``spp`` samples of the lighting, fixed ``seed``.
+* **sphere**: a smooth UV sphere mesh (``geometry`` ``"SxR"``, default 512x256 segments x rings) with
+  its pole along +y and UVs set per loop to the embedded ones, ``u = 0.5 + atan2(x, z) / 2 pi``,
+  ``v = acos(y / r) / pi`` (Blender's v is ``1 - v``; image rows are flipped on upload).
+* **textures**: float images, colour space Non-Color (values used as they are), Linear
+  interpolation, Extend (clamp) wrapping; scalar maps are read through their red channel.
+* **normal maps**: tangent space in [-1, 1], x along u, y up the image, stored as ``(n + 1) / 2``
+  under a Normal Map node (tangent space of the UV map: MikkTSpace from dP/du, dP/dv).
+* **environment**: the world's Environment Texture (equirectangular, Linear) from the EnvMap array;
+  Blender's lookup direction is ``e = (-z', -x', y')`` with ``d' = R_y(-rotation) d`` built from dot
+  products in the world node tree, which puts Blender's u on matremap's u and Blender's up on +y.
+  The background is transparent (black), lighting is direct only (``max_bounces = 0``).
+"""
+
+from __future__ import annotations
+
+import tempfile
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from matremap.core.envmap import EnvMap
+from matremap.core.models import ModelSpec, get_model
+from matremap.core.scene import Scene
+from matremap.errors import MatremapError
+from matremap.renderers.cycles.probe import CyclesRenderer
+
+MODELS = ("cycles:glossy", "cycles:diffuse", "cycles:principled")
+PARTS = ("full", "specular", "diffuse")
+
+#: default samples per pixel
+DEFAULT_SPP = 64
+
+_shared: CyclesRenderer | None = None
+
+
+def _renderer(renderer: CyclesRenderer | None) -> CyclesRenderer:
+    global _shared
+    if renderer is not None:
+        return renderer
+    if _shared is None:
+        _shared = CyclesRenderer(timeout=600.0)
+    return _shared
+
+
+def _split_params(spec: ModelSpec, params: Mapping[str, Any],
+                  overrides: Mapping[str, Any]) -> tuple[dict[str, list[float]], dict[str, np.ndarray]]:
+    """Constants as lists (for the worker's JSON) and textures as float32 [h, w, 3] images."""
+    from matremap.renderers.embedded.environment import split_texture_params
+
+    consts, textures = split_texture_params(spec, params, overrides)
+    images = {k: (t if t.ndim == 3 else np.repeat(t[..., None], 3, axis=2)).astype(np.float32)
+              for k, t in textures.items()}
+    return {k: [float(x) for x in v] for k, v in consts.items() if k not in textures}, images
+
+
+def render_svbrdf_cycles(
+    model: str,
+    params: Mapping[str, Any],
+    options: Mapping[str, str] | None,
+    env: EnvMap,
+    rotation_deg: float = 0.0,
+    resolution: int = 256,
+    part: str = "full",
+    normal_map: np.ndarray | None = None,
+    spp: int = DEFAULT_SPP,
+    seed: int = 0,
+    renderer: CyclesRenderer | None = None,
+    geometry: str = "512x256",
+) -> np.ndarray:
+    """Render a textured ``cycles:glossy`` / ``cycles:diffuse`` material on the sphere under ``env``
+    turned by ``rotation_deg`` with Blender Cycles.
+
+    Arguments as :func:`matremap.renderers.embedded.environment.render_svbrdf` (sphere only); ``spp`` samples per
+    pixel, ``seed`` Cycles' seed (same seed, same image); ``renderer`` the
+    :class:`~matremap.renderers.cycles.probe.CyclesRenderer` whose worker renders (default: one shared by
+    this module). Returns linear radiance float32 [res, res, 3], black off the sphere.
+    """
+    from matremap.renderers.embedded.environment import _check_params
+
+    spec = get_model(model)
+    if spec.id not in MODELS:
+        raise MatremapError(f"Cycles SVBRDF renders take {', '.join(MODELS)}, got {spec.id}")
+    if part not in PARTS:
+        raise MatremapError(f"unknown render part {part!r}; use one of {', '.join(PARTS)}")
+    if not isinstance(env, EnvMap):
+        raise MatremapError(f"env must be an EnvMap, got {type(env).__name__}")
+    if not (isinstance(spp, (int, np.integer)) and spp >= 1):
+        raise MatremapError(f"spp must be a positive integer, got {spp!r}")
+    opts = _check_params(spec, params, options or {})
+    res = int(resolution)
+    overrides = spec.part_overrides(part, params)
+    if overrides is None:
+        return np.zeros((res, res, 3), dtype=np.float32)
+    consts, textures = _split_params(spec, params, overrides)
+    from matremap.renderers.embedded.environment import check_normal_map
+
+    nm = None if normal_map is None else check_normal_map(normal_map)
+    scene = Scene(resolution=res)
+    r = _renderer(renderer)
+    with tempfile.TemporaryDirectory(prefix="matremap-cycles-svbrdf-") as d:
+        names = {}
+        for i, (name, tex) in enumerate(textures.items()):
+            names[name] = str(i)
+            np.save(Path(d) / f"tex_{i}.npy", tex)
+        if nm is not None:
+            np.save(Path(d) / "normal_map.npy", ((nm + 1.0) / 2.0).astype(np.float32))
+        np.save(Path(d) / "env.npy", np.asarray(env.radiance, dtype=np.float32))
+        request = {
+            "op": "svbrdf",
+            "dir": d,
+            "scene": {"resolution": res, "fov": float(scene.effective_fov),
+                      "camera_distance": float(scene.camera_distance),
+                      "sphere_radius": float(scene.sphere_radius)},
+            "geometry": geometry,
+            "model": spec.id,
+            "options": dict(opts),
+            "consts": consts,
+            "textures": names,
+            "normal_map": nm is not None,
+            "rotation_deg": float(rotation_deg),
+            "spp": int(spp),
+            "seed": int(seed),
+        }
+        images = r._request(request)
+    if images.shape != (1, res, res, 3):
+        raise MatremapError(f"the Cycles worker returned an image of shape {images.shape}")
+    return images[0].astype(np.float32, copy=False)
+
+
+__all__ = ["DEFAULT_SPP", "MODELS", "render_svbrdf_cycles"]

@@ -1,0 +1,305 @@
+"""The real Blender Cycles renderer (``bpy==5.0.1``), behind the same protocol as the embedded one.
+
+``bpy`` 5.0.1 needs Python 3.11 and numpy < 2, so it lives in its own venv and runs in a persistent
+worker process (:mod:`matremap.renderers.cycles.worker`) that this module talks to over a pipe.
+Set it up with::
+
+    python3.11 -m venv .venv-bpy && .venv-bpy/bin/pip install bpy==5.0.1
+
+The worker's Python is ``$MATREMAP_BPY_PYTHON`` or else ``<repo>/.venv-bpy/bin/python``. Importing
+this module starts nothing: the models are plain data; the worker starts on the first render.
+
+The probe scene (see :mod:`matremap.core.scene`): the sphere is a one-point Cycles point cloud of the
+scene's radius, which Cycles intersects as a true sphere (exact silhouette and normals; a smooth
+512x256 UV sphere is 6e-5 relative off on a Lambertian sphere, 128x64 1e-3); a camera at (0, 0, d)
+with the scene's full fov along x; one point light with ``shadow_soft_size = 0``, no soft falloff and
+power P = 4 pi I W (radiant intensity I W/sr), moved to each scene light in turn and the renders
+summed (Cycles samples one light per sample otherwise); CPU, 1 spp, ``filter_width = 0.01`` (one
+ray through each pixel centre: deterministic, noise-free), no denoising, seed 0, no world, direct
+light only. Pixels come back through a 32-bit uncompressed EXR.
+
+=================  =========================================================================
+model              Blender nodes (socket names are the parameter names)
+=================  =========================================================================
+cycles:glossy      Glossy BSDF (distribution GGX, BECKMANN, ASHIKHMIN_SHIRLEY, MULTI_GGX) + Diffuse
+                   BSDF (Roughness 0) through an Add Shader; "Diffuse Color" is the Diffuse's Color
+cycles:diffuse     Diffuse BSDF, Roughness 0
+cycles:principled  Principled BSDF (multiscatter GGX by default): Base Color, Metallic,
+                   Roughness, IOR, Specular IOR Level, Specular Tint
+=================  =========================================================================
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import select
+import struct
+import subprocess
+import tempfile
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from matremap.core.models import Material, ModelSpec, OptionSpec, ParamSpec, register
+from matremap.core.scene import Scene
+from matremap.errors import MatremapError
+from matremap.renderers.base import check_supported
+
+ENV_PYTHON = "MATREMAP_BPY_PYTHON"
+REPO = Path(__file__).resolve().parents[4]
+DEFAULT_PYTHON = REPO / ".venv-bpy" / "bin" / "python"
+WORKER = Path(__file__).with_name("worker.py")
+
+INSTALL_HINT = (
+    "Blender's bpy is not set up: create its own venv with `python3.11 -m venv .venv-bpy && "
+    ".venv-bpy/bin/pip install bpy==5.0.1` in the repository, or point the environment variable "
+    f"{ENV_PYTHON} at a Python that can `import bpy` (bpy 5.0.1 pins numpy<2, so not the main venv)"
+)
+
+# ---------------------------------------------------------------------------------------------
+# Models (data only). cycles:glossy and cycles:diffuse are registered by the embedded dialects.
+
+PRINCIPLED = register(
+    ModelSpec(
+        id="cycles:principled",
+        summary="Principled BSDF (Blender 5.0 Cycles; multiscatter GGX, F82-tint metals); real Cycles only",
+        params=(
+            ParamSpec("Base Color", "diffuse", (0.8,) * 3, (0.0, 1.0), channels=3,
+                      doc="diffuse albedo; metal reflectance at normal incidence"),
+            ParamSpec("Metallic", "specular", 0.0, (0.0, 1.0), fit=False, doc="metallicity (held at 0 in fits)"),
+            ParamSpec("Roughness", "roughness", 0.5, (0.0, 1.0), doc="alpha = Roughness^2"),
+            ParamSpec("IOR", "fresnel", 1.5, (1.0, 4.0), doc="dielectric IOR (fitted: sets the specular level)"),
+            ParamSpec("Specular IOR Level", "specular", 0.5, (0.0, 1.0), fit=False,
+                      doc="scales the dielectric F0 (0.5 = the IOR's own; 0 = no specular); held at 0.5 in "
+                          "fits, where IOR sets the level"),
+            ParamSpec("Specular Tint", "other", (1.0,) * 3, (0.0, 1.0), channels=3, fit=False,
+                      doc="dielectric specular colour (held at white in fits)"),
+        ),
+        options=(OptionSpec("distribution", ("multi_ggx", "ggx"), "multi_ggx", "microfacet distribution"),),
+        diffuse_only={"Metallic": 0.0, "Specular IOR Level": 0.0},
+        # with Metallic = 0 (held in fits) a black base leaves the dielectric specular lobe alone;
+        # a metal's lobe takes Base Color's colour, so this isolates nothing when Metallic > 0
+        specular_only={"Base Color": 0.0},
+        # F0 of the IOR, with Specular IOR Level held at 0.5 (where Cycles leaves F0 as the IOR gives it)
+        reflectance=("dielectric", "IOR"),
+        channel_separable=False,
+    )
+)
+
+MODELS = ("cycles:diffuse", "cycles:glossy", "cycles:principled")
+
+
+def find_python(python: str | os.PathLike | None = None) -> str:
+    """The Python that runs the worker: the argument, ``$MATREMAP_BPY_PYTHON``, or ``<repo>/.venv-bpy``."""
+    for candidate, where in ((python, "the python argument"), (os.environ.get(ENV_PYTHON), ENV_PYTHON)):
+        if candidate:
+            if not os.access(candidate, os.X_OK):
+                raise MatremapError(f"{where} names {candidate!r}, which is not an executable; {INSTALL_HINT}")
+            return str(candidate)
+    if os.access(DEFAULT_PYTHON, os.X_OK):
+        return str(DEFAULT_PYTHON)
+    raise MatremapError(INSTALL_HINT)
+
+
+def bpy_available() -> bool:
+    """Whether a bpy venv is found (does not start it)."""
+    try:
+        find_python()
+    except MatremapError:
+        return False
+    return True
+
+
+class _WorkerDied(Exception):
+    pass
+
+
+class CyclesRenderer:
+    """The probe scene rendered by Blender Cycles in a worker process (``cycles:*`` models).
+
+    ``timeout`` (seconds) bounds one request; a worker that dies or hangs is restarted and the
+    request retried once, then a :class:`MatremapError` says what happened (with the tail of the
+    worker's stderr). ``geometry`` is ``"points"`` (true sphere) or ``"SxR"`` (smooth UV sphere).
+    """
+
+    name = "cycles"
+
+    def __init__(self, python: str | None = None, timeout: float = 120.0, geometry: str = "points") -> None:
+        self.python = find_python(python)
+        self.timeout = float(timeout)
+        self.geometry = geometry
+        self._proc: subprocess.Popen | None = None
+        self._log: Any = None
+        self.renders = 0  # Cycles images (one per material and light)
+        self.restarts = 0
+        self.blender_version: str | None = None
+
+    def __repr__(self) -> str:
+        return f"CyclesRenderer(python={self.python!r})"
+
+    def __getstate__(self) -> dict[str, Any]:  # for process pools: each copy starts its own worker
+        return {"python": self.python, "timeout": self.timeout, "geometry": self.geometry}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__init__(**state)
+
+    def __del__(self) -> None:
+        try:
+            self.close()
+        except Exception:
+            pass
+
+    # -- protocol ----------------------------------------------------------------------------
+    def supports(self, model_id: str) -> bool:
+        return model_id in MODELS
+
+    def render(self, materials: Sequence[Material], scene: Scene) -> np.ndarray:
+        """float32 [N, H, W, 3], linear radiance."""
+        materials = list(materials)
+        check_supported(self, materials)
+        res = scene.resolution
+        if not materials:
+            return np.zeros((0, res, res, 3), dtype=np.float32)
+        request = {
+            "op": "render",
+            "scene": self.scene_dict(scene),
+            "materials": [
+                {"model": m.model, "options": dict(m.options),
+                 "values": {k: [float(x) for x in v] for k, v in m.values.items()}}
+                for m in materials
+            ],
+        }
+        images = self._request(request)
+        if images.shape != (len(materials), res, res, 3):
+            raise MatremapError(f"the Cycles worker returned images of shape {images.shape}")
+        self.renders += len(materials) * len(scene.lights)
+        return images.astype(np.float32, copy=False)
+
+    def render_pixels(self, materials: Sequence[Material], scene: Scene) -> np.ndarray:
+        images = self.render(materials, scene)
+        return np.take(images.reshape(len(images), -1, 3), scene.pixel_indices(), axis=1)
+
+    def scene_dict(self, scene: Scene) -> dict[str, Any]:
+        return {
+            "resolution": scene.resolution,
+            "fov": float(scene.effective_fov),
+            "camera_distance": float(scene.camera_distance),
+            "sphere_radius": float(scene.sphere_radius),
+            "geometry": self.geometry,
+            "lights": [{"position": [float(x) for x in scene.light_position(lt)],
+                        "intensity": float(scene.light_intensity(lt))} for lt in scene.lights],
+        }
+
+    # -- the worker ----------------------------------------------------------------------------
+    @property
+    def pid(self) -> int | None:
+        return self._proc.pid if self._proc is not None and self._proc.poll() is None else None
+
+    def start(self) -> None:
+        """Start the worker (done on the first render) and wait until bpy is imported."""
+        if self.pid is not None:
+            return
+        if self._proc is not None:  # it died since the last request
+            self.restarts += 1
+        self.close()
+        self._log = tempfile.TemporaryFile()
+        try:
+            self._proc = subprocess.Popen([self.python, str(WORKER)], stdin=subprocess.PIPE,
+                                          stdout=subprocess.PIPE, stderr=self._log)
+        except OSError as e:
+            raise MatremapError(f"cannot start the Cycles worker with {self.python}: {e}; {INSTALL_HINT}") from e
+        try:
+            header, _ = self._reply(time.monotonic() + max(self.timeout, 60.0))
+        except _WorkerDied as e:
+            self.close()
+            raise MatremapError(f"the Cycles worker did not start ({e}): {INSTALL_HINT}") from None
+        self.blender_version = header.get("blender")
+
+    def close(self) -> None:
+        """Stop the worker (a later render starts a new one)."""
+        proc, self._proc = self._proc, None
+        if proc is not None:
+            if proc.poll() is None:
+                proc.kill()
+            proc.wait()
+            for f in (proc.stdin, proc.stdout):
+                if f is not None:
+                    f.close()
+        if self._log is not None:
+            self._log.close()
+            self._log = None
+
+    def _request(self, request: dict[str, Any]) -> np.ndarray:
+        """Send a request whose reply carries images; returns them."""
+        header, payload = self._exchange(request)
+        if not header.get("nbytes"):
+            raise MatremapError(f"the Cycles worker sent no images for {request.get('op')!r}")
+        return np.load(io.BytesIO(payload))
+
+    def call(self, request: dict[str, Any]) -> dict[str, Any]:
+        """Send a request whose reply is data (``write_blend``, ``inspect_blend``); returns its ``info``."""
+        header, _ = self._exchange(request)
+        return header.get("info", {})
+
+    def _exchange(self, request: dict[str, Any]) -> tuple[dict[str, Any], bytes]:
+        body = json.dumps(request).encode()
+        for attempt in (1, 2):
+            try:
+                self.start()
+                self._proc.stdin.write(struct.pack(">I", len(body)) + body)
+                self._proc.stdin.flush()
+                header, payload = self._reply(time.monotonic() + self.timeout)
+            except (_WorkerDied, BrokenPipeError, OSError) as e:
+                why = f"{e}; its stderr ends with: {self._stderr_tail()}"
+                self.close()
+                self.restarts += 1
+                if attempt == 2:
+                    raise MatremapError(f"the Cycles worker failed twice: {why}") from None
+                continue
+            if not header.get("ok"):
+                raise MatremapError(f"Cycles failed to render: {header.get('error')}")
+            return header, payload
+        raise AssertionError("unreachable")
+
+    def _read(self, n: int, deadline: float) -> bytes:
+        out = self._proc.stdout
+        fd = out.fileno()
+        buf = bytearray()
+        while len(buf) < n:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise _WorkerDied(f"no reply within {self.timeout:g} s")
+            ready, _, _ = select.select([fd], [], [], left)
+            if not ready:
+                continue
+            chunk = os.read(fd, n - len(buf))
+            if not chunk:
+                code = self._proc.wait()
+                raise _WorkerDied(f"the worker exited with status {code}")
+            buf += chunk
+        return bytes(buf)
+
+    def _reply(self, deadline: float) -> tuple[dict[str, Any], bytes]:
+        (n,) = struct.unpack(">I", self._read(4, deadline))
+        header = json.loads(self._read(n, deadline))
+        payload = self._read(int(header["nbytes"]), deadline) if header.get("nbytes") else b""
+        return header, payload
+
+    def _stderr_tail(self, chars: int = 800) -> str:
+        if self._log is None:
+            return "(nothing)"
+        try:
+            self._log.seek(0, os.SEEK_END)
+            size = self._log.tell()
+            self._log.seek(max(0, size - chars))
+            return self._log.read().decode(errors="replace").strip() or "(nothing)"
+        except (OSError, ValueError):
+            return "(unreadable)"
+
+
+__all__ = ["CyclesRenderer", "ENV_PYTHON", "INSTALL_HINT", "MODELS", "PRINCIPLED", "bpy_available", "find_python"]

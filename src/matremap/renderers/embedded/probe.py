@@ -1,0 +1,113 @@
+"""The embedded renderer: pure numpy, deterministic bit for bit, no external program.
+
+It shades each sphere pixel (one ray through the pixel centre, so no sampling noise) with the
+point lights of the scene: radiance = sum over lights of I / d^2 * [f cos(theta_i)], where the
+bracket is the dialect's evaluator (see :mod:`.dialects`). A batch of materials is evaluated in one
+vectorised pass per (model, options) group, which makes a finite-difference Jacobian one call.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from matremap.core.models import Material
+from matremap.core.scene import Scene
+from matremap.renderers.base import check_supported
+from matremap.renderers.embedded.geometry import LocalGeometry
+
+
+@dataclass(frozen=True, eq=False)
+class SceneGeometry:
+    """Shading inputs for the sphere pixels of a scene, per light: arrays [L, P]."""
+
+    local: LocalGeometry
+    irradiance: np.ndarray  # I / d^2 where the light is above the surface, else 0
+    lit: np.ndarray
+
+
+@lru_cache(maxsize=16)
+def scene_geometry(scene: Scene) -> SceneGeometry:
+    p = scene.sphere_points()
+    n = p / np.linalg.norm(p, axis=-1, keepdims=True)
+    cam = np.array([0.0, 0.0, scene.camera_distance])
+    wo = cam - p
+    wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
+    cos_i, cos_o, i_dot_o, irr = [], [], [], []
+    for light in scene.lights:
+        to_light = scene.light_position(light) - p
+        d2 = np.sum(to_light * to_light, axis=-1)
+        wi = to_light / np.sqrt(d2)[:, None]
+        cos_i.append(np.sum(n * wi, axis=-1))
+        cos_o.append(np.sum(n * wo, axis=-1))
+        i_dot_o.append(np.sum(wi * wo, axis=-1))
+        irr.append(scene.light_intensity(light) / d2)
+    cos_i, cos_o, i_dot_o, irr = (np.stack(a) for a in (cos_i, cos_o, i_dot_o, irr))
+    lit = (cos_i > 0.0) & (cos_o > 0.0)
+    # keep every formula finite where the point is unlit; the result is masked there anyway
+    cos_i = np.where(lit, cos_i, 1.0)
+    cos_o = np.where(lit, cos_o, 1.0)
+    i_dot_o = np.where(lit, i_dot_o, 1.0)
+    for a in (cos_i, cos_o, i_dot_o, lit):
+        a.flags.writeable = False
+    return SceneGeometry(LocalGeometry(cos_i, cos_o, i_dot_o), np.where(lit, irr, 0.0), lit)
+
+
+class EmbeddedRenderer:
+    """Numpy renderer emulating renderer dialects (``mitsuba06:*``, ``blender27:*``, ``cycles:*``)."""
+
+    name = "embedded"
+
+    def supports(self, model_id: str) -> bool:
+        from matremap.renderers.embedded.evaluators import EVALUATORS
+
+        return model_id in EVALUATORS
+
+    def render(self, materials: Sequence[Material], scene: Scene) -> np.ndarray:
+        materials = list(materials)
+        res = scene.resolution
+        out = np.zeros((len(materials), res * res, 3), dtype=np.float32)
+        pix = scene.pixel_indices()
+        for idx, radiance in self._shade(materials, scene):  # radiance [n, C, P]
+            target = out if len(idx) == len(materials) else out[idx]
+            for c in range(3):
+                target[:, pix, c] = radiance[:, min(c, radiance.shape[1] - 1)]
+            if target is not out:
+                out[idx] = target
+        return out.reshape(len(materials), res, res, 3)
+
+    def render_pixels(self, materials: Sequence[Material], scene: Scene) -> np.ndarray:
+        """The sphere pixels of :meth:`render`, float32 [N, P, 3] in ``scene.pixel_indices()``
+        order, without the image around them (the fitter's fast path)."""
+        materials = list(materials)
+        out = np.zeros((len(materials), scene.pixel_indices().size, 3), dtype=np.float32)
+        for idx, radiance in self._shade(materials, scene):
+            out[idx] = radiance.transpose(0, 2, 1)
+        return out
+
+    def _shade(self, materials: list[Material], scene: Scene):
+        """Yield (material indices, radiance [n, C, P]) per group of materials sharing a model and
+        options. Evaluators work on [N, C, L, P] arrays (channels before pixels, so that numpy's
+        inner loops run over pixels): parameters come as [N, C, 1, 1], geometry as [L, P]."""
+        from matremap.renderers.embedded.evaluators import EVALUATORS
+
+        check_supported(self, materials)
+        geo = scene_geometry(scene)
+        groups: dict[tuple, list[int]] = {}
+        for i, m in enumerate(materials):
+            groups.setdefault((m.model, tuple(sorted(m.options.items()))), []).append(i)
+        for (model, options), idx in groups.items():
+            params = {
+                name: np.stack([materials[i].values[name] for i in idx])[:, :, None, None]
+                for name in materials[idx[0]].values
+            }
+            # grey parameters shade the same in every channel: compute one and broadcast
+            if all(np.all(v == v[:, :1]) for v in params.values()):
+                params = {k: v[:, :1] for k, v in params.items()}
+            fcos = EVALUATORS[model](params, dict(options), geo.local)
+            # unlit points have finite stand-in geometry and zero irradiance
+            radiance = fcos * geo.irradiance
+            yield idx, (radiance[:, :, 0] if radiance.shape[2] == 1 else radiance.sum(axis=2))

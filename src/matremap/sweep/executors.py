@@ -1,0 +1,132 @@
+"""Where sweep work runs: in this process, a local process pool, or a Dask cluster.
+
+All three are ``concurrent.futures`` executors (Dask's through ``Client.get_executor()``), so the
+sweep has one code path. Dask is optional (``pip install 'matremap[dask]'``) and imported only
+when asked for.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+from collections.abc import Callable, Iterator
+from concurrent.futures import Executor, Future, ProcessPoolExecutor
+from contextlib import contextmanager
+from typing import Any
+
+from matremap.errors import MatremapError
+
+_BLAS_LIMITED = False
+
+
+def limit_blas_threads() -> None:
+    """One BLAS thread in every process that fits: multi-threaded reductions change the last bits
+    of results, and sweep rows must not depend on where they were computed (Dask workers run
+    single-threaded BLAS by default). The fits' matrices are small: threads do not pay anyway."""
+    global _BLAS_LIMITED
+    if not _BLAS_LIMITED:
+        from threadpoolctl import threadpool_limits
+
+        threadpool_limits(limits=1, user_api="blas")
+        _BLAS_LIMITED = True
+
+
+class InlineExecutor(Executor):
+    """Runs each task at submission, in this process (one worker: no pickling, easy debugging)."""
+
+    slots = 1
+
+    def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future:
+        f: Future = Future()
+        try:
+            f.set_result(fn(*args, **kwargs))
+        except BaseException as e:  # noqa: BLE001 - delivered through the future, as a pool would
+            if isinstance(e, KeyboardInterrupt):
+                raise
+            f.set_exception(e)
+        return f
+
+
+def _ignore_sigint() -> None:
+    """Pool workers leave Ctrl-C to the parent, which stops the sweep cleanly."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+
+@contextmanager
+def make_executor(
+    workers: int | None = None, scheduler: str | None = None, dask_local: int | None = None
+) -> Iterator[tuple[Executor, str]]:
+    """An executor and a one-line description of it.
+
+    ``scheduler`` (a Dask scheduler address) or ``dask_local`` (start a LocalCluster of that many
+    worker processes on loopback) select Dask; otherwise ``workers`` local processes (default: all
+    cores; 1 runs in this process).
+    """
+    if scheduler and dask_local:
+        raise MatremapError("give either --scheduler or --dask-local, not both")
+    if scheduler or dask_local:
+        with _dask_executor(scheduler, dask_local) as (ex, desc):
+            yield ex, desc
+        return
+    n = workers or os.cpu_count() or 1
+    if n < 1:
+        raise MatremapError(f"--workers must be at least 1, got {workers}")
+    if n == 1:
+        yield InlineExecutor(), "1 worker (in process)"
+        return
+    pool = ProcessPoolExecutor(max_workers=n, initializer=_ignore_sigint)
+    pool.slots = n  # type: ignore[attr-defined]  (how many tasks run at once)
+    try:
+        yield pool, f"{n} local worker processes"
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _check_reachable(address: str) -> None:
+    """Fail fast (one line) when nothing listens at a tcp:// scheduler address."""
+    import socket
+    from urllib.parse import urlsplit
+
+    parts = urlsplit(address if "://" in address else f"tcp://{address}")
+    if parts.scheme != "tcp" or not parts.hostname or not parts.port:
+        raise MatremapError(f"--scheduler {address!r}: give a Dask scheduler address like tcp://host:8786")
+    try:
+        socket.create_connection((parts.hostname, parts.port), timeout=5).close()
+    except OSError as e:
+        raise MatremapError(f"cannot reach the Dask scheduler at {address}: {e.strerror or e}") from None
+
+
+@contextmanager
+def _dask_executor(scheduler: str | None, dask_local: int | None) -> Iterator[tuple[Executor, str]]:
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise MatremapError("Dask is not installed: pip install 'matremap[dask]' (or 'dask[distributed]')") from None
+    cluster = None
+    try:
+        if dask_local:
+            if dask_local < 1:
+                raise MatremapError(f"--dask-local must be at least 1, got {dask_local}")
+            cluster = LocalCluster(
+                n_workers=dask_local, threads_per_worker=1, processes=True, host="127.0.0.1",
+                dashboard_address=None, silence_logs=40,
+            )
+            client = Client(cluster)
+            desc = f"Dask LocalCluster with {dask_local} workers ({cluster.scheduler_address})"
+        else:
+            _check_reachable(scheduler)
+            try:
+                client = Client(scheduler, timeout=10)
+            except (OSError, TimeoutError) as e:
+                raise MatremapError(f"cannot reach the Dask scheduler at {scheduler}: {e}") from None
+            desc = f"Dask scheduler {scheduler} ({len(client.scheduler_info().get('workers', {}))} workers)"
+        executor = client.get_executor(pure=False)
+        executor.slots = max(1, sum(w.get("nthreads", 1) for w in client.scheduler_info().get("workers", {}).values()))
+        try:
+            yield executor, desc
+        finally:
+            client.close()
+    finally:
+        if cluster is not None:
+            cluster.close()

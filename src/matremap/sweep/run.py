@@ -1,0 +1,255 @@
+"""Parameter sweeps: one uniform fit per grid point, into a remapping database (paper §4-5).
+
+Work is cut into lines of the grid (the last axis varies along a line) and submitted to an
+executor (:mod:`matremap.sweep.executors`); rows are stored as lines finish (:mod:`matremap.sweep.store`).
+Running the same sweep again resumes it: finished points are skipped.
+
+Continuation (an option, beyond the paper) fits the points of a line in order and starts each
+from its finished neighbour's result instead of from the model defaults and a coarse search.
+Lines are the same whatever the number of workers, so results do not depend on it.
+
+Round trip (an option) fits each result back onto the source model, to measure how much of the
+source parameters a remapping preserves.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, wait
+from dataclasses import dataclass, field
+from typing import Any
+
+from matremap import __version__
+from matremap.core.fit import STRATEGIES, fit
+from matremap.core.models import Material, get_model
+from matremap.core.scene import Scene
+from matremap.errors import MatremapError
+from matremap.sweep.executors import limit_blas_threads
+from matremap.sweep.grid import Grid
+from matremap.sweep.store import SweepStore, point_key
+
+
+@dataclass(frozen=True)
+class SweepConfig:
+    """Everything that decides a sweep's rows, except the grid."""
+
+    source: Material
+    target: str
+    fix: Mapping[str, Any] = field(default_factory=dict)
+    free: tuple[str, ...] = ()
+    strategy: str = "two-stage"
+    scene: Scene = field(default_factory=Scene)
+    source_renderer: str = "embedded"
+    target_renderer: str = "embedded"
+    continuation: bool = False
+    round_trip: bool = False
+
+    def __post_init__(self) -> None:
+        if self.strategy not in STRATEGIES:
+            raise MatremapError(f"unknown strategy {self.strategy!r}; choose one of {', '.join(STRATEGIES)}")
+        spec = get_model(self.target)
+        for name in self.fix:
+            if name not in spec.option_names:
+                spec.param(name)
+        for name in self.free:
+            spec.param(name)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "source": self.source.to_dict(),
+            "target": {"model": self.target, "fix": dict(sorted(self.fix.items())), "free": list(self.free)},
+            "strategy": self.strategy,
+            "scene": self.scene.to_dict(),
+            "renderers": {"source": self.source_renderer, "target": self.target_renderer},
+            "continuation": self.continuation,
+            "round_trip": self.round_trip,
+            "matremap": __version__,
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> SweepConfig:
+        return cls(
+            source=Material.from_dict(d["source"]),
+            target=d["target"]["model"],
+            fix=d["target"]["fix"],
+            free=tuple(d["target"]["free"]),
+            strategy=d["strategy"],
+            scene=Scene.from_dict(d["scene"]),
+            source_renderer=d["renderers"]["source"],
+            target_renderer=d["renderers"]["target"],
+            continuation=d["continuation"],
+            round_trip=d["round_trip"],
+        )
+
+
+# --------------------------------------------------------------------------------------------
+# Work (runs in workers: plain data in, plain data out)
+
+
+def fit_line(config: dict[str, Any], points: list[tuple[str, dict[str, Any], dict[str, Any]]],
+             warm: dict[str, Any] | None) -> list[dict[str, Any]]:
+    """Fit the points of one grid line in order; ``points`` are (key, swept values, source params).
+    With continuation each point starts from the previous result (``warm`` for the first)."""
+    limit_blas_threads()
+    cfg = SweepConfig.from_dict(config)
+    rows = []
+    for key, swept, source_params in points:
+        t0 = time.perf_counter()
+        row: dict[str, Any] = {"key": key, "swept": swept, "source": source_params, "warm": 0}
+        try:
+            source = Material.create(cfg.source.model, source_params)
+            start = warm if cfg.continuation else None
+            result = fit(source, cfg.target, cfg.strategy, cfg.scene, cfg.source_renderer, cfg.target_renderer,
+                         fix=cfg.fix, free=cfg.free, start=start)
+            row.update(
+                target=result.params, loss=result.loss, renders=result.renders, status="ok", message="",
+                stages=[s.to_dict() for s in result.stages], warnings=result.warnings, warm=int(start is not None),
+            )
+            if cfg.round_trip:
+                back = fit(result.target, cfg.source.model, cfg.strategy, cfg.scene, cfg.target_renderer,
+                           cfg.source_renderer, fix=dict(cfg.source.options))
+                row.update(back=back.params, back_loss=back.loss, renders=result.renders + back.renders)
+            warm = {k: v for k, v in result.params.items() if k not in cfg.fix}
+        except Exception as e:  # noqa: BLE001 - a failed point is recorded, the sweep goes on
+            row.update(status="failed", message=f"{type(e).__name__}: {e}")
+            warm = None
+        row["seconds"] = time.perf_counter() - t0
+        row["finished"] = time.time()
+        rows.append(row)
+    return rows
+
+
+# --------------------------------------------------------------------------------------------
+# Driver
+
+
+@dataclass
+class SweepSummary:
+    total: int
+    skipped: int
+    done: int
+    failed: int
+    seconds: float
+    interrupted: bool
+    executor: str
+
+    @property
+    def rate(self) -> float:
+        return self.done / self.seconds if self.seconds > 0 else 0.0
+
+
+def plan(config: SweepConfig, grid: Grid, finished: set[str]) -> tuple[list[list[tuple]], list[dict | None]]:
+    """Lines of unfinished points (key, swept, source params) and each line's warm start."""
+    lines: dict[tuple[int, ...], list[tuple]] = {}
+    for index in grid.indices():
+        swept = grid.values_at(index)
+        key = point_key(swept)
+        material = grid.material(config.source, index)
+        lines.setdefault(index[:-1], []).append((key, swept, material.to_dict()["params"], key in finished))
+    todo, warms = [], []
+    for line in lines.values():
+        pending = [(k, s, p) for k, s, p, done in line if not done]
+        if pending:
+            todo.append(pending)
+            warms.append(None)  # filled by the caller from the database when resuming
+    return todo, warms
+
+
+def run_sweep(
+    config: SweepConfig,
+    grid: Grid,
+    db: str,
+    executor: Any,
+    progress: Callable[[int], None] | None = None,
+    executor_name: str = "",
+    on_start: Callable[[int], None] | None = None,
+    in_flight: int = 4,
+) -> SweepSummary:
+    """Run (or resume) a sweep; rows are committed as lines finish. Ctrl-C stops it cleanly:
+    lines in flight are finished and saved, the rest is left for the next run."""
+    t0 = time.perf_counter()
+    cfg = config.to_dict()
+    with SweepStore.create_or_open(db, cfg) as store:
+        store.set_meta("grid", grid.to_dict())
+        finished = store.finished_keys()
+        lines, warms = plan(config, grid, finished)
+        if config.continuation:
+            warms = _warm_starts(store, config, grid, lines)
+        total = len(grid)
+        todo = sum(len(line) for line in lines)
+        if on_start:
+            on_start(total - todo)
+        done = failed = 0
+        interrupted = False
+        work = iter(zip(lines, warms, strict=True))
+        pending: set[Future] = set()
+
+        def save(fut: Future) -> None:
+            nonlocal done, failed
+            rows = fut.result()
+            store.add(rows)
+            done += len(rows)
+            failed += sum(r["status"] != "ok" for r in rows)
+            if progress:
+                progress(len(rows))
+
+        try:
+            while True:
+                # keep a few lines in flight: rows are stored as lines finish, whatever the executor
+                for line, warm in itertools.islice(work, max(in_flight - len(pending), 0)):
+                    pending.add(executor.submit(fit_line, cfg, line, warm))
+                if not pending:
+                    break
+                finished_now, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
+                for fut in finished_now:
+                    save(fut)
+        except KeyboardInterrupt:
+            interrupted = True
+            running = [f for f in pending if not f.cancel()]
+            finished_now, _ = wait(running, timeout=60)  # lines being fitted are finished and saved
+            for fut in finished_now:
+                if fut.exception() is None:
+                    save(fut)
+    return SweepSummary(total, total - todo, done, failed, time.perf_counter() - t0, interrupted, executor_name)
+
+
+def _warm_starts(store: SweepStore, config: SweepConfig, grid: Grid, lines: list[list[tuple]]) -> list[dict | None]:
+    """When resuming a line with continuation, its first pending point starts from the stored
+    result of the point before it on the line (if that one finished)."""
+    ok = {r["key"]: r["target"] for r in store.rows("ok")}
+    keys_in_order = [point_key(grid.values_at(ix)) for ix in grid.indices()]
+    position = {k: i for i, k in enumerate(keys_in_order)}
+    last = len(grid.axes) - 1
+    warms: list[dict | None] = []
+    for line in lines:
+        first = position[line[0][0]]
+        index = list(grid.indices())[first] if first else None
+        warm = None
+        if index is not None and index[last] > 0:
+            prev_key = keys_in_order[first - 1]
+            if prev_key in ok:
+                warm = {k: v for k, v in ok[prev_key].items() if k not in config.fix}
+        warms.append(warm)
+    return warms
+
+
+def check_grid_for(config: SweepConfig, grid: Grid) -> None:
+    """Refuse grid axes that the fixed source material cannot take (validated up front)."""
+    for index in (tuple(0 for _ in grid.axes), tuple(n - 1 for n in grid.shape)):
+        grid.material(config.source, index)
+
+
+__all__ = ["SweepConfig", "SweepSummary", "check_grid_for", "fit_line", "plan", "run_sweep"]
+
+
+def describe(summary: SweepSummary) -> str:
+    state = "interrupted" if summary.interrupted else "done"
+    return (f"{state}: {summary.done} points fitted ({summary.failed} failed), {summary.skipped} already in the "
+            f"database, {summary.total} in the grid; {summary.seconds:.1f} s, {summary.rate:.1f} points/s "
+            f"on {summary.executor}")
+
+
+def sources_of(grid: Grid, base: Material) -> Sequence[Material]:
+    return [grid.material(base, ix) for ix in grid.indices()]
