@@ -50,8 +50,12 @@ def learn(tmp: Path):
 
     src = Material.create("mitsuba06:ward", {"variant": "ward", "diffuseReflectance": 0.0})
     cfg = SweepConfig(source=src, target="mitsuba06:pbr", fix={"distribution": "as"}, scene=Scene(resolution=48))
-    run_sweep(cfg, parse_grid("alpha=0.03:0.99:6,specularReflectance=0.02:0.232:4", src.spec), str(tmp / "w.sqlite"),
-              InlineExecutor())
+    run_sweep(
+        cfg,
+        parse_grid("alpha=0.03:0.99:6,specularReflectance=0.02:0.232:4", src.spec),
+        str(tmp / "w.sqlite"),
+        InlineExecutor(),
+    )
     t = learn_transform(tmp / "w.sqlite")
     t.save(tmp / "w2as.json", force=True)
     return tmp / "w2as.json"
@@ -66,16 +70,19 @@ def band_fields(y0: int, y1: int, n: int) -> dict[str, np.ndarray]:
     alpha = 0.05 + 0.5 * (0.5 + 0.5 * np.sin(7 * x + 3 * y)) + noise
     base = 0.5 + 0.5 * np.sin(5 * x - 4 * y)
     rho = np.stack([0.03 + 0.18 * base, 0.03 + 0.12 * base, 0.03 + 0.05 * base], axis=-1) + noise[..., None]
-    normal = np.stack([0.5 + 0.1 * np.sin(40 * x + 0 * y), 0.5 + 0.1 * np.cos(37 * y + 0 * x),
-                       np.full_like(base, 0.97)], axis=-1)
+    normal = np.stack(
+        [0.5 + 0.1 * np.sin(40 * x + 0 * y), 0.5 + 0.1 * np.cos(37 * y + 0 * x), np.full_like(base, 0.97)], axis=-1
+    )
     return {"roughness": np.clip(alpha, 0.03, 0.95), "specular": np.clip(rho, 0, 1), "normal": normal}
 
 
 def make_set(folder: Path, n: int, fmt: str, pixel_type: str) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
-    infos = {"roughness": ImageInfo(fmt, pixel_type, 1, n, n, "linear"),
-             "specular": ImageInfo(fmt, pixel_type, 3, n, n, "srgb" if pixel_type != "float" else "linear"),
-             "normal": ImageInfo("png" if fmt == "png" else fmt, pixel_type, 3, n, n, "linear")}
+    infos = {
+        "roughness": ImageInfo(fmt, pixel_type, 1, n, n, "linear"),
+        "specular": ImageInfo(fmt, pixel_type, 3, n, n, "srgb" if pixel_type != "float" else "linear"),
+        "normal": ImageInfo("png" if fmt == "png" else fmt, pixel_type, 3, n, n, "linear"),
+    }
     writers = {k: MapWriter(folder / f"m_{k}.{i.format}", i) for k, i in infos.items()}
     rows = max(16, (1 << 20) // n)
     for y0 in range(0, n, rows):
@@ -85,9 +92,16 @@ def make_set(folder: Path, n: int, fmt: str, pixel_type: str) -> Path:
             w.write_rows(y0, f[k])
     for w in writers.values():
         w.close()
-    (folder / "material.json").write_text(json.dumps({
-        "model": "mitsuba06:ward", "maps": {"alpha": f"m_roughness.{fmt}", "specularReflectance": f"m_specular.{fmt}"},
-        "normal": f"m_normal.{fmt}", "params": {"variant": "ward", "diffuseReflectance": 0}}))
+    (folder / "material.json").write_text(
+        json.dumps(
+            {
+                "model": "mitsuba06:ward",
+                "maps": {"alpha": f"m_roughness.{fmt}", "specularReflectance": f"m_specular.{fmt}"},
+                "normal": f"m_normal.{fmt}",
+                "params": {"variant": "ward", "diffuseReflectance": 0},
+            }
+        )
+    )
     return folder
 
 
@@ -181,14 +195,23 @@ def main() -> int:
             n = args.big_size
             t = time.perf_counter()
             folder = make_set(tmp / "big", n, "png", "uint8")
-            print(f"\n{n}^2 8-bit PNG set written in {time.perf_counter() - t:.0f}s "
-                  f"({sum(p.stat().st_size for p in folder.iterdir()) / 2**20:.0f} MiB on disk)", flush=True)
-            res = subprocess.run([sys.executable, "-c", BIG_CHILD, str(folder), str(transform), str(tmp / "big-out"),
-                                  str(args.workers)], capture_output=True, text=True, check=True)
+            print(
+                f"\n{n}^2 8-bit PNG set written in {time.perf_counter() - t:.0f}s "
+                f"({sum(p.stat().st_size for p in folder.iterdir()) / 2**20:.0f} MiB on disk)",
+                flush=True,
+            )
+            res = subprocess.run(
+                [sys.executable, "-c", BIG_CHILD, str(folder), str(transform), str(tmp / "big-out"), str(args.workers)],
+                capture_output=True,
+                text=True,
+                check=True,
+            )
             r = json.loads(res.stdout.strip().splitlines()[-1])
-            print(f"convert {n}^2: {r['seconds']:.0f}s, peak RSS main process {r['self_kb'] / 1024:.0f} MiB, "
-                  f"largest worker {r['child_kb'] / 1024:.0f} MiB (total at most "
-                  f"{(r['self_kb'] + args.workers * r['child_kb']) / 1024:.0f} MiB)")
+            print(
+                f"convert {n}^2: {r['seconds']:.0f}s, peak RSS main process {r['self_kb'] / 1024:.0f} MiB, "
+                f"largest worker {r['child_kb'] / 1024:.0f} MiB (total at most "
+                f"{(r['self_kb'] + args.workers * r['child_kb']) / 1024:.0f} MiB)"
+            )
     print(f"(this benchmark process peaked at {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB)")
     return 0
 

@@ -37,8 +37,10 @@ def blend_timing(cycles: CyclesRenderer) -> None:
         img = cycles._request({"op": "render_blend", "path": str(out), "scene": cycles.scene_dict(scene)})[0]
         t2 = time.perf_counter()
         err = rel(img, cycles.render([m], scene)[0], scene.mask())
-        print(f".blend write {t1 - t0:.2f} s ({out.stat().st_size / 1e3:.0f} kB), reopen + render its sphere "
-              f"{t2 - t1:.2f} s; vs the backend's true sphere {err:.1e} relative RMSE")
+        print(
+            f".blend write {t1 - t0:.2f} s ({out.stat().st_size / 1e3:.0f} kB), reopen + render its sphere "
+            f"{t2 - t1:.2f} s; vs the backend's true sphere {err:.1e} relative RMSE"
+        )
 
 
 def main() -> None:
@@ -51,17 +53,24 @@ def main() -> None:
         scene = Scene.probe([0.0, 45.0], resolution=res)
         mask = scene.mask()
         for dist in ("ggx", "beckmann", "ashikhmin_shirley", "multi_ggx"):
-            mats = [Material.create("cycles:glossy", {"distribution": dist, "Roughness": r, "Diffuse Color": 0.1})
-                    for r in (0.1, 0.3, 0.5, 0.9)]
+            mats = [
+                Material.create("cycles:glossy", {"distribution": dist, "Roughness": r, "Diffuse Color": 0.1})
+                for r in (0.1, 0.3, 0.5, 0.9)
+            ]
             real, ref = cycles.render(mats, scene), embedded.render(mats, scene)
             errs = [rel(a, b, mask) for a, b in zip(real, ref, strict=True)]
-            print(f"{res}^2 glossy {dist:18s} relative RMSE per roughness 0.1/0.3/0.5/0.9: "
-                  + " ".join(f"{e:.1e}" for e in errs))
+            print(
+                f"{res}^2 glossy {dist:18s} relative RMSE per roughness 0.1/0.3/0.5/0.9: "
+                + " ".join(f"{e:.1e}" for e in errs)
+            )
             if dist == "multi_ggx":  # how far single scattering is from it: what the compensation adds
-                single = embedded.render([Material.create("cycles:glossy", {**m.values, "distribution": "ggx"})
-                                          for m in mats], scene)
-                print(f"{res}^2 glossy multi_ggx vs single-scatter ggx: "
-                      + " ".join(f"{rel(a, b, mask):.1e}" for a, b in zip(real, single, strict=True)))
+                single = embedded.render(
+                    [Material.create("cycles:glossy", {**m.values, "distribution": "ggx"}) for m in mats], scene
+                )
+                print(
+                    f"{res}^2 glossy multi_ggx vs single-scatter ggx: "
+                    + " ".join(f"{rel(a, b, mask):.1e}" for a, b in zip(real, single, strict=True))
+                )
         d = Material.create("cycles:diffuse", {"Color": [0.2, 0.5, 1.0]})
         err = rel(cycles.render([d], scene)[0], embedded.render([d], scene)[0], mask)
         print(f"{res}^2 diffuse relative RMSE {err:.1e}")
@@ -73,12 +82,16 @@ def main() -> None:
         print(f"{res}^2 seconds per Cycles image (one material, one light): {dt * 1000:.1f} ms")
     blend_timing(cycles)
     scene = Scene.probe([0.0], resolution=64)
-    source = Material.create("mitsuba06:ward", {"variant": "ward", "alpha": 0.2, "specularReflectance": 0.08,
-                                                "diffuseReflectance": [0.5, 0.3, 0.2]})
+    source = Material.create(
+        "mitsuba06:ward",
+        {"variant": "ward", "alpha": 0.2, "specularReflectance": 0.08, "diffuseReflectance": [0.5, 0.3, 0.2]},
+    )
     t0 = time.perf_counter()
     r = fit(source, "cycles:principled", scene=scene, target_renderer=cycles)
-    print(f"fit mitsuba06:ward -> cycles:principled 64^2: loss {r.loss:.4f}, {r.renders} renders, "
-          f"{time.perf_counter() - t0:.2f} s; {r.target}")
+    print(
+        f"fit mitsuba06:ward -> cycles:principled 64^2: loss {r.loss:.4f}, {r.renders} renders, "
+        f"{time.perf_counter() - t0:.2f} s; {r.target}"
+    )
     cycles.close()
 
 

@@ -29,17 +29,33 @@ def sources(model: str, n: int, rng: np.random.Generator) -> list[Material]:
     out = []
     for _ in range(n):
         if model == "mitsuba06:ward":
-            p = {"variant": "ward", "alpha": rng.uniform(0.03, 0.9), "specularReflectance": rng.uniform(0.02, 0.25),
-                 "diffuseReflectance": rng.uniform(0.0, 0.5)}
+            p = {
+                "variant": "ward",
+                "alpha": rng.uniform(0.03, 0.9),
+                "specularReflectance": rng.uniform(0.02, 0.25),
+                "diffuseReflectance": rng.uniform(0.0, 0.5),
+            }
         elif model == "mitsuba06:roughconductor":
-            p = {"distribution": "as", "alpha": rng.uniform(0.03, 0.6), "eta": rng.uniform(0.2, 2.0, 3).tolist(),
-                 "k": rng.uniform(0.0, 1.5, 3).tolist()}
+            p = {
+                "distribution": "as",
+                "alpha": rng.uniform(0.03, 0.6),
+                "eta": rng.uniform(0.2, 2.0, 3).tolist(),
+                "k": rng.uniform(0.0, 1.5, 3).tolist(),
+            }
         elif model == "cycles:glossy":
-            p = {"Roughness": rng.uniform(0.2, 0.9), "Color": rng.uniform(0.1, 0.9, 3).tolist(),
-                 "Diffuse Color": rng.uniform(0.0, 0.5, 3).tolist()}
+            p = {
+                "Roughness": rng.uniform(0.2, 0.9),
+                "Color": rng.uniform(0.1, 0.9, 3).tolist(),
+                "Diffuse Color": rng.uniform(0.0, 0.5, 3).tolist(),
+            }
         elif model == "blender27:ward":
-            p = {"specular_slope": rng.uniform(0.03, 0.4), "specular_color": rng.uniform(0.1, 1.0),
-                 "specular_intensity": 1.0, "diffuse_color": rng.uniform(0.0, 0.8), "diffuse_intensity": 1.0}
+            p = {
+                "specular_slope": rng.uniform(0.03, 0.4),
+                "specular_color": rng.uniform(0.1, 1.0),
+                "specular_intensity": 1.0,
+                "diffuse_color": rng.uniform(0.0, 0.8),
+                "diffuse_intensity": 1.0,
+            }
         else:
             raise ValueError(model)
         out.append(Material.create(model, p))
@@ -79,8 +95,10 @@ def main() -> None:
                 renders.append(r.renders)
                 losses.append(r.loss)
             label = f"{src_model} -> {tgt_model} ({note})"
-            print(f"{label:<46} {strategy:<12} {statistics.median(ms):9.1f} {np.percentile(ms, 90):7.1f} "
-                  f"{statistics.median(renders):7.0f} {statistics.median(losses):8.4f}")
+            print(
+                f"{label:<46} {strategy:<12} {statistics.median(ms):9.1f} {np.percentile(ms, 90):7.1f} "
+                f"{statistics.median(renders):7.0f} {statistics.median(losses):8.4f}"
+            )
 
 
 if __name__ == "__main__":

@@ -31,10 +31,17 @@ def make_asset(folder: Path, side: int) -> Path:
     mr = np.stack([0 * x, np.clip(0.3 + 0.5 * x + noise, 0, 1), np.ones_like(x)], -1).astype(np.float32)
     write_image_like(folder / "base.png", base, ImageInfo("png", "uint8", 3, 0, 0, "srgb"))
     write_image_like(folder / "mr.png", mr, ImageInfo("png", "uint8", 3, 0, 0, "linear"))
-    doc = {"asset": {"version": "2.0"}, "images": [{"uri": "base.png"}, {"uri": "mr.png"}],
-           "textures": [{"source": 0}, {"source": 1}],
-           "materials": [{"name": "brass", "pbrMetallicRoughness": {
-               "baseColorTexture": {"index": 0}, "metallicRoughnessTexture": {"index": 1}}}]}
+    doc = {
+        "asset": {"version": "2.0"},
+        "images": [{"uri": "base.png"}, {"uri": "mr.png"}],
+        "textures": [{"source": 0}, {"source": 1}],
+        "materials": [
+            {
+                "name": "brass",
+                "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}, "metallicRoughnessTexture": {"index": 1}},
+            }
+        ],
+    }
     path = folder / "brass.gltf"
     path.write_text(json.dumps(doc))
     return path
@@ -53,17 +60,25 @@ def main() -> None:
         for i in range(args.repeat):
             logs: list[str] = []
             t = time.perf_counter()
-            res = remap_file(asset, "mitsuba3:roughconductor", root / f"out{i}", fix={"distribution": "ggx"},
-                             evaluate=False, log=logs.append)
+            res = remap_file(
+                asset,
+                "mitsuba3:roughconductor",
+                root / f"out{i}",
+                fix={"distribution": "ggx"},
+                evaluate=False,
+                log=logs.append,
+            )
             runs.append((time.perf_counter() - t, res, logs))
         seconds, res, logs = min(runs, key=lambda r: r[0])
         route = next((m for m in logs if m.startswith("library:")), "library: -")
         steps = res.remap.seconds
         print(f"glTF {args.side}^2 (base colour + packed metallic-roughness) -> Mitsuba 3 XML")
         print(route)
-        print(f"total {seconds:.2f} s (best of {args.repeat}; target <= 5 s): unpack+load {steps['load']:.2f} s, "
-              f"route {steps['transform']:.2f} s, convert {steps['convert']:.2f} s, "
-              f"read+write rest {seconds - steps['total']:.2f} s")
+        print(
+            f"total {seconds:.2f} s (best of {args.repeat}; target <= 5 s): unpack+load {steps['load']:.2f} s, "
+            f"route {steps['transform']:.2f} s, convert {steps['convert']:.2f} s, "
+            f"read+write rest {seconds - steps['total']:.2f} s"
+        )
         print(f"wrote {res.file.name} with {', '.join(sorted(p.name for p in res.file.parent.glob('brass_*')))}")
 
 

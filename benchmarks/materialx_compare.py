@@ -69,10 +69,15 @@ IMG_DIR = Path(__file__).resolve().parent.parent / "docs" / "img" / "materials"
 VIEWS = ("probe", "lights3", "env")
 #: fit variants for dielectrics: name -> (strategy, parameters freed); "b" is the default remap (and the
 #: only one for metals, whose glTF form has no diffuse part, so every strategy is the same there)
-VARIANTS = {"b": ("two-stage", (), FIT_LIGHTS), "b_ior": ("two-stage", ("ior",), FIT_LIGHTS),
-            "b3": ("three-stage", (), FIT_LIGHTS), "b3_ior": ("three-stage", ("ior",), FIT_LIGHTS),
-            "b3_spec": ("three-stage", ("specularColor",), FIT_LIGHTS),
-            "b_ior_2L": ("two-stage", ("ior",), FIT_LIGHTS_2), "b3_ior_2L": ("three-stage", ("ior",), FIT_LIGHTS_2)}
+VARIANTS = {
+    "b": ("two-stage", (), FIT_LIGHTS),
+    "b_ior": ("two-stage", ("ior",), FIT_LIGHTS),
+    "b3": ("three-stage", (), FIT_LIGHTS),
+    "b3_ior": ("three-stage", ("ior",), FIT_LIGHTS),
+    "b3_spec": ("three-stage", ("specularColor",), FIT_LIGHTS),
+    "b_ior_2L": ("two-stage", ("ior",), FIT_LIGHTS_2),
+    "b3_ior_2L": ("three-stage", ("ior",), FIT_LIGHTS_2),
+}
 #: every candidate, in table order: (a) as shipped, (a) with F0 computed from n,k (metals), the fits
 CANDIDATES = ("a", "a_nk", *VARIANTS)
 
@@ -143,20 +148,26 @@ def classify(rec: dict[str, Any], min_roughness: float) -> Entry:
         f0 = conductor_f0(n, k)
         gap = float(np.max(np.abs(f0 - np.array(colour))))
         if gap > DYE_GAP:
-            e.skip = (f"colour {colour} is not its n,k's F0 {np.round(f0, 3).tolist()} (a dye or coating; "
-                      f"the n,k are the bare metal's)")
+            e.skip = (
+                f"colour {colour} is not its n,k's F0 {np.round(f0, 3).tolist()} (a dye or coating; "
+                f"the n,k are the bare metal's)"
+            )
             return e
         e.kind = "metal"
-        e.truth = Material.create("mitsuba06:roughconductor", {
-            "distribution": "ggx", "alpha": alpha, "eta": n.tolist(), "k": k.tolist(), "extEta": 1.0})
+        e.truth = Material.create(
+            "mitsuba06:roughconductor",
+            {"distribution": "ggx", "alpha": alpha, "eta": n.tolist(), "k": k.tolist(), "extEta": 1.0},
+        )
         if gap > 0.02:
             e.notes.append(f"listed colour {colour} vs F0 of n,k {np.round(f0, 3).tolist()}")
     else:
         e.kind = "dielectric"
         ior = float(rec.get("ior", 1.5))
         diffuse = np.clip(colour, 0.0, 1.0).tolist()
-        e.truth = Material.create("mitsuba06:roughplastic", {
-            "distribution": "ggx", "alpha": alpha, "intIOR": ior, "extIOR": 1.0, "diffuseReflectance": diffuse})
+        e.truth = Material.create(
+            "mitsuba06:roughplastic",
+            {"distribution": "ggx", "alpha": alpha, "intIOR": ior, "extIOR": 1.0, "diffuseReflectance": diffuse},
+        )
     return e
 
 
@@ -252,8 +263,10 @@ def dssim(x: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> float:
 def mitsuba3_check(e: Entry, views: Views) -> None:
     """Real Mitsuba 3's roughconductor with the truth's parameters against the embedded one."""
     v = e.truth.values
-    m3 = Material.create("mitsuba3:roughconductor", {
-        "distribution": "ggx", "alpha": float(v["alpha"][0]), "eta": v["eta"].tolist(), "k": v["k"].tolist()})
+    m3 = Material.create(
+        "mitsuba3:roughconductor",
+        {"distribution": "ggx", "alpha": float(v["alpha"][0]), "eta": v["eta"].tolist(), "k": v["k"].tolist()},
+    )
     r = get_renderer("mitsuba3")
     for view in ("probe", "lights3"):
         img = r.render([m3], views.scenes[view])[0]
@@ -265,8 +278,14 @@ def run_entry(e: Entry, views: Views, variants: dict[str, Any], keep_images: boo
     names = ["b"] if e.kind == "metal" else list(variants)
     for name in names:
         strategy, free, lights = variants[name]
-        e.fits[name] = fit(e.truth, TARGET, strategy=strategy, scene=Scene.probe(lights, views.size),
-                           fix={"metallic": metallic}, free=free)
+        e.fits[name] = fit(
+            e.truth,
+            TARGET,
+            strategy=strategy,
+            scene=Scene.probe(lights, views.size),
+            fix={"metallic": metallic},
+            free=free,
+        )
     cands = {"a": e.hand}
     if e.hand_nk is not None:
         cands["a_nk"] = e.hand_nk
@@ -306,16 +325,22 @@ def summary(entries: list[Entry], cand: str, view: str, kind: str | None = None)
     b = np.array([e.err[cand][view] for e in rows])
     ratio = b / a
     return {
-        "n": len(rows), "wins": int(np.sum(b < a)), "median_a": float(np.median(a)), "median_b": float(np.median(b)),
-        "median_ratio": float(np.median(ratio)), "worst_ratio": float(np.max(ratio)),
+        "n": len(rows),
+        "wins": int(np.sum(b < a)),
+        "median_a": float(np.median(a)),
+        "median_b": float(np.median(b)),
+        "median_ratio": float(np.median(ratio)),
+        "worst_ratio": float(np.max(ratio)),
         "worst": rows[int(np.argmax(ratio))].name if rows else "",
     }
 
 
 def print_report(entries: list[Entry], skipped: list[Entry], seconds: float) -> None:
     done = [e for e in entries if e.err]
-    print(f"# {len(done)} materials compared ({sum(e.kind == 'metal' for e in done)} metals, "
-          f"{sum(e.kind == 'dielectric' for e in done)} dielectrics), {len(skipped)} skipped, {seconds:.0f} s\n")
+    print(
+        f"# {len(done)} materials compared ({sum(e.kind == 'metal' for e in done)} metals, "
+        f"{sum(e.kind == 'dielectric' for e in done)} dielectrics), {len(skipped)} skipped, {seconds:.0f} s\n"
+    )
     cells = {"metal": ("a", "a_nk", "b"), "dielectric": ("a", "b", "b_ior", "b3", "b3_ior", "b3_ior_2L")}
     for kind, cands in cells.items():
         rows = [e for e in done if e.kind == kind]
@@ -328,9 +353,13 @@ def print_report(entries: list[Entry], skipped: list[Entry], seconds: float) -> 
         for e in rows:
             errs = " | ".join(
                 f"{100 * e.err[c]['probe']:.1f} / {100 * e.err[c]['lights3']:.1f} / {100 * e.err[c]['env']:.1f} "
-                f"[{100 * e.err[c]['env_dssim']:.2f}]" for c in cands)
-            print(f"| {e.name} | {e.roughness_db:g} -> {e.roughness:g} | {errs} | {fmt_params(e.hand)} | "
-                  f"{fmt_params(e.fits['b'].target)} |")
+                f"[{100 * e.err[c]['env_dssim']:.2f}]"
+                for c in cands
+            )
+            print(
+                f"| {e.name} | {e.roughness_db:g} -> {e.roughness:g} | {errs} | {fmt_params(e.hand)} | "
+                f"{fmt_params(e.fits['b'].target)} |"
+            )
         print()
     print("## summary (x = a candidate; wins = materials where x's error < a's, the shipped hand-made glTF)\n")
     print("| x | materials | view | wins | median a | median x | median x/a | worst x/a (material) |")
@@ -343,22 +372,31 @@ def print_report(entries: list[Entry], skipped: list[Entry], seconds: float) -> 
                 s = summary(done, cand, view, kind)
                 if not s["n"]:
                     continue
-                print(f"| {cand} | {kind or 'all'} ({s['n']}) | {view} | {s['wins']} | {s['median_a']:.4f} | "
-                      f"{s['median_b']:.4f} | {s['median_ratio']:.3f} | {s['worst_ratio']:.2f} ({s['worst']}) |")
+                print(
+                    f"| {cand} | {kind or 'all'} ({s['n']}) | {view} | {s['wins']} | {s['median_a']:.4f} | "
+                    f"{s['median_b']:.4f} | {s['median_ratio']:.3f} | {s['worst_ratio']:.2f} ({s['worst']}) |"
+                )
     m3 = [e for e in done if e.mitsuba3]
     if m3:
         worst = max(m3, key=lambda e: max(e.mitsuba3.values()))
-        print(f"\nMitsuba 3 roughconductor vs embedded truth, {len(m3)} metals: median relative RMSE "
-              f"{np.median([e.mitsuba3['probe'] for e in m3]):.1e} (probe), "
-              f"{np.median([e.mitsuba3['lights3'] for e in m3]):.1e} (3 lights); worst "
-              f"{max(worst.mitsuba3.values()):.1e} ({worst.name})")
+        print(
+            f"\nMitsuba 3 roughconductor vs embedded truth, {len(m3)} metals: median relative RMSE "
+            f"{np.median([e.mitsuba3['probe'] for e in m3]):.1e} (probe), "
+            f"{np.median([e.mitsuba3['lights3'] for e in m3]):.1e} (3 lights); worst "
+            f"{max(worst.mitsuba3.values()):.1e} ({worst.name})"
+        )
     print("\n## biggest losses of b against a (env relative RMSE ratio)\n")
-    losses = sorted((e for e in done if e.err["b"]["env"] > e.err["a"]["env"]),
-                    key=lambda e: e.err["b"]["env"] / e.err["a"]["env"], reverse=True)
+    losses = sorted(
+        (e for e in done if e.err["b"]["env"] > e.err["a"]["env"]),
+        key=lambda e: e.err["b"]["env"] / e.err["a"]["env"],
+        reverse=True,
+    )
     for e in losses[:10]:
-        print(f"- {e.name} ({e.kind}): env a {e.err['a']['env']:.3f}, b {e.err['b']['env']:.3f}; probe a "
-              f"{e.err['a']['probe']:.3f}, b {e.err['b']['probe']:.3f}; 3 lights a {e.err['a']['lights3']:.3f}, "
-              f"b {e.err['b']['lights3']:.3f}")
+        print(
+            f"- {e.name} ({e.kind}): env a {e.err['a']['env']:.3f}, b {e.err['b']['env']:.3f}; probe a "
+            f"{e.err['a']['probe']:.3f}, b {e.err['b']['probe']:.3f}; 3 lights a {e.err['a']['lights3']:.3f}, "
+            f"b {e.err['b']['lights3']:.3f}"
+        )
     notes = [(e.name, n) for e in done for n in e.notes]
     hows = sorted({(e.name, e.hand_how) for e in done if e.hand_how != "matremap reader"})
     if hows or notes:
@@ -374,12 +412,23 @@ def print_report(entries: list[Entry], skipped: list[Entry], seconds: float) -> 
 
 def to_json(entries: list[Entry], skipped: list[Entry]) -> dict[str, Any]:
     return {
-        "materials": [{
-            "name": e.name, "kind": e.kind, "roughness_db": e.roughness_db, "roughness": e.roughness,
-            "truth": e.truth.to_dict(), "hand": e.hand.to_dict(), "hand_read_by": e.hand_how,
-            "fits": {k: {"params": f.params, "loss": f.loss, "renders": f.renders} for k, f in e.fits.items()},
-            "errors": e.err, "mitsuba3": e.mitsuba3, "notes": e.notes,
-        } for e in entries if e.err],
+        "materials": [
+            {
+                "name": e.name,
+                "kind": e.kind,
+                "roughness_db": e.roughness_db,
+                "roughness": e.roughness,
+                "truth": e.truth.to_dict(),
+                "hand": e.hand.to_dict(),
+                "hand_read_by": e.hand_how,
+                "fits": {k: {"params": f.params, "loss": f.loss, "renders": f.renders} for k, f in e.fits.items()},
+                "errors": e.err,
+                "mitsuba3": e.mitsuba3,
+                "notes": e.notes,
+            }
+            for e in entries
+            if e.err
+        ],
         "skipped": {e.name: e.skip for e in skipped},
     }
 
@@ -404,8 +453,12 @@ def plot_errors(entries: list[Entry], out: Path) -> None:
     import matplotlib.pyplot as plt
 
     done = [e for e in entries if e.err]
-    labels = {"probe": "probe, headlight (fit scene)", "lights3": "probe, lights 0/45/70 deg",
-              "env": "environment map", "env_dssim": "environment map, DSSIM"}
+    labels = {
+        "probe": "probe, headlight (fit scene)",
+        "lights3": "probe, lights 0/45/70 deg",
+        "env": "environment map",
+        "env_dssim": "environment map, DSSIM",
+    }
     fig, axes = plt.subplots(1, 4, figsize=(17, 4.4))
     for ax, view in zip(axes, labels, strict=True):
         for kind, colour in (("metal", "tab:orange"), ("dielectric", "tab:blue")):
@@ -438,8 +491,9 @@ def plot_errors(entries: list[Entry], out: Path) -> None:
     ax.legend(fontsize=8)
     split = sum(e.kind == "dielectric" for e in order)
     ax.axvline(split - 0.5, color="k", lw=0.6)
-    ax.set_title("per material (dielectrics left, metals right), independent view: built-in environment map",
-                 fontsize=10)
+    ax.set_title(
+        "per material (dielectrics left, metals right), independent view: built-in environment map", fontsize=10
+    )
     ax.grid(axis="y", alpha=0.3, which="both", lw=0.4)
     fig.tight_layout()
     fig.savefig(out / "bars.png", dpi=90)
@@ -454,8 +508,13 @@ def strip(entries: list[Entry], names: list[str], views: Views, out: Path, view:
 
     rows = [e for name in names for e in entries if e.name == name and e.images]
     cols = ["truth", "a", "b", "diff a x4", "diff b x4"]
-    titles = {"truth": "truth (physical)", "a": "(a) hand-made glTF", "b": "(b) matremap fit",
-              "diff a x4": "|a - truth| x4", "diff b x4": "|b - truth| x4"}
+    titles = {
+        "truth": "truth (physical)",
+        "a": "(a) hand-made glTF",
+        "b": "(b) matremap fit",
+        "diff a x4": "|a - truth| x4",
+        "diff b x4": "|b - truth| x4",
+    }
     fig, axes = plt.subplots(len(rows), len(cols), figsize=(2.0 * len(cols), 2.0 * len(rows) + 0.3), squeeze=False)
     mask = views.masks[view]
     for i, e in enumerate(rows):
@@ -488,13 +547,20 @@ def strip(entries: list[Entry], names: list[str], views: Views, out: Path, view:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--size", type=int, default=128, help="image resolution (default 128)")
-    ap.add_argument("--min-roughness", type=float, default=0.3,
-                    help="perceptual roughness floor for truth and hand-made (default 0.3, alpha 0.09)")
+    ap.add_argument(
+        "--min-roughness",
+        type=float,
+        default=0.3,
+        help="perceptual roughness floor for truth and hand-made (default 0.3, alpha 0.09)",
+    )
     ap.add_argument("--env", default="builtin", help="environment map for the third view (default builtin)")
     ap.add_argument("--only", default="", help="comma-separated material names")
     ap.add_argument("--no-mitsuba3", action="store_true", help="skip the real Mitsuba 3 check of the metals")
-    ap.add_argument("--default-only", action="store_true",
-                    help="fit only the default remap (no three-stage / ior / specularColor variants for dielectrics)")
+    ap.add_argument(
+        "--default-only",
+        action="store_true",
+        help="fit only the default remap (no three-stage / ior / specularColor variants for dielectrics)",
+    )
     ap.add_argument("--plots", action="store_true", help=f"write plots into {IMG_DIR}")
     ap.add_argument("--json", help="write every figure to this JSON file")
     args = ap.parse_args()

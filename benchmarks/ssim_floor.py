@@ -42,19 +42,39 @@ AS = {"distribution": "as"}
 def naive(example: str, tmp: Path) -> float:
     ms = load_map_set(ROOT / "examples" / example)
     params, normal = load_arrays(ms)
-    renamed = {"alpha": params["alpha"], "F0": params["specularReflectance"],
-               "diffuseReflectance": params["diffuseReflectance"]}
+    renamed = {
+        "alpha": params["alpha"],
+        "F0": params["specularReflectance"],
+        "diffuseReflectance": params["diffuseReflectance"],
+    }
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        r = evaluate((ms.model, params, ms.options, normal), ("mitsuba06:pbr", renamed, AS, normal),
-                     resolve("builtin"), ROTATIONS, tmp / f"naive-{example}", resolution=RES, lights=LIGHTS)
+        r = evaluate(
+            (ms.model, params, ms.options, normal),
+            ("mitsuba06:pbr", renamed, AS, normal),
+            resolve("builtin"),
+            ROTATIONS,
+            tmp / f"naive-{example}",
+            resolution=RES,
+            lights=LIGHTS,
+        )
     return float(r.mean_full)
 
 
 def remapped(example: str, tmp: Path) -> tuple[float, float]:
     """Mean 1-SSIM of the remap, full and specular only."""
-    r = remap(ROOT / "examples" / example, None, "mitsuba06:pbr", tmp / f"remap-{example}", fix=AS,
-              rotations="0:360:6", resolution=RES, lights=LIGHTS, cache=tmp / "cache", log=lambda m: None)
+    r = remap(
+        ROOT / "examples" / example,
+        None,
+        "mitsuba06:pbr",
+        tmp / f"remap-{example}",
+        fix=AS,
+        rotations="0:360:6",
+        resolution=RES,
+        lights=LIGHTS,
+        cache=tmp / "cache",
+        log=lambda m: None,
+    )
     results = json.loads((r.report.parent / "results.json").read_text())
     return float(r.mean_dssim), float(results["mean_dssim_specular"])
 
@@ -76,16 +96,23 @@ def floor(example: str) -> str:
     def unpack(x):
         return {"alpha": x[0], "F0": x[1:4], "diffuseReflectance": x[4:7]}
 
-    sol = least_squares(lambda x: (render("mitsuba06:pbr", unpack(x), AS) - src).ravel(), x0,
-                        bounds=([1e-3] + [0.0] * 6, [1.0] * 7), x_scale="jac")
+    sol = least_squares(
+        lambda x: (render("mitsuba06:pbr", unpack(x), AS) - src).ravel(),
+        x0,
+        bounds=([1e-3] + [0.0] * 6, [1.0] * 7),
+        x_scale="jac",
+    )
     best = render("mitsuba06:pbr", unpack(sol.x), AS)
     fitted = render("mitsuba06:pbr", dict(probe.values), dict(probe.options))
     m_best, smap = ssim_map(src, best)
     m_fit = ssim_map(src, fitted)[0]
 
     def dssim(x):
-        p = {"alpha": np.clip(x[0], 1e-3, 1.0), "F0": np.clip(x[1:4], 0, 1),
-             "diffuseReflectance": np.clip(x[4:7], 0, 1)}
+        p = {
+            "alpha": np.clip(x[0], 1e-3, 1.0),
+            "F0": np.clip(x[1:4], 0, 1),
+            "diffuseReflectance": np.clip(x[4:7], 0, 1),
+        }
         return 1.0 - ssim_map(src, render("mitsuba06:pbr", p, AS))[0]
 
     search = minimize(dssim, x0, method="Nelder-Mead", options={"maxfev": 600, "xatol": 1e-4, "fatol": 1e-5})
@@ -97,8 +124,10 @@ def floor(example: str) -> str:
         sel = mask & (r >= lo) & (r < hi)
         ratio = np.median(best[sel].sum(-1) / np.maximum(src[sel].sum(-1), 1e-12))
         rings.append(f"r {lo:.1f}-{hi:.1f}: {1 - smap[sel].mean():.3f} (AS/Ward {ratio:.2f})")
-    return (f"probe fit {1 - m_fit:.4f}; L2 floor {1 - m_best:.4f}, SSIM floor {search.fun:.4f}\n{'':<17}"
-            "L2 floor by ring: " + ", ".join(rings))
+    return (
+        f"probe fit {1 - m_fit:.4f}; L2 floor {1 - m_best:.4f}, SSIM floor {search.fun:.4f}\n{'':<17}"
+        "L2 floor by ring: " + ", ".join(rings)
+    )
 
 
 def main() -> None:
@@ -109,8 +138,10 @@ def main() -> None:
         for ex in EXAMPLES:
             full, spec = remapped(ex, tmp)
             print(f"{ex:<16} {full:9.4f} {naive(ex, tmp):9.4f} {spec:24.4f}")
-        print("\nuniform material at the median parameters, rotation 0; floors: AS fitted to the environment-lit "
-              "Ward image itself")
+        print(
+            "\nuniform material at the median parameters, rotation 0; floors: AS fitted to the environment-lit "
+            "Ward image itself"
+        )
         for ex in EXAMPLES:
             print(f"{ex:<16} {floor(ex)}")
 

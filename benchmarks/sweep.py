@@ -31,8 +31,13 @@ GRID_AUTHORS = "alpha=0.005:0.99:35,specularReflectance=0.02:0.232413793103:23"
 
 
 def timed_sweep(grid_text: str, workers: int, size: int, continuation: bool, folder: Path) -> tuple[float, Path]:
-    config = SweepConfig(source=SOURCE, target="mitsuba06:pbr", fix={"distribution": "as"},
-                         scene=Scene(resolution=size), continuation=continuation)
+    config = SweepConfig(
+        source=SOURCE,
+        target="mitsuba06:pbr",
+        fix={"distribution": "as"},
+        scene=Scene(resolution=size),
+        continuation=continuation,
+    )
     grid = parse_grid(grid_text, SOURCE.spec)
     db = folder / f"{abs(hash((grid_text, workers, continuation)))}.sqlite"
     t = time.perf_counter()
@@ -59,11 +64,15 @@ def main() -> None:
             for w in args.workers:
                 seconds, db = timed_sweep(grid_text, w, args.size, continuation, folder)
                 rows = SweepStore.open(db).rows()
-                print(f"{label:<44} {w:>7} {seconds:8.1f} {len(rows) / seconds:9.1f} "
-                      f"{np.mean([r['renders'] for r in rows]):11.1f}")
+                print(
+                    f"{label:<44} {w:>7} {seconds:8.1f} {len(rows) / seconds:9.1f} "
+                    f"{np.mean([r['renders'] for r in rows]):11.1f}"
+                )
         if TABLE.is_file():
-            fitted = {(round(r["swept"]["alpha"], 6), round(r["swept"]["specularReflectance"], 6)): r["target"]
-                      for r in SweepStore.open(db).rows()}
+            fitted = {
+                (round(r["swept"]["alpha"], 6), round(r["swept"]["specularReflectance"], 6)): r["target"]
+                for r in SweepStore.open(db).rows()
+            }
             dev_a, dev_f = [], []
             with TABLE.open() as f:
                 for r in csv.DictReader(f, delimiter="\t"):
@@ -73,8 +82,10 @@ def main() -> None:
                         continue
                     dev_a.append(abs(t["alpha"] / float(r["alpha2"]) - 1))
                     dev_f.append(abs(t["F0"][0] / float(r["eta2"]) - 1))
-            print(f"\nauthors' table, {len(dev_a)} rows with alpha1 >= 0.03 matched to the sweep: alpha2 max "
-                  f"{100 * max(dev_a):.3f}%, F0/rho_s max {100 * max(dev_f):.3f}%")
+            print(
+                f"\nauthors' table, {len(dev_a)} rows with alpha1 >= 0.03 matched to the sweep: alpha2 max "
+                f"{100 * max(dev_a):.3f}%, F0/rho_s max {100 * max(dev_f):.3f}%"
+            )
 
 
 if __name__ == "__main__":

@@ -44,12 +44,17 @@ def blender_version_of(example: Path, out: Path) -> Path:
     slope = np.clip(np.asarray(p["alpha"], np.float32), 0.02, 0.4)
     write_image(out / "roughness.exr", np.repeat(slope[..., None], 3, axis=-1))
     shutil.copy(ward.normal, out / "normal.png")
-    (out / "material.json").write_text(json.dumps({
-        "model": "blender27:ward",
-        "maps": {"specular_color": "specular.exr", "specular_slope": "roughness.exr"},
-        "normal": "normal.png",
-        "params": {"diffuse_intensity": 0.0, "diffuse_color": 0.0, "specular_intensity": 1.0},
-    }, indent=1))
+    (out / "material.json").write_text(
+        json.dumps(
+            {
+                "model": "blender27:ward",
+                "maps": {"specular_color": "specular.exr", "specular_slope": "roughness.exr"},
+                "normal": "normal.png",
+                "params": {"diffuse_intensity": 0.0, "diffuse_color": 0.0, "specular_intensity": 1.0},
+            },
+            indent=1,
+        )
+    )
     return out
 
 
@@ -57,8 +62,17 @@ def chain(label: str, start: Path, hops: list[tuple[str, dict, str]], work: Path
     maps, transforms = start, []
     for i, (target, fix, renderer) in enumerate(hops):
         out = work / f"{label}-hop{i + 1}"
-        r = remap(maps, None, target, out, fix=fix, cache=cache, evaluate=False, target_renderer=renderer,
-                  log=lambda m, hop=i + 1: print(f"  [{label} hop {hop}] {m}"))
+        r = remap(
+            maps,
+            None,
+            target,
+            out,
+            fix=fix,
+            cache=cache,
+            evaluate=False,
+            target_renderer=renderer,
+            log=lambda m, hop=i + 1: print(f"  [{label} hop {hop}] {m}"),
+        )
         transforms.append(Transform.load(r.transform))
         maps = r.maps
     chained = Transform.chain(transforms) if len(transforms) > 1 else transforms[0]
@@ -68,12 +82,22 @@ def chain(label: str, start: Path, hops: list[tuple[str, dict, str]], work: Path
         report = convert(load_map_set(start), [chained], final)
     src, tgt = load_map_set(start), load_map_set(final)
     (sp, sn), (tp, tn) = load_arrays(src), load_arrays(tgt)
-    result = evaluate((src.model, sp, src.options, sn), (tgt.model, tp, tgt.options, tn), resolve("builtin"),
-                      ROTATIONS, work / f"{label}-evaluation", resolution=160, lights=256, title=chained.describe())
+    result = evaluate(
+        (src.model, sp, src.options, sn),
+        (tgt.model, tp, tgt.options, tn),
+        resolve("builtin"),
+        ROTATIONS,
+        work / f"{label}-evaluation",
+        resolution=160,
+        lights=256,
+        title=chained.describe(),
+    )
     for name in ("r000_full_source", "r000_full_target", "r000_full_dssim", "dssim_vs_rotation"):
         shutil.copy(work / f"{label}-evaluation" / "images" / f"{name}.png", IMG / f"{label}-{name}.png")
-    print(f"{label}: {chained.describe()}: outside {report.outside}/{report.texels}, mean 1-SSIM "
-          f"{result.mean_full:.4f} (specular {result.mean_specular:.4f})")
+    print(
+        f"{label}: {chained.describe()}: outside {report.outside}/{report.texels}, mean 1-SSIM "
+        f"{result.mean_full:.4f} (specular {result.mean_specular:.4f})"
+    )
     return {"chain": chained.describe(), "mean_dssim": result.mean_full, "specular": result.mean_specular}
 
 
@@ -84,17 +108,37 @@ def main() -> None:
         example = ROOT / "examples" / "bronze"
         bi = blender_version_of(example, work / "bronze-blender27")
         results = {
-            "blender27-to-cycles": chain("blender27-to-cycles", bi, [
-                ("mitsuba06:ward", {"variant": "ward"}, "embedded"),
-                ("mitsuba06:roughconductor", {"distribution": "ggx"}, "embedded"),
-                ("cycles:glossy", {"distribution": "ggx"}, "cycles"),
-            ], work, cache),
+            "blender27-to-cycles": chain(
+                "blender27-to-cycles",
+                bi,
+                [
+                    ("mitsuba06:ward", {"variant": "ward"}, "embedded"),
+                    ("mitsuba06:roughconductor", {"distribution": "ggx"}, "embedded"),
+                    ("cycles:glossy", {"distribution": "ggx"}, "cycles"),
+                ],
+                work,
+                cache,
+            ),
         }
-        as_maps = remap(example, None, "mitsuba06:pbr", work / "bronze-as", fix={"distribution": "as"},
-                        cache=cache, evaluate=False, log=lambda m: None).maps
-        results["as-to-cycles"] = chain("as-to-cycles", as_maps, [
-            ("cycles:glossy", {"distribution": "ggx"}, "cycles"),
-        ], work, cache)
+        as_maps = remap(
+            example,
+            None,
+            "mitsuba06:pbr",
+            work / "bronze-as",
+            fix={"distribution": "as"},
+            cache=cache,
+            evaluate=False,
+            log=lambda m: None,
+        ).maps
+        results["as-to-cycles"] = chain(
+            "as-to-cycles",
+            as_maps,
+            [
+                ("cycles:glossy", {"distribution": "ggx"}, "cycles"),
+            ],
+            work,
+            cache,
+        )
         (IMG / "results.json").write_text(json.dumps(results, indent=1))
 
 

@@ -1,6 +1,6 @@
 """Regenerate the pictures in docs/img (run from the repository root):
 
-    python docs/make_figures.py
+python docs/make_figures.py
 """
 
 from __future__ import annotations
@@ -16,14 +16,25 @@ from matremap.core.scene import Scene
 OUT = Path(__file__).resolve().parent / "img"
 
 FIGURES = {
-    "fit-ward-to-as.png": ("mitsuba06:ward,variant=ward,alpha=0.3,specularReflectance=0.12,diffuseReflectance=0",
-                           "mitsuba06:pbr", {"distribution": "as"}, [0.0]),
-    "fit-plastic-to-cycles.png": ("mitsuba06:roughplastic,alpha=0.2,diffuseReflectance=0.5:0.2:0.1",
-                                  "cycles:glossy", {}, [0.0]),
-    "fit-blender-to-ward-45.png": ("blender27:ward,specular_slope=0.15,specular_intensity=1,diffuse_color=0.4:0.5:0.6",
-                                   "mitsuba06:ward", {}, [45.0]),
-    "fit-conductor-to-ward.png": ("mitsuba06:roughconductor,distribution=ggx,alpha=0.25",
-                                  "mitsuba06:ward", {}, [0.0]),
+    "fit-ward-to-as.png": (
+        "mitsuba06:ward,variant=ward,alpha=0.3,specularReflectance=0.12,diffuseReflectance=0",
+        "mitsuba06:pbr",
+        {"distribution": "as"},
+        [0.0],
+    ),
+    "fit-plastic-to-cycles.png": (
+        "mitsuba06:roughplastic,alpha=0.2,diffuseReflectance=0.5:0.2:0.1",
+        "cycles:glossy",
+        {},
+        [0.0],
+    ),
+    "fit-blender-to-ward-45.png": (
+        "blender27:ward,specular_slope=0.15,specular_intensity=1,diffuse_color=0.4:0.5:0.6",
+        "mitsuba06:ward",
+        {},
+        [45.0],
+    ),
+    "fit-conductor-to-ward.png": ("mitsuba06:roughconductor,distribution=ggx,alpha=0.25", "mitsuba06:ward", {}, [0.0]),
 }
 
 

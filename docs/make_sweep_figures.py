@@ -41,16 +41,26 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         # (a) + (c): conductors AS -> Ward and back; k sweeps F0 from 0.01 to 0.9 (eta = 1)
-        db = sweep(tmp / "conductors.sqlite", "mitsuba06:roughconductor,distribution=as,eta=1",
-                   "mitsuba06:ward", "alpha=0.05:0.6:12,k=0.2:6:20", fix={"variant": "ward"}, round_trip=True)
+        db = sweep(
+            tmp / "conductors.sqlite",
+            "mitsuba06:roughconductor,distribution=as,eta=1",
+            "mitsuba06:ward",
+            "alpha=0.05:0.6:12,k=0.2:6:20",
+            fix={"variant": "ward"},
+            round_trip=True,
+        )
         print(write_report(db, IMG / "sweep-conductors", force=True))
 
         # (b): dielectric IOR sweep, simple vs two-stage
         fig, axes = plt.subplots(1, 2, figsize=(9, 3.4), constrained_layout=True)
         for strategy, colour in (("simple", "tab:red"), ("two-stage", "tab:blue"), ("three-stage", "tab:green")):
-            db = sweep(tmp / f"plastic-{strategy}.sqlite",
-                       "mitsuba06:roughplastic,distribution=phong,alpha=0.1,diffuseReflectance=0.5",
-                       "mitsuba06:ward", "intIOR=1.05:2.0:60", strategy=strategy)
+            db = sweep(
+                tmp / f"plastic-{strategy}.sqlite",
+                "mitsuba06:roughplastic,distribution=phong,alpha=0.1,diffuseReflectance=0.5",
+                "mitsuba06:ward",
+                "intIOR=1.05:2.0:60",
+                strategy=strategy,
+            )
             rows = sorted(SweepStore.open(db).rows("ok"), key=lambda r: r["source"]["intIOR"])
             ior = np.array([r["source"]["intIOR"] for r in rows])
             style = dict(color=colour, label=strategy, lw=1.5, ls="--" if strategy == "three-stage" else "-")

@@ -136,8 +136,11 @@ def bronze(size: int) -> dict[str, np.ndarray]:
     return {"diffuse": diffuse, "specular": spec, "roughness": alpha, "normal": normal_map(h, 0.6)}
 
 
-MATERIALS = {"scratched-gold": ("gold", scratched_gold), "blue-plastic": ("plastic", blue_plastic),
-             "bronze": ("bronze", bronze)}
+MATERIALS = {
+    "scratched-gold": ("gold", scratched_gold),
+    "blue-plastic": ("plastic", blue_plastic),
+    "bronze": ("bronze", bronze),
+}
 
 
 def write_set(folder: Path, prefix: str, maps: dict[str, np.ndarray], force: bool) -> list[Path]:
@@ -154,12 +157,18 @@ def write_set(folder: Path, prefix: str, maps: dict[str, np.ndarray], force: boo
         written.append(write_image_like(folder / f"{prefix}_{role}.png", a, info, force=force))
     manifest = {
         "model": "mitsuba06:ward",
-        "maps": {"diffuseReflectance": f"{prefix}_diffuse.png", "specularReflectance": f"{prefix}_specular.png",
-                 "alpha": f"{prefix}_roughness.png"},
+        "maps": {
+            "diffuseReflectance": f"{prefix}_diffuse.png",
+            "specularReflectance": f"{prefix}_specular.png",
+            "alpha": f"{prefix}_roughness.png",
+        },
         "normal": f"{prefix}_normal.png",
         "params": {"variant": "ward"},
-        "colorspace": {f"{prefix}_diffuse.png": "srgb", f"{prefix}_specular.png": "srgb",
-                       f"{prefix}_roughness.png": "linear"},
+        "colorspace": {
+            f"{prefix}_diffuse.png": "srgb",
+            f"{prefix}_specular.png": "srgb",
+            f"{prefix}_roughness.png": "linear",
+        },
     }
     m = folder / "material.json"
     if m.exists() and not force:
@@ -187,8 +196,11 @@ def write_gltf(folder: Path, maps: dict[str, np.ndarray], force: bool) -> list[P
     folder.mkdir(parents=True, exist_ok=True)
     size = maps["roughness"].shape[0]
     mr = np.stack([np.zeros((size, size)), maps["roughness"], np.ones((size, size))], axis=-1)
-    images = {"brass_basecolor.png": (maps["base"], "srgb"), "brass_metalrough.png": (mr, "linear"),
-              "brass_normal.png": (maps["normal"], "linear")}
+    images = {
+        "brass_basecolor.png": (maps["base"], "srgb"),
+        "brass_metalrough.png": (mr, "linear"),
+        "brass_normal.png": (maps["normal"], "linear"),
+    }
     written = []
     for name, (a, cs) in images.items():
         info = ImageInfo("png", "uint8", 3, size, size, cs)
@@ -197,9 +209,13 @@ def write_gltf(folder: Path, maps: dict[str, np.ndarray], force: bool) -> list[P
         "asset": {"version": "2.0", "generator": "matremap examples/make_examples.py"},
         "images": [{"uri": n} for n in images],
         "textures": [{"source": i} for i in range(len(images))],
-        "materials": [{"name": "brass", "normalTexture": {"index": 2},
-                       "pbrMetallicRoughness": {"baseColorTexture": {"index": 0},
-                                                "metallicRoughnessTexture": {"index": 1}}}],
+        "materials": [
+            {
+                "name": "brass",
+                "normalTexture": {"index": 2},
+                "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}, "metallicRoughnessTexture": {"index": 1}},
+            }
+        ],
     }
     path = folder / "brass.gltf"
     if path.exists() and not force:
@@ -222,14 +238,17 @@ def main(argv: list[str] | None = None) -> int:
         size = sum(f.stat().st_size for f in files)
         total += size
         a, s = maps["roughness"], maps["specular"]
-        print(f"{name:15s} {size / 1024:7.1f} KiB  alpha {a.min():.3f}..{a.max():.3f}  "
-              f"rho_s {s.min():.3f}..{s.max():.3f}")
+        print(
+            f"{name:15s} {size / 1024:7.1f} KiB  alpha {a.min():.3f}..{a.max():.3f}  rho_s {s.min():.3f}..{s.max():.3f}"
+        )
     maps = brass(args.size)
     files = write_gltf(args.out / "brass-gltf", maps, args.force)
     size = sum(f.stat().st_size for f in files)
     total += size
-    print(f"{'brass-gltf':15s} {size / 1024:7.1f} KiB  roughness {maps['roughness'].min():.3f}.."
-          f"{maps['roughness'].max():.3f} (glTF, alpha = roughness^2)")
+    print(
+        f"{'brass-gltf':15s} {size / 1024:7.1f} KiB  roughness {maps['roughness'].min():.3f}.."
+        f"{maps['roughness'].max():.3f} (glTF, alpha = roughness^2)"
+    )
     print(f"total {total / 1024:.1f} KiB (budget {BUDGET / 1024:.0f} KiB)")
     if total > BUDGET:
         print("over budget: use a smaller --size", file=sys.stderr)

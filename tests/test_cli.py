@@ -67,8 +67,19 @@ def test_render_refuses_to_overwrite_without_force(capsys, tmp_path):
 
 def test_fit_json_prints_one_object(capsys, tmp_path):
     out = tmp_path / "fit.json"
-    code, stdout, _ = run(capsys, "fit", "--source", WARD, "--target", "mitsuba06:pbr", "--fix", "distribution=as",
-                          "--json", "-o", str(out))
+    code, stdout, _ = run(
+        capsys,
+        "fit",
+        "--source",
+        WARD,
+        "--target",
+        "mitsuba06:pbr",
+        "--fix",
+        "distribution=as",
+        "--json",
+        "-o",
+        str(out),
+    )
     assert code == 0
     record = json.loads(stdout)
     assert {"params", "loss", "renders", "seconds", "strategy"} <= set(record)
@@ -81,8 +92,21 @@ def test_fit_json_prints_one_object(capsys, tmp_path):
 def test_fit_reads_a_material_file_and_prints_a_table(capsys, tmp_path):
     f = tmp_path / "ward.json"
     f.write_text(WARD)
-    code, out, _ = run(capsys, "fit", "--source", str(f), "--target", "cycles:glossy", "--light", "0", "45",
-                       "--size", "64", "--strategy", "three-stage")
+    code, out, _ = run(
+        capsys,
+        "fit",
+        "--source",
+        str(f),
+        "--target",
+        "cycles:glossy",
+        "--light",
+        "0",
+        "45",
+        "--size",
+        "64",
+        "--strategy",
+        "three-stage",
+    )
     assert code == 0 and "Roughness =" in out and "stage joint" in out
 
 
@@ -127,8 +151,9 @@ def test_fit_compare_writes_source_target_difference(capsys, tmp_path):
     from matremap.core.imageio import read_image
 
     out = tmp_path / "cmp.exr"
-    code, stdout, _ = run(capsys, "fit", "--source", WARD, "--target", "cycles:glossy", "--size", "48",
-                          "--compare", str(out), "--json")
+    code, stdout, _ = run(
+        capsys, "fit", "--source", WARD, "--target", "cycles:glossy", "--size", "48", "--compare", str(out), "--json"
+    )
     assert code == 0
     loss = json.loads(stdout)["loss"]
     strip = read_image(out)

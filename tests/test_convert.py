@@ -20,11 +20,14 @@ H, W = 23, 17
 @pytest.fixture(scope="module")
 def ward_db(tmp_path_factory):
     source = Material.create("mitsuba06:ward", {"variant": "ward", "diffuseReflectance": 0.0})
-    config = SweepConfig(source=source, target="mitsuba06:pbr", fix={"distribution": "as"},
-                         scene=Scene(resolution=48))
+    config = SweepConfig(source=source, target="mitsuba06:pbr", fix={"distribution": "as"}, scene=Scene(resolution=48))
     path = tmp_path_factory.mktemp("db") / "w2as.sqlite"
-    run_sweep(config, parse_grid("alpha=0.03:0.99:5,specularReflectance=0.02:0.232:4", source.spec), str(path),
-              InlineExecutor())
+    run_sweep(
+        config,
+        parse_grid("alpha=0.03:0.99:5,specularReflectance=0.02:0.232:4", source.spec),
+        str(path),
+        InlineExecutor(),
+    )
     return path
 
 
@@ -52,10 +55,19 @@ def make_set(folder, alpha, rho, normal, rough_info=PNG8_GREY, spec_info=PNG16_S
     write_image_like(folder / f"w_roughness.{rough_info.format}", alpha, rough_info)
     write_image_like(folder / f"w_specular.{spec_info.format}", rho, spec_info)
     write_image_like(folder / "w_normal.png", normal, ImageInfo("png", "uint8", 3, 0, 0, "linear"))
-    (folder / "material.json").write_text(json.dumps({
-        "model": "mitsuba06:ward", "normal": "w_normal.png",
-        "maps": {"alpha": f"w_roughness.{rough_info.format}", "specularReflectance": f"w_specular.{spec_info.format}"},
-        "params": {"variant": "ward", "diffuseReflectance": 0}}))
+    (folder / "material.json").write_text(
+        json.dumps(
+            {
+                "model": "mitsuba06:ward",
+                "normal": "w_normal.png",
+                "maps": {
+                    "alpha": f"w_roughness.{rough_info.format}",
+                    "specularReflectance": f"w_specular.{spec_info.format}",
+                },
+                "params": {"variant": "ward", "diffuseReflectance": 0},
+            }
+        )
+    )
     return load_map_set(folder)
 
 
@@ -72,8 +84,9 @@ def test_convert_matches_transform_apply(tmp_path, ward_to_as):
     # what the converter read, through the transform, directly
     alpha, _ = read_image(ms.maps["alpha"], "linear")
     rho, _ = read_image(ms.maps["specularReflectance"], "srgb")
-    expected, outside = ward_to_as.apply({"alpha": alpha[..., 0], "specularReflectance": rho,
-                                          "diffuseReflectance": 0.0})
+    expected, outside = ward_to_as.apply(
+        {"alpha": alpha[..., 0], "specularReflectance": rho, "diffuseReflectance": 0.0}
+    )
     doc = json.loads((tmp_path / "out" / "material.json").read_text())
     assert doc["model"] == "mitsuba06:pbr" and doc["maps"] == {"alpha": "w_roughness.png", "F0": "w_specular.png"}
     assert doc["params"]["distribution"] == "as" and doc["params"]["specularReflectance"] == [1.0, 1.0, 1.0]
@@ -88,7 +101,8 @@ def test_convert_matches_transform_apply(tmp_path, ward_to_as):
     assert any("2 of 391 texels" in m for m in warned)
     assert (tmp_path / "out" / "w_normal.png").read_bytes() == (tmp_path / "in" / "w_normal.png").read_bytes()
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == sorted(
-        ["material.json", MASK_NAME, "w_normal.png", "w_roughness.png", "w_specular.png"])
+        ["material.json", MASK_NAME, "w_normal.png", "w_roughness.png", "w_specular.png"]
+    )
     # the output is itself a map set
     again = load_map_set(tmp_path / "out")
     assert again.model == "mitsuba06:pbr" and again.colorspace == {"alpha": "linear", "F0": "srgb"}
@@ -99,8 +113,14 @@ def test_float_maps_stay_float_and_two_workers_agree(tmp_path, ward_to_as, monke
 
     monkeypatch.setattr(matremap.svbrdf.convert, "PARALLEL_MIN_TEXELS", 0)  # a pool even for small maps
     alpha, rho, normal = fields(1)
-    ms = make_set(tmp_path / "in", alpha, rho, normal, ImageInfo("exr", "float", 1, 0, 0, "linear"),
-                  ImageInfo("exr", "float", 3, 0, 0, "linear"))
+    ms = make_set(
+        tmp_path / "in",
+        alpha,
+        rho,
+        normal,
+        ImageInfo("exr", "float", 1, 0, 0, "linear"),
+        ImageInfo("exr", "float", 3, 0, 0, "linear"),
+    )
     quiet_convert(ms, ward_to_as, tmp_path / "one", tile_rows=4, workers=1)
     quiet_convert(ms, ward_to_as, tmp_path / "two", tile_rows=6, workers=2)
     expected, _ = ward_to_as.apply({"alpha": alpha, "specularReflectance": rho, "diffuseReflectance": 0.0})
@@ -115,16 +135,24 @@ def test_float_maps_stay_float_and_two_workers_agree(tmp_path, ward_to_as, monke
 def test_a_chain_is_applied_per_texel(tmp_path, ward_db, ward_to_as):
     back = learn_transform(ward_db, reverse=True)
     alpha, rho, normal = fields(2)
-    ms = make_set(tmp_path / "in", alpha, rho, normal, ImageInfo("exr", "float", 1, 0, 0, "linear"),
-                  ImageInfo("exr", "float", 3, 0, 0, "linear"))
+    ms = make_set(
+        tmp_path / "in",
+        alpha,
+        rho,
+        normal,
+        ImageInfo("exr", "float", 1, 0, 0, "linear"),
+        ImageInfo("exr", "float", 3, 0, 0, "linear"),
+    )
     report, _ = quiet_convert(ms, [ward_to_as, back], tmp_path / "out", workers=1)
     assert report.model == "mitsuba06:ward"
     doc = json.loads((tmp_path / "out" / "material.json").read_text())
     assert doc["params"]["variant"] == "ward"
-    expected, _ = Transform.chain([ward_to_as, back]).apply({"alpha": alpha, "specularReflectance": rho,
-                                                             "diffuseReflectance": 0.0})
-    np.testing.assert_allclose(read_image(tmp_path / "out" / "w_roughness.exr")[0][..., 0], expected["alpha"],
-                               rtol=1e-6)
+    expected, _ = Transform.chain([ward_to_as, back]).apply(
+        {"alpha": alpha, "specularReflectance": rho, "diffuseReflectance": 0.0}
+    )
+    np.testing.assert_allclose(
+        read_image(tmp_path / "out" / "w_roughness.exr")[0][..., 0], expected["alpha"], rtol=1e-6
+    )
     np.testing.assert_allclose(alpha, expected["alpha"], atol=0.02)  # and it is nearly a round trip
 
 
@@ -175,13 +203,20 @@ def test_mismatched_transforms_and_missing_maps(tmp_path, ward_db, ward_to_as):
     back = learn_transform(ward_db, reverse=True)
     with pytest.raises(MatremapError, match="maps are for mitsuba06:ward.*learned from mitsuba06:ward"):
         convert(ms, back, tmp_path / "out")
-    (tmp_path / "in" / "material.json").write_text(json.dumps({
-        "model": "mitsuba06:ward", "maps": {"alpha": "w_roughness.png"}, "params": {"variant": "ward"}}))
+    (tmp_path / "in" / "material.json").write_text(
+        json.dumps({"model": "mitsuba06:ward", "maps": {"alpha": "w_roughness.png"}, "params": {"variant": "ward"}})
+    )
     with pytest.raises(MatremapError, match="no map or value for specularReflectance"):
         convert(load_map_set(tmp_path / "in"), ward_to_as, tmp_path / "out")
-    (tmp_path / "in" / "material.json").write_text(json.dumps({
-        "model": "mitsuba06:ward", "maps": {"alpha": "w_roughness.png", "specularReflectance": "w_specular.png"},
-        "params": {"variant": "balanced"}}))
+    (tmp_path / "in" / "material.json").write_text(
+        json.dumps(
+            {
+                "model": "mitsuba06:ward",
+                "maps": {"alpha": "w_roughness.png", "specularReflectance": "w_specular.png"},
+                "params": {"variant": "balanced"},
+            }
+        )
+    )
     with pytest.raises(MatremapError, match="variant=balanced but the transform was trained on variant=ward"):
         convert(load_map_set(tmp_path / "in"), ward_to_as, tmp_path / "out")
     assert not (tmp_path / "out").exists()

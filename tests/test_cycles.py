@@ -63,6 +63,7 @@ def test_multiscatter_tables_match_direct_integration_and_are_cached(tmp_path, m
     """The E / E_avg tables hold the numerically integrated single-scatter albedo on Cycles' nodes,
     are read back bilinearly, and come from the disk cache the second time."""
     from matremap.renderers.embedded.evaluators import cycles as dc
+
     monkeypatch.setenv("MATREMAP_CACHE_DIR", str(tmp_path))
     dc.albedo_tables.cache_clear()
     try:
@@ -109,8 +110,11 @@ def test_white_multiscatter_glossy_conserves_energy(rough):
         g = from_directions(wi.reshape(-1, 3), np.broadcast_to(wo, (wi.size // 3, 3)))
         albedo = {}
         for dist in ("ggx", "multi_ggx"):
-            p = {"Color": np.ones((1, 1, 1)), "Roughness": np.full((1, 1, 1), rough),
-                 "Diffuse Color": np.zeros((1, 1, 1))}
+            p = {
+                "Color": np.ones((1, 1, 1)),
+                "Roughness": np.full((1, 1, 1), rough),
+                "Diffuse Color": np.zeros((1, 1, 1)),
+            }
             f_cos = EVALUATORS[spec.id](p, {"distribution": dist}, g).reshape(n_t, n_p)  # f cos(theta_light)
             albedo[dist] = float(np.sum(f_cos * wt[:, None]) * 2.0 * np.pi / n_p)
         # measured 1.0003 / 1.0002 (Roughness 0.3), 1.0001 / 0.9999 (0.8); single scatter 0.96-0.99, 0.57-0.66
@@ -149,9 +153,13 @@ def test_glossy_matches_the_embedded_emulation(cycles, embedded, distribution):
     """Glossy BSDF (+ Diffuse) vs the embedded cycles:glossy: measured 4e-6 (GGX) and 2e-5
     (Beckmann) relative RMSE over sphere pixels: the height-correlated G agrees."""
     scene = Scene.probe([0.0, 45.0], resolution=64)
-    mats = [Material.create("cycles:glossy", {"distribution": distribution, "Roughness": r, "Color": [1.0, 0.7, 0.3],
-                                              "Diffuse Color": d})
-            for r, d in ((0.2, 0.0), (0.5, 0.3), (0.9, 0.1))]
+    mats = [
+        Material.create(
+            "cycles:glossy",
+            {"distribution": distribution, "Roughness": r, "Color": [1.0, 0.7, 0.3], "Diffuse Color": d},
+        )
+        for r, d in ((0.2, 0.0), (0.5, 0.3), (0.9, 0.1))
+    ]
     real = cycles.render(mats, scene)
     emulated = embedded.render(mats, scene)
     for m, img, ref in zip(mats, real, emulated, strict=True):
@@ -166,9 +174,12 @@ def test_multiscatter_glossy_matches_the_embedded_emulation(cycles, embedded, ro
     off (the multiscatter energy is what the probe sees at Roughness 0.8)."""
     scene = Scene.probe([0.0, 45.0], resolution=64)
     mask = scene.mask()
-    mats = [Material.create("cycles:glossy", {"distribution": "multi_ggx", "Roughness": rough, "Color": c,
-                                              "Diffuse Color": 0.1})
-            for c in ([1.0, 1.0, 1.0], [1.0, 0.7, 0.3])]
+    mats = [
+        Material.create(
+            "cycles:glossy", {"distribution": "multi_ggx", "Roughness": rough, "Color": c, "Diffuse Color": 0.1}
+        )
+        for c in ([1.0, 1.0, 1.0], [1.0, 0.7, 0.3])
+    ]
     single = [Material.create("cycles:glossy", {**m.values, "distribution": "ggx"}) for m in mats]
     real = cycles.render(mats, scene)
     emulated = embedded.render(mats + single, scene)
@@ -191,8 +202,10 @@ def test_ashikhmin_shirley_renders(cycles, embedded):
 @needs_bpy
 def test_renders_are_deterministic_and_batches_equal_singles(cycles):
     scene = Scene.probe([20.0], resolution=32)
-    mats = [Material.create("cycles:principled", {"Base Color": [0.8, 0.3, 0.1], "Roughness": r, "Metallic": mt})
-            for r, mt in ((0.3, 0.0), (0.6, 1.0), (0.3, 0.0))]
+    mats = [
+        Material.create("cycles:principled", {"Base Color": [0.8, 0.3, 0.1], "Roughness": r, "Metallic": mt})
+        for r, mt in ((0.3, 0.0), (0.6, 1.0), (0.3, 0.0))
+    ]
     batch = cycles.render(mats, scene)
     np.testing.assert_array_equal(batch[0], batch[2])
     np.testing.assert_array_equal(cycles.render(mats[1:2], scene)[0], batch[1])
@@ -247,11 +260,15 @@ def test_renderer_pickles_for_process_pools(cycles):
 def test_two_stage_fit_ward_to_principled(cycles):
     """Embedded Mitsuba 0.6 Ward -> real Cycles Principled (multiscatter GGX), two-stage."""
     scene = Scene.probe([0.0], resolution=64)
-    source = Material.create("mitsuba06:ward", {"variant": "ward", "alpha": 0.2, "specularReflectance": 0.08,
-                                                "diffuseReflectance": [0.5, 0.3, 0.2]})
+    source = Material.create(
+        "mitsuba06:ward",
+        {"variant": "ward", "alpha": 0.2, "specularReflectance": 0.08, "diffuseReflectance": [0.5, 0.3, 0.2]},
+    )
     r = fit(source, "cycles:principled", scene=scene, target_renderer=cycles)
-    print(f"ward -> cycles:principled: loss {r.loss:.4f}, {r.renders} renders, {r.seconds:.1f} s, "
-          f"irradiance scale {r.irradiance_scale:.6f}, {r.target}")
+    print(
+        f"ward -> cycles:principled: loss {r.loss:.4f}, {r.renders} renders, {r.seconds:.1f} s, "
+        f"irradiance scale {r.irradiance_scale:.6f}, {r.target}"
+    )
     assert r.target_renderer == "cycles" and r.strategy == "two-stage"
     assert r.irradiance_scale == pytest.approx(1.0, abs=1e-3)
     assert r.loss < 0.15
@@ -262,8 +279,10 @@ def test_two_stage_fit_ward_to_principled(cycles):
 def test_two_stage_fit_back_from_real_cycles_to_ward(cycles):
     """The way back: real Cycles Principled (the fit above) -> embedded Mitsuba 0.6 Ward."""
     scene = Scene.probe([0.0], resolution=64)
-    ward = Material.create("mitsuba06:ward", {"variant": "ward", "alpha": 0.2, "specularReflectance": 0.08,
-                                              "diffuseReflectance": [0.5, 0.3, 0.2]})
+    ward = Material.create(
+        "mitsuba06:ward",
+        {"variant": "ward", "alpha": 0.2, "specularReflectance": 0.08, "diffuseReflectance": [0.5, 0.3, 0.2]},
+    )
     there = fit(ward, "cycles:principled", scene=scene, target_renderer=cycles)
     back = fit(there.target, "mitsuba06:ward", scene=scene, source_renderer=cycles, fix={"variant": "ward"})
     assert back.source_renderer == "cycles" and back.target_renderer == "embedded"

@@ -36,8 +36,12 @@ def env():
 def halves(img: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """Mean over the sphere of its left, right, top and bottom halves."""
     h = img.shape[0] // 2
-    parts = [(slice(None), slice(0, h)), (slice(None), slice(h, None)), (slice(0, h), slice(None)),
-             (slice(h, None), slice(None))]
+    parts = [
+        (slice(None), slice(0, h)),
+        (slice(None), slice(h, None)),
+        (slice(0, h), slice(None)),
+        (slice(h, None), slice(None)),
+    ]
     return np.array([img[p][mask[p]].mean() for p in parts])
 
 
@@ -50,10 +54,10 @@ def test_rejects_other_models(env):
 @pytest.mark.parametrize("rotation", [0.0, 90.0])
 def test_diffuse_sphere_agrees_with_embedded(cycles, env, rotation):
     mask = object_mask("sphere", RES)
-    ref = render_svbrdf("cycles:diffuse", {"Color": 0.7}, None, env, rotation_deg=rotation, resolution=RES,
-                        lights=1024)
-    img = render_svbrdf_cycles("cycles:diffuse", {"Color": 0.7}, None, env, rotation_deg=rotation, resolution=RES,
-                               spp=64, renderer=cycles)
+    ref = render_svbrdf("cycles:diffuse", {"Color": 0.7}, None, env, rotation_deg=rotation, resolution=RES, lights=1024)
+    img = render_svbrdf_cycles(
+        "cycles:diffuse", {"Color": 0.7}, None, env, rotation_deg=rotation, resolution=RES, spp=64, renderer=cycles
+    )
     assert img.shape == (RES, RES, 3) and img.dtype == np.float32
     inner = mask & np.roll(mask, 1, 0) & np.roll(mask, -1, 0) & np.roll(mask, 1, 1) & np.roll(mask, -1, 1)
     assert np.mean(np.abs(img[inner] - ref[inner])) / np.mean(ref[inner]) < 0.04
@@ -73,12 +77,12 @@ def test_textured_glossy_sphere_shows_its_texture(cycles):
     img = render_svbrdf_cycles("cycles:glossy", params, None, env, resolution=RES, spp=16, renderer=cycles)
     ref = render_svbrdf("cycles:glossy", params, None, env, resolution=RES)
     mask = object_mask("sphere", RES)
-    left, right = img[:, : RES // 2 - 4], img[:, RES // 2 + 4:]
-    lm, rm = mask[:, : RES // 2 - 4], mask[:, RES // 2 + 4:]
+    left, right = img[:, : RES // 2 - 4], img[:, RES // 2 + 4 :]
+    lm, rm = mask[:, : RES // 2 - 4], mask[:, RES // 2 + 4 :]
     assert left[lm][:, 0].mean() > 3 * left[lm][:, 2].mean()
     assert right[rm][:, 2].mean() > 3 * right[rm][:, 0].mean()
     # as the embedded renderer (a furnace: the diffuse part is the albedo, plus a weak grey lobe)
-    for a, b, m in ((left, ref[:, : RES // 2 - 4], lm), (right, ref[:, RES // 2 + 4:], rm)):
+    for a, b, m in ((left, ref[:, : RES // 2 - 4], lm), (right, ref[:, RES // 2 + 4 :], rm)):
         np.testing.assert_allclose(a[m].mean(axis=0), b[m].mean(axis=0), rtol=0.05)
 
 
@@ -86,14 +90,16 @@ def test_textured_glossy_sphere_shows_its_texture(cycles):
 def test_rotation_changes_the_image_and_specular_part(cycles, env):
     params = {"Color": 0.9, "Roughness": 0.3, "Diffuse Color": 0.3}
     a = render_svbrdf_cycles("cycles:glossy", params, None, env, resolution=RES, spp=16, renderer=cycles)
-    b = render_svbrdf_cycles("cycles:glossy", params, None, env, rotation_deg=120, resolution=RES, spp=16,
-                             renderer=cycles)
+    b = render_svbrdf_cycles(
+        "cycles:glossy", params, None, env, rotation_deg=120, resolution=RES, spp=16, renderer=cycles
+    )
     again = render_svbrdf_cycles("cycles:glossy", params, None, env, resolution=RES, spp=16, renderer=cycles)
     np.testing.assert_array_equal(a, again)  # fixed seed: deterministic
     mask = object_mask("sphere", RES)
     assert np.mean(np.abs(a[mask] - b[mask])) / np.mean(a[mask]) > 0.2
-    spec = render_svbrdf_cycles("cycles:glossy", params, None, env, resolution=RES, part="specular", spp=16,
-                                renderer=cycles)
+    spec = render_svbrdf_cycles(
+        "cycles:glossy", params, None, env, resolution=RES, part="specular", spp=16, renderer=cycles
+    )
     assert 0.1 * a[mask].mean() < spec[mask].mean() < 0.95 * a[mask].mean()
 
 
@@ -109,12 +115,14 @@ def test_normal_map_orientation_matches_embedded(cycles, env, tilt):
     yy, xx = np.mgrid[:RES, :RES]
     c = (RES - 1) / 2
     core = mask & ((xx - c) ** 2 + (yy - c) ** 2 < (0.3 * RES) ** 2)  # away from grazing angles
-    img = render_svbrdf_cycles("cycles:diffuse", {"Color": 0.7}, None, env, resolution=RES, spp=64,
-                               normal_map=nmap(*tilt), renderer=cycles)
+    img = render_svbrdf_cycles(
+        "cycles:diffuse", {"Color": 0.7}, None, env, resolution=RES, spp=64, normal_map=nmap(*tilt), renderer=cycles
+    )
 
     def err(x, y, where=core):
-        ref = render_svbrdf("cycles:diffuse", {"Color": 0.7}, None, env, resolution=RES, lights=1024,
-                            normal_map=nmap(x, y))
+        ref = render_svbrdf(
+            "cycles:diffuse", {"Color": 0.7}, None, env, resolution=RES, lights=1024, normal_map=nmap(x, y)
+        )
         return np.mean(np.abs(img[where] - ref[where])) / np.mean(ref[where])
 
     # the emulation follows Cycles' bump shadowing term and geometric cut: what is left is noise
@@ -130,8 +138,9 @@ def test_normal_mapped_diffuse_has_no_bias_against_cycles(cycles, env):
     nm = np.zeros((16, 32, 3))
     nm[..., 0], nm[..., 2] = 0.5, np.sqrt(0.75)
     mask = object_mask("sphere", RES)
-    img = render_svbrdf_cycles("cycles:diffuse", {"Color": 0.7}, None, env, resolution=RES, spp=128,
-                               normal_map=nm, renderer=cycles)
+    img = render_svbrdf_cycles(
+        "cycles:diffuse", {"Color": 0.7}, None, env, resolution=RES, spp=128, normal_map=nm, renderer=cycles
+    )
     ref = render_svbrdf("cycles:diffuse", {"Color": 0.7}, None, env, resolution=RES, lights=2048, normal_map=nm)
     assert abs(img[mask].mean() / ref[mask].mean() - 1.0) < 0.01
 
@@ -144,8 +153,9 @@ def test_probe_renders_still_work_after_an_svbrdf_request(cycles):
     scene = Scene.probe(resolution=32)
     mats = [Material("cycles:diffuse", {"Color": np.array([0.5] * 3)}, {})]
     before = cycles.render(mats, scene)
-    render_svbrdf_cycles("cycles:diffuse", {"Color": 0.7}, None, envmap.constant(1.0), resolution=32, spp=4,
-                         renderer=cycles)
+    render_svbrdf_cycles(
+        "cycles:diffuse", {"Color": 0.7}, None, envmap.constant(1.0), resolution=32, spp=4, renderer=cycles
+    )
     np.testing.assert_array_equal(cycles.render(mats, scene), before)
 
 
@@ -185,8 +195,9 @@ def test_evaluate_draws_cycles_maps_with_real_cycles(env, tmp_path, monkeypatch)
     target = (source[0], {**source[1], "Roughness": 0.9 * source[1]["Roughness"]}, source[2])
     result = evaluate(source, target, env, [30.0], tmp_path / "ev", resolution=RES, lights=64)
     settings = json.loads((tmp_path / "ev" / "results.json").read_text())["settings"]
-    assert settings["renderers"] == ("source: Blender Cycles (bpy worker, 64 spp), "
-                                     "target: Blender Cycles (bpy worker, 64 spp)")
+    assert settings["renderers"] == (
+        "source: Blender Cycles (bpy worker, 64 spp), target: Blender Cycles (bpy worker, 64 spp)"
+    )
     assert len(drawn) == 4  # source and target, full and specular
     assert 0.0 < result.mean_full < 0.5 and result.irradiance_scale == 1.0
     mask = object_mask("sphere", RES)
@@ -194,8 +205,9 @@ def test_evaluate_draws_cycles_maps_with_real_cycles(env, tmp_path, monkeypatch)
     for args, kwargs, img in drawn:
         model, params, options, env_ = args
         assert kwargs["rotation_deg"] == 30.0 and kwargs["resolution"] == RES
-        ref = render_svbrdf(model, params, options, env_, rotation_deg=30.0, resolution=RES, lights=1024,
-                            part=kwargs["part"])
+        ref = render_svbrdf(
+            model, params, options, env_, rotation_deg=30.0, resolution=RES, lights=1024, part=kwargs["part"]
+        )
         assert np.mean(np.abs(img[inner] - ref[inner])) / np.mean(ref[inner]) < 0.05
         assert abs(img[mask].mean() / ref[mask].mean() - 1.0) < 0.01
 
@@ -228,13 +240,20 @@ def test_principled_maps_render_in_cycles_and_without_specular_are_its_diffuse(c
     rng = np.random.default_rng(3)
     base = rng.uniform(0.2, 0.8, (16, 32, 3))
     mask = object_mask("sphere", RES)
-    p = render_svbrdf_cycles("cycles:principled", {"Base Color": base, "Specular IOR Level": 0.0, "Metallic": 0.0,
-                                                   "Roughness": 0.5}, None, env, resolution=RES, spp=64,
-                             renderer=cycles)
+    p = render_svbrdf_cycles(
+        "cycles:principled",
+        {"Base Color": base, "Specular IOR Level": 0.0, "Metallic": 0.0, "Roughness": 0.5},
+        None,
+        env,
+        resolution=RES,
+        spp=64,
+        renderer=cycles,
+    )
     d = render_svbrdf_cycles("cycles:diffuse", {"Color": base}, None, env, resolution=RES, spp=64, renderer=cycles)
     assert abs(p[mask].mean() / d[mask].mean() - 1.0) < 0.01
-    glossy = render_svbrdf_cycles("cycles:principled", {"Base Color": base, "Roughness": 0.2}, None, env,
-                                  resolution=RES, spp=64, renderer=cycles)
+    glossy = render_svbrdf_cycles(
+        "cycles:principled", {"Base Color": base, "Roughness": 0.2}, None, env, resolution=RES, spp=64, renderer=cycles
+    )
     assert glossy[mask].mean() > 1.02 * p[mask].mean()  # the default specular adds light
 
 
@@ -271,8 +290,9 @@ def test_normal_mapped_glossy_agrees_with_cycles(cycles, env):
     mask = object_mask("sphere", RES)
     yy, xx = np.mgrid[:RES, :RES]
     rim = mask & (np.hypot(xx - (RES - 1) / 2, yy - (RES - 1) / 2) > 0.8 * RES / 2)
-    img = render_svbrdf_cycles("cycles:glossy", params, None, env, resolution=RES, spp=128, normal_map=nm,
-                               renderer=cycles)
+    img = render_svbrdf_cycles(
+        "cycles:glossy", params, None, env, resolution=RES, spp=128, normal_map=nm, renderer=cycles
+    )
     ref = render_svbrdf("cycles:glossy", params, None, env, resolution=RES, lights=2048, normal_map=nm)
     assert abs(img[mask].mean() / ref[mask].mean() - 1.0) < 0.015
     assert abs(img[rim].mean() / ref[rim].mean() - 1.0) < 0.03

@@ -530,14 +530,10 @@ def _ward_lobe_geometry(target: float, alpha: float) -> tuple[tuple, tuple]:
 def test_ward_lobe_is_dropped_below_1e10_before_multiplying_rho_s():
     alpha = 0.1
     wi, wo = _ward_lobe_geometry(0.7e-10, alpha)
-    big = Material.create(
-        "mitsuba06:ward", {"alpha": alpha, "specularReflectance": 1.0, "diffuseReflectance": 0.0}
-    )
+    big = Material.create("mitsuba06:ward", {"alpha": alpha, "specularReflectance": 1.0, "diffuseReflectance": 0.0})
     assert evaluate(big, wi, wo)[0, 0] == 0.0  # rho_s * lobe = 7e-11 would be > 0 but is dropped
     wi, wo = _ward_lobe_geometry(1.5e-10, alpha)
-    small = Material.create(
-        "mitsuba06:ward", {"alpha": alpha, "specularReflectance": 0.01, "diffuseReflectance": 0.0}
-    )
+    small = Material.create("mitsuba06:ward", {"alpha": alpha, "specularReflectance": 0.01, "diffuseReflectance": 0.0})
     got = evaluate(small, wi, wo)[0, 0]
     np.testing.assert_allclose(got, 0.01 * 1.5e-10 * wi[2], rtol=1e-6)  # 1.5e-12 < 1e-10 is kept
 
@@ -672,11 +668,7 @@ def _random_pairs(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
 
 RECIPROCAL = [
     ("mitsuba06:diffuse", {"reflectance": RGB_D}),
-    *[
-        ("mitsuba06:ward", {"variant": v, "alpha": a})
-        for v in ("ward", "ward-duer", "balanced")
-        for a in (0.05, 0.3)
-    ],
+    *[("mitsuba06:ward", {"variant": v, "alpha": a}) for v in ("ward", "ward-duer", "balanced") for a in (0.05, 0.3)],
     ("mitsuba06:ward", {"specularReflectance": 0.8, "diffuseReflectance": 0.5}),
     *[("mitsuba06:phong", {"exponent": e, "specularReflectance": RGB_S}) for e in (3.0, 200.0)],
     *[
@@ -714,9 +706,7 @@ def test_brdf_is_reciprocal(model, params):
 @pytest.mark.parametrize("nonlinear", ["false", "true"])
 def test_roughplastic_is_reciprocal(distribution, nonlinear):
     needs_rough_transmittance()
-    _assert_reciprocal(
-        "mitsuba06:roughplastic", {"distribution": distribution, "nonlinear": nonlinear, "alpha": 0.2}
-    )
+    _assert_reciprocal("mitsuba06:roughplastic", {"distribution": distribution, "nonlinear": nonlinear, "alpha": 0.2})
 
 
 # ------------------------------------------------------------------------------------------------
@@ -743,9 +733,7 @@ def test_lambertian_albedo_equals_its_reflectance(model, params):
 
 
 def test_blender27_lambert_albedo_is_pi_times_colour():
-    m = Material.create(
-        "blender27:ward", {"specular_intensity": 0.0, "diffuse_intensity": 1.0, "diffuse_color": 1.0}
-    )
+    m = Material.create("blender27:ward", {"specular_intensity": 0.0, "diffuse_intensity": 1.0, "diffuse_color": 1.0})
     np.testing.assert_allclose(white_furnace(m, VIEWS, alpha=1.0), PI, rtol=1e-3)
 
 
@@ -759,9 +747,7 @@ def _assert_albedo_at_most_one(m: Material, alpha_quadrature: float) -> np.ndarr
 
 @pytest.mark.parametrize("alpha", [0.05, 0.15, 0.3, 0.5, 1.0, 2.0])
 def test_balanced_ward_albedo_at_most_one(alpha):
-    m = Material.create(
-        "mitsuba06:ward", {"alpha": alpha, "specularReflectance": 1.0, "diffuseReflectance": 0.0}
-    )
+    m = Material.create("mitsuba06:ward", {"alpha": alpha, "specularReflectance": 1.0, "diffuseReflectance": 0.0})
     _assert_albedo_at_most_one(m, alpha)
 
 

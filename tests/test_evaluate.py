@@ -177,13 +177,20 @@ def test_report_shows_its_images_in_headless_chromium(report, tmp_path):
 def test_mitsuba3_materials_are_drawn_by_mitsuba3_and_compare_with_their_emulation(tmp_path):
     pytest.importorskip("mitsuba", reason="Mitsuba 3 not installed: pip install 'matremap[mitsuba]'")
     from matremap.core import envmap as envmap_module
+
     rng = np.random.default_rng(0)
     alpha = rng.uniform(0.2, 0.4, (16, 32))
     k = np.stack([np.full((16, 32), v) for v in (3.0, 2.0, 1.0)], axis=-1)
-    real = ("mitsuba3:roughconductor", {"alpha": alpha, "eta": 1.0, "k": k},
-            {"distribution": "ggx", "material": "custom"})
-    emulated = ("mitsuba06:roughconductor", {"alpha": alpha, "eta": 1.0 * 1.000277, "k": k * 1.000277},
-                {"distribution": "ggx"})
+    real = (
+        "mitsuba3:roughconductor",
+        {"alpha": alpha, "eta": 1.0, "k": k},
+        {"distribution": "ggx", "material": "custom"},
+    )
+    emulated = (
+        "mitsuba06:roughconductor",
+        {"alpha": alpha, "eta": 1.0 * 1.000277, "k": k * 1.000277},
+        {"distribution": "ggx"},
+    )
     env = envmap_module.builtin()
     result = evaluate(real, emulated, env, [0.0], tmp_path / "ev", resolution=48, lights=256)
     assert result.irradiance_scale == pytest.approx(1.0, abs=0.02)

@@ -18,16 +18,34 @@ def rel(a, b):
 @pytest.mark.parametrize(
     "model, params, fix",
     [
-        ("mitsuba06:ward", {"variant": "ward", "alpha": 0.25, "specularReflectance": 0.15, "diffuseReflectance": 0.4},
-         {"variant": "ward"}),
-        ("mitsuba06:pbr", {"distribution": "as", "alpha": 0.3, "F0": 0.08, "diffuseReflectance": 0.2},
-         {"distribution": "as"}),
+        (
+            "mitsuba06:ward",
+            {"variant": "ward", "alpha": 0.25, "specularReflectance": 0.15, "diffuseReflectance": 0.4},
+            {"variant": "ward"},
+        ),
+        (
+            "mitsuba06:pbr",
+            {"distribution": "as", "alpha": 0.3, "F0": 0.08, "diffuseReflectance": 0.2},
+            {"distribution": "as"},
+        ),
         ("cycles:glossy", {"Roughness": 0.45, "Color": [0.9, 0.6, 0.3], "Diffuse Color": 0.1}, {}),
-        ("mitsuba06:roughconductor", {"distribution": "ggx", "alpha": 0.15, "eta": 1.0, "k": [3.0, 2.0, 1.0]},
-         {"distribution": "ggx"}),
+        (
+            "mitsuba06:roughconductor",
+            {"distribution": "ggx", "alpha": 0.15, "eta": 1.0, "k": [3.0, 2.0, 1.0]},
+            {"distribution": "ggx"},
+        ),
         ("mitsuba06:phong", {"exponent": 80.0, "specularReflectance": 0.3, "diffuseReflectance": 0.3}, {}),
-        ("blender27:ward", {"specular_slope": 0.2, "specular_color": 0.6, "diffuse_color": 0.5,
-                            "specular_intensity": 1.0, "diffuse_intensity": 1.0}, {}),
+        (
+            "blender27:ward",
+            {
+                "specular_slope": 0.2,
+                "specular_color": 0.6,
+                "diffuse_color": 0.5,
+                "specular_intensity": 1.0,
+                "diffuse_intensity": 1.0,
+            },
+            {},
+        ),
     ],
 )
 def test_identity_remap_recovers_parameters(model, params, fix):
@@ -44,9 +62,15 @@ def test_reproduces_the_authors_ward_to_as_table(reference_rows):
     rows = [r for r in reference_rows if r["alpha1"] >= 0.03][::61]
     assert len(rows) >= 10
     for r in rows:
-        source = Material.create("mitsuba06:ward", {
-            "variant": "ward", "alpha": r["alpha1"], "specularReflectance": r["specular1"], "diffuseReflectance": 0,
-        })
+        source = Material.create(
+            "mitsuba06:ward",
+            {
+                "variant": "ward",
+                "alpha": r["alpha1"],
+                "specularReflectance": r["specular1"],
+                "diffuseReflectance": 0,
+            },
+        )
         result = fit(source, "mitsuba06:pbr", fix={"distribution": "as"})
         alpha2 = result.target.values["alpha"][0]
         f0 = result.target.values["F0"][0]
@@ -68,8 +92,10 @@ def test_conductor_round_trip_through_ward_recovers_f0(alpha, eta, k):
 
 
 def test_two_stage_separates_diffuse_and_specular():
-    source = Material.create("mitsuba06:ward", {"variant": "ward", "alpha": 0.2, "specularReflectance": 0.1,
-                                                "diffuseReflectance": [0.6, 0.4, 0.2]})
+    source = Material.create(
+        "mitsuba06:ward",
+        {"variant": "ward", "alpha": 0.2, "specularReflectance": 0.1, "diffuseReflectance": [0.6, 0.4, 0.2]},
+    )
     result = fit(source, "mitsuba06:pbr", fix={"distribution": "as"})
     assert [s.name for s in result.stages] == ["diffuse", "specular"]
     np.testing.assert_allclose(result.target.values["diffuseReflectance"], [0.6, 0.4, 0.2], rtol=2e-3)
@@ -88,8 +114,9 @@ def test_strategies_run_their_stages_and_three_stage_does_not_lose():
 
 def test_irradiance_is_matched_across_renderer_families():
     """Blender Internal's Lambert has no 1/pi: the scale is 1/pi and colours carry over."""
-    source = Material.create("blender27:ward", {"diffuse_color": [0.5, 0.4, 0.3], "diffuse_intensity": 1.0,
-                                                "specular_intensity": 0.0})
+    source = Material.create(
+        "blender27:ward", {"diffuse_color": [0.5, 0.4, 0.3], "diffuse_intensity": 1.0, "specular_intensity": 0.0}
+    )
     result = fit(source, "mitsuba06:diffuse")
     assert result.irradiance_scale == pytest.approx(1 / math.pi, rel=1e-6)
     np.testing.assert_allclose(result.target.values["reflectance"], [0.5, 0.4, 0.3], rtol=1e-4)
@@ -164,16 +191,18 @@ def test_bad_fit_requests(kwargs, message):
 
 
 def test_scene_light_positions_change_the_fit_but_not_its_quality():
-    source = Material.create("mitsuba06:ward", {"variant": "ward", "alpha": 0.2, "specularReflectance": 0.1,
-                                                "diffuseReflectance": 0})
+    source = Material.create(
+        "mitsuba06:ward", {"variant": "ward", "alpha": 0.2, "specularReflectance": 0.1, "diffuseReflectance": 0}
+    )
     side = fit(source, "mitsuba06:pbr", scene=Scene.probe([45.0]), fix={"distribution": "as"})
     assert side.scene.lights[0].theta == 45.0
     assert side.loss < 0.05
 
 
 def test_a_sub_pixel_highlight_is_flagged():
-    tiny = Material.create("mitsuba06:ward", {"variant": "ward", "alpha": 0.005, "specularReflectance": 0.1,
-                                              "diffuseReflectance": 0})
+    tiny = Material.create(
+        "mitsuba06:ward", {"variant": "ward", "alpha": 0.005, "specularReflectance": 0.1, "diffuseReflectance": 0}
+    )
     result = fit(tiny, "mitsuba06:ward", fix={"variant": "ward"}, scene=Scene(resolution=64))
     assert result.warnings and "raise the resolution" in result.warnings[0]
     broad = fit(Material.create("mitsuba06:ward", {"alpha": 0.2}), "mitsuba06:pbr")

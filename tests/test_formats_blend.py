@@ -84,8 +84,15 @@ def test_without_bpy_says_how_to_set_it_up(tmp_path, monkeypatch):
     "material",
     [
         Material.create("cycles:principled", {"Base Color": [0.8, 0.3, 0.1], "Roughness": 0.4, "IOR": 1.6}),
-        Material.create("cycles:glossy", {"distribution": "multi_ggx", "Color": [1.0, 0.7, 0.3], "Roughness": 0.5,
-                                          "Diffuse Color": [0.2, 0.25, 0.3]}),
+        Material.create(
+            "cycles:glossy",
+            {
+                "distribution": "multi_ggx",
+                "Color": [1.0, 0.7, 0.3],
+                "Roughness": 0.5,
+                "Diffuse Color": [0.2, 0.25, 0.3],
+            },
+        ),
     ],
     ids=["principled", "glossy"],
 )
@@ -152,13 +159,17 @@ def test_map_set_becomes_packed_image_textures_with_their_colour_spaces(cycles, 
     _write(maps / "rough.png", np.full((*n, 1), 115, np.uint8), "uint8")
     _write(maps / "diffuse.exr", np.full((*n, 3), [0.05, 0.1, 0.2], np.float32), "float")
     _write(maps / "normal.exr", np.full((*n, 3), [0.5, 0.5, 1.0], np.float32), "float")
-    (maps / "material.json").write_text(json.dumps({
-        "model": "cycles:glossy",
-        "maps": {"Color": "color.png", "Roughness": "rough.png", "Diffuse Color": "diffuse.exr"},
-        "normal": "normal.exr",
-        "params": {"distribution": "multi_ggx"},
-        "colorspace": {"color.png": "srgb", "rough.png": "linear"},
-    }))
+    (maps / "material.json").write_text(
+        json.dumps(
+            {
+                "model": "cycles:glossy",
+                "maps": {"Color": "color.png", "Roughness": "rough.png", "Diffuse Color": "diffuse.exr"},
+                "normal": "normal.exr",
+                "params": {"distribution": "multi_ggx"},
+                "colorspace": {"color.png": "srgb", "rough.png": "linear"},
+            }
+        )
+    )
     ms = load_map_set(maps)
 
     class Asset:
@@ -186,9 +197,15 @@ def test_map_set_becomes_packed_image_textures_with_their_colour_spaces(cycles, 
 
     from matremap.core.imageio import srgb_to_linear
 
-    uniform = Material.create("cycles:glossy", {"distribution": "multi_ggx",
-                                                "Color": srgb_to_linear(np.array([230, 160, 60]) / 255.0),
-                                                "Roughness": 115 / 255, "Diffuse Color": [0.05, 0.1, 0.2]})
+    uniform = Material.create(
+        "cycles:glossy",
+        {
+            "distribution": "multi_ggx",
+            "Color": srgb_to_linear(np.array([230, 160, 60]) / 255.0),
+            "Roughness": 115 / 255,
+            "Diffuse Color": [0.05, 0.1, 0.2],
+        },
+    )
     scene = Scene.probe([0.0, 45.0], resolution=64)
     img = render_file(cycles, out, scene)
     ref = cycles.render([uniform], scene)[0]

@@ -56,8 +56,14 @@ def glb_bytes(doc: dict, bin_data: bytes | None) -> bytes:
     return struct.pack("<III", 0x46546C67, 2, 12 + len(body)) + body
 
 
-def make_file(folder: Path, name: str, materials: list[dict], images: dict[str, np.ndarray] | None = None,
-              store: str = "file", extra: dict | None = None) -> Path:
+def make_file(
+    folder: Path,
+    name: str,
+    materials: list[dict],
+    images: dict[str, np.ndarray] | None = None,
+    store: str = "file",
+    extra: dict | None = None,
+) -> Path:
     """A glTF (.gltf or .glb by ``name``) with ``materials``; ``images`` name -> uint8 array become
     textures in order (texture i = image i), stored as files ("file"), data: URIs ("data") or buffer
     views ("bufferView"; in the BIN chunk of a .glb, else in a data: URI buffer)."""
@@ -76,8 +82,9 @@ def make_file(folder: Path, name: str, materials: list[dict], images: dict[str, 
                 doc["images"].append({"uri": "data:image/png;base64," + base64.b64encode(data).decode()})
             else:
                 blob += b"\0" * (-len(blob) % 4)
-                doc.setdefault("bufferViews", []).append({"buffer": 0, "byteOffset": len(blob),
-                                                          "byteLength": len(data)})
+                doc.setdefault("bufferViews", []).append(
+                    {"buffer": 0, "byteOffset": len(blob), "byteLength": len(data)}
+                )
                 blob += data
                 doc["images"].append({"bufferView": len(doc["bufferViews"]) - 1, "mimeType": "image/png"})
             doc["textures"].append({"source": i})
@@ -109,13 +116,13 @@ def load_written(path: Path) -> tuple[dict, bytes | None]:
         assert (magic, version, length) == (0x46546C67, 2, len(data))
         clen, ctype = struct.unpack_from("<II", data, 12)
         assert ctype == 0x4E4F534A and clen % 4 == 0
-        doc = json.loads(data[20:20 + clen])
+        doc = json.loads(data[20 : 20 + clen])
         pos = 20 + clen
         binc = None
         if pos < len(data):
             blen, btype = struct.unpack_from("<II", data, pos)
             assert btype == 0x004E4942 and blen % 4 == 0 and pos + 8 + blen == len(data)
-            binc = data[pos + 8:pos + 8 + blen]
+            binc = data[pos + 8 : pos + 8 + blen]
         return doc, binc
     assert data[:1] == b"{"
     return json.loads(data), None
@@ -132,8 +139,18 @@ def validate(path: Path) -> dict:
     def ok(key, i):
         assert isinstance(i, int) and 0 <= i < count(key), (key, i, count(key))
 
-    for key in ("scenes", "nodes", "meshes", "accessors", "bufferViews", "buffers", "images", "textures",
-                "materials", "samplers"):
+    for key in (
+        "scenes",
+        "nodes",
+        "meshes",
+        "accessors",
+        "bufferViews",
+        "buffers",
+        "images",
+        "textures",
+        "materials",
+        "samplers",
+    ):
         if key in doc:
             assert isinstance(doc[key], list) and doc[key], f"{key} must be a non-empty array when present"
     if "scene" in doc:
@@ -193,8 +210,13 @@ def validate(path: Path) -> dict:
     assert set(doc.get("extensionsRequired", [])) <= used
     for m in doc.get("materials", []):
         pbr = m.get("pbrMetallicRoughness", {})
-        infos = [pbr.get("baseColorTexture"), pbr.get("metallicRoughnessTexture"), m.get("normalTexture"),
-                 m.get("occlusionTexture"), m.get("emissiveTexture")]
+        infos = [
+            pbr.get("baseColorTexture"),
+            pbr.get("metallicRoughnessTexture"),
+            m.get("normalTexture"),
+            m.get("occlusionTexture"),
+            m.get("emissiveTexture"),
+        ]
         for name, e in (m.get("extensions") or {}).items():
             assert name in used, f"{name} used but not in extensionsUsed"
             infos += [v for v in e.values() if isinstance(v, dict) and "index" in v]
@@ -215,17 +237,26 @@ def listing(folder: Path) -> set[str]:
 
 
 def test_factors_and_khr_extensions_are_read(tmp_path):
-    mat = {"name": "paint", "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.4, 0.2, 1.0], "metallicFactor": 0.25,
-                                                     "roughnessFactor": 0.6},
-           "extensions": {"KHR_materials_ior": {"ior": 1.4},
-                          "KHR_materials_specular": {"specularFactor": 0.7, "specularColorFactor": [1.0, 0.9, 0.8]}}}
+    mat = {
+        "name": "paint",
+        "pbrMetallicRoughness": {
+            "baseColorFactor": [0.8, 0.4, 0.2, 1.0],
+            "metallicFactor": 0.25,
+            "roughnessFactor": 0.6,
+        },
+        "extensions": {
+            "KHR_materials_ior": {"ior": 1.4},
+            "KHR_materials_specular": {"specularFactor": 0.7, "specularColorFactor": [1.0, 0.9, 0.8]},
+        },
+    }
     f = make_file(tmp_path, "a.gltf", [mat], extra={"extensionsUsed": ["KHR_materials_ior", "KHR_materials_specular"]})
     asset = read_asset(f)
     assert asset.format == "gltf" and asset.model == MR and asset.name == "paint" and not asset.textured
     m = asset.material()
     np.testing.assert_allclose(m.values["baseColor"], [0.8, 0.4, 0.2])
-    np.testing.assert_allclose([m.values[k][0] for k in ("metallic", "roughness", "ior", "specular")],
-                               [0.25, 0.6, 1.4, 0.7])
+    np.testing.assert_allclose(
+        [m.values[k][0] for k in ("metallic", "roughness", "ior", "specular")], [0.25, 0.6, 1.4, 0.7]
+    )
     np.testing.assert_allclose(m.values["specularColor"], [1.0, 0.9, 0.8])
     assert asset.notes == []
 
@@ -233,17 +264,24 @@ def test_factors_and_khr_extensions_are_read(tmp_path):
 def test_missing_properties_take_the_spec_defaults(tmp_path):
     asset = read(make_file(tmp_path, "a.glb", [{}]))
     m = asset.material()
-    assert m == Material.create(MR, {"baseColor": 1.0, "metallic": 1.0, "roughness": 1.0, "ior": 1.5,
-                                     "specular": 1.0, "specularColor": 1.0})
+    assert m == Material.create(
+        MR, {"baseColor": 1.0, "metallic": 1.0, "roughness": 1.0, "ior": 1.5, "specular": 1.0, "specularColor": 1.0}
+    )
     assert asset.name == "material 0"
 
 
-@pytest.mark.parametrize("store, name", [("file", "a.gltf"), ("bufferView", "a.glb"), ("data", "a.gltf"),
-                                         ("bufferView", "a.gltf")])
+@pytest.mark.parametrize(
+    "store, name", [("file", "a.gltf"), ("bufferView", "a.glb"), ("data", "a.gltf"), ("bufferView", "a.gltf")]
+)
 def test_packed_metallic_roughness_texture_gives_green_roughness_and_blue_metallic(tmp_path, store, name):
     mr = ramp(seed=1)
-    mat = {"pbrMetallicRoughness": {"metallicFactor": 0.5, "roughnessFactor": 0.8,
-                                    "metallicRoughnessTexture": {"index": 0}}}
+    mat = {
+        "pbrMetallicRoughness": {
+            "metallicFactor": 0.5,
+            "roughnessFactor": 0.8,
+            "metallicRoughnessTexture": {"index": 0},
+        }
+    }
     f = make_file(tmp_path / "in", name, [mat], {"mr": mr}, store=store)
     asset = read(f)
     assert set(asset.textures) == {"roughness", "metallic"}
@@ -258,13 +296,23 @@ def test_packed_metallic_roughness_texture_gives_green_roughness_and_blue_metall
 
 
 def test_embedded_images_are_extracted_to_a_cache_folder_named_by_the_file(tmp_path):
-    f = make_file(tmp_path, "a.glb", [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
-                  {"base": ramp(seed=2)}, store="bufferView")
+    f = make_file(
+        tmp_path,
+        "a.glb",
+        [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
+        {"base": ramp(seed=2)},
+        store="bufferView",
+    )
     p1 = read(f).textures["baseColor"].path
     assert p1.suffix == ".png" and "matremap-gltf" in str(p1) and not p1.is_relative_to(tmp_path)
     assert read(f).textures["baseColor"].path == p1  # cached, same file
-    g = make_file(tmp_path / "b", "a.glb", [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
-                  {"base": ramp(seed=3)}, store="bufferView")
+    g = make_file(
+        tmp_path / "b",
+        "a.glb",
+        [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
+        {"base": ramp(seed=3)},
+        store="bufferView",
+    )
     assert read(g).textures["baseColor"].path != p1  # another file, another folder
 
 
@@ -285,8 +333,9 @@ def test_a_base_colour_texture_with_alpha_keeps_its_stored_colour(tmp_path):
     """PNG colour is unassociated with alpha: alpha 64 must not darken the base colour."""
     rgba = ramp(seed=8, channels=4)
     rgba[..., 3] = 64
-    asset = read(make_file(tmp_path, "a.gltf", [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
-                           {"b": rgba}))
+    asset = read(
+        make_file(tmp_path, "a.gltf", [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}], {"b": rgba})
+    )
     assert any("baseColorTexture alpha ignored" in n for n in asset.notes)
     ms = load_map_set(asset.to_map_set(tmp_path / "maps"))
     base, _ = read_image(ms.maps["baseColor"], ms.colorspace["baseColor"])
@@ -295,9 +344,16 @@ def test_a_base_colour_texture_with_alpha_keeps_its_stored_colour(tmp_path):
 
 def test_specular_textures_use_alpha_and_srgb_colour(tmp_path):
     rgba = ramp(seed=4, channels=4)
-    mat = {"extensions": {"KHR_materials_specular": {"specularFactor": 0.5, "specularTexture": {"index": 0},
-                                                     "specularColorFactor": [2.0, 1.0, 1.0],
-                                                     "specularColorTexture": {"index": 0}}}}
+    mat = {
+        "extensions": {
+            "KHR_materials_specular": {
+                "specularFactor": 0.5,
+                "specularTexture": {"index": 0},
+                "specularColorFactor": [2.0, 1.0, 1.0],
+                "specularColorTexture": {"index": 0},
+            }
+        }
+    }
     asset = read(make_file(tmp_path, "a.gltf", [mat], {"spec": rgba}))
     assert asset.textures["specular"].channels == (3,) and asset.textures["specular"].colorspace == "linear"
     assert asset.textures["specularColor"].colorspace == "srgb"
@@ -319,23 +375,40 @@ def test_normal_texture_is_kept_as_the_normal_map(tmp_path):
 
 
 def test_inputs_matremap_does_not_remap_are_noted(tmp_path):
-    mat = {"name": "fancy", "alphaMode": "BLEND", "emissiveFactor": [1, 0, 0], "occlusionTexture": {"index": 0},
-           "pbrMetallicRoughness": {"baseColorFactor": [1, 1, 1, 0.5],
-                                    "baseColorTexture": {"index": 0, "texCoord": 1},
-                                    "metallicRoughnessTexture": {
-                                        "index": 0, "extensions": {"KHR_texture_transform": {"scale": [2, 2]}}}},
-           "extensions": {"KHR_materials_clearcoat": {"clearcoatFactor": 1}, "KHR_materials_sheen": {}}}
+    mat = {
+        "name": "fancy",
+        "alphaMode": "BLEND",
+        "emissiveFactor": [1, 0, 0],
+        "occlusionTexture": {"index": 0},
+        "pbrMetallicRoughness": {
+            "baseColorFactor": [1, 1, 1, 0.5],
+            "baseColorTexture": {"index": 0, "texCoord": 1},
+            "metallicRoughnessTexture": {"index": 0, "extensions": {"KHR_texture_transform": {"scale": [2, 2]}}},
+        },
+        "extensions": {"KHR_materials_clearcoat": {"clearcoatFactor": 1}, "KHR_materials_sheen": {}},
+    }
     f = make_file(tmp_path, "a.gltf", [mat, {"name": "other"}], {"t": ramp(seed=7)})
     notes = " | ".join(read(f).notes)
-    for word in ("2 materials", "BLEND", "emissi", "occlusion", "alpha 0.5", "texCoord 1", "KHR_texture_transform",
-                 "KHR_materials_clearcoat", "KHR_materials_sheen"):
+    for word in (
+        "2 materials",
+        "BLEND",
+        "emissi",
+        "occlusion",
+        "alpha 0.5",
+        "texCoord 1",
+        "KHR_texture_transform",
+        "KHR_materials_clearcoat",
+        "KHR_materials_sheen",
+    ):
         assert word in notes, word
     assert read(f, "other").notes == []
 
 
 def test_materials_are_chosen_by_name_or_index(tmp_path):
-    mats = [{"name": "a", "pbrMetallicRoughness": {"roughnessFactor": 0.1}},
-            {"name": "b", "pbrMetallicRoughness": {"roughnessFactor": 0.2}}]
+    mats = [
+        {"name": "a", "pbrMetallicRoughness": {"roughnessFactor": 0.1}},
+        {"name": "b", "pbrMetallicRoughness": {"roughnessFactor": 0.2}},
+    ]
     f = make_file(tmp_path, "m.glb", mats)
     assert read(f).name == "a"
     assert read(f, "b").material().values["roughness"][0] == 0.2
@@ -346,18 +419,24 @@ def test_materials_are_chosen_by_name_or_index(tmp_path):
         read(f, 2)
 
 
-@pytest.mark.parametrize("name, content, message", [
-    ("a.glb", b'{"asset": {"version": "2.0"}}', "JSON text, not a binary glTF; rename it to .gltf"),
-    ("a.glb", b"hello, not a model", "does not start with the 'glTF' magic"),
-    ("a.gltf", glb_bytes({"asset": {"version": "2.0"}, "materials": [{}]}, None), "binary glTF.*rename it to .glb"),
-    ("a.gltf", b"\x00\xff\xfe binary", "not UTF-8"),
-    ("a.gltf", b'{"asset": {"version": "2.0"}, "materials": [', "not valid glTF JSON"),
-    ("a.gltf", b'{"asset": {"version": "1.0"}, "materials": [{}]}', "glTF 1.0; matremap reads glTF 2.0"),
-    ("a.gltf", b'{"asset": {"version": "2.0"}}', "has no materials"),
-    ("a.glb", glb_bytes({"asset": {"version": "2.0"}, "materials": [{}]}, None)[:-4], "truncated"),
-    ("a.gltf", b'{"asset": {"version": "2.0"}, "materials": [{"pbrMetallicRoughness": {"roughnessFactor": 2}}]}',
-     "roughness=2 is outside"),
-])
+@pytest.mark.parametrize(
+    "name, content, message",
+    [
+        ("a.glb", b'{"asset": {"version": "2.0"}}', "JSON text, not a binary glTF; rename it to .gltf"),
+        ("a.glb", b"hello, not a model", "does not start with the 'glTF' magic"),
+        ("a.gltf", glb_bytes({"asset": {"version": "2.0"}, "materials": [{}]}, None), "binary glTF.*rename it to .glb"),
+        ("a.gltf", b"\x00\xff\xfe binary", "not UTF-8"),
+        ("a.gltf", b'{"asset": {"version": "2.0"}, "materials": [', "not valid glTF JSON"),
+        ("a.gltf", b'{"asset": {"version": "1.0"}, "materials": [{}]}', "glTF 1.0; matremap reads glTF 2.0"),
+        ("a.gltf", b'{"asset": {"version": "2.0"}}', "has no materials"),
+        ("a.glb", glb_bytes({"asset": {"version": "2.0"}, "materials": [{}]}, None)[:-4], "truncated"),
+        (
+            "a.gltf",
+            b'{"asset": {"version": "2.0"}, "materials": [{"pbrMetallicRoughness": {"roughnessFactor": 2}}]}',
+            "roughness=2 is outside",
+        ),
+    ],
+)
 def test_files_that_are_not_what_they_say_raise_clear_errors(tmp_path, name, content, message):
     (tmp_path / name).write_bytes(content)
     before = listing(tmp_path)
@@ -367,8 +446,7 @@ def test_files_that_are_not_what_they_say_raise_clear_errors(tmp_path, name, con
 
 
 def test_a_missing_external_texture_raises_naming_it(tmp_path):
-    f = make_file(tmp_path, "a.gltf", [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
-                  {"gone": ramp()})
+    f = make_file(tmp_path, "a.gltf", [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}], {"gone": ramp()})
     (tmp_path / "gone.png").unlink()
     with pytest.raises(MatremapError, match=r"image 'gone.png' \(material 'material 0' baseColorTexture\) not found"):
         read(f)
@@ -388,15 +466,27 @@ def mr_map_set(folder: Path, size: int = 8, with_specular: bool = True) -> Path:
     """A gltf:metal-rough map set: baseColor and specularColor 8-bit sRGB PNGs, roughness, metallic and
     specular 8-bit linear PNGs, ior as a constant."""
     folder.mkdir(parents=True, exist_ok=True)
-    maps = {"baseColor": ramp(size, size, 10), "roughness": ramp(size, size, 11, 1),
-            "metallic": ramp(size, size, 12, 1)}
+    maps = {
+        "baseColor": ramp(size, size, 10),
+        "roughness": ramp(size, size, 11, 1),
+        "metallic": ramp(size, size, 12, 1),
+    }
     if with_specular:
         maps.update(specular=ramp(size, size, 13, 1), specularColor=ramp(size, size, 14))
     for k, a in maps.items():
         (folder / f"{k}.png").write_bytes(png_bytes(folder, a))
-    manifest = {"model": MR, "maps": {k: f"{k}.png" for k in maps}, "params": {"ior": 1.45},
-                "colorspace": {"baseColor": "srgb", "specularColor": "srgb", "roughness": "linear",
-                               "metallic": "linear", "specular": "linear"}}
+    manifest = {
+        "model": MR,
+        "maps": {k: f"{k}.png" for k in maps},
+        "params": {"ior": 1.45},
+        "colorspace": {
+            "baseColor": "srgb",
+            "specularColor": "srgb",
+            "roughness": "linear",
+            "metallic": "linear",
+            "specular": "linear",
+        },
+    }
     (folder / "material.json").write_text(json.dumps(manifest))
     return folder
 
@@ -435,8 +525,11 @@ def test_uniform_material_without_source_writes_factors_and_only_needed_extensio
     m = Material.create(MR, {"baseColor": [0.9, 0.5, 0.1], "metallic": 0.0, "roughness": 0.3})
     doc = validate(write(tmp_path / "u.gltf", m))
     mat = doc["materials"][0]
-    assert mat["pbrMetallicRoughness"] == {"baseColorFactor": [0.9, 0.5, 0.1, 1.0], "metallicFactor": 0.0,
-                                           "roughnessFactor": 0.3}
+    assert mat["pbrMetallicRoughness"] == {
+        "baseColorFactor": [0.9, 0.5, 0.1, 1.0],
+        "metallicFactor": 0.0,
+        "roughnessFactor": 0.3,
+    }
     assert "extensions" not in mat and "extensionsUsed" not in doc and "images" not in doc
     assert (tmp_path / "u.bin").is_file()
     assert read(tmp_path / "u.gltf").material() == m
@@ -460,10 +553,13 @@ def make_source_scene(folder: Path) -> Path:
     doc = {
         "asset": {"version": "2.0", "generator": "test"},
         "extensionsUsed": ["KHR_materials_specular", "KHR_materials_clearcoat"],
-        "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
         "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "material": 1}]}],
-        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
-                       "min": [0, 0, 0], "max": [1, 1, 0]}],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}
+        ],
         "bufferViews": [{"buffer": 0, "byteLength": 36}],
         "buffers": [{"uri": "mesh.bin", "byteLength": 36}],
         "samplers": [{"wrapS": 33071, "wrapT": 33071}],
@@ -471,9 +567,13 @@ def make_source_scene(folder: Path) -> Path:
         "textures": [{"source": 0, "sampler": 0}, {"source": 1}],
         "materials": [
             {"name": "keep", "extensions": {"KHR_materials_clearcoat": {"clearcoatFactor": 1.0}}},
-            {"name": "car", "occlusionTexture": {"index": 0}, "normalTexture": {"index": 1},
-             "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}, "metallicRoughnessTexture": {"index": 0}},
-             "extensions": {"KHR_materials_specular": {"specularFactor": 0.5}}},
+            {
+                "name": "car",
+                "occlusionTexture": {"index": 0},
+                "normalTexture": {"index": 1},
+                "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}, "metallicRoughnessTexture": {"index": 0}},
+                "extensions": {"KHR_materials_specular": {"specularFactor": 0.5}},
+            },
         ],
     }
     (folder / "scene.gltf").write_text(json.dumps(doc))

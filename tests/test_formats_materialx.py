@@ -19,8 +19,7 @@ from matremap.svbrdf.textures import ImageInfo, load_map_set, read_image, write_
 
 def doc(tmp_path: Path, body: str, name: str = "m.mtlx") -> Path:
     p = tmp_path / name
-    p.write_text(f'<?xml version="1.0"?>\n<materialx version="1.39" colorspace="lin_rec709">\n{body}\n'
-                 f'</materialx>\n')
+    p.write_text(f'<?xml version="1.0"?>\n<materialx version="1.39" colorspace="lin_rec709">\n{body}\n</materialx>\n')
     return p
 
 
@@ -47,7 +46,9 @@ def test_gltf_pbr_values_textures_and_normal(tmp_path):
     png(tmp_path / "base.png", rng.uniform(0.05, 0.95, (8, 8, 3)).astype(np.float32), "srgb")
     png(tmp_path / "orm.png", rng.uniform(0.05, 0.95, (8, 8, 3)).astype(np.float32), "linear")
     png(tmp_path / "n.png", np.tile(np.array([0.5, 0.5, 1.0], np.float32), (8, 8, 1)), "linear")
-    p = doc(tmp_path, """
+    p = doc(
+        tmp_path,
+        """
   <image name="base" type="color3"><input name="file" type="filename" value="base.png" colorspace="srgb_texture"/>
   </image>
   <gltf_image name="orm" type="color3"><input name="file" type="filename" value="orm.png"/>
@@ -69,7 +70,8 @@ def test_gltf_pbr_values_textures_and_normal(tmp_path):
     <input name="clearcoat" type="float" value="0.3"/>
   </gltf_pbr>
   <surfacematerial name="Painted" type="material"><input name="surfaceshader" type="surfaceshader" nodename="SR"/>
-  </surfacematerial>""")
+  </surfacematerial>""",
+    )
     a = read(p)
     assert (a.name, a.model, a.format) == ("Painted", "gltf:metal-rough", "mtlx")
     assert a.constants["metallic"] == 0.0 and a.constants["ior"] == 1.45 and a.constants["specular"] == 1.0
@@ -95,8 +97,12 @@ def test_colour_spaces(tmp_path):
   <gltf_pbr name="SR" type="surfaceshader"><input name="base_color" type="color3" nodename="img"/></gltf_pbr>
   <surfacematerial name="M" type="material"><input name="surfaceshader" type="surfaceshader" nodename="SR"/>
   </surfacematerial>"""
-    expect = {'colorspace="srgb_texture"': "srgb", 'colorspace="lin_rec709"': "linear", 'colorspace="raw"': "linear",
-              "": "linear"}  # no attribute: the document's lin_rec709
+    expect = {
+        'colorspace="srgb_texture"': "srgb",
+        'colorspace="lin_rec709"': "linear",
+        'colorspace="raw"': "linear",
+        "": "linear",
+    }  # no attribute: the document's lin_rec709
     for cs, want in expect.items():
         assert read(doc(tmp_path, body.format(cs=cs))).textures["baseColor"].colorspace == want, cs
     with pytest.raises(MatremapError, match="colour space 'acescg'"):
@@ -104,7 +110,9 @@ def test_colour_spaces(tmp_path):
 
 
 def test_standard_surface_translation_warns_about_what_it_drops(tmp_path):
-    p = doc(tmp_path, """
+    p = doc(
+        tmp_path,
+        """
   <standard_surface name="SS" type="surfaceshader">
     <input name="base" type="float" value="0.5"/>
     <input name="base_color" type="color3" value="0.8, 0.6, 0.4"/>
@@ -117,7 +125,8 @@ def test_standard_surface_translation_warns_about_what_it_drops(tmp_path):
     <input name="specular_anisotropy" type="float" value="0.4"/>
   </standard_surface>
   <surfacematerial name="Brass" type="material">
-    <input name="surfaceshader" type="surfaceshader" nodename="SS"/></surfacematerial>""")
+    <input name="surfaceshader" type="surfaceshader" nodename="SS"/></surfacematerial>""",
+    )
     a = read(p)
     assert a.constants["baseColor"] == pytest.approx([0.4, 0.3, 0.2])
     assert a.constants["metallic"] == 1.0 and a.constants["roughness"] == 0.35 and a.constants["ior"] == 1.6
@@ -130,7 +139,9 @@ def test_standard_surface_translation_warns_about_what_it_drops(tmp_path):
 
 
 def test_open_pbr_surface(tmp_path):
-    p = doc(tmp_path, """
+    p = doc(
+        tmp_path,
+        """
   <open_pbr_surface name="OP" type="surfaceshader">
     <input name="base_weight" type="float" value="0.5"/>
     <input name="base_color" type="color3" value="0.2, 0.4, 0.6"/>
@@ -138,7 +149,8 @@ def test_open_pbr_surface(tmp_path):
     <input name="fuzz_weight" type="float" value="0.3"/>
   </open_pbr_surface>
   <surfacematerial name="M" type="material"><input name="surfaceshader" type="surfaceshader" nodename="OP"/>
-  </surfacematerial>""")
+  </surfacematerial>""",
+    )
     a = read(p)
     assert a.constants["baseColor"] == pytest.approx([0.1, 0.2, 0.3]) and a.constants["roughness"] == 0.2
     assert a.constants["metallic"] == 0.0 and a.constants["ior"] == 1.5
@@ -146,13 +158,16 @@ def test_open_pbr_surface(tmp_path):
 
 
 def test_material_selection(tmp_path):
-    p = doc(tmp_path, """
+    p = doc(
+        tmp_path,
+        """
   <gltf_pbr name="A" type="surfaceshader"><input name="roughness" type="float" value="0.1"/></gltf_pbr>
   <gltf_pbr name="B" type="surfaceshader"><input name="roughness" type="float" value="0.2"/></gltf_pbr>
   <surfacematerial name="first" type="material"><input name="surfaceshader" type="surfaceshader" nodename="A"/>
   </surfacematerial>
   <surfacematerial name="second" type="material"><input name="surfaceshader" type="surfaceshader" nodename="B"/>
-  </surfacematerial>""")
+  </surfacematerial>""",
+    )
     assert read(p).constants["roughness"] == 0.1
     assert read(p, "second").constants["roughness"] == 0.2 and read(p, 1).index == 1
     with pytest.raises(MatremapError, match="no material named 'third'; its materials are 'first', 'second'"):
@@ -161,22 +176,35 @@ def test_material_selection(tmp_path):
         read(p, 2)
 
 
-@pytest.mark.parametrize("text, words", [
-    ("not xml at all", "not a MaterialX document"),
-    ('<?xml version="1.0"?><scene version="3.0.0"><bsdf type="diffuse"/></scene>', "not a MaterialX document"),
-    ('<?xml version="1.0"?><materialx version="1.39"><UsdPreviewSurface name="U" type="surfaceshader"/>'
-     '<surfacematerial name="M" type="material"><input name="surfaceshader" type="surfaceshader" nodename="U"/>'
-     '</surfacematerial></materialx>', "'UsdPreviewSurface' shader"),
-    ('<?xml version="1.0"?><materialx version="1.39"><image name="i" type="color3">'
-     '<input name="file" type="filename" value="missing.png"/></image><gltf_pbr name="S" type="surfaceshader">'
-     '<input name="base_color" type="color3" nodename="i"/></gltf_pbr><surfacematerial name="M" type="material">'
-     '<input name="surfaceshader" type="surfaceshader" nodename="S"/></surfacematerial></materialx>',
-     "texture missing.png for base_color not found"),
-    ('<?xml version="1.0"?><materialx version="1.39"><nodedef name="ND_x" node="x"/></materialx>',
-     "holds no surfacematerial"),
-    ('<?xml version="1.0"?><materialx version="1.39"><gltf_pbr name="S" type="surfaceshader">'
-     '<input name="roughness" type="float" value="2"/></gltf_pbr></materialx>', "outside its range"),
-])
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        ("not xml at all", "not a MaterialX document"),
+        ('<?xml version="1.0"?><scene version="3.0.0"><bsdf type="diffuse"/></scene>', "not a MaterialX document"),
+        (
+            '<?xml version="1.0"?><materialx version="1.39"><UsdPreviewSurface name="U" type="surfaceshader"/>'
+            '<surfacematerial name="M" type="material"><input name="surfaceshader" type="surfaceshader" nodename="U"/>'
+            "</surfacematerial></materialx>",
+            "'UsdPreviewSurface' shader",
+        ),
+        (
+            '<?xml version="1.0"?><materialx version="1.39"><image name="i" type="color3">'
+            '<input name="file" type="filename" value="missing.png"/></image><gltf_pbr name="S" type="surfaceshader">'
+            '<input name="base_color" type="color3" nodename="i"/></gltf_pbr><surfacematerial name="M" type="material">'
+            '<input name="surfaceshader" type="surfaceshader" nodename="S"/></surfacematerial></materialx>',
+            "texture missing.png for base_color not found",
+        ),
+        (
+            '<?xml version="1.0"?><materialx version="1.39"><nodedef name="ND_x" node="x"/></materialx>',
+            "holds no surfacematerial",
+        ),
+        (
+            '<?xml version="1.0"?><materialx version="1.39"><gltf_pbr name="S" type="surfaceshader">'
+            '<input name="roughness" type="float" value="2"/></gltf_pbr></materialx>',
+            "outside its range",
+        ),
+    ],
+)
 def test_bad_inputs_say_what_is_wrong(tmp_path, text, words):
     p = tmp_path / "bad.mtlx"
     p.write_text(text)
@@ -189,9 +217,17 @@ def test_bad_inputs_say_what_is_wrong(tmp_path, text, words):
 
 
 def test_uniform_round_trip_and_validation(tmp_path):
-    m = Material.create("gltf:metal-rough", {"baseColor": [0.1, 0.2, 0.30000000000000004], "metallic": 0.25,
-                                             "roughness": 0.123456789, "ior": 1.45, "specular": 0.7,
-                                             "specularColor": [1.0, 0.9, 0.8]})
+    m = Material.create(
+        "gltf:metal-rough",
+        {
+            "baseColor": [0.1, 0.2, 0.30000000000000004],
+            "metallic": 0.25,
+            "roughness": 0.123456789,
+            "ior": 1.45,
+            "specular": 0.7,
+            "specularColor": [1.0, 0.9, 0.8],
+        },
+    )
     out = write(tmp_path / "m.mtlx", m)
     assert validates(out)
     a = read(out)
@@ -211,9 +247,11 @@ def test_map_set_round_trip(tmp_path):
     png(d / "lin_base.png", rng.uniform(0.05, 0.95, (8, 8, 3)).astype(np.float32), "linear")
     png(d / "rough.png", rng.uniform(0.1, 0.9, (8, 8, 1)).astype(np.float32), "linear")
     png(d / "normal.png", np.tile(np.array([0.5, 0.5, 1.0], np.float32), (8, 8, 1)), "linear")
-    (d / "material.json").write_text('{"model": "gltf:metal-rough", "maps": {"baseColor": "base.png", '
-                                     '"roughness": "rough.png"}, "normal": "normal.png", '
-                                     '"params": {"metallic": 0, "ior": 1.4}}')
+    (d / "material.json").write_text(
+        '{"model": "gltf:metal-rough", "maps": {"baseColor": "base.png", '
+        '"roughness": "rough.png"}, "normal": "normal.png", '
+        '"params": {"metallic": 0, "ior": 1.4}}'
+    )
     ms = load_map_set(d)
     (tmp_path / "out").mkdir()
     out = write(tmp_path / "out" / "mat.mtlx", ms)
@@ -231,8 +269,9 @@ def test_map_set_round_trip(tmp_path):
         assert np.array_equal(back, orig)
     assert a.normal is not None and a.normal.path.read_bytes() == (d / "normal.png").read_bytes()
     # a linear colour PNG is declared lin_rec709
-    (d / "material.json").write_text('{"model": "gltf:metal-rough", "maps": {"baseColor": "lin_base.png"}, '
-                                     '"colorspace": {"lin_base.png": "linear"}}')
+    (d / "material.json").write_text(
+        '{"model": "gltf:metal-rough", "maps": {"baseColor": "lin_base.png"}, "colorspace": {"lin_base.png": "linear"}}'
+    )
     out2 = write(tmp_path / "lin.mtlx", load_map_set(d))
     assert 'colorspace="lin_rec709"' in out2.read_text() and read(out2).textures["baseColor"].colorspace == "linear"
 
@@ -246,10 +285,13 @@ def test_writer_refuses_other_models_and_writes_nothing(tmp_path):
 
 
 def test_a_colour_just_above_one_is_clamped_with_a_note(tmp_path):
-    p = doc(tmp_path, '<gltf_pbr name="S" type="surfaceshader">'
-                      '<input name="base_color" type="color3" value="1.059, 0.773, 0.307"/></gltf_pbr>'
-                      '<surfacematerial name="Gold" type="material">'
-                      '<input name="surfaceshader" type="surfaceshader" nodename="S"/></surfacematerial>')
+    p = doc(
+        tmp_path,
+        '<gltf_pbr name="S" type="surfaceshader">'
+        '<input name="base_color" type="color3" value="1.059, 0.773, 0.307"/></gltf_pbr>'
+        '<surfacematerial name="Gold" type="material">'
+        '<input name="surfaceshader" type="surfaceshader" nodename="S"/></surfacematerial>',
+    )
     asset = read(p)
     np.testing.assert_allclose(asset.constants["baseColor"], [1.0, 0.773, 0.307])
     assert any("clamped" in n for n in asset.notes)

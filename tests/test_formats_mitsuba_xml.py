@@ -43,7 +43,9 @@ def exr(path: Path, values: np.ndarray) -> Path:
 
 
 def test_defaults_substituted_and_twosided_unwrapped_inside_a_shape(tmp_path):
-    p = scene_xml(tmp_path, """
+    p = scene_xml(
+        tmp_path,
+        """
     <default name="rough" value="0.25"/>
     <default name="dist" value="ggx"/>
     <bsdf type="diffuse" id="wall"><rgb name="reflectance" value="0.2, 0.4, 0.6"/></bsdf>
@@ -56,32 +58,45 @@ def test_defaults_substituted_and_twosided_unwrapped_inside_a_shape(tmp_path):
                 <rgb name="k" value="3.9 2.45 2.14"/>
             </bsdf>
         </bsdf>
-    </shape>""")
+    </shape>""",
+    )
     first = read(p)
     assert (first.name, first.model, first.index) == ("wall", "mitsuba3:diffuse", 0)
     assert first.constants == {"reflectance": [0.2, 0.4, 0.6]}
     for key in ("metal", 1):
         a = read(p, key)
         assert a.name == "metal" and a.model == "mitsuba3:roughconductor"
-        assert a.constants == {"distribution": "ggx", "alpha": 0.25, "material": "custom",
-                               "eta": [0.2, 0.92, 1.1], "k": [3.9, 2.45, 2.14]}
+        assert a.constants == {
+            "distribution": "ggx",
+            "alpha": 0.25,
+            "material": "custom",
+            "eta": [0.2, 0.92, 1.1],
+            "k": [3.9, 2.45, 2.14],
+        }
         assert any("twosided" in n for n in a.notes)
         m = a.material()
         assert float(m.values["alpha"][0]) == 0.25 and m.options["distribution"] == "ggx"
     # a shape's anonymous BSDF is named after the shape; a reference to a top-level texture is followed
-    p2 = scene_xml(tmp_path, """
+    p2 = scene_xml(
+        tmp_path,
+        """
     <texture type="bitmap" id="tex"><string name="filename" value="r.exr"/></texture>
-    <shape type="cube" id="box"><bsdf type="diffuse"><ref name="reflectance" id="tex"/></bsdf></shape>""", "b.xml")
+    <shape type="cube" id="box"><bsdf type="diffuse"><ref name="reflectance" id="tex"/></bsdf></shape>""",
+        "b.xml",
+    )
     exr(tmp_path / "r.exr", np.full((4, 4, 3), 0.3, np.float32))
     b = read(p2)
     assert b.name == "box/bsdf" and b.textures["reflectance"].path == (tmp_path / "r.exr").resolve()
 
 
 def test_conductor_defaults_and_named_material(tmp_path):
-    p = scene_xml(tmp_path, """
+    p = scene_xml(
+        tmp_path,
+        """
     <bsdf type="roughconductor" id="mirror"/>
     <bsdf type="roughconductor" id="gold"><string name="material" value="Au"/>
-        <float name="alpha_u" value="0.3"/><float name="alpha_v" value="0.3"/></bsdf>""")
+        <float name="alpha_u" value="0.3"/><float name="alpha_v" value="0.3"/></bsdf>""",
+    )
     assert read(p, "mirror").constants == {"material": "none"}  # Mitsuba's default: a perfect mirror
     gold = read(p, "gold")
     assert gold.constants == {"material": "Au", "alpha": 0.3}
@@ -89,12 +104,15 @@ def test_conductor_defaults_and_named_material(tmp_path):
 
 
 def test_roughplastic_named_iors_and_legacy_names(tmp_path):
-    p = scene_xml(tmp_path, """
+    p = scene_xml(
+        tmp_path,
+        """
     <bsdf type="roughplastic" id="p">
         <string name="int_ior" value="bk7"/><string name="ext_ior" value="Water"/>
         <boolean name="nonlinear" value="true"/><float name="alpha" value="0.05"/>
         <rgb name="diffuse_reflectance" value="0.5"/>
-    </bsdf>""")
+    </bsdf>""",
+    )
     a = read(p)
     assert a.constants["int_ior"] == 1.5046 and a.constants["ext_ior"] == 1.333
     assert a.constants["nonlinear"] == "true" and a.constants["diffuse_reflectance"] == 0.5
@@ -102,9 +120,14 @@ def test_roughplastic_named_iors_and_legacy_names(tmp_path):
     m = a.material()
     assert np.allclose(m.values["diffuse_reflectance"], 0.5) and m.options["nonlinear"] == "true"
     # a Mitsuba 0.6 file: camelCase names
-    old = scene_xml(tmp_path, """
+    old = scene_xml(
+        tmp_path,
+        """
     <bsdf type="roughplastic"><float name="intIOR" value="1.6"/>
-        <rgb name="diffuseReflectance" value="0.1, 0.2, 0.3"/></bsdf>""", "old.xml", version="0.6.0")
+        <rgb name="diffuseReflectance" value="0.1, 0.2, 0.3"/></bsdf>""",
+        "old.xml",
+        version="0.6.0",
+    )
     o = read(old)
     assert o.constants == {"int_ior": 1.6, "diffuse_reflectance": [0.1, 0.2, 0.3]}
     assert "snake_case" in o.notes[0]
@@ -124,8 +147,10 @@ def test_ior_table_is_mitsubas():
 
 def test_principled_eta_and_a_bare_bsdf(tmp_path):
     p = tmp_path / "bsdf.xml"
-    p.write_text('<bsdf version="3.0.0" type="principled" id="car"><rgb name="base_color" value="0.8, 0.1, 0.1"/>'
-                 '<float name="eta" value="1.5"/><float name="metallic" value="0.2"/></bsdf>')
+    p.write_text(
+        '<bsdf version="3.0.0" type="principled" id="car"><rgb name="base_color" value="0.8, 0.1, 0.1"/>'
+        '<float name="eta" value="1.5"/><float name="metallic" value="0.2"/></bsdf>'
+    )
     a = read(p)
     assert a.name == "car" and a.model == "mitsuba3:principled"
     assert a.constants["specular"] == pytest.approx(0.04 / 0.08)  # F0 of 1.5 is 0.04
@@ -143,7 +168,9 @@ def test_bitmaps_raw_vs_srgb_normalmap_and_bumpmap(tmp_path):
     sub = tmp_path / "maps"
     sub.mkdir()
     png(sub / "bump.png", np.full((8, 8, 1), 0.5, np.float32), "linear")
-    p = scene_xml(tmp_path, """
+    p = scene_xml(
+        tmp_path,
+        """
     <bsdf type="bumpmap" id="bumpy">
         <texture type="bitmap" name="bumpmap"><string name="filename" value="maps/bump.png"/></texture>
         <bsdf type="normalmap">
@@ -162,7 +189,8 @@ def test_bitmaps_raw_vs_srgb_normalmap_and_bumpmap(tmp_path):
     </bsdf>
     <bsdf type="roughconductor" id="srgb_alpha">
         <texture type="bitmap" name="alpha"><string name="filename" value="rough_srgb.png"/></texture>
-    </bsdf>""")
+    </bsdf>""",
+    )
     a = read(p, "bumpy")
     assert a.textures["alpha"].colorspace == "linear"  # raw
     assert a.textures["specular_reflectance"].colorspace == "linear"  # a float file is linear, raw or not
@@ -178,27 +206,48 @@ def test_bitmaps_raw_vs_srgb_normalmap_and_bumpmap(tmp_path):
 # -- errors ------------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("text, words", [
-    ("this is not xml <", "not valid XML"),
-    ('<?xml version="1.0"?><materialx version="1.39"/>', "not a Mitsuba scene"),
-    ('<scene version="3.0.0"><shape type="sphere"/></scene>', "holds no <bsdf>"),
-    ('<scene version="3.0.0"><bsdf type="dielectric"/></scene>', "'dielectric' BSDF"),
-    ('<scene version="3.0.0"><bsdf type="diffuse"><float name="roughness" value="0.1"/></bsdf></scene>',
-     "unknown parameter(s) roughness"),
-    ('<scene version="3.0.0"><bsdf type="diffuse"><rgb name="reflectance" value="$c"/></bsdf></scene>', "$c"),
-    ('<scene version="3.0.0"><bsdf type="roughconductor"><float name="alpha_u" value="0.1"/>'
-     '<float name="alpha_v" value="0.3"/></bsdf></scene>', "anisotropic"),
-    ('<scene version="3.0.0"><bsdf type="roughplastic"><string name="int_ior" value="unobtainium"/></bsdf></scene>',
-     "named IORs"),
-    ('<scene version="3.0.0"><bsdf type="roughconductor"><string name="material" value="Kryptonite"/></bsdf>'
-     '</scene>', "Mitsuba's conductors"),
-    ('<scene version="3.0.0"><bsdf type="diffuse"><texture type="bitmap" name="reflectance">'
-     '<string name="filename" value="gone.png"/></texture></bsdf></scene>', "gone.png for reflectance not found"),
-    ('<scene version="3.0.0"><bsdf type="diffuse"><texture type="checkerboard" name="reflectance"/></bsdf>'
-     '</scene>', "bitmap textures only"),
-    ('<scene version="3.0.0"><bsdf type="diffuse"><rgb name="reflectance" value="1.5"/></bsdf></scene>',
-     "outside its range"),
-])
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        ("this is not xml <", "not valid XML"),
+        ('<?xml version="1.0"?><materialx version="1.39"/>', "not a Mitsuba scene"),
+        ('<scene version="3.0.0"><shape type="sphere"/></scene>', "holds no <bsdf>"),
+        ('<scene version="3.0.0"><bsdf type="dielectric"/></scene>', "'dielectric' BSDF"),
+        (
+            '<scene version="3.0.0"><bsdf type="diffuse"><float name="roughness" value="0.1"/></bsdf></scene>',
+            "unknown parameter(s) roughness",
+        ),
+        ('<scene version="3.0.0"><bsdf type="diffuse"><rgb name="reflectance" value="$c"/></bsdf></scene>', "$c"),
+        (
+            '<scene version="3.0.0"><bsdf type="roughconductor"><float name="alpha_u" value="0.1"/>'
+            '<float name="alpha_v" value="0.3"/></bsdf></scene>',
+            "anisotropic",
+        ),
+        (
+            '<scene version="3.0.0"><bsdf type="roughplastic"><string name="int_ior" value="unobtainium"/></bsdf></scene>',
+            "named IORs",
+        ),
+        (
+            '<scene version="3.0.0"><bsdf type="roughconductor"><string name="material" value="Kryptonite"/></bsdf>'
+            "</scene>",
+            "Mitsuba's conductors",
+        ),
+        (
+            '<scene version="3.0.0"><bsdf type="diffuse"><texture type="bitmap" name="reflectance">'
+            '<string name="filename" value="gone.png"/></texture></bsdf></scene>',
+            "gone.png for reflectance not found",
+        ),
+        (
+            '<scene version="3.0.0"><bsdf type="diffuse"><texture type="checkerboard" name="reflectance"/></bsdf>'
+            "</scene>",
+            "bitmap textures only",
+        ),
+        (
+            '<scene version="3.0.0"><bsdf type="diffuse"><rgb name="reflectance" value="1.5"/></bsdf></scene>',
+            "outside its range",
+        ),
+    ],
+)
 def test_bad_inputs_say_what_is_wrong(tmp_path, text, words):
     p = tmp_path / "bad.xml"
     p.write_text(text)
@@ -235,14 +284,32 @@ def test_writer_refuses_and_writes_nothing(tmp_path):
 
 MATERIALS = [
     Material.create("mitsuba3:diffuse", {"reflectance": [0.1, 0.2, 0.30000000000000004]}),
-    Material.create("mitsuba3:roughconductor", {"alpha": 0.123456789, "eta": [0.2, 0.92, 1.1],
-                                                "k": [3.9, 2.45, 2.14], "distribution": "ggx",
-                                                "specular_reflectance": [1.0, 0.9, 0.8]}),
+    Material.create(
+        "mitsuba3:roughconductor",
+        {
+            "alpha": 0.123456789,
+            "eta": [0.2, 0.92, 1.1],
+            "k": [3.9, 2.45, 2.14],
+            "distribution": "ggx",
+            "specular_reflectance": [1.0, 0.9, 0.8],
+        },
+    ),
     Material.create("mitsuba3:roughconductor", {"material": "Cu", "alpha": 0.3}),
-    Material.create("mitsuba3:roughplastic", {"alpha": 0.07, "int_ior": 1.6, "ext_ior": 1.1, "nonlinear": "true",
-                                              "diffuse_reflectance": [0.5, 0.25, 0.125]}),
-    Material.create("mitsuba3:principled", {"base_color": [0.7, 0.3, 0.1], "roughness": 0.4, "metallic": 0.6,
-                                            "specular": 0.3, "sheen": 0.1, "clearcoat": 0.2}),
+    Material.create(
+        "mitsuba3:roughplastic",
+        {"alpha": 0.07, "int_ior": 1.6, "ext_ior": 1.1, "nonlinear": "true", "diffuse_reflectance": [0.5, 0.25, 0.125]},
+    ),
+    Material.create(
+        "mitsuba3:principled",
+        {
+            "base_color": [0.7, 0.3, 0.1],
+            "roughness": 0.4,
+            "metallic": 0.6,
+            "specular": 0.3,
+            "sheen": 0.1,
+            "clearcoat": 0.2,
+        },
+    ),
 ]
 
 
@@ -260,9 +327,11 @@ def make_map_set(tmp_path: Path) -> Path:
     png(d / "colour.png", rng.uniform(0.05, 0.95, (16, 16, 3)).astype(np.float32), "srgb")
     exr(d / "rough.exr", rng.uniform(0.05, 0.6, (16, 16, 1)).astype(np.float32))
     png(d / "normal.png", np.tile(np.array([0.5, 0.5, 1.0], np.float32), (16, 16, 1)), "linear")
-    (d / "material.json").write_text('{"model": "mitsuba3:roughconductor", "maps": {"specular_reflectance": '
-                                     '"colour.png", "alpha": "rough.exr"}, "normal": "normal.png", '
-                                     '"params": {"distribution": "ggx", "material": "Au"}}')
+    (d / "material.json").write_text(
+        '{"model": "mitsuba3:roughconductor", "maps": {"specular_reflectance": '
+        '"colour.png", "alpha": "rough.exr"}, "normal": "normal.png", '
+        '"params": {"distribution": "ggx", "material": "Au"}}'
+    )
     return d
 
 
@@ -294,8 +363,10 @@ def test_writer_converts_what_mitsuba_would_misread(tmp_path):
     # a linear-encoded colour PNG: Mitsuba would decode it as sRGB unless converted
     png(d / "lin.png", np.full((4, 4, 3), 0.25, np.float32), "linear")
     png(d / "grey_rgb.png", np.full((4, 4, 3), 0.4, np.float32), "linear")  # RGB file for a scalar
-    (d / "material.json").write_text('{"model": "mitsuba3:roughconductor", "maps": {"specular_reflectance": '
-                                     '"lin.png", "alpha": "grey_rgb.png"}, "colorspace": {"lin.png": "linear"}}')
+    (d / "material.json").write_text(
+        '{"model": "mitsuba3:roughconductor", "maps": {"specular_reflectance": '
+        '"lin.png", "alpha": "grey_rgb.png"}, "colorspace": {"lin.png": "linear"}}'
+    )
     ms = load_map_set(d)
     out = write(tmp_path / "s.xml", ms)
     a = read(out)
@@ -395,5 +466,9 @@ def test_mitsuba_probe_lights_match_scene_conventions():
     # the probe light intensity the renderer test relies on
     s = Scene.probe([0.0])
     assert s.light_intensity(s.lights[0]) == pytest.approx(math.pi * 36.0)
-    assert mitsuba_xml.MODELS == ("mitsuba3:diffuse", "mitsuba3:roughconductor", "mitsuba3:roughplastic",
-                                  "mitsuba3:principled")
+    assert mitsuba_xml.MODELS == (
+        "mitsuba3:diffuse",
+        "mitsuba3:roughconductor",
+        "mitsuba3:roughplastic",
+        "mitsuba3:principled",
+    )

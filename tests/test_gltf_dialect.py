@@ -61,11 +61,16 @@ def reference(params: dict, L, V, visibility: str) -> list[float]:
     a2 = (r * r) ** 2  # alpha = roughness^2
     D = a2 / (math.pi * (NdotH * NdotH * (a2 - 1.0) + 1.0) ** 2) if NdotH > 0 else 0.0
     if visibility == "separable":  # B.2.1: V = G / (4 |N.L| |N.V|) with G = G1(L) G1(V), simplified
-        vis = (1.0 / (abs(NdotL) + math.sqrt(a2 + (1.0 - a2) * NdotL * NdotL))
-               * 1.0 / (abs(NdotV) + math.sqrt(a2 + (1.0 - a2) * NdotV * NdotV)))
+        vis = (
+            1.0
+            / (abs(NdotL) + math.sqrt(a2 + (1.0 - a2) * NdotL * NdotL))
+            * 1.0
+            / (abs(NdotV) + math.sqrt(a2 + (1.0 - a2) * NdotV * NdotV))
+        )
     else:  # height-correlated Smith GGX
-        vis = 0.5 / (NdotL * math.sqrt(NdotV * NdotV * (1.0 - a2) + a2)
-                     + NdotV * math.sqrt(NdotL * NdotL * (1.0 - a2) + a2))
+        vis = 0.5 / (
+            NdotL * math.sqrt(NdotV * NdotV * (1.0 - a2) + a2) + NdotV * math.sqrt(NdotL * NdotL * (1.0 - a2) + a2)
+        )
     specular_brdf = D * vis
     out = []
     m, ior, s = params["metallic"], params["ior"], params["specular"]
@@ -95,10 +100,22 @@ CASES = {
     "dielectric": {"baseColor": [0.5, 0.2, 0.1], "metallic": 0.0, "roughness": 0.5},
     "mixed": {"baseColor": [0.8, 0.7, 0.2], "metallic": 0.4, "roughness": 0.7},
     "smooth-dielectric": {"baseColor": [0.3, 0.3, 0.3], "metallic": 0.0, "roughness": 0.12},
-    "khr-ior-specular": {"baseColor": [0.2, 0.4, 0.6], "metallic": 0.0, "roughness": 0.45, "ior": 1.9,
-                         "specular": 0.6, "specularColor": [1.6, 1.0, 0.3]},
-    "khr-f0-clamped": {"baseColor": [0.5, 0.5, 0.5], "metallic": 0.3, "roughness": 0.3, "ior": 3.0,
-                       "specular": 0.8, "specularColor": [25.0, 2.0, 0.0]},
+    "khr-ior-specular": {
+        "baseColor": [0.2, 0.4, 0.6],
+        "metallic": 0.0,
+        "roughness": 0.45,
+        "ior": 1.9,
+        "specular": 0.6,
+        "specularColor": [1.6, 1.0, 0.3],
+    },
+    "khr-f0-clamped": {
+        "baseColor": [0.5, 0.5, 0.5],
+        "metallic": 0.3,
+        "roughness": 0.3,
+        "ior": 3.0,
+        "specular": 0.8,
+        "specularColor": [25.0, 2.0, 0.0],
+    },
 }
 
 
@@ -121,8 +138,11 @@ def test_the_visibility_options_differ_where_the_spec_forms_do():
     L, V = PAIRS["grazing-view"]
     a, b = evaluate(hc, L, V), evaluate(sep, L, V)
     assert np.all(a > b * 1.01)  # height-correlated masking shadows less at grazing angles (1.6 % here)
-    np.testing.assert_allclose(a / b, np.array(reference(_full(hc), L, V, "height-correlated"))
-                               / np.array(reference(_full(sep), L, V, "separable")), rtol=1e-9)
+    np.testing.assert_allclose(
+        a / b,
+        np.array(reference(_full(hc), L, V, "height-correlated")) / np.array(reference(_full(sep), L, V, "separable")),
+        rtol=1e-9,
+    )
 
 
 def _full(m: Material) -> dict:
@@ -131,8 +151,14 @@ def _full(m: Material) -> dict:
 
 def test_defaults_are_the_spec_defaults():
     m = Material.create(MR)
-    assert _full(m) == {"baseColor": [1.0] * 3, "metallic": 1.0, "roughness": 1.0, "ior": 1.5, "specular": 1.0,
-                        "specularColor": [1.0] * 3}
+    assert _full(m) == {
+        "baseColor": [1.0] * 3,
+        "metallic": 1.0,
+        "roughness": 1.0,
+        "ior": 1.5,
+        "specular": 1.0,
+        "specularColor": [1.0] * 3,
+    }
     assert m.options == {"visibility": "height-correlated"}
     np.testing.assert_allclose(f0_from_ior(1.5), 0.04)  # the dielectric F0 the core spec hard-codes
 
@@ -169,8 +195,9 @@ SCENES = {"headlight": Scene(), "oblique": Scene(lights=(PointLight(0.0), PointL
 @pytest.mark.parametrize("alpha", [0.05, 0.2, 0.5])
 def test_fit_of_a_ggx_conductor_recovers_roughness_near_sqrt_alpha(alpha, visibility, scene):
     k = np.array([4.0, 2.5, 1.2])
-    source = Material.create("mitsuba06:roughconductor", {"distribution": "ggx", "alpha": alpha, "eta": 1.0,
-                                                          "k": k, "extEta": 1.0})
+    source = Material.create(
+        "mitsuba06:roughconductor", {"distribution": "ggx", "alpha": alpha, "eta": 1.0, "k": k, "extEta": 1.0}
+    )
     result = fit(source, MR, scene=SCENES[scene], fix={"metallic": 1.0, "visibility": visibility})
     rough = result.target.values["roughness"][0]
     assert abs(rough - math.sqrt(alpha)) < ROUGHNESS_TOL[visibility], (rough, math.sqrt(alpha))
@@ -204,8 +231,11 @@ def test_quantities_of_a_dielectric_read_albedo_and_write_f0_through_specular_co
     np.testing.assert_allclose(got["reflectance"], 0.04)
     np.testing.assert_allclose(got["diffuse"], [0.5, 0.3, 0.2])
     f0 = np.array([0.06, 0.05, 0.02])
-    out = q.write(spec, {"roughness": np.array(0.3), "reflectance": f0, "diffuse": np.array([0.1, 0.2, 0.3])},
-                  q.material_values(m))
+    out = q.write(
+        spec,
+        {"roughness": np.array(0.3), "reflectance": f0, "diffuse": np.array([0.1, 0.2, 0.3])},
+        q.material_values(m),
+    )
     np.testing.assert_allclose(out["baseColor"], [0.1, 0.2, 0.3])
     np.testing.assert_allclose(out["specularColor"], f0 / 0.04)  # specularColor = F0 / f0(ior) / specular
     np.testing.assert_allclose(out["ior"], 1.5)

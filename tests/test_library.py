@@ -43,8 +43,14 @@ def test_a_chain_is_found_when_no_direct_transform_exists():
     assert found.error == pytest.approx(np.hypot(*(e.error for e in found.steps)))
     t = found.transform
     assert t.method == "chain" and t.source == "blender27:ward" and t.target == "gltf:metal-rough"
-    out, outside = t.apply({"specular_slope": np.array([0.1, 0.2]), "specular_color": np.array([0.1, 0.3]),
-                            "specular_intensity": np.array([1.0, 1.0]), "diffuse_color": np.zeros((2, 3))})
+    out, outside = t.apply(
+        {
+            "specular_slope": np.array([0.1, 0.2]),
+            "specular_color": np.array([0.1, 0.3]),
+            "specular_intensity": np.array([1.0, 1.0]),
+            "diffuse_color": np.zeros((2, 3)),
+        }
+    )
     assert not outside.any() and np.all(out["metallic"] == 1.0)
     assert "blender27:ward -> mitsuba06:ward -> gltf:metal-rough" in found.describe()
 
@@ -94,13 +100,25 @@ def _ward_maps(folder, variant: str):
 
     folder.mkdir()
     y, x = np.mgrid[0:8, 0:8] / 7.0
-    write_image_like(folder / "w_roughness.exr", (0.1 + 0.4 * x)[..., None].astype(np.float32),
-                     ImageInfo("exr", "float", 1, 0, 0, "linear"))
-    write_image_like(folder / "w_specular.exr", np.stack([0.05 + 0.2 * y] * 3, -1).astype(np.float32),
-                     ImageInfo("exr", "float", 3, 0, 0, "linear"))
-    (folder / "material.json").write_text(json.dumps({
-        "model": "mitsuba06:ward", "params": {"variant": variant, "diffuseReflectance": 0.0},
-        "maps": {"alpha": "w_roughness.exr", "specularReflectance": "w_specular.exr"}}))
+    write_image_like(
+        folder / "w_roughness.exr",
+        (0.1 + 0.4 * x)[..., None].astype(np.float32),
+        ImageInfo("exr", "float", 1, 0, 0, "linear"),
+    )
+    write_image_like(
+        folder / "w_specular.exr",
+        np.stack([0.05 + 0.2 * y] * 3, -1).astype(np.float32),
+        ImageInfo("exr", "float", 3, 0, 0, "linear"),
+    )
+    (folder / "material.json").write_text(
+        json.dumps(
+            {
+                "model": "mitsuba06:ward",
+                "params": {"variant": variant, "diffuseReflectance": 0.0},
+                "maps": {"alpha": "w_roughness.exr", "specularReflectance": "w_specular.exr"},
+            }
+        )
+    )
     return x, y
 
 
@@ -109,12 +127,15 @@ def test_convert_to_a_model_takes_the_library_route(tmp_path, capsys):
 
     x, y = _ward_maps(tmp_path / "in", "balanced")
     out = tmp_path / "out"
-    assert main(["convert", str(tmp_path / "in"), "--to", "mitsuba06:pbr", "--fix", "distribution=as",
-                 "-o", str(out)]) == 0
+    assert (
+        main(["convert", str(tmp_path / "in"), "--to", "mitsuba06:pbr", "--fix", "distribution=as", "-o", str(out)])
+        == 0
+    )
     assert "route mitsuba06:ward -> mitsuba06:pbr" in capsys.readouterr().err
     shipped = next(e.transform for e in entries() if e.name == "ward-as")
-    expected, _ = shipped.apply({"alpha": 0.1 + 0.4 * x, "specularReflectance": np.stack([0.05 + 0.2 * y] * 3, -1),
-                                 "diffuseReflectance": 0.0})
+    expected, _ = shipped.apply(
+        {"alpha": 0.1 + 0.4 * x, "specularReflectance": np.stack([0.05 + 0.2 * y] * 3, -1), "diffuseReflectance": 0.0}
+    )
     alpha, _ = read_image(out / "w_roughness.exr")
     np.testing.assert_allclose(alpha[..., 0], expected["alpha"], rtol=1e-5)
 
@@ -122,6 +143,8 @@ def test_convert_to_a_model_takes_the_library_route(tmp_path, capsys):
 def test_convert_to_a_model_without_a_route_fails_cleanly(tmp_path, capsys):
     _ward_maps(tmp_path / "in", "ward")  # the library's Ward is the balanced variant
     out = tmp_path / "out"
-    assert main(["convert", str(tmp_path / "in"), "--to", "mitsuba06:pbr", "--fix", "distribution=as",
-                 "-o", str(out)]) == 2
+    assert (
+        main(["convert", str(tmp_path / "in"), "--to", "mitsuba06:pbr", "--fix", "distribution=as", "-o", str(out)])
+        == 2
+    )
     assert "no route" in capsys.readouterr().err and not out.exists()

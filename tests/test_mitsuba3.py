@@ -97,12 +97,22 @@ def test_conductor_matches_the_mitsuba06_emulation(mitsuba3, embedded, distribut
     scene = Scene.probe([theta], resolution=128)
     alphas = (0.03, 0.1, 0.3, 0.7)
     real = mitsuba3.render(
-        [Material.create("mitsuba3:roughconductor", {"distribution": distribution, "alpha": a, "eta": ETA, "k": K})
-         for a in alphas], scene)
+        [
+            Material.create("mitsuba3:roughconductor", {"distribution": distribution, "alpha": a, "eta": ETA, "k": K})
+            for a in alphas
+        ],
+        scene,
+    )
     emulated = embedded.render(
-        [Material.create("mitsuba06:roughconductor",
-                         {"distribution": distribution, "alpha": a, "eta": ETA, "k": K, "extEta": 1.0})
-         for a in alphas], scene)
+        [
+            Material.create(
+                "mitsuba06:roughconductor",
+                {"distribution": distribution, "alpha": a, "eta": ETA, "k": K, "extEta": 1.0},
+            )
+            for a in alphas
+        ],
+        scene,
+    )
     for a, img, ref in zip(alphas, real, emulated, strict=True):
         assert relative_rmse(img, ref, scene.mask()) < 0.01, a
 
@@ -111,8 +121,10 @@ def test_conductor_matches_the_mitsuba06_emulation(mitsuba3, embedded, distribut
 def test_batches_update_parameters_in_place(mitsuba3):
     """One cached scene, parameters changed with mi.traverse: equal to fresh scenes, deterministic."""
     scene = Scene.probe([20.0], resolution=32)
-    mats = [Material.create("mitsuba3:roughconductor", {"distribution": "ggx", "alpha": a, "k": [k, 2.0, 1.0]})
-            for a, k in ((0.1, 3.0), (0.4, 1.0), (0.1, 3.0))]
+    mats = [
+        Material.create("mitsuba3:roughconductor", {"distribution": "ggx", "alpha": a, "k": [k, 2.0, 1.0]})
+        for a, k in ((0.1, 3.0), (0.4, 1.0), (0.1, 3.0))
+    ]
     batch = mitsuba3.render(mats, scene)
     np.testing.assert_array_equal(batch[0], batch[2])
     fresh = Mitsuba3Renderer().render(mats[1:2], scene)[0]
@@ -146,8 +158,10 @@ def test_render_failure_carries_mitsubas_message(mitsuba3):
 @needs_mitsuba
 def test_plastic_and_principled_render(mitsuba3):
     scene = Scene.probe([30.0], resolution=32)
-    plastic = [Material.create("mitsuba3:roughplastic", {"distribution": "ggx", "alpha": a, "int_ior": eta})
-               for a, eta in ((0.1, 1.5), (0.4, 1.7))]
+    plastic = [
+        Material.create("mitsuba3:roughplastic", {"distribution": "ggx", "alpha": a, "int_ior": eta})
+        for a, eta in ((0.1, 1.5), (0.4, 1.7))
+    ]
     batch = mitsuba3.render(plastic, scene)
     fresh = Mitsuba3Renderer().render(plastic[1:], scene)[0]
     assert relative_rmse(batch[1], fresh, scene.mask()) < 1e-3  # Mitsuba rebuilds its tables on update
@@ -172,15 +186,17 @@ def test_two_stage_fit_ggx_conductor_to_ward_and_back(mitsuba3):
     scene = Scene.probe([0.0], resolution=64)
     source = Material.create("mitsuba3:roughconductor", {"distribution": "ggx", "alpha": 0.25, "eta": ETA, "k": K})
     forward = fit(source, "mitsuba06:ward", scene=scene, source_renderer="mitsuba3", fix={"variant": "ward"})
-    emulated = Material.create("mitsuba06:roughconductor",
-                               {"distribution": "ggx", "alpha": 0.25, "eta": ETA, "k": K, "extEta": 1.0})
+    emulated = Material.create(
+        "mitsuba06:roughconductor", {"distribution": "ggx", "alpha": 0.25, "eta": ETA, "k": K, "extEta": 1.0}
+    )
     reference = fit(emulated, "mitsuba06:ward", scene=scene, fix={"variant": "ward"})
     assert forward.source_renderer == "mitsuba3" and forward.irradiance_scale == pytest.approx(1.0, abs=1e-5)
     assert forward.loss == pytest.approx(reference.loss, rel=1e-2, abs=1e-3)
     assert forward.target.values["alpha"][0] == pytest.approx(reference.target.values["alpha"][0], rel=1e-2)
 
-    back = fit(forward.target, "mitsuba3:roughconductor", scene=scene, target_renderer=mitsuba3,
-               fix={"distribution": "ggx"})
+    back = fit(
+        forward.target, "mitsuba3:roughconductor", scene=scene, target_renderer=mitsuba3, fix={"distribution": "ggx"}
+    )
     assert back.target_renderer == "mitsuba3" and back.strategy == "two-stage"
     assert back.loss < 0.25
     assert back.target.values["alpha"][0] == pytest.approx(0.25, rel=0.15)
@@ -192,11 +208,17 @@ def test_two_stage_fit_ggx_conductor_to_ward_and_back(mitsuba3):
 @needs_mitsuba
 def test_two_stage_fit_beckmann_round_trip_is_close(mitsuba3):
     scene = Scene.probe([0.0], resolution=64)
-    source = Material.create("mitsuba3:roughconductor",
-                             {"distribution": "beckmann", "alpha": 0.25, "eta": 1.0, "k": [3.0, 2.0, 1.2]})
+    source = Material.create(
+        "mitsuba3:roughconductor", {"distribution": "beckmann", "alpha": 0.25, "eta": 1.0, "k": [3.0, 2.0, 1.2]}
+    )
     forward = fit(source, "mitsuba06:ward", scene=scene, source_renderer=mitsuba3, fix={"variant": "ward"})
-    back = fit(forward.target, "mitsuba3:roughconductor", scene=scene, target_renderer="mitsuba3",
-               fix={"distribution": "beckmann"})
+    back = fit(
+        forward.target,
+        "mitsuba3:roughconductor",
+        scene=scene,
+        target_renderer="mitsuba3",
+        fix={"distribution": "beckmann"},
+    )
     img = get_renderer("mitsuba3").render([source, back.target], scene)
     assert relative_rmse(img[1], img[0], scene.mask()) < 1e-3  # measured 2e-5
     np.testing.assert_allclose(back.target.values["k"], [3.0, 2.0, 1.2], rtol=1e-2)
@@ -205,6 +227,7 @@ def test_two_stage_fit_beckmann_round_trip_is_close(mitsuba3):
 @needs_mitsuba
 def test_auto_variant_falls_back_to_scalar(monkeypatch):
     from matremap.renderers.mitsuba3.probe import probe as m3
+
     mi = import_mitsuba()
     monkeypatch.setattr(m3, "llvm_renders", lambda: False)
     assert m3.choose_variant(mi, "auto") == "scalar_rgb"
@@ -224,9 +247,11 @@ def test_llvm_variant_agrees_with_scalar(mitsuba3):
     if not llvm_renders():
         pytest.skip("Mitsuba's llvm_ad_rgb variant does not render here: install Debian libllvm19")
     scene = Scene.probe([0.0, 40.0], resolution=64)
-    mats = [Material.create("mitsuba3:roughconductor", {"distribution": "ggx", "alpha": 0.2, "k": [3.0, 2.0, 1.0]}),
-            Material.create("mitsuba3:roughplastic", {"alpha": 0.2}),
-            Material.create("mitsuba3:principled", {"base_color": [0.8, 0.3, 0.1], "metallic": 0.5})]
+    mats = [
+        Material.create("mitsuba3:roughconductor", {"distribution": "ggx", "alpha": 0.2, "k": [3.0, 2.0, 1.0]}),
+        Material.create("mitsuba3:roughplastic", {"alpha": 0.2}),
+        Material.create("mitsuba3:principled", {"base_color": [0.8, 0.3, 0.1], "metallic": 0.5}),
+    ]
     llvm = Mitsuba3Renderer(variant="auto")
     assert llvm.variant == "llvm_ad_rgb"
     a = llvm.render(mats, scene)
@@ -244,8 +269,9 @@ def test_autodiff_fit_recovers_a_conductor(mitsuba3):
     if not llvm_renders():
         pytest.skip("Mitsuba's llvm_ad_rgb variant does not render here: install Debian libllvm19")
     scene = Scene.probe([0.0, 40.0], resolution=48)
-    source = Material.create("mitsuba3:roughconductor",
-                             {"distribution": "ggx", "alpha": 0.25, "eta": 1.0, "k": [3.0, 2.0, 1.2]})
+    source = Material.create(
+        "mitsuba3:roughconductor", {"distribution": "ggx", "alpha": 0.25, "eta": 1.0, "k": [3.0, 2.0, 1.2]}
+    )
     target = mitsuba3.render([source], scene)[0]
     r = fit_roughconductor_autodiff(target, scene, "ggx")
     assert r.loss < 1e-8 and r.evaluations <= 60

@@ -64,8 +64,9 @@ def test_diffuse_sphere_matches_the_embedded_renderer(env, inner, rotation):
     quadrant means within 0.4 %."""
     albedo = [0.8, 0.5, 0.2]
     ref = render_svbrdf("mitsuba06:diffuse", {"reflectance": albedo}, None, env, rotation, resolution=RES, lights=1024)
-    img = render_svbrdf_mitsuba3("mitsuba3:diffuse", {"reflectance": albedo}, None, env, rotation, resolution=RES,
-                                 spp=256)
+    img = render_svbrdf_mitsuba3(
+        "mitsuba3:diffuse", {"reflectance": albedo}, None, env, rotation, resolution=RES, spp=256
+    )
     assert img.shape == (RES, RES, 3) and img.dtype == np.float32
     assert mean_relative_error(img, ref, inner) < 0.03
     np.testing.assert_allclose(quadrant_means(img, inner), quadrant_means(ref, inner), rtol=0.02)
@@ -79,16 +80,28 @@ def test_textured_conductor_shows_its_texture(env, inner):
     as the map does, and as the embedded renderer's (measured: half means within 0.3 %)."""
     h, w = 32, 64
     alpha = np.full((h, w), 0.05)
-    alpha[:, w // 2:] = 0.4
+    alpha[:, w // 2 :] = 0.4
     k = np.ones((h, w, 3))
-    k[:, w // 2:] = [3.9, 2.45, 2.14]
-    img = render_svbrdf_mitsuba3("mitsuba3:roughconductor", {"alpha": alpha, "k": k, "eta": 1.0},
-                                 {"distribution": "ggx"}, env, resolution=RES, spp=128)
-    ref = render_svbrdf("mitsuba06:roughconductor", {"alpha": alpha, "k": k, "eta": 1.0, "extEta": 1.0},
-                        {"distribution": "ggx"}, env, resolution=RES, lights=1024)
+    k[:, w // 2 :] = [3.9, 2.45, 2.14]
+    img = render_svbrdf_mitsuba3(
+        "mitsuba3:roughconductor",
+        {"alpha": alpha, "k": k, "eta": 1.0},
+        {"distribution": "ggx"},
+        env,
+        resolution=RES,
+        spp=128,
+    )
+    ref = render_svbrdf(
+        "mitsuba06:roughconductor",
+        {"alpha": alpha, "k": k, "eta": 1.0, "extEta": 1.0},
+        {"distribution": "ggx"},
+        env,
+        resolution=RES,
+        lights=1024,
+    )
     left, right = inner.copy(), inner.copy()
-    left[:, RES // 2:] = False
-    right[:, :RES // 2] = False
+    left[:, RES // 2 :] = False
+    right[:, : RES // 2] = False
     ml, mr = img[left].mean(axis=0), img[right].mean(axis=0)
     assert mr[0] > 1.5 * ml[0] and mr[0] > 1.2 * mr[2]  # the right half is brighter and reddish
     assert abs(ml[0] - ml[2]) < 0.05 * ml.mean()  # the left half is grey
@@ -103,12 +116,21 @@ def test_normal_map_follows_the_embedded_convention(env, inner):
     measured 4-6 % mean relative error with the map, 16-19 % without it or with the axis flipped."""
     for tilt in ([0.4, 0.0, 1.0], [0.0, 0.4, 1.0]):
         nm = np.broadcast_to(np.array(tilt) / np.linalg.norm(tilt), (16, 32, 3))
-        ref = render_svbrdf("mitsuba06:diffuse", {"reflectance": 0.7}, None, env, resolution=RES, normal_map=nm,
-                            lights=1024)
-        img = render_svbrdf_mitsuba3("mitsuba3:diffuse", {"reflectance": 0.7}, None, env, resolution=RES,
-                                     normal_map=nm, spp=128)
-        flipped = render_svbrdf_mitsuba3("mitsuba3:diffuse", {"reflectance": 0.7}, None, env, resolution=RES,
-                                         normal_map=nm * [-1.0, -1.0, 1.0], spp=128)
+        ref = render_svbrdf(
+            "mitsuba06:diffuse", {"reflectance": 0.7}, None, env, resolution=RES, normal_map=nm, lights=1024
+        )
+        img = render_svbrdf_mitsuba3(
+            "mitsuba3:diffuse", {"reflectance": 0.7}, None, env, resolution=RES, normal_map=nm, spp=128
+        )
+        flipped = render_svbrdf_mitsuba3(
+            "mitsuba3:diffuse",
+            {"reflectance": 0.7},
+            None,
+            env,
+            resolution=RES,
+            normal_map=nm * [-1.0, -1.0, 1.0],
+            spp=128,
+        )
         err = mean_relative_error(img, ref, inner)
         assert err < 0.1, tilt
         assert mean_relative_error(flipped, ref, inner) > 2.0 * err, tilt
@@ -128,8 +150,7 @@ def test_rotation_seed_and_parts(env, inner):
     np.testing.assert_allclose(d, e, rtol=1e-4, atol=1e-5)  # 480 = 120 + 360
     spec = render_svbrdf_mitsuba3(*args, 0.0, resolution=32, part="specular", spp=16, seed=3)
     np.testing.assert_array_equal(spec, a)  # a conductor is all specular
-    black = render_svbrdf_mitsuba3("mitsuba3:diffuse", {"reflectance": 0.5}, None, env, resolution=32,
-                                   part="specular")
+    black = render_svbrdf_mitsuba3("mitsuba3:diffuse", {"reflectance": 0.5}, None, env, resolution=32, part="specular")
     assert black.shape == (32, 32, 3) and not black.any()
 
 
@@ -143,11 +164,18 @@ def test_errors(env):
     with pytest.raises(MatremapError, match="is an option"):
         render_svbrdf_mitsuba3("mitsuba3:roughconductor", {"distribution": "ggx"}, None, env, resolution=16, spp=1)
     with pytest.raises(MatremapError, match="needs material=custom"):
-        render_svbrdf_mitsuba3("mitsuba3:roughconductor", {"k": np.ones((4, 8, 3))}, {"material": "Au"}, env,
-                               resolution=16, spp=1)
+        render_svbrdf_mitsuba3(
+            "mitsuba3:roughconductor", {"k": np.ones((4, 8, 3))}, {"material": "Au"}, env, resolution=16, spp=1
+        )
     with pytest.raises(MatremapError, match="different R, G, B"):
-        render_svbrdf_mitsuba3("mitsuba3:roughconductor", {"alpha": np.random.default_rng(0).random((4, 8, 3))},
-                               None, env, resolution=16, spp=1)
+        render_svbrdf_mitsuba3(
+            "mitsuba3:roughconductor",
+            {"alpha": np.random.default_rng(0).random((4, 8, 3))},
+            None,
+            env,
+            resolution=16,
+            spp=1,
+        )
     with pytest.raises(MatremapError, match="spp"):
         render_svbrdf_mitsuba3("mitsuba3:diffuse", {}, None, env, resolution=16, spp=0)
 

@@ -10,8 +10,13 @@ from matremap.errors import MatremapError
 def test_every_embedded_dialect_is_registered():
     ids = {m.id for m in list_models()}
     assert {
-        "mitsuba06:ward", "mitsuba06:phong", "mitsuba06:roughconductor", "mitsuba06:roughplastic",
-        "mitsuba06:pbr", "blender27:ward", "cycles:glossy",
+        "mitsuba06:ward",
+        "mitsuba06:phong",
+        "mitsuba06:roughconductor",
+        "mitsuba06:roughplastic",
+        "mitsuba06:pbr",
+        "blender27:ward",
+        "cycles:glossy",
     } <= ids
 
 
@@ -58,7 +63,7 @@ def test_compact_inline_form_with_rgb_triples():
 
 
 def test_malformed_material_documents():
-    with pytest.raises(MatremapError, match="missing \"model\""):
+    with pytest.raises(MatremapError, match='missing "model"'):
         Material.from_dict({"params": {}})
     with pytest.raises(MatremapError, match="unknown key"):
         Material.from_dict({"model": "mitsuba06:ward", "parameters": {}})

@@ -27,8 +27,13 @@ def sweep(path, source, target, grid, fix=None, size=48):
 
 @pytest.fixture(scope="module")
 def ward_db(tmp_path_factory):
-    return sweep(tmp_path_factory.mktemp("db") / "w2as.sqlite", WARD, "mitsuba06:pbr",
-                 "alpha=0.05:0.9:8,specularReflectance=0.02:0.25:6", {"distribution": "as"})
+    return sweep(
+        tmp_path_factory.mktemp("db") / "w2as.sqlite",
+        WARD,
+        "mitsuba06:pbr",
+        "alpha=0.05:0.9:8,specularReflectance=0.02:0.25:6",
+        {"distribution": "as"},
+    )
 
 
 @pytest.fixture(scope="module")
@@ -48,8 +53,9 @@ def test_parametric_transform_reproduces_the_sweep(ward_db, ward_to_as):
     assert not outside.any()
     assert set(out) == {"alpha", "F0", "specularReflectance", "diffuseReflectance"}
     for q in ("roughness", "reflectance"):
-        assert ward_to_as.errors[q]["heldout_rmse"] < 0.01 * np.ptp(ward_to_as.domain[q] if q == "roughness"
-                                                                   else fitted_f0)
+        assert ward_to_as.errors[q]["heldout_rmse"] < 0.01 * np.ptp(
+            ward_to_as.domain[q] if q == "roughness" else fitted_f0
+        )
 
 
 def test_reflectance_follows_k_alpha_times_rho(ward_to_as):
@@ -74,8 +80,9 @@ def test_apply_is_vectorised_over_any_shape(ward_to_as):
 
 
 def test_inputs_outside_the_training_domain_are_flagged(ward_to_as):
-    _, outside = ward_to_as.apply({"alpha": np.array([0.3, 0.99, 0.3]),
-                                   "specularReflectance": np.array([[0.1] * 3, [0.1] * 3, [0.1, 0.1, 0.6]])})
+    _, outside = ward_to_as.apply(
+        {"alpha": np.array([0.3, 0.99, 0.3]), "specularReflectance": np.array([[0.1] * 3, [0.1] * 3, [0.1, 0.1, 0.6]])}
+    )
     assert outside.tolist() == [False, True, True]
 
 
@@ -135,12 +142,22 @@ def test_f0_and_ior_change_of_variable(tmp_path):
 
 
 def test_too_little_or_failed_data_is_refused(tmp_path):
-    tiny = sweep(tmp_path / "tiny.sqlite", WARD, "mitsuba06:pbr", "alpha=0.1:0.3:2,specularReflectance=0.1:0.2:2",
-                 {"distribution": "as"})
+    tiny = sweep(
+        tmp_path / "tiny.sqlite",
+        WARD,
+        "mitsuba06:pbr",
+        "alpha=0.1:0.3:2,specularReflectance=0.1:0.2:2",
+        {"distribution": "as"},
+    )
     with pytest.raises(MatremapError, match="too few"):
         learn_transform(tiny)
-    flat = sweep(tmp_path / "flat.sqlite", WARD.with_params({"alpha": 0.2}), "mitsuba06:pbr",
-                 "diffuseReflectance=0:0:1,variant=ward", {"distribution": "as"})
+    flat = sweep(
+        tmp_path / "flat.sqlite",
+        WARD.with_params({"alpha": 0.2}),
+        "mitsuba06:pbr",
+        "diffuseReflectance=0:0:1,variant=ward",
+        {"distribution": "as"},
+    )
     with pytest.raises(MatremapError, match="too few|nothing to learn"):
         learn_transform(flat)
     failed = tmp_path / "failed.sqlite"
@@ -156,8 +173,18 @@ def test_cli_learn_chain_apply(ward_db, tmp_path, capsys):
     assert main(["learn", str(ward_db), "--reverse", "-o", str(t2)]) == 0
     assert main(["chain", str(t1), str(t2), "-o", str(chained)]) == 0
     capsys.readouterr()
-    assert main(["apply", str(chained), "--source", "mitsuba06:ward,variant=ward,alpha=0.3,specularReflectance=0.1,"
-                 "diffuseReflectance=0", "--json"]) == 0
+    assert (
+        main(
+            [
+                "apply",
+                str(chained),
+                "--source",
+                "mitsuba06:ward,variant=ward,alpha=0.3,specularReflectance=0.1,diffuseReflectance=0",
+                "--json",
+            ]
+        )
+        == 0
+    )
     record = json.loads(capsys.readouterr().out)
     assert record["model"] == "mitsuba06:ward" and record["params"]["alpha"] == pytest.approx(0.3, rel=0.01)
     assert record["outside_domain"] is False
@@ -174,8 +201,10 @@ def test_chunked_apply_equals_one_pass(ward_to_as, monkeypatch):
     import matremap.regress.transform as transform_module
 
     rng = np.random.default_rng(3)
-    values = {"alpha": rng.uniform(0.1, 0.8, (37, 29)).astype(np.float32),
-              "specularReflectance": rng.uniform(0.03, 0.2, (37, 29, 3)).astype(np.float32)}
+    values = {
+        "alpha": rng.uniform(0.1, 0.8, (37, 29)).astype(np.float32),
+        "specularReflectance": rng.uniform(0.03, 0.2, (37, 29, 3)).astype(np.float32),
+    }
     whole, outside = ward_to_as.apply(values)
     monkeypatch.setattr(transform_module, "CHUNK", 100)
     chunked, outside_chunked = ward_to_as.apply(values)

@@ -25,8 +25,16 @@ def plastic(tmp_path):
 def test_remap_sweeps_learns_converts_and_evaluates_then_reuses_the_transform(plastic, tmp_path):
     pytest.importorskip("skimage")
     cache = tmp_path / "cache"
-    first = remap(plastic, "mitsuba06:ward", "mitsuba06:pbr", tmp_path / "out1", fix={"distribution": "as"},
-                  cache=cache, log=lambda m: None, **FAST)
+    first = remap(
+        plastic,
+        "mitsuba06:ward",
+        "mitsuba06:pbr",
+        tmp_path / "out1",
+        fix={"distribution": "as"},
+        cache=cache,
+        log=lambda m: None,
+        **FAST,
+    )
     assert not first.cached and first.transform.is_file() and first.outside == 0
     assert first.report.is_file() and 0.0 <= first.mean_dssim < 0.5
     result = load_map_set(first.maps)
@@ -43,8 +51,16 @@ def test_remap_sweeps_learns_converts_and_evaluates_then_reuses_the_transform(pl
     f0, _ = read_image(result.maps["F0"], result.colorspace.get("F0"))
     np.testing.assert_allclose(f0[..., :3], expected["F0"], atol=2.5 / 255)
 
-    second = remap(plastic, None, "mitsuba06:pbr", tmp_path / "out2", fix={"distribution": "as"},
-                   cache=cache, log=lambda m: None, **FAST)
+    second = remap(
+        plastic,
+        None,
+        "mitsuba06:pbr",
+        tmp_path / "out2",
+        fix={"distribution": "as"},
+        cache=cache,
+        log=lambda m: None,
+        **FAST,
+    )
     assert second.cached and second.transform == first.transform
     assert second.seconds["transform"] < first.seconds["transform"]
     maps1, maps2 = tmp_path / "out1" / "maps", tmp_path / "out2" / "maps"
@@ -57,16 +73,52 @@ def test_cli_remap_convert_evaluate(plastic, tmp_path, capsys):
     pytest.importorskip("skimage")
     cache = tmp_path / "cache"
     out = tmp_path / "remapped"
-    code = main(["remap", str(plastic), "--to", "mitsuba06:pbr", "--fix", "distribution=as", "-o", str(out),
-                 "--cache", str(cache), "--rotations", "0:360:2", "--size", "48", "--lights", "16", "--workers", "1"])
+    code = main(
+        [
+            "remap",
+            str(plastic),
+            "--to",
+            "mitsuba06:pbr",
+            "--fix",
+            "distribution=as",
+            "-o",
+            str(out),
+            "--cache",
+            str(cache),
+            "--rotations",
+            "0:360:2",
+            "--size",
+            "48",
+            "--lights",
+            "16",
+            "--workers",
+            "1",
+        ]
+    )
     assert code == 0
     transform = next(cache.glob("*.json"))
     converted = tmp_path / "converted"
     assert main(["convert", str(plastic), "--transform", str(transform), "-o", str(converted), "--workers", "1"]) == 0
     assert json.loads((converted / "material.json").read_text())["model"] == "mitsuba06:pbr"
     ev = tmp_path / "eval"
-    assert main(["evaluate", str(plastic), str(converted), "-o", str(ev), "--rotations", "0:360:2",
-                 "--size", "48", "--lights", "16"]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                str(plastic),
+                str(converted),
+                "-o",
+                str(ev),
+                "--rotations",
+                "0:360:2",
+                "--size",
+                "48",
+                "--lights",
+                "16",
+            ]
+        )
+        == 0
+    )
     assert (ev / "report.html").is_file() and "mean 1-SSIM" in capsys.readouterr().out
 
 
@@ -76,8 +128,19 @@ def test_remap_refuses_unsafe_outputs(plastic, tmp_path, capsys, where):
     if where == "nonempty":
         out.mkdir()
         (out / "keep.txt").write_text("mine")
-    code = main(["remap", str(plastic), "--to", "mitsuba06:pbr", "-o", str(out), "--no-evaluate",
-                 "--cache", str(tmp_path / "c")])
+    code = main(
+        [
+            "remap",
+            str(plastic),
+            "--to",
+            "mitsuba06:pbr",
+            "-o",
+            str(out),
+            "--no-evaluate",
+            "--cache",
+            str(tmp_path / "c"),
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 2 and ("inside the input folder" in err or "--force" in err), err
     if where == "nonempty":

@@ -26,8 +26,7 @@ def png(path: Path, values: np.ndarray, colorspace: str) -> Path:
     return write_image_like(path, values, ImageInfo("png", "uint8", values.shape[-1], 0, 0, colorspace), force=True)
 
 
-def gltf(folder: Path, textured: bool, metallic: float = 1.0, roughness: float = 0.5,
-         base=(0.9, 0.6, 0.3)) -> Path:
+def gltf(folder: Path, textured: bool, metallic: float = 1.0, roughness: float = 0.5, base=(0.9, 0.6, 0.3)) -> Path:
     """A one-material glTF (no mesh needed: matremap reads materials)."""
     folder.mkdir(parents=True, exist_ok=True)
     pbr: dict = {"baseColorFactor": [*base, 1.0], "metallicFactor": metallic, "roughnessFactor": roughness}
@@ -39,8 +38,12 @@ def gltf(folder: Path, textured: bool, metallic: float = 1.0, roughness: float =
         png(folder / "mr.png", mr, "linear")
         doc["images"] = [{"uri": "base.png"}, {"uri": "mr.png"}]
         doc["textures"] = [{"source": 0}, {"source": 1}]
-        pbr.update(baseColorFactor=[1, 1, 1, 1], roughnessFactor=1.0,
-                   baseColorTexture={"index": 0}, metallicRoughnessTexture={"index": 1})
+        pbr.update(
+            baseColorFactor=[1, 1, 1, 1],
+            roughnessFactor=1.0,
+            baseColorTexture={"index": 0},
+            metallicRoughnessTexture={"index": 1},
+        )
     path = folder / "brass.gltf"
     path.write_text(json.dumps(doc))
     return path
@@ -62,8 +65,10 @@ def test_a_uniform_gltf_remapped_onto_its_own_model_comes_back(tmp_path):
 
 def test_a_uniform_metal_onto_a_model_without_a_file_format_writes_its_parameters(tmp_path, capsys):
     src = gltf(tmp_path / "in", textured=False, roughness=0.4)
-    assert main(["remap", str(src), "--to", "mitsuba06:pbr", "--fix", "distribution=ggx", "-o",
-                 str(tmp_path / "out")]) == 0
+    assert (
+        main(["remap", str(src), "--to", "mitsuba06:pbr", "--fix", "distribution=ggx", "-o", str(tmp_path / "out")])
+        == 0
+    )
     err = capsys.readouterr().err
     assert "no material file format for mitsuba06:pbr" in err
     m = json.loads((tmp_path / "out" / "material.json").read_text())
@@ -79,8 +84,16 @@ def test_a_textured_gltf_becomes_a_mitsuba_scene_through_the_library(tmp_path):
 
     src = gltf(tmp_path / "in", textured=True)
     logs: list[str] = []
-    res = remap_file(src, "mitsuba3:roughconductor", tmp_path / "out", fix={"distribution": "ggx"},
-                     log=logs.append, rotations="0:360:2", resolution=96, lights=64)
+    res = remap_file(
+        src,
+        "mitsuba3:roughconductor",
+        tmp_path / "out",
+        fix={"distribution": "ggx"},
+        log=logs.append,
+        rotations="0:360:2",
+        resolution=96,
+        lights=64,
+    )
     assert any(m.startswith("library: gltf:metal-rough (metallic=1) -> mitsuba3:roughconductor") for m in logs)
     assert res.file.suffix == ".xml" and res.textured and res.remap.outside == 0
     assert (tmp_path / "out" / "maps" / "material.json").is_file() and (tmp_path / "out" / "transform.json").is_file()
@@ -157,8 +170,16 @@ def test_a_textured_gltf_metal_is_swept_when_asked(tmp_path):
     """--sweep: the grid runs over the maps' roughness and base colour (the metal's F0), once each."""
     src = gltf(tmp_path / "in", textured=True)
     logs: list[str] = []
-    res = remap_file(src, "mitsuba06:pbr", tmp_path / "out", fix={"distribution": "ggx"}, library=False,
-                     evaluate=False, cache=tmp_path / "cache", log=logs.append)
+    res = remap_file(
+        src,
+        "mitsuba06:pbr",
+        tmp_path / "out",
+        fix={"distribution": "ggx"},
+        library=False,
+        evaluate=False,
+        cache=tmp_path / "cache",
+        log=logs.append,
+    )
     sweep = next(m for m in logs if m.startswith("sweep:") and "fits over" in m)
     assert "roughness=" in sweep and sweep.count("baseColor=") == 1
     assert res.remap.outside == 0 and res.file is None
@@ -171,8 +192,9 @@ def _bpy_available() -> bool:
     return bpy_available()
 
 
-@pytest.mark.skipif(not _bpy_available(), reason="no bpy venv: python3.11 -m venv .venv-bpy && "
-                    ".venv-bpy/bin/pip install bpy==5.0.1")
+@pytest.mark.skipif(
+    not _bpy_available(), reason="no bpy venv: python3.11 -m venv .venv-bpy && .venv-bpy/bin/pip install bpy==5.0.1"
+)
 def test_a_gltf_dielectric_becomes_a_blend_file_fitted_with_real_cycles(tmp_path):
     from matremap.renderers.cycles.probe import CyclesRenderer
 
@@ -197,8 +219,10 @@ def test_a_glb_written_by_matremap_is_remapped_and_written_back_as_glb(tmp_path)
     from matremap.formats import write_asset
 
     (tmp_path / "in").mkdir()
-    glb = write_asset(tmp_path / "in" / "copper.glb", Material.create(
-        "gltf:metal-rough", {"baseColor": [0.95, 0.64, 0.54], "metallic": 1.0, "roughness": 0.35}))
+    glb = write_asset(
+        tmp_path / "in" / "copper.glb",
+        Material.create("gltf:metal-rough", {"baseColor": [0.95, 0.64, 0.54], "metallic": 1.0, "roughness": 0.35}),
+    )
     assert glb.read_bytes()[:4] == b"glTF"
     res = remap_file(glb, "gltf:metal-rough", tmp_path / "out", log=lambda m: None)
     assert res.file.name == "copper.glb" and res.file.read_bytes()[:4] == b"glTF"
@@ -214,7 +238,8 @@ def test_the_shipped_gltf_example_reads_and_routes_through_the_library(tmp_path)
     assert asset.model == "gltf:metal-rough" and set(asset.textures) == {"baseColor", "roughness", "metallic"}
     assert asset.normal is not None
     logs: list[str] = []
-    res = remap_file(src, "mitsuba06:pbr", tmp_path / "out", fix={"distribution": "ggx"}, evaluate=False,
-                     log=logs.append)
+    res = remap_file(
+        src, "mitsuba06:pbr", tmp_path / "out", fix={"distribution": "ggx"}, evaluate=False, log=logs.append
+    )
     assert any(m.startswith("library: gltf:metal-rough (metallic=1) -> mitsuba06:pbr") for m in logs)
     assert res.remap.outside == 0 and (tmp_path / "out" / "maps" / "material.json").is_file()

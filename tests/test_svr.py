@@ -56,7 +56,9 @@ def test_mappings_are_svrs_with_chosen_hyperparameters(svr_t):
         assert 0 < len(m["support_vectors"]) == len(m["dual_coef"]) <= m["n_train"] <= svr.MAX_POINTS
         assert len(m["heldout_rmse_grid"]) == len(svr.C_GRID) * len(svr.GAMMA_GRID) * len(svr.EPSILON_GRID)
     assert svr_t.mappings["reflectance"]["per_channel"] and svr_t.mappings["reflectance"]["inputs"] == [
-        "roughness", "reflectance"]
+        "roughness",
+        "reflectance",
+    ]
     assert svr_t.mappings["diffuse"]["kind"] == "constant"  # the sweep holds the Ward diffuse at 0
 
 
@@ -117,7 +119,7 @@ def test_evaluate_matches_sklearn_on_random_models_and_chunks(d, monkeypatch):
     names = ["roughness", "reflectance", "diffuse"][:d]
     m = svr.mapping_from_model(model, names, False, np.zeros(d), np.ones(d), 0.0, 1.0)
     q = rng.normal(size=(1000, d))
-    x = {n: q[:, i] if n == "roughness" else np.repeat(q[:, i:i + 1], 3, axis=1) for i, n in enumerate(names)}
+    x = {n: q[:, i] if n == "roughness" else np.repeat(q[:, i : i + 1], 3, axis=1) for i, n in enumerate(names)}
     monkeypatch.setattr(svr, "CHUNK_ENTRIES", 5000)  # many chunks, with a ragged last one
     np.testing.assert_allclose(svr.evaluate(m, x), model.predict(q), rtol=0, atol=1e-9)
 

@@ -135,8 +135,12 @@ def test_continuation_warm_starts_and_saves_renders(tmp_path):
 
 def test_round_trip_fits_back_onto_the_source_model(tmp_path):
     grid = parse_grid("alpha=0.1:0.3:2", SOURCE.spec)
-    run_sweep(config(round_trip=True, source=SOURCE.with_params({"specularReflectance": 0.1})), grid,
-              str(tmp_path / "rt.sqlite"), InlineExecutor())
+    run_sweep(
+        config(round_trip=True, source=SOURCE.with_params({"specularReflectance": 0.1})),
+        grid,
+        str(tmp_path / "rt.sqlite"),
+        InlineExecutor(),
+    )
     for r in SweepStore.open(tmp_path / "rt.sqlite").rows():
         assert r["back"]["alpha"] == pytest.approx(r["source"]["alpha"], rel=5e-3)
         assert r["back"]["variant"] == "ward"
@@ -146,6 +150,7 @@ def test_a_failing_point_is_recorded_and_the_sweep_goes_on(tmp_path):
     # Blender's specular_color cannot exceed 1: fitting a bright Ward lobe hits the bound but does not
     # fail; a failure comes from a renderer error, simulated with a model the target renderer lacks
     from matremap.sweep.run import run as sweep_mod
+
     grid = parse_grid("alpha=0.1:0.2:2", SOURCE.spec)
     real_fit = sweep_mod.fit
     calls = []
@@ -167,8 +172,18 @@ def test_a_failing_point_is_recorded_and_the_sweep_goes_on(tmp_path):
 
 
 # -- the command line, interruption, crashes -----------------------------------------------------
-SWEEP_ARGS = ["sweep", "--source", "mitsuba06:ward,variant=ward,diffuseReflectance=0", "--target", "mitsuba06:pbr",
-              "--fix", "distribution=as", "--size", "48", "--no-progress"]
+SWEEP_ARGS = [
+    "sweep",
+    "--source",
+    "mitsuba06:ward,variant=ward,diffuseReflectance=0",
+    "--target",
+    "mitsuba06:pbr",
+    "--fix",
+    "distribution=as",
+    "--size",
+    "48",
+    "--no-progress",
+]
 
 
 def test_cli_sweep_and_resume(tmp_path, capsys):
@@ -203,9 +218,22 @@ def test_cli_bad_sweep_input_leaves_the_database_untouched(tmp_path, capsys, ext
 
 def _start_cli_sweep(db, grid, workers=1):
     return subprocess.Popen(
-        [sys.executable, "-m", "matremap.cli", *SWEEP_ARGS[:-1], "--grid", grid, "--db", str(db),
-         "--workers", str(workers), "--no-progress"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        [
+            sys.executable,
+            "-m",
+            "matremap.cli",
+            *SWEEP_ARGS[:-1],
+            "--grid",
+            grid,
+            "--db",
+            str(db),
+            "--workers",
+            str(workers),
+            "--no-progress",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
     )
 
 

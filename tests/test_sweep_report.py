@@ -34,8 +34,11 @@ def ward_db(tmp_path_factory):
     """Ward -> the authors' AS model, 6 x 5, with round trip: smooth and well behaved."""
     return make_sweep(
         tmp_path_factory.mktemp("ward") / "ward2as.sqlite",
-        ("mitsuba06:ward", {"variant": "ward", "diffuseReflectance": 0}), "mitsuba06:pbr", {"distribution": "as"},
-        "alpha=0.05:0.6:6,specularReflectance=0.02:0.2:5", round_trip=True,
+        ("mitsuba06:ward", {"variant": "ward", "diffuseReflectance": 0}),
+        "mitsuba06:pbr",
+        {"distribution": "as"},
+        "alpha=0.05:0.6:6,specularReflectance=0.02:0.2:5",
+        round_trip=True,
     )
 
 
@@ -44,8 +47,11 @@ def conductor_db(tmp_path_factory):
     """Rough conductor (eta 1, so F0 = k^2 / (4 + k^2)) -> Ward, round trip: large k needs Ward rho_s > 1."""
     return make_sweep(
         tmp_path_factory.mktemp("conductor") / "as2ward.sqlite",
-        ("mitsuba06:roughconductor", {"distribution": "as", "eta": 1}), "mitsuba06:ward", {"variant": "ward"},
-        "alpha=0.05:0.4:5,k=0.3:4:6", round_trip=True,
+        ("mitsuba06:roughconductor", {"distribution": "as", "eta": 1}),
+        "mitsuba06:ward",
+        {"variant": "ward"},
+        "alpha=0.05:0.4:5,k=0.3:4:6",
+        round_trip=True,
     )
 
 
@@ -71,9 +77,15 @@ def test_smooth_sweep_has_no_flags(ward_db):
     assert a.counts == {} and a.flagged_keys == []
 
 
-@pytest.mark.parametrize(("index", "param", "factor"), [
-    ((2, 2), "alpha", 1.15), ((3, 1), "F0", 0.8), ((0, 2), "alpha", 0.85), ((5, 4), "F0", 1.3),
-])
+@pytest.mark.parametrize(
+    ("index", "param", "factor"),
+    [
+        ((2, 2), "alpha", 1.15),
+        ((3, 1), "F0", 0.8),
+        ((0, 2), "alpha", 0.85),
+        ((5, 4), "F0", 1.3),
+    ],
+)
 def test_a_corrupted_value_is_flagged_as_a_jump_and_only_there(ward_db, index, param, factor):
     rows, grid, config = load(ward_db)
     key = key_at(grid, index)
@@ -220,8 +232,13 @@ def test_report_does_not_overwrite_without_force(ward_db, tmp_path):
 
 
 def test_report_on_a_one_dimensional_grid(tmp_path):
-    db = make_sweep(tmp_path / "line.sqlite", ("mitsuba06:ward", {"variant": "ward", "diffuseReflectance": 0}),
-                    "mitsuba06:pbr", {"distribution": "as"}, "alpha=0.05:0.5:5")
+    db = make_sweep(
+        tmp_path / "line.sqlite",
+        ("mitsuba06:ward", {"variant": "ward", "diffuseReflectance": 0}),
+        "mitsuba06:pbr",
+        {"distribution": "as"},
+        "alpha=0.05:0.5:5",
+    )
     text = write_report(db, tmp_path / "out")
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["loss.png", "roughness.png"]
     assert "specular.png skipped" in text
@@ -244,10 +261,25 @@ def test_not_a_database_gives_a_matremap_error(tmp_path):
 # Export
 
 REQUIRED = [
-    "source.variant", "source.alpha", "source.specularReflectance.r", "source.specularReflectance.g",
-    "source.specularReflectance.b", "target.distribution", "target.alpha", "target.F0.r", "target.F0.g",
-    "target.F0.b", "back.alpha", "back.specularReflectance.r", "back_loss", "loss", "renders", "seconds",
-    "status", "flagged", "flags",
+    "source.variant",
+    "source.alpha",
+    "source.specularReflectance.r",
+    "source.specularReflectance.g",
+    "source.specularReflectance.b",
+    "target.distribution",
+    "target.alpha",
+    "target.F0.r",
+    "target.F0.g",
+    "target.F0.b",
+    "back.alpha",
+    "back.specularReflectance.r",
+    "back_loss",
+    "loss",
+    "renders",
+    "seconds",
+    "status",
+    "flagged",
+    "flags",
 ]
 
 
@@ -274,8 +306,19 @@ def test_export_parquet(conductor_db, tmp_path):
     t = pq.read_table(path)
     assert t.num_rows == 30
     names = set(t.column_names)
-    assert {"source.k.r", "target.specularReflectance.b", "target.variant", "back.k.g", "back_loss", "loss",
-            "renders", "seconds", "status", "flagged", "flags"} <= names
+    assert {
+        "source.k.r",
+        "target.specularReflectance.b",
+        "target.variant",
+        "back.k.g",
+        "back_loss",
+        "loss",
+        "renders",
+        "seconds",
+        "status",
+        "flagged",
+        "flags",
+    } <= names
     flagged = t.column("flagged").to_pylist()
     flags = t.column("flags").to_pylist()
     assert any(flagged) and all(bool(f) == g for f, g in zip(flags, flagged, strict=True))

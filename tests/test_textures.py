@@ -35,9 +35,14 @@ def raw_write(path, data, fmt):
 
 
 FORMATS = [  # out format, extension, pixel type, max error in linear values
-    ("png8", "png", "uint8", 0.0045), ("png16", "png", "uint16", 2e-5), ("jpg", "jpg", "uint8", 0.06),
-    ("tif8", "tif", "uint8", 0.0045), ("tif16", "tif", "uint16", 2e-5), ("tif32", "tif", "float", 0.0),
-    ("exr", "exr", "float", 0.0), ("exr16", "exr", "half", 5e-4),
+    ("png8", "png", "uint8", 0.0045),
+    ("png16", "png", "uint16", 2e-5),
+    ("jpg", "jpg", "uint8", 0.06),
+    ("tif8", "tif", "uint8", 0.0045),
+    ("tif16", "tif", "uint16", 2e-5),
+    ("tif32", "tif", "float", 0.0),
+    ("exr", "exr", "float", 0.0),
+    ("exr16", "exr", "half", 5e-4),
 ]
 
 
@@ -89,8 +94,9 @@ def test_bands_read_in_order_match_the_whole_image(tmp_path):
     np.testing.assert_array_equal(region, whole[10:20])
 
 
-def make_set(folder, size=(12, 16), names=("ward_diffuse.png", "ward_specular.png", "ward_roughness.png",
-                                            "ward_normal.png")):
+def make_set(
+    folder, size=(12, 16), names=("ward_diffuse.png", "ward_specular.png", "ward_roughness.png", "ward_normal.png")
+):
     folder.mkdir(parents=True, exist_ok=True)
     h, w = size
     for n in names:
@@ -101,11 +107,17 @@ def make_set(folder, size=(12, 16), names=("ward_diffuse.png", "ward_specular.pn
     return folder
 
 
-MANIFEST = {"model": "mitsuba06:ward",
-            "maps": {"specularReflectance": "ward_specular.png", "alpha": "ward_roughness.png",
-                     "diffuseReflectance": "ward_diffuse.png"},
-            "normal": "ward_normal.png", "params": {"variant": "ward"},
-            "colorspace": {"ward_specular.png": "srgb"}}
+MANIFEST = {
+    "model": "mitsuba06:ward",
+    "maps": {
+        "specularReflectance": "ward_specular.png",
+        "alpha": "ward_roughness.png",
+        "diffuseReflectance": "ward_diffuse.png",
+    },
+    "normal": "ward_normal.png",
+    "params": {"variant": "ward"},
+    "colorspace": {"ward_specular.png": "srgb"},
+}
 
 
 def test_manifest_json_and_toml(tmp_path):
@@ -120,7 +132,8 @@ def test_manifest_json_and_toml(tmp_path):
     (root / "material.toml").write_text(
         'model = "mitsuba06:ward"\nnormal = "ward_normal.png"\n[maps]\nalpha = "ward_roughness.png"\n'
         'specularReflectance = "ward_specular.png"\n[params]\nvariant = "ward"\ndiffuseReflectance = 0.1\n'
-        '[colorspace]\n"ward_specular.png" = "linear"\n')
+        '[colorspace]\n"ward_specular.png" = "linear"\n'
+    )
     ms = load_map_set(root / "material.toml")
     assert set(ms.maps) == {"alpha", "specularReflectance"} and ms.constants["diffuseReflectance"] == 0.1
     assert ms.colorspace["specularReflectance"] == "linear"
@@ -134,8 +147,10 @@ def test_file_name_conventions(tmp_path):
     root = make_set(tmp_path / "set")
     ms = load_map_set(root, model="mitsuba06:ward")
     assert {k: v.name for k, v in ms.maps.items()} == {
-        "diffuseReflectance": "ward_diffuse.png", "specularReflectance": "ward_specular.png",
-        "alpha": "ward_roughness.png"}
+        "diffuseReflectance": "ward_diffuse.png",
+        "specularReflectance": "ward_specular.png",
+        "alpha": "ward_roughness.png",
+    }
     assert ms.normal.name == "ward_normal.png"
     assert ms.colorspace["alpha"] == "linear" and ms.colorspace["specularReflectance"] == "srgb"
     pbr = load_map_set(root, model="mitsuba06:pbr")  # *_specular binds the model's reflectance parameter
@@ -164,8 +179,9 @@ def test_bad_map_sets(tmp_path):
         return root
 
     root = fresh("sizes")
-    write_image_like(root / "ward_roughness.png", smooth(12, 15, 1), ImageInfo("png", "uint8", 1, 0, 0, "linear"),
-                     force=True)
+    write_image_like(
+        root / "ward_roughness.png", smooth(12, 15, 1), ImageInfo("png", "uint8", 1, 0, 0, "linear"), force=True
+    )
     with pytest.raises(MatremapError, match="differ in size.*resample"):
         load_map_set(root)
     root = fresh("missing")
@@ -173,13 +189,15 @@ def test_bad_map_sets(tmp_path):
     with pytest.raises(MatremapError, match="ward_specular.png not found"):
         load_map_set(root)
     root = fresh("channels")
-    write_image_like(root / "ward_roughness.png", smooth(12, 16, 2), ImageInfo("png", "uint8", 2, 0, 0, "linear"),
-                     force=True)
+    write_image_like(
+        root / "ward_roughness.png", smooth(12, 16, 2), ImageInfo("png", "uint8", 2, 0, 0, "linear"), force=True
+    )
     with pytest.raises(MatremapError, match="2 channels but alpha is a scalar"):
         load_map_set(root)
     root = fresh("normal")
-    write_image_like(root / "ward_normal.png", smooth(12, 16, 1), ImageInfo("png", "uint8", 1, 0, 0, "linear"),
-                     force=True)
+    write_image_like(
+        root / "ward_normal.png", smooth(12, 16, 1), ImageInfo("png", "uint8", 1, 0, 0, "linear"), force=True
+    )
     with pytest.raises(MatremapError, match="normal map.*needs 3"):
         load_map_set(root)
     root = fresh("corrupt")
@@ -202,8 +220,11 @@ def test_bad_map_sets(tmp_path):
 
 def test_truncated_and_non_finite_files_fail_when_read(tmp_path):
     a = smooth(64, 64)
-    p = write_image_like(tmp_path / "t.png", a + 0.01 * np.random.default_rng(0).normal(size=a.shape),
-                         ImageInfo("png", "uint8", 3, 0, 0, "srgb"))
+    p = write_image_like(
+        tmp_path / "t.png",
+        a + 0.01 * np.random.default_rng(0).normal(size=a.shape),
+        ImageInfo("png", "uint8", 3, 0, 0, "srgb"),
+    )
     data = p.read_bytes()
     (tmp_path / "cut.png").write_bytes(data[: len(data) // 2])
     with pytest.raises(MatremapError, match="cut.png.*corrupt or truncated"), MapReader(tmp_path / "cut.png") as r:

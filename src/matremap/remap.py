@@ -136,8 +136,9 @@ def _no_diffuse(model: str, values: Mapping[str, Any]) -> bool:
 LIBRARY_MAX_OUTSIDE = 0.01
 
 
-def library_transform(map_set: MapSet, params: Mapping[str, Any], target: str, fix: Mapping[str, Any],
-                      log: Callable[[str], None]) -> Transform | None:
+def library_transform(
+    map_set: MapSet, params: Mapping[str, Any], target: str, fix: Mapping[str, Any], log: Callable[[str], None]
+) -> Transform | None:
     """A transform from the shipped library (direct or chained) that covers these maps, or None."""
     from matremap.regress.library import find_route
 
@@ -148,8 +149,9 @@ def library_transform(map_set: MapSet, params: Mapping[str, Any], target: str, f
         log(f"library: no route from {spec.id} to {target} with {_fmt_fix(fix)}; sweeping")
         return None
     transform = found.transform
-    sample = {k: (np.asarray(v)[::4, ::4] if np.ndim(v) >= 2 else v) for k, v in params.items()
-              if k in spec.param_names}
+    sample = {
+        k: (np.asarray(v)[::4, ::4] if np.ndim(v) >= 2 else v) for k, v in params.items() if k in spec.param_names
+    }
     _, outside = transform.apply(sample)
     share = float(np.mean(outside)) if np.size(outside) else 0.0
     if share > LIBRARY_MAX_OUTSIDE:
@@ -164,8 +166,15 @@ def _fmt_fix(fix: Mapping[str, Any]) -> str:
 
 
 def cached_transform(
-    map_set: MapSet, params: Mapping[str, Any], target: str, fix: Mapping[str, Any], strategy: str,
-    cache: Path, workers: int | None, log: Callable[[str], None], scene: Scene | None = None,
+    map_set: MapSet,
+    params: Mapping[str, Any],
+    target: str,
+    fix: Mapping[str, Any],
+    strategy: str,
+    cache: Path,
+    workers: int | None,
+    log: Callable[[str], None],
+    scene: Scene | None = None,
     target_renderer: str = "embedded",
 ) -> tuple[Transform, Path, bool]:
     """The transform for these maps and models: from the cache, or swept and learned now."""
@@ -179,9 +188,15 @@ def cached_transform(
     grid_text = sweep_grid(map_set, params)
     from matremap.renderers.base import renderer_for
 
-    config = SweepConfig(source=base, target=get_model(target).id, fix=dict(fix), strategy=strategy,
-                         scene=scene or Scene(), source_renderer=renderer_for(spec.id),
-                         target_renderer=target_renderer)
+    config = SweepConfig(
+        source=base,
+        target=get_model(target).id,
+        fix=dict(fix),
+        strategy=strategy,
+        scene=scene or Scene(),
+        source_renderer=renderer_for(spec.id),
+        target_renderer=target_renderer,
+    )
     key_doc = {"config": config.to_dict(), "grid": grid_text, "version": __version__}
     key = hashlib.sha256(json.dumps(key_doc, sort_keys=True).encode()).hexdigest()[:16]
     cache.mkdir(parents=True, exist_ok=True)
@@ -194,24 +209,50 @@ def cached_transform(
     log(f"sweep: {spec.id} -> {config.target}, {len(grid)} fits over {grid_text}")
     from tqdm import tqdm
 
-    with make_executor(workers) as (executor, desc), \
-            tqdm(total=len(grid), unit="fit", desc="sweep", disable=None, leave=False) as bar:
-        summary = run_sweep(config, grid, str(db), executor, progress=bar.update, executor_name=desc,
-                            on_start=bar.update, in_flight=2 * getattr(executor, "slots", 1))
+    with (
+        make_executor(workers) as (executor, desc),
+        tqdm(total=len(grid), unit="fit", desc="sweep", disable=None, leave=False) as bar,
+    ):
+        summary = run_sweep(
+            config,
+            grid,
+            str(db),
+            executor,
+            progress=bar.update,
+            executor_name=desc,
+            on_start=bar.update,
+            in_flight=2 * getattr(executor, "slots", 1),
+        )
     log(f"sweep: {describe(summary)}")
     transform = learn_transform(db)
     transform.save(path, force=True)
-    log(f"learn: {transform.describe()}, held-out RMSE "
-        + ", ".join(f"{k} {v['heldout_rmse']:.3g}" for k, v in transform.errors.items() if "heldout_rmse" in v))
+    log(
+        f"learn: {transform.describe()}, held-out RMSE "
+        + ", ".join(f"{k} {v['heldout_rmse']:.3g}" for k, v in transform.errors.items() if "heldout_rmse" in v)
+    )
     return transform, path, False
 
 
 def remap(
-    maps: str | Path, source_model: str | None, target_model: str, out: str | Path, *,
-    fix: Mapping[str, Any] | None = None, strategy: str = "two-stage", envmap: str = "builtin",
-    rotations: str = "0:360:6", resolution: int = 160, lights: int = 128, workers: int | None = None,
-    cache: Path | None = None, evaluate: bool = True, force: bool = False, scene: Scene | None = None,
-    target_renderer: str | None = None, library: bool = True, log: Callable[[str], None] = print,
+    maps: str | Path,
+    source_model: str | None,
+    target_model: str,
+    out: str | Path,
+    *,
+    fix: Mapping[str, Any] | None = None,
+    strategy: str = "two-stage",
+    envmap: str = "builtin",
+    rotations: str = "0:360:6",
+    resolution: int = 160,
+    lights: int = 128,
+    workers: int | None = None,
+    cache: Path | None = None,
+    evaluate: bool = True,
+    force: bool = False,
+    scene: Scene | None = None,
+    target_renderer: str | None = None,
+    library: bool = True,
+    log: Callable[[str], None] = print,
 ) -> RemapResult:
     """Remap the map set ``maps`` onto ``target_model``; write ``OUT/maps`` and ``OUT/report``.
     ``scene`` is the probe scene of the sweep (default: the paper's, with a headlight);
@@ -248,13 +289,16 @@ def remap(
     if library and scene is None and target_renderer == renderer_for(target) and strategy == "two-stage":
         transform = library_transform(map_set, params, target, fix, log)
     elif library:
-        log("library: not used (its transforms are two-stage fits on the default probe, each model drawn by its "
-            "default renderer)")
+        log(
+            "library: not used (its transforms are two-stage fits on the default probe, each model drawn by its "
+            "default renderer)"
+        )
     if transform is not None:
         tpath, cached = None, True
     else:
-        transform, tpath, cached = cached_transform(map_set, params, target, fix, strategy,
-                                                    cache or default_cache(), workers, log, scene, target_renderer)
+        transform, tpath, cached = cached_transform(
+            map_set, params, target, fix, strategy, cache or default_cache(), workers, log, scene, target_renderer
+        )
     seconds["transform"] = time.perf_counter() - t
 
     t = time.perf_counter()
@@ -264,8 +308,10 @@ def remap(
         report = convert(map_set, [transform], out / "maps", workers=workers or 2, force=force)
     transform.save(out / "transform.json", force=True)  # what was applied, with its provenance
     seconds["convert"] = time.perf_counter() - t
-    log(f"convert: {report.texels} texels into {out / 'maps'}"
-        + (f"; {report.outside} outside the training domain (see outside_domain.png)" if report.outside else ""))
+    log(
+        f"convert: {report.texels} texels into {out / 'maps'}"
+        + (f"; {report.outside} outside the training domain (see outside_domain.png)" if report.outside else "")
+    )
 
     mean = None
     html = None
@@ -276,20 +322,28 @@ def remap(
         result = run_evaluation(
             (map_set.model, params, map_set.options, normal),
             (result_set.model, target_params, result_set.options, target_normal),
-            env, angles, out / "report", resolution=resolution, lights=lights, force=force,
+            env,
+            angles,
+            out / "report",
+            resolution=resolution,
+            lights=lights,
+            force=force,
             title=f"{map_set.model} -> {result_set.model}: {Path(maps).name}",
         )
         seconds["evaluate"] = time.perf_counter() - t
         mean = float(result.mean_full)
         html = out / "report" / "report.html"
-        log(f"evaluate: mean 1-SSIM {result.mean_full:.4f} (specular only {result.mean_specular:.4f}) over "
-            f"{len(angles)} rotations; {html}")
+        log(
+            f"evaluate: mean 1-SSIM {result.mean_full:.4f} (specular only {result.mean_specular:.4f}) over "
+            f"{len(angles)} rotations; {html}"
+        )
     seconds["total"] = time.perf_counter() - t0
     return RemapResult(tpath, cached, out / "maps", html, int(report.outside), int(report.texels), mean, seconds)
 
 
 # ---------------------------------------------------------------------------------------------
 # material files
+
 
 @dataclass
 class FileRemapResult:
@@ -313,9 +367,16 @@ def default_suffix(target: str, source_format: str) -> str | None:
 
 
 def remap_file(
-    path: str | Path, target_model: str, out: str | Path, *, material: str | int | None = None,
-    fix: Mapping[str, Any] | None = None, write: str | None = None, force: bool = False,
-    log: Callable[[str], None] = print, **options: Any,
+    path: str | Path,
+    target_model: str,
+    out: str | Path,
+    *,
+    material: str | int | None = None,
+    fix: Mapping[str, Any] | None = None,
+    write: str | None = None,
+    force: bool = False,
+    log: Callable[[str], None] = print,
+    **options: Any,
 ) -> FileRemapResult:
     """Remap one material of a glTF/.glb, MaterialX or Mitsuba XML file onto ``target_model`` and
     write it in the target's own format into ``out`` (``write`` names the file; default: the
@@ -358,9 +419,14 @@ def remap_file(
     else:
         source = asset.material()
         full_fix = complete_fix(source.model, qty.material_values(source), target, fix or {})
-        r = fit(source, target, source_renderer=renderer_for(source.model),
-                target_renderer=options.get("target_renderer") or renderer_for(target), fix=full_fix,
-                strategy=options.get("strategy", "two-stage"))
+        r = fit(
+            source,
+            target,
+            source_renderer=renderer_for(source.model),
+            target_renderer=options.get("target_renderer") or renderer_for(target),
+            fix=full_fix,
+            strategy=options.get("strategy", "two-stage"),
+        )
         for w in r.warnings:
             log(f"warning: {w}")
         log(f"fit: {target} {json.dumps(r.target.to_dict()['params'])}; relative L2 error {r.loss:.4f}")
@@ -376,8 +442,7 @@ def remap_file(
         result.material, result.loss = r.target, r.loss
         produced = r.target
     if name is not None:
-        source_for_writer = asset if format_for(name) in ("gltf", "mtlx") and asset.format == format_for(name) \
-            else None
+        source_for_writer = asset if format_for(name) in ("gltf", "mtlx") and asset.format == format_for(name) else None
         result.file = write_asset(out / name, produced, source=source_for_writer, force=force)
         log(f"wrote {result.file}")
     return result

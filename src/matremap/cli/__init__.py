@@ -136,8 +136,9 @@ def cmd_renderers(args: argparse.Namespace) -> int:
             rows.append({"name": name, "available": False, "reason": str(e), "models": []})
             continue
         models = [m.id for m in list_models() if r.supports(m.id)]
-        rows.append({"name": name, "available": True, "details": repr(r) if name != "embedded" else "numpy",
-                     "models": models})
+        rows.append(
+            {"name": name, "available": True, "details": repr(r) if name != "embedded" else "numpy", "models": models}
+        )
     if args.json:
         print(json.dumps(rows, indent=2))
         return 0
@@ -216,14 +217,21 @@ def cmd_fit(args: argparse.Namespace) -> int:
 
 
 def _print_fit(r: dict[str, Any]) -> None:
-    print(f"{r['source']['model']} -> {r['model']}  ({r['strategy']}, {r['renderers']['source']} -> "
-          f"{r['renderers']['target']})")
+    print(
+        f"{r['source']['model']} -> {r['model']}  ({r['strategy']}, {r['renderers']['source']} -> "
+        f"{r['renderers']['target']})"
+    )
     for k, v in r["params"].items():
-        v = f"{v:.6g}" if isinstance(v, float) else (
-            "[" + ", ".join(f"{x:.6g}" for x in v) + "]" if isinstance(v, list) else v)
+        v = (
+            f"{v:.6g}"
+            if isinstance(v, float)
+            else ("[" + ", ".join(f"{x:.6g}" for x in v) + "]" if isinstance(v, list) else v)
+        )
         print(f"  {k} = {v}")
-    print(f"loss (relative RMSE) {r['loss']:.4g}   renders {r['renders']}   {r['seconds'] * 1000:.1f} ms"
-          + (f"   irradiance scale {r['irradiance_scale']:.4g}" if r["irradiance_scale"] != 1.0 else ""))
+    print(
+        f"loss (relative RMSE) {r['loss']:.4g}   renders {r['renders']}   {r['seconds'] * 1000:.1f} ms"
+        + (f"   irradiance scale {r['irradiance_scale']:.4g}" if r["irradiance_scale"] != 1.0 else "")
+    )
     for s in r["stages"]:
         print(f"  stage {s['name']}: loss {s['loss']:.4g}, {s['renders']} renders, {s['message']}")
 
@@ -235,10 +243,16 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
     source = load_material(args.source)
     config = SweepConfig(
-        source=source, target=get_model(args.target).id, fix=parse_assignments(args.fix, "--fix"),
-        free=tuple(args.free), strategy=args.strategy, scene=make_scene(args),
-        source_renderer=args.source_renderer, target_renderer=args.target_renderer,
-        continuation=args.continuation, round_trip=args.round_trip,
+        source=source,
+        target=get_model(args.target).id,
+        fix=parse_assignments(args.fix, "--fix"),
+        free=tuple(args.free),
+        strategy=args.strategy,
+        scene=make_scene(args),
+        source_renderer=args.source_renderer,
+        target_renderer=args.target_renderer,
+        continuation=args.continuation,
+        round_trip=args.round_trip,
     )
     grid = parse_grid(args.grid, source.spec)
     check_grid_for(config, grid)
@@ -251,12 +265,24 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         slots = getattr(executor, "slots", 1)
         from tqdm import tqdm
 
-        print(f"sweep {source.model} -> {config.target}: {len(grid)} points "
-              f"({' x '.join(f'{a.label} {len(a.values)}' for a in grid.axes)}) on {desc}", file=sys.stderr)
-        with tqdm(total=len(grid), unit="pt", disable=args.no_progress or None, dynamic_ncols=True,
-                  smoothing=0.1) as bar:
-            summary = run_sweep(config, grid, str(db), executor, progress=bar.update, executor_name=desc,
-                                on_start=lambda skipped: bar.update(skipped), in_flight=2 * slots)
+        print(
+            f"sweep {source.model} -> {config.target}: {len(grid)} points "
+            f"({' x '.join(f'{a.label} {len(a.values)}' for a in grid.axes)}) on {desc}",
+            file=sys.stderr,
+        )
+        with tqdm(
+            total=len(grid), unit="pt", disable=args.no_progress or None, dynamic_ncols=True, smoothing=0.1
+        ) as bar:
+            summary = run_sweep(
+                config,
+                grid,
+                str(db),
+                executor,
+                progress=bar.update,
+                executor_name=desc,
+                on_start=lambda skipped: bar.update(skipped),
+                in_flight=2 * slots,
+            )
     print(describe(summary), file=sys.stderr)
     return 130 if summary.interrupted else 0
 
@@ -286,11 +312,15 @@ def cmd_learn(args: argparse.Namespace) -> int:
     from matremap.regress.transform import learn_transform
 
     out = check_output(args.output, args.force, (".json",))
-    t = learn_transform(args.db, method=args.method, reverse=args.reverse, holdout=args.holdout,
-                        exclude_flagged=not args.keep_flagged)
+    t = learn_transform(
+        args.db, method=args.method, reverse=args.reverse, holdout=args.holdout, exclude_flagged=not args.keep_flagged
+    )
     t.save(out, force=args.force)
-    print(f"wrote {out}: {t.describe()}, {t.provenance['used']} points "
-          f"({t.provenance['excluded_flagged']} flagged points left out)", file=sys.stderr)
+    print(
+        f"wrote {out}: {t.describe()}, {t.provenance['used']} points "
+        f"({t.provenance['excluded_flagged']} flagged points left out)",
+        file=sys.stderr,
+    )
     for name, e in t.errors.items():
         lo, hi = t.domain.get(name, (0.0, 0.0))
         held = e.get("heldout_rmse")
@@ -351,13 +381,14 @@ def cmd_convert(args: argparse.Namespace) -> int:
         spec = map_set.spec
         dp = diffuse_param(spec)
         params, _ = load_arrays(map_set, only={n for n, _, _ in spec.specialisations} | ({dp.name} if dp else set()))
-        fix = complete_fix(map_set.model, {**map_set.constants, **params}, target,
-                           parse_assignments(args.fix, "--fix"))
+        fix = complete_fix(map_set.model, {**map_set.constants, **params}, target, parse_assignments(args.fix, "--fix"))
         held = {n: params[n] for n, _, _ in map_set.spec.specialisations if n in params}
         found = find_route(map_set.model, map_set.options, target, fix, source_values=held)
         if found is None:
-            raise MatremapError(f"no route from {map_set.model} to {target} in the transform library "
-                                f"(`matremap transforms` lists it); run `matremap remap` to sweep one")
+            raise MatremapError(
+                f"no route from {map_set.model} to {target} in the transform library "
+                f"(`matremap transforms` lists it); run `matremap remap` to sweep one"
+            )
         print(f"matremap: route {found.describe()}", file=sys.stderr)
         transforms = [found.transform]
     else:
@@ -368,14 +399,18 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
     with warnings.catch_warnings():  # reported below, in one line
         warnings.simplefilter("ignore", UserWarning)
-        report = convert(map_set, transforms, args.output, workers=args.workers, force=args.force,
-                         out_format=args.format)
+        report = convert(
+            map_set, transforms, args.output, workers=args.workers, force=args.force, out_format=args.format
+        )
     for note in report.notes:
         print(f"matremap: note: {note}", file=sys.stderr)
     if report.outside:
-        print(f"matremap: warning: {report.outside} of {report.texels} texels "
-              f"({100 * report.outside_fraction:.2f}%) lie outside the transform's training domain; "
-              f"see {Path(args.output) / 'outside_domain.png'}", file=sys.stderr)
+        print(
+            f"matremap: warning: {report.outside} of {report.texels} texels "
+            f"({100 * report.outside_fraction:.2f}%) lie outside the transform's training domain; "
+            f"see {Path(args.output) / 'outside_domain.png'}",
+            file=sys.stderr,
+        )
     print(f"wrote {args.output}: {report.model}, {report.texels} texels in {report.seconds:.2f} s", file=sys.stderr)
     return 0
 
@@ -386,8 +421,9 @@ def cmd_transforms(args: argparse.Namespace) -> int:
     if args.route:
         source, target = args.route
         fix = parse_assignments(args.fix, "--fix")
-        found = find_route(get_model(source).id, parse_assignments(args.source_option, "--source-option"),
-                           get_model(target).id, fix)
+        found = find_route(
+            get_model(source).id, parse_assignments(args.source_option, "--source-option"), get_model(target).id, fix
+        )
         if found is None:
             raise MatremapError(f"no route from {source} to {target} in the library; `matremap remap` sweeps instead")
         print(found.describe())
@@ -398,13 +434,19 @@ def cmd_transforms(args: argparse.Namespace) -> int:
         return 0
     print(f"{'name':<30} {'source -> target':<78} {'held-out RMSE (roughness, F0, diffuse)':<36}")
     for r in rows:
-        errs = ", ".join("-" if r["heldout_rmse"].get(q) is None else f"{r['heldout_rmse'][q]:.2g}"
-                         for q in ("roughness", "reflectance", "diffuse") if q in r["heldout_rmse"])
+        errs = ", ".join(
+            "-" if r["heldout_rmse"].get(q) is None else f"{r['heldout_rmse'][q]:.2g}"
+            for q in ("roughness", "reflectance", "diffuse")
+            if q in r["heldout_rmse"]
+        )
         print(f"{r['name']:<30} {r['source'] + ' -> ' + r['target']:<78} {errs}")
         dom = ", ".join(f"{k} {lo:.3g}..{hi:.3g}" for k, (lo, hi) in r["domain"].items())
         rend = r["renderers"]
-        how = "embedded" if set(rend.values()) <= {"embedded"} else f"source {rend.get('source')}, target " \
-            f"{rend.get('target')}"
+        how = (
+            "embedded"
+            if set(rend.values()) <= {"embedded"}
+            else f"source {rend.get('source')}, target {rend.get('target')}"
+        )
         print(f"{'':<30} trained on {dom} ({how})")
     return 0
 
@@ -417,16 +459,28 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
     rotations = parse_rotations(args.rotations)
     env = resolve(args.envmap)
-    sets = [load_map_set(p, m) for p, m in ((args.source_maps, args.source_model),
-                                            (args.target_maps, args.target_model))]
+    sets = [
+        load_map_set(p, m) for p, m in ((args.source_maps, args.source_model), (args.target_maps, args.target_model))
+    ]
     materials = []
     for ms in sets:
         params, normal = load_arrays(ms)
         materials.append((ms.model, params, ms.options, normal))
-    result = evaluate(materials[0], materials[1], env, rotations, args.output, geometry=args.geometry,
-                      resolution=args.size, lights=args.lights, force=args.force)
-    print(f"mean 1-SSIM {result.mean_full:.4f} (specular only {result.mean_specular:.4f}) over "
-          f"{len(rotations)} rotations; report {Path(args.output) / 'report.html'}")
+    result = evaluate(
+        materials[0],
+        materials[1],
+        env,
+        rotations,
+        args.output,
+        geometry=args.geometry,
+        resolution=args.size,
+        lights=args.lights,
+        force=args.force,
+    )
+    print(
+        f"mean 1-SSIM {result.mean_full:.4f} (specular only {result.mean_specular:.4f}) over "
+        f"{len(rotations)} rotations; report {Path(args.output) / 'report.html'}"
+    )
     return 0
 
 
@@ -438,29 +492,58 @@ def cmd_remap(args: argparse.Namespace) -> int:
         if args.source:
             raise MatremapError(f"{args.maps} names its own model; drop --from")
         fres = remap_file(
-            args.maps, args.target, args.output, material=args.material, fix=parse_assignments(args.fix, "--fix"),
-            write=args.write, force=args.force, log=lambda m: print(m, file=sys.stderr),
-            strategy=args.strategy, envmap=args.envmap, rotations=args.rotations, resolution=args.size,
-            lights=args.lights, workers=args.workers, cache=Path(args.cache) if args.cache else None,
-            evaluate=not args.no_evaluate, target_renderer=args.target_renderer, library=not args.sweep,
+            args.maps,
+            args.target,
+            args.output,
+            material=args.material,
+            fix=parse_assignments(args.fix, "--fix"),
+            write=args.write,
+            force=args.force,
+            log=lambda m: print(m, file=sys.stderr),
+            strategy=args.strategy,
+            envmap=args.envmap,
+            rotations=args.rotations,
+            resolution=args.size,
+            lights=args.lights,
+            workers=args.workers,
+            cache=Path(args.cache) if args.cache else None,
+            evaluate=not args.no_evaluate,
+            target_renderer=args.target_renderer,
+            library=not args.sweep,
         )
-        print(f"done: {fres.source_model} -> {fres.target_model}" + (f", wrote {fres.file}" if fres.file else "")
-              + (f", mean 1-SSIM {fres.remap.mean_dssim:.4f}" if fres.remap and fres.remap.mean_dssim is not None
-                 else ""))
+        print(
+            f"done: {fres.source_model} -> {fres.target_model}"
+            + (f", wrote {fres.file}" if fres.file else "")
+            + (f", mean 1-SSIM {fres.remap.mean_dssim:.4f}" if fres.remap and fres.remap.mean_dssim is not None else "")
+        )
         return 0
     if args.material is not None or args.write is not None:
         raise MatremapError("--material and --write apply to material files (.gltf, .glb, .mtlx, .xml)")
     result = remap(
-        args.maps, args.source, args.target, args.output, fix=parse_assignments(args.fix, "--fix"),
-        strategy=args.strategy, envmap=args.envmap, rotations=args.rotations, resolution=args.size,
-        lights=args.lights, workers=args.workers, cache=Path(args.cache) if args.cache else None,
-        evaluate=not args.no_evaluate, force=args.force, log=lambda m: print(m, file=sys.stderr),
+        args.maps,
+        args.source,
+        args.target,
+        args.output,
+        fix=parse_assignments(args.fix, "--fix"),
+        strategy=args.strategy,
+        envmap=args.envmap,
+        rotations=args.rotations,
+        resolution=args.size,
+        lights=args.lights,
+        workers=args.workers,
+        cache=Path(args.cache) if args.cache else None,
+        evaluate=not args.no_evaluate,
+        force=args.force,
+        log=lambda m: print(m, file=sys.stderr),
         scene=Scene.probe(lights=parse_lights(args.light)) if args.light else None,
-        target_renderer=args.target_renderer, library=not args.sweep,
+        target_renderer=args.target_renderer,
+        library=not args.sweep,
     )
-    print(f"done in {result.seconds['total']:.1f} s: maps {result.maps}"
-          + (f", report {result.report}" if result.report else "")
-          + (f", mean 1-SSIM {result.mean_dssim:.4f}" if result.mean_dssim is not None else ""))
+    print(
+        f"done in {result.seconds['total']:.1f} s: maps {result.maps}"
+        + (f", report {result.report}" if result.report else "")
+        + (f", mean 1-SSIM {result.mean_dssim:.4f}" if result.mean_dssim is not None else "")
+    )
     return 0
 
 
@@ -490,8 +573,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=cmd_renderers)
 
-    p = sub.add_parser("render", help="render a material on the probe sphere", epilog=EXAMPLES["render"],
-                       formatter_class=fmt)
+    p = sub.add_parser(
+        "render", help="render a material on the probe sphere", epilog=EXAMPLES["render"], formatter_class=fmt
+    )
     p.add_argument("material", help="JSON file, inline JSON, or MODEL,name=value,...")
     p.add_argument("-o", "--output", required=True, help="image file: .exr, .png (sRGB), .npy, .tif, .hdr")
     p.add_argument("--part", choices=("full", "diffuse", "specular"), default="full")
@@ -500,33 +584,57 @@ def build_parser() -> argparse.ArgumentParser:
     _scene_args(p)
     p.set_defaults(func=cmd_render)
 
-    p = sub.add_parser("fit", help="remap a uniform material onto a target model", epilog=EXAMPLES["fit"],
-                       formatter_class=fmt)
-    p.add_argument("--source", required=True, metavar="MATERIAL",
-                   help="JSON file, inline JSON, or MODEL,name=value,...")
+    p = sub.add_parser(
+        "fit", help="remap a uniform material onto a target model", epilog=EXAMPLES["fit"], formatter_class=fmt
+    )
+    p.add_argument(
+        "--source", required=True, metavar="MATERIAL", help="JSON file, inline JSON, or MODEL,name=value,..."
+    )
     p.add_argument("--target", required=True, metavar="MODEL", help="target model id (see `matremap models`)")
-    p.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
-                   help="set a target option or hold a parameter (repeatable), e.g. distribution=as")
-    p.add_argument("--free", action="append", default=[], metavar="NAME",
-                   help="also fit a parameter that is held by default (repeatable)")
+    p.add_argument(
+        "--fix",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="set a target option or hold a parameter (repeatable), e.g. distribution=as",
+    )
+    p.add_argument(
+        "--free",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="also fit a parameter that is held by default (repeatable)",
+    )
     p.add_argument("--strategy", choices=("simple", "two-stage", "three-stage"), default="two-stage")
     p.add_argument("--source-renderer", default="embedded", metavar="NAME")
     p.add_argument("--target-renderer", default="embedded", metavar="NAME")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("-o", "--output", metavar="FILE.json", help="also save the result as JSON")
-    p.add_argument("--compare", metavar="FILE.png",
-                   help="write source | target | difference renders side by side (.png sRGB, .exr linear)")
+    p.add_argument(
+        "--compare",
+        metavar="FILE.png",
+        help="write source | target | difference renders side by side (.png sRGB, .exr linear)",
+    )
     p.add_argument("--force", action="store_true", help="overwrite existing output files")
     _scene_args(p)
     p.set_defaults(func=cmd_fit)
 
-    p = sub.add_parser("sweep", help="fit a grid of source materials into a remapping database",
-                       epilog=EXAMPLES["sweep"], formatter_class=fmt)
-    p.add_argument("--source", required=True, metavar="MATERIAL",
-                   help="the base source material; grid values replace its parameters")
+    p = sub.add_parser(
+        "sweep",
+        help="fit a grid of source materials into a remapping database",
+        epilog=EXAMPLES["sweep"],
+        formatter_class=fmt,
+    )
+    p.add_argument(
+        "--source",
+        required=True,
+        metavar="MATERIAL",
+        help="the base source material; grid values replace its parameters",
+    )
     p.add_argument("--target", required=True, metavar="MODEL", help="target model id")
-    p.add_argument("--grid", required=True,
-                   help="NAME=LO:HI:COUNT[:log] or NAME=V1;V2;..., comma-separated, or a .toml file")
+    p.add_argument(
+        "--grid", required=True, help="NAME=LO:HI:COUNT[:log] or NAME=V1;V2;..., comma-separated, or a .toml file"
+    )
     p.add_argument("--db", required=True, metavar="FILE.sqlite", help="database (created, or resumed)")
     p.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE", help="as for fit")
     p.add_argument("--free", action="append", default=[], metavar="NAME", help="as for fit")
@@ -536,29 +644,38 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: all cores)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="run on a Dask cluster (tcp://host:port)")
     p.add_argument("--dask-local", type=int, metavar="N", help="start a local Dask cluster of N workers")
-    p.add_argument("--continuation", action="store_true",
-                   help="start each fit from its finished neighbour along the last grid axis")
+    p.add_argument(
+        "--continuation",
+        action="store_true",
+        help="start each fit from its finished neighbour along the last grid axis",
+    )
     p.add_argument("--round-trip", action="store_true", help="also fit each result back onto the source model")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     _scene_args(p)
     p.set_defaults(func=cmd_sweep)
 
-    p = sub.add_parser("sweep-report", help="summarise a sweep database and plot it",
-                       epilog=EXAMPLES["sweep-report"], formatter_class=fmt)
+    p = sub.add_parser(
+        "sweep-report",
+        help="summarise a sweep database and plot it",
+        epilog=EXAMPLES["sweep-report"],
+        formatter_class=fmt,
+    )
     p.add_argument("db", metavar="DB")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the PNG plots")
     p.add_argument("--force", action="store_true", help="overwrite existing plots in DIR")
     p.set_defaults(func=cmd_sweep_report)
 
-    p = sub.add_parser("export", help="export a sweep database as a table", epilog=EXAMPLES["export"],
-                       formatter_class=fmt)
+    p = sub.add_parser(
+        "export", help="export a sweep database as a table", epilog=EXAMPLES["export"], formatter_class=fmt
+    )
     p.add_argument("db", metavar="DB")
     p.add_argument("-o", "--output", required=True, metavar="FILE", help=".csv or .parquet")
     p.add_argument("--force", action="store_true", help="overwrite an existing file")
     p.set_defaults(func=cmd_export)
 
-    p = sub.add_parser("learn", help="learn a transform from a sweep database", epilog=EXAMPLES["learn"],
-                       formatter_class=fmt)
+    p = sub.add_parser(
+        "learn", help="learn a transform from a sweep database", epilog=EXAMPLES["learn"], formatter_class=fmt
+    )
     p.add_argument("db", metavar="DB")
     p.add_argument("--method", choices=("parametric", "svr"), default="parametric")
     p.add_argument("-o", "--output", required=True, metavar="T.json")
@@ -574,23 +691,42 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="overwrite an existing file")
     p.set_defaults(func=cmd_chain)
 
-    p = sub.add_parser("apply", help="apply a transform to a uniform material", epilog=EXAMPLES["apply"],
-                       formatter_class=fmt)
+    p = sub.add_parser(
+        "apply", help="apply a transform to a uniform material", epilog=EXAMPLES["apply"], formatter_class=fmt
+    )
     p.add_argument("transform", metavar="T.json")
     p.add_argument("--source", required=True, metavar="MATERIAL")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_apply)
 
-    p = sub.add_parser("convert", help="apply transforms to an SVBRDF map set", epilog=EXAMPLES["convert"],
-                       formatter_class=fmt)
-    p.add_argument("maps", metavar="MAPS", help="folder of maps (material.json, or *_diffuse/_specular/"
-                   "_roughness/_normal file names)")
-    p.add_argument("--transform", action="append", default=[], metavar="T.json",
-                   help="transform to apply; several are chained in order")
-    p.add_argument("--to", dest="target", metavar="MODEL",
-                   help="instead of --transform: find a route to MODEL through the transform library")
-    p.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
-                   help="with --to: target options/held values the route must have")
+    p = sub.add_parser(
+        "convert", help="apply transforms to an SVBRDF map set", epilog=EXAMPLES["convert"], formatter_class=fmt
+    )
+    p.add_argument(
+        "maps",
+        metavar="MAPS",
+        help="folder of maps (material.json, or *_diffuse/_specular/_roughness/_normal file names)",
+    )
+    p.add_argument(
+        "--transform",
+        action="append",
+        default=[],
+        metavar="T.json",
+        help="transform to apply; several are chained in order",
+    )
+    p.add_argument(
+        "--to",
+        dest="target",
+        metavar="MODEL",
+        help="instead of --transform: find a route to MODEL through the transform library",
+    )
+    p.add_argument(
+        "--fix",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="with --to: target options/held values the route must have",
+    )
     p.add_argument("-o", "--output", required=True, metavar="OUT", help="output folder")
     p.add_argument("--model", "--from", dest="model", help="source model, when the folder has no manifest")
     p.add_argument("--format", help="output format instead of the inputs' (e.g. exr, png16)")
@@ -598,17 +734,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
     p.set_defaults(func=cmd_convert)
 
-    p = sub.add_parser("transforms", help="list the shipped transform library, or find a route through it",
-                       epilog=EXAMPLES["transforms"], formatter_class=fmt)
+    p = sub.add_parser(
+        "transforms",
+        help="list the shipped transform library, or find a route through it",
+        epilog=EXAMPLES["transforms"],
+        formatter_class=fmt,
+    )
     p.add_argument("--route", nargs=2, metavar=("FROM", "TO"), help="show the route between two models")
     p.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE", help="with --route: target values")
-    p.add_argument("--source-option", action="append", default=[], metavar="NAME=VALUE",
-                   help="with --route: source options")
+    p.add_argument(
+        "--source-option", action="append", default=[], metavar="NAME=VALUE", help="with --route: source options"
+    )
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_transforms)
 
-    p = sub.add_parser("evaluate", help="compare two map sets under an environment map (SSIM, HTML report)",
-                       epilog=EXAMPLES["evaluate"], formatter_class=fmt)
+    p = sub.add_parser(
+        "evaluate",
+        help="compare two map sets under an environment map (SSIM, HTML report)",
+        epilog=EXAMPLES["evaluate"],
+        formatter_class=fmt,
+    )
     p.add_argument("source_maps", metavar="SOURCE_MAPS")
     p.add_argument("target_maps", metavar="TARGET_MAPS")
     p.add_argument("--source-model", help="source model, when its folder has no manifest")
@@ -622,13 +767,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="overwrite an existing report")
     p.set_defaults(func=cmd_evaluate)
 
-    p = sub.add_parser("remap", help="the main job: sweep, learn, convert and evaluate a map set",
-                       epilog=EXAMPLES["remap"], formatter_class=fmt)
+    p = sub.add_parser(
+        "remap",
+        help="the main job: sweep, learn, convert and evaluate a map set",
+        epilog=EXAMPLES["remap"],
+        formatter_class=fmt,
+    )
     p.add_argument("maps", metavar="MAPS|FILE", help="a map set folder, or a .gltf/.glb/.mtlx/Mitsuba .xml file")
     p.add_argument("--from", dest="source", metavar="MODEL", help="source model (default: the manifest's)")
     p.add_argument("--material", metavar="NAME|INDEX", help="which material of the file (default: the first)")
-    p.add_argument("--write", metavar="NAME.EXT", help="the file to write into OUT (default: the input's name with "
-                   "the target format's suffix: .gltf/.glb/.mtlx for gltf:*, .xml for mitsuba3:*, .blend for cycles:*)")
+    p.add_argument(
+        "--write",
+        metavar="NAME.EXT",
+        help="the file to write into OUT (default: the input's name with "
+        "the target format's suffix: .gltf/.glb/.mtlx for gltf:*, .xml for mitsuba3:*, .blend for cycles:*)",
+    )
     p.add_argument("--sweep", action="store_true", help="always sweep, even when the transform library has a route")
     p.add_argument("--to", dest="target", required=True, metavar="MODEL", help="target model")
     p.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE", help="target options/held values")
@@ -640,11 +793,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lights", type=int, default=128)
     p.add_argument("--workers", type=int, metavar="N")
     p.add_argument("--cache", metavar="DIR", help="transform cache (default ~/.cache/matremap/transforms)")
-    p.add_argument("--light", nargs="+", metavar="DEG",
-                   help="light angles of the sweep's probe scene (default 0: headlight)")
-    p.add_argument("--target-renderer", metavar="NAME",
-                   help="renderer of the target model in the sweep (embedded, mitsuba3, cycles; default: embedded "
-                   "where it emulates the model, else the model's own renderer)")
+    p.add_argument(
+        "--light", nargs="+", metavar="DEG", help="light angles of the sweep's probe scene (default 0: headlight)"
+    )
+    p.add_argument(
+        "--target-renderer",
+        metavar="NAME",
+        help="renderer of the target model in the sweep (embedded, mitsuba3, cycles; default: embedded "
+        "where it emulates the model, else the model's own renderer)",
+    )
     p.add_argument("--no-evaluate", action="store_true", help="skip the evaluation renders")
     p.add_argument("--force", action="store_true", help="write into an existing output folder")
     p.set_defaults(func=cmd_remap)
@@ -668,5 +825,3 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:  # the reader went away (`matremap transforms | head`): stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
-
-

@@ -376,9 +376,7 @@ def fit(
         raise MatremapError(f"nothing to fit: every parameter of {spec.id} is fixed")
 
     counter = _Counter(scene)
-    scale = irradiance_scale(
-        source, src_r, spec.id, tgt_r, scene, render=lambda r, ms: counter.images_of(r, ms)
-    )
+    scale = irradiance_scale(source, src_r, spec.id, tgt_r, scene, render=lambda r, ms: counter.images_of(r, ms))
 
     which = [FULL] if strategy == "simple" else [DIFFUSE, SPECULAR, FULL]
     src_parts = [part(source, w) for w in which]
@@ -402,7 +400,15 @@ def fit(
     if strategy in ("simple", "three-stage"):
         name = "joint" if strategy == "three-stage" else FULL
         current = _run_stage(
-            FULL, free_params, current, goals[FULL], 1.0, tgt_r, counter, stages, name=name,
+            FULL,
+            free_params,
+            current,
+            goals[FULL],
+            1.0,
+            tgt_r,
+            counter,
+            stages,
+            name=name,
             coarse=coarse and strategy == "simple",
         )
 
@@ -467,8 +473,15 @@ def _run_stage(
     def report(result: Material, loss: float, evaluations: int, message: str) -> None:
         stages.append(
             StageReport(
-                name, names, _values_dict(current, names), _values_dict(result, names), loss,
-                counter.images - renders0, evaluations, time.perf_counter() - t0, message,
+                name,
+                names,
+                _values_dict(current, names),
+                _values_dict(result, names),
+                loss,
+                counter.images - renders0,
+                evaluations,
+                time.perf_counter() - t0,
+                message,
             )
         )
 

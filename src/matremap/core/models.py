@@ -266,9 +266,7 @@ def _validate_option(spec: ModelSpec, opt: OptionSpec, raw: Any) -> str:
     if isinstance(raw, bool):
         raw = "true" if raw else "false"
     if not isinstance(raw, str) or raw not in opt.choices:
-        raise MatremapError(
-            f"{spec.id}: option {opt.name}={raw!r} is not one of {', '.join(opt.choices)}"
-        )
+        raise MatremapError(f"{spec.id}: option {opt.name}={raw!r} is not one of {', '.join(opt.choices)}")
     return raw
 
 

@@ -59,16 +59,25 @@ def format_for(out: str | os.PathLike) -> str:
     for fmt, (_, suffixes) in WRITERS.items():
         if suffix in suffixes:
             return fmt
-    raise MatremapError(f"{out}: matremap writes {', '.join(s for _, ss in WRITERS.values() for s in ss)} files; "
-                        f"give the output one of these suffixes")
+    raise MatremapError(
+        f"{out}: matremap writes {', '.join(s for _, ss in WRITERS.values() for s in ss)} files; "
+        f"give the output one of these suffixes"
+    )
 
 
-def write_asset(out: str | os.PathLike, result: Any, source: MaterialAsset | None = None,
-                force: bool = False) -> Path:
+def write_asset(out: str | os.PathLike, result: Any, source: MaterialAsset | None = None, force: bool = False) -> Path:
     """Write ``result`` (a Material or a MapSet) in the format ``out``'s suffix names."""
     module, _ = WRITERS[format_for(out)]
     return _module(module).write(Path(out), result, source=source, force=force)
 
 
-__all__ = ["READERS", "WRITERS", "MaterialAsset", "TextureRef", "format_for", "is_material_file", "read_asset",
-           "write_asset"]
+__all__ = [
+    "READERS",
+    "WRITERS",
+    "MaterialAsset",
+    "TextureRef",
+    "format_for",
+    "is_material_file",
+    "read_asset",
+    "write_asset",
+]

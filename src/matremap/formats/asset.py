@@ -98,8 +98,9 @@ class MaterialAsset:
         for name, ref in self.textures.items():
             p = spec.param(name)
             if not ref.path.is_file():
-                raise MatremapError(f"{self.path}: texture {ref.path} for {name} not found; put it beside the file "
-                                    f"or fix its uri")
+                raise MatremapError(
+                    f"{self.path}: texture {ref.path} for {name} not found; put it beside the file or fix its uri"
+                )
             header = image_info(ref.path, ref.colorspace, colour=False)
             whole = ref.channels is None or tuple(ref.channels) == tuple(range(header.channels))
             if ref.plain_factor and whole and (p.channels == 3 or header.channels == 1):
@@ -111,8 +112,9 @@ class MaterialAsset:
             image = np.atleast_3d(image)
             if ref.channels is not None:
                 if max(ref.channels) >= image.shape[-1]:
-                    raise MatremapError(f"{ref.path}: has {image.shape[-1]} channel(s); {name} needs channel "
-                                        f"{max(ref.channels)}")
+                    raise MatremapError(
+                        f"{ref.path}: has {image.shape[-1]} channel(s); {name} needs channel {max(ref.channels)}"
+                    )
                 image = image[..., list(ref.channels)]
             elif p.channels == 1:
                 image = image[..., :1]
@@ -123,22 +125,30 @@ class MaterialAsset:
             scale = np.asarray(ref.scale, dtype=np.float32).reshape(-1)
             if scale.size not in (1, image.shape[-1]):  # an RGB factor on picked channels: their factors
                 if ref.channels is None or max(ref.channels) >= scale.size:
-                    raise MatremapError(f"{self.path}: {name}: a factor of {scale.size} values does not fit a "
-                                        f"texture of {image.shape[-1]} channel(s)")
+                    raise MatremapError(
+                        f"{self.path}: {name}: a factor of {scale.size} values does not fit a "
+                        f"texture of {image.shape[-1]} channel(s)"
+                    )
                 scale = scale[list(ref.channels)]
             image = (image * scale).astype(np.float32)
             lo, hi = p.bounds
             image = np.clip(image, lo, hi)
             fname = f"{name.replace(' ', '_')}.exr"
-            write_image_like(out / fname, image, info.like(format="exr", pixel_type="float", channels=image.shape[-1],
-                                                          colorspace="linear"), force=True)
+            write_image_like(
+                out / fname,
+                image,
+                info.like(format="exr", pixel_type="float", channels=image.shape[-1], colorspace="linear"),
+                force=True,
+            )
             maps[name] = fname
             colorspace[name] = "linear"
             sizes[name] = image.shape[:2]
         if len(set(sizes.values())) > 1:
             detail = ", ".join(f"{k} {w}x{h}" for k, (h, w) in sizes.items())
-            raise MatremapError(f"{self.path}: material {self.name!r} has textures of different sizes ({detail}); "
-                                f"resize them to one size")
+            raise MatremapError(
+                f"{self.path}: material {self.name!r} has textures of different sizes ({detail}); "
+                f"resize them to one size"
+            )
         manifest: dict[str, Any] = {
             "model": spec.id,
             "maps": maps,

@@ -82,8 +82,10 @@ def _request(out_tmp: str, result: Any, source: Any, out: Path) -> dict[str, Any
             p = Path(path)
             if not p.is_file():
                 raise MatremapError(f"cannot write {out}: map {p} for {name} not found")
-            textures[name] = {"path": str(p.resolve()),
-                              "colorspace": _colorspace(spec, name, result.colorspace.get(name, "linear"))}
+            textures[name] = {
+                "path": str(p.resolve()),
+                "colorspace": _colorspace(spec, name, result.colorspace.get(name, "linear")),
+            }
         normal = None
         if result.normal is not None:
             normal = {"path": str(Path(result.normal).resolve()), "colorspace": "Non-Color"}
@@ -91,8 +93,10 @@ def _request(out_tmp: str, result: Any, source: Any, out: Path) -> dict[str, Any
     else:
         raise MatremapError(f"a .blend is written from a Material or a MapSet, not {type(result).__name__}")
     if spec.id not in MODELS:
-        raise MatremapError(f"cannot write {spec.id} to a .blend: the Blender nodes are known for "
-                            f"{', '.join(MODELS)}; convert to one of them first")
+        raise MatremapError(
+            f"cannot write {spec.id} to a .blend: the Blender nodes are known for "
+            f"{', '.join(MODELS)}; convert to one of them first"
+        )
     if isinstance(result, Material):
         options = {o.name: result.options.get(o.name, o.default) for o in spec.options}
     name = getattr(source, "name", None) or default_name
@@ -107,13 +111,16 @@ def _request(out_tmp: str, result: Any, source: Any, out: Path) -> dict[str, Any
         "textures": textures,
         "normal": normal,
         "geometry": GEOMETRY,
-        "scene": {"resolution": scene.resolution, "fov": float(scene.effective_fov),
-                  "camera_distance": float(scene.camera_distance), "sphere_radius": float(scene.sphere_radius)},
+        "scene": {
+            "resolution": scene.resolution,
+            "fov": float(scene.effective_fov),
+            "camera_distance": float(scene.camera_distance),
+            "sphere_radius": float(scene.sphere_radius),
+        },
     }
 
 
-def write(out: str | os.PathLike, result: Any, source: Any = None, force: bool = False,
-          renderer: Any = None) -> Path:
+def write(out: str | os.PathLike, result: Any, source: Any = None, force: bool = False, renderer: Any = None) -> Path:
     """Write ``result`` (a ``cycles:*`` Material or MapSet) as a .blend at ``out``; returns its path.
     ``renderer``: the :class:`~matremap.renderers.cycles.probe.CyclesRenderer` whose worker writes (default:
     the one shared with :mod:`matremap.renderers.cycles.environment`)."""

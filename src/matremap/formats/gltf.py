@@ -83,23 +83,26 @@ def _parse(path: Path, data: bytes) -> tuple[dict[str, Any], bytes | None]:
         if data[:4] != b"glTF":
             if data.lstrip()[:1] == b"{":
                 raise MatremapError(f"{path} holds JSON text, not a binary glTF; rename it to .gltf")
-            raise MatremapError(f"{path} is not a binary glTF: it does not start with the 'glTF' magic; "
-                                f"re-export it as .glb (or give the file its real extension)")
+            raise MatremapError(
+                f"{path} is not a binary glTF: it does not start with the 'glTF' magic; "
+                f"re-export it as .glb (or give the file its real extension)"
+            )
         if len(data) < 20:
             raise MatremapError(f"{path} is truncated ({len(data)} bytes, shorter than a GLB header); re-export it")
         _, version, length = struct.unpack_from("<III", data, 0)
         if version != 2:
             raise MatremapError(f"{path} is a GLB version {version} file; matremap reads glTF 2.0 (GLB version 2)")
         if length > len(data):
-            raise MatremapError(f"{path} is truncated: its header says {length} bytes, the file has {len(data)}; "
-                                f"re-export it")
+            raise MatremapError(
+                f"{path} is truncated: its header says {length} bytes, the file has {len(data)}; re-export it"
+            )
         chunks: list[tuple[int, bytes]] = []
         pos = 12
         while pos + 8 <= length:
             clen, ctype = struct.unpack_from("<II", data, pos)
             if pos + 8 + clen > length:
                 raise MatremapError(f"{path} is truncated: a chunk runs past the end of the file; re-export it")
-            chunks.append((ctype, data[pos + 8:pos + 8 + clen]))
+            chunks.append((ctype, data[pos + 8 : pos + 8 + clen]))
             pos += 8 + clen
         if not chunks or chunks[0][0] != CHUNK_JSON:
             raise MatremapError(f"{path}: the first GLB chunk is not JSON; the file is corrupt, re-export it")
@@ -114,11 +117,14 @@ def _parse(path: Path, data: bytes) -> tuple[dict[str, Any], bytes | None]:
     try:
         obj = json.loads(text.decode("utf-8-sig"))
     except UnicodeDecodeError:
-        raise MatremapError(f"{path} is not a JSON glTF: it is not UTF-8 text"
-                            + ("; if it is a binary glTF, name it .glb" if suffix == ".gltf" else "")) from None
+        raise MatremapError(
+            f"{path} is not a JSON glTF: it is not UTF-8 text"
+            + ("; if it is a binary glTF, name it .glb" if suffix == ".gltf" else "")
+        ) from None
     except json.JSONDecodeError as e:
-        raise MatremapError(f"{path} is not valid glTF JSON: {e.msg} at line {e.lineno}, column {e.colno}; "
-                            f"fix or re-export the file") from None
+        raise MatremapError(
+            f"{path} is not valid glTF JSON: {e.msg} at line {e.lineno}, column {e.colno}; fix or re-export the file"
+        ) from None
     if not isinstance(obj, dict):
         raise MatremapError(f"{path}: a glTF file is a JSON object with 'asset'; this one is not")
     asset = obj.get("asset")
@@ -126,8 +132,10 @@ def _parse(path: Path, data: bytes) -> tuple[dict[str, Any], bytes | None]:
     if not isinstance(version, str):
         raise MatremapError(f"{path} has no asset.version; it is not a glTF 2.0 file (re-export it)")
     if version.split(".")[0] != "2":
-        raise MatremapError(f"{path} is glTF {version}; matremap reads glTF 2.0 (convert it, e.g. with the Khronos "
-                            f"glTF 1.0 to 2.0 converter)")
+        raise MatremapError(
+            f"{path} is glTF {version}; matremap reads glTF 2.0 (convert it, e.g. with the Khronos "
+            f"glTF 1.0 to 2.0 converter)"
+        )
     return obj, bin_chunk
 
 
@@ -167,8 +175,9 @@ class _Reader:
         items = self.doc.json.get(key)
         n = len(items) if isinstance(items, list) else 0
         if not isinstance(index, int) or isinstance(index, bool) or not 0 <= index < n:
-            raise MatremapError(f"{self.path}: {where} refers to {key}[{index}], but the file has {n}; the file is "
-                                f"broken, re-export it")
+            raise MatremapError(
+                f"{self.path}: {where} refers to {key}[{index}], but the file has {n}; the file is broken, re-export it"
+            )
         obj = items[index]
         if not isinstance(obj, dict):
             raise MatremapError(f"{self.path}: {key}[{index}] is not an object; the file is broken, re-export it")
@@ -180,21 +189,26 @@ class _Reader:
             uri = buf.get("uri")
             if uri is None:
                 if index != 0 or self.doc.bin is None:
-                    raise MatremapError(f"{self.path}: buffers[{index}] has no uri and no GLB BIN chunk holds it; "
-                                        f"re-export the file")
+                    raise MatremapError(
+                        f"{self.path}: buffers[{index}] has no uri and no GLB BIN chunk holds it; re-export the file"
+                    )
                 data = self.doc.bin
             elif uri.startswith("data:"):
                 data = _data_uri(uri)[1]
             else:
                 f = self.doc.base / unquote(uri)
                 if not f.is_file():
-                    raise MatremapError(f"{self.path}: buffer file {uri!r} not found at {f}; put it beside "
-                                        f"{self.path.name} or fix its uri")
+                    raise MatremapError(
+                        f"{self.path}: buffer file {uri!r} not found at {f}; put it beside "
+                        f"{self.path.name} or fix its uri"
+                    )
                 data = f.read_bytes()
             need = buf.get("byteLength", 0)
             if len(data) < need:
-                raise MatremapError(f"{self.path}: buffers[{index}] holds {len(data)} bytes but says byteLength "
-                                    f"{need}; the file is truncated, re-export it")
+                raise MatremapError(
+                    f"{self.path}: buffers[{index}] holds {len(data)} bytes but says byteLength "
+                    f"{need}; the file is truncated, re-export it"
+                )
             self._buffers[index] = data
         return self._buffers[index]
 
@@ -203,9 +217,10 @@ class _Reader:
         data = self.buffer(bv.get("buffer"), f"bufferViews[{index}]")
         off, n = int(bv.get("byteOffset", 0)), int(bv.get("byteLength", 0))
         if off + n > len(data):
-            raise MatremapError(f"{self.path}: bufferViews[{index}] runs past the end of its buffer; the file is "
-                                f"broken, re-export it")
-        return data[off:off + n]
+            raise MatremapError(
+                f"{self.path}: bufferViews[{index}] runs past the end of its buffer; the file is broken, re-export it"
+            )
+        return data[off : off + n]
 
     def image(self, index: Any, where: str) -> Path:
         """A file holding image ``index``: the external file itself, or an extracted copy."""
@@ -216,8 +231,10 @@ class _Reader:
         if isinstance(uri, str) and not uri.startswith("data:"):
             f = self.doc.base / unquote(uri)
             if not f.is_file():
-                raise MatremapError(f"{self.path}: image {uri!r} ({where}) not found at {f}; put it beside "
-                                    f"{self.path.name} or fix its uri")
+                raise MatremapError(
+                    f"{self.path}: image {uri!r} ({where}) not found at {f}; put it beside "
+                    f"{self.path.name} or fix its uri"
+                )
             self._images[index] = f
             return f
         if isinstance(uri, str):
@@ -285,18 +302,19 @@ def _select(path: Path, materials: list[Any], material: str | int | None) -> int
     if idx is not None and 0 <= idx < len(materials):
         return idx
     listing = ", ".join(f"{i}: {n!r}" if n else f"{i}: (unnamed)" for i, n in enumerate(names))
-    raise MatremapError(f"{path} has no material {material!r}; its materials are {listing} (pick one by name or "
-                        f"index)")
+    raise MatremapError(f"{path} has no material {material!r}; its materials are {listing} (pick one by name or index)")
 
 
 def _number(path: Path, where: str, value: Any, default: Any, size: int = 1) -> Any:
     if value is None:
         return default
     vals = value if isinstance(value, list) else [value]
-    if len(vals) != size or not all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
-                                    for v in vals):
-        raise MatremapError(f"{path}: {where} must be {'a number' if size == 1 else f'{size} numbers'}, got "
-                            f"{value!r}; fix the file")
+    if len(vals) != size or not all(
+        isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in vals
+    ):
+        raise MatremapError(
+            f"{path}: {where} must be {'a number' if size == 1 else f'{size} numbers'}, got {value!r}; fix the file"
+        )
     return [float(v) for v in vals] if size > 1 else float(vals[0])
 
 
@@ -327,8 +345,7 @@ def read(path: str | os.PathLike, material: str | int | None = None) -> Material
     r = _Reader(p, doc, data)
     notes: list[str] = []
     if material is None and len(mats) > 1:
-        notes.append(f"{p.name} has {len(mats)} materials; using the first, {name!r} (choose another by name or "
-                     f"index)")
+        notes.append(f"{p.name} has {len(mats)} materials; using the first, {name!r} (choose another by name or index)")
     where = f"material {name!r}"
     pbr = m.get("pbrMetallicRoughness", {}) or {}
     ext = m.get("extensions", {}) or {}
@@ -347,11 +364,14 @@ def read(path: str | os.PathLike, material: str | int | None = None) -> Material
     spec_ext = ext.get(SPECULAR) or {}
     constants["ior"] = _number(p, f"{where} {IOR}.ior", ior_ext.get("ior"), DEFAULT_IOR)
     if constants["ior"] == 0.0:
-        raise MatremapError(f"{p}: {where} has {IOR} ior 0 (full specular), which gltf:metal-rough cannot express; "
-                            f"give it an ior in [1, 5]")
+        raise MatremapError(
+            f"{p}: {where} has {IOR} ior 0 (full specular), which gltf:metal-rough cannot express; "
+            f"give it an ior in [1, 5]"
+        )
     constants["specular"] = _number(p, f"{where} {SPECULAR}.specularFactor", spec_ext.get("specularFactor"), 1.0)
-    constants["specularColor"] = _number(p, f"{where} {SPECULAR}.specularColorFactor",
-                                         spec_ext.get("specularColorFactor"), [1.0] * 3, 3)
+    constants["specularColor"] = _number(
+        p, f"{where} {SPECULAR}.specularColorFactor", spec_ext.get("specularColorFactor"), [1.0] * 3, 3
+    )
     try:
         Material.create(MODEL, constants)
     except MatremapError as e:
@@ -364,11 +384,14 @@ def read(path: str | os.PathLike, material: str | int | None = None) -> Material
         tex = r.item("textures", info["index"], f"{where} {slot}")
         src = tex.get("source")
         if src is None:  # an extension may give the only source (EXT_texture_webp, KHR_texture_basisu)
-            src = next((e["source"] for e in (tex.get("extensions") or {}).values()
-                        if isinstance(e, dict) and "source" in e), None)
+            src = next(
+                (e["source"] for e in (tex.get("extensions") or {}).values() if isinstance(e, dict) and "source" in e),
+                None,
+            )
         if src is None:
-            raise MatremapError(f"{p}: {where} {slot} uses textures[{info['index']}], which has no image source; "
-                                f"re-export the file")
+            raise MatremapError(
+                f"{p}: {where} {slot} uses textures[{info['index']}], which has no image source; re-export the file"
+            )
         f = r.image(src, f"{where} {slot}")
         if info.get("texCoord", 0) != 0:
             notes.append(f"{slot} uses texCoord {info['texCoord']}; the map is taken as it is (UV set ignored)")
@@ -392,8 +415,9 @@ def read(path: str | os.PathLike, material: str | int | None = None) -> Material
     if "baseColorTexture" in pbr:
         raw = texture(pbr["baseColorTexture"], "baseColorTexture")
         f, n = colour(*raw)
-        textures["baseColor"] = TextureRef(f, tuple(channel(c, n) for c in range(3)), "srgb",
-                                           tuple(constants["baseColor"]))
+        textures["baseColor"] = TextureRef(
+            f, tuple(channel(c, n) for c in range(3)), "srgb", tuple(constants["baseColor"])
+        )
         if raw[1] in (2, 4):
             notes.append("baseColorTexture alpha ignored (matremap remaps opaque reflectance)")
     if "metallicRoughnessTexture" in pbr:
@@ -409,8 +433,9 @@ def read(path: str | os.PathLike, material: str | int | None = None) -> Material
             textures["specular"] = TextureRef(f, (a,), "linear", constants["specular"])
     if "specularColorTexture" in spec_ext:
         f, n = colour(*texture(spec_ext["specularColorTexture"], "specularColorTexture"))
-        textures["specularColor"] = TextureRef(f, tuple(channel(c, n) for c in range(3)), "srgb",
-                                               tuple(constants["specularColor"]))
+        textures["specularColor"] = TextureRef(
+            f, tuple(channel(c, n) for c in range(3)), "srgb", tuple(constants["specularColor"])
+        )
     normal = None
     if "normalTexture" in m:
         f, _ = texture(m["normalTexture"], "normalTexture")
@@ -428,14 +453,25 @@ def read(path: str | os.PathLike, material: str | int | None = None) -> Material
     if mode != "OPAQUE":
         notes.append(f"alphaMode {mode} ignored: matremap remaps the material as opaque")
     for name_ in sorted(set(ext) - {IOR, SPECULAR}):
-        notes.append(f"{name_} is not remapped (matremap fits the base metallic-roughness layer); "
-                     f"a written copy keeps it")
+        notes.append(
+            f"{name_} is not remapped (matremap fits the base metallic-roughness layer); a written copy keeps it"
+        )
     required = set(obj.get("extensionsRequired") or []) - {IOR, SPECULAR}
     if required:
         notes.append(f"the file requires {', '.join(sorted(required))}; matremap ignores them")
 
-    return MaterialAsset(path=p, format="gltf", name=name, model=MODEL, constants=constants, textures=textures,
-                         normal=normal, notes=notes, document=doc, index=idx)
+    return MaterialAsset(
+        path=p,
+        format="gltf",
+        name=name,
+        model=MODEL,
+        constants=constants,
+        textures=textures,
+        normal=normal,
+        notes=notes,
+        document=doc,
+        index=idx,
+    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -454,8 +490,10 @@ def _result_values(result: Any) -> tuple[dict[str, Any], dict[str, np.ndarray], 
     else:
         raise MatremapError(f"cannot write {type(result).__name__} as glTF; give a material or a map set")
     if get_model(model).id != MODEL:
-        raise MatremapError(f"glTF stores {MODEL} materials, and this result is {model}; remap it onto {MODEL} "
-                            f"first (e.g. matremap remap ... --to {MODEL})")
+        raise MatremapError(
+            f"glTF stores {MODEL} materials, and this result is {model}; remap it onto {MODEL} "
+            f"first (e.g. matremap remap ... --to {MODEL})"
+        )
     spec = get_model(MODEL)
     if isinstance(result, Material):
         return dict(material_values(result)), {}, None, []
@@ -467,8 +505,9 @@ def _result_values(result: Any) -> tuple[dict[str, Any], dict[str, np.ndarray], 
     for name, f in result.maps.items():
         pspec = spec.param(name)
         if name == "ior":
-            raise MatremapError(f"{f}: {IOR} has no texture, so a map of ior cannot be written to glTF; use a "
-                                f"uniform ior")
+            raise MatremapError(
+                f"{f}: {IOR} has no texture, so a map of ior cannot be written to glTF; use a uniform ior"
+            )
         img, _ = read_image(f, result.colorspace.get(name), colour=pspec.channels == 3 and pspec.role != "other")
         if pspec.channels == 3:
             img = np.repeat(img[..., :1], 3, axis=-1) if img.shape[-1] == 1 else img[..., :3]
@@ -528,11 +567,19 @@ def _uv_sphere(n_lat: int = 16, n_lon: int = 32) -> tuple[dict[str, Any], bytes]
     ind = np.array(idx, dtype=np.uint16).reshape(-1)
     blobs = [pos.tobytes(), pos.tobytes(), uv.tobytes(), ind.tobytes()]
     offsets = np.cumsum([0] + [len(b) for b in blobs])
-    views = [{"buffer": 0, "byteOffset": int(o), "byteLength": len(b), "target": 34963 if k == 3 else 34962}
-             for k, (o, b) in enumerate(zip(offsets, blobs, strict=False))]
+    views = [
+        {"buffer": 0, "byteOffset": int(o), "byteLength": len(b), "target": 34963 if k == 3 else 34962}
+        for k, (o, b) in enumerate(zip(offsets, blobs, strict=False))
+    ]
     acc = [
-        {"bufferView": 0, "componentType": 5126, "count": len(pos), "type": "VEC3",
-         "min": [float(x) for x in pos.min(axis=0)], "max": [float(x) for x in pos.max(axis=0)]},
+        {
+            "bufferView": 0,
+            "componentType": 5126,
+            "count": len(pos),
+            "type": "VEC3",
+            "min": [float(x) for x in pos.min(axis=0)],
+            "max": [float(x) for x in pos.max(axis=0)],
+        },
         {"bufferView": 1, "componentType": 5126, "count": len(pos), "type": "VEC3"},
         {"bufferView": 2, "componentType": 5126, "count": len(uv), "type": "VEC2"},
         {"bufferView": 3, "componentType": 5123, "count": len(ind), "type": "SCALAR"},
@@ -540,10 +587,15 @@ def _uv_sphere(n_lat: int = 16, n_lon: int = 32) -> tuple[dict[str, Any], bytes]
     data = b"".join(blobs)
     doc = {
         "asset": {"version": "2.0", "generator": "matremap"},
-        "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0, "name": "probe sphere"}],
-        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2}, "indices": 3,
-                                    "material": 0}]}],
-        "accessors": acc, "bufferViews": views, "buffers": [{"byteLength": len(data)}],
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0, "name": "probe sphere"}],
+        "meshes": [
+            {"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2}, "indices": 3, "material": 0}]}
+        ],
+        "accessors": acc,
+        "bufferViews": views,
+        "buffers": [{"byteLength": len(data)}],
         "materials": [{}],
     }
     return doc, data
@@ -600,8 +652,12 @@ def write(out: str | os.PathLike, result: Any, source: MaterialAsset | None = No
         bin_data: bytes | None = gdoc.bin
         src_base: Path | None = gdoc.base
         index = source.index  # type: ignore[union-attr]
-        inputs = [*inputs, source.path, *(t.path for t in source.textures.values()),  # type: ignore[union-attr]
-                  *([source.normal.path] if source.normal else [])]  # type: ignore[union-attr]
+        inputs = [
+            *inputs,
+            source.path,
+            *(t.path for t in source.textures.values()),  # type: ignore[union-attr]
+            *([source.normal.path] if source.normal else []),
+        ]  # type: ignore[union-attr]
         for key in ("buffers", "images"):
             for item in doc.get(key, []):
                 uri = item.get("uri") if isinstance(item, dict) else None
@@ -653,12 +709,19 @@ def write(out: str | os.PathLike, result: Any, source: MaterialAsset | None = No
             rgba[..., 3] = _code(maps["specular"], False)
         else:
             rgba = rgba[..., :3]
-        new.append(_NewImage("specular", _png(rgba), "image/png",
-                             old_spec.get("specularColorTexture") or old_spec.get("specularTexture")))
+        new.append(
+            _NewImage(
+                "specular",
+                _png(rgba),
+                "image/png",
+                old_spec.get("specularColorTexture") or old_spec.get("specularTexture"),
+            )
+        )
     if spec_f != 1.0 or any(v != 1.0 for v in tint_f) or "specular" in maps or tint_tex is not None:
         spec_ext = {"specularFactor": spec_f, "specularColorFactor": tint_f}
-    if normal is not None and not (source is not None and source.normal is not None
-                                   and Path(normal).resolve() == source.normal.path.resolve()):
+    if normal is not None and not (
+        source is not None and source.normal is not None and Path(normal).resolve() == source.normal.path.resolve()
+    ):
         old_normal = mat.pop("normalTexture", None)
         nsuffix = Path(normal).suffix.lower()
         if nsuffix in (".png", ".jpg", ".jpeg"):
@@ -708,8 +771,7 @@ def write(out: str | os.PathLike, result: Any, source: MaterialAsset | None = No
         image: dict[str, Any] = {"name": f"{out.stem}_{im.slot}"}
         if kind == ".glb":
             blob += b"\0" * (-len(blob) % 4)
-            doc.setdefault("bufferViews", []).append({"buffer": 0, "byteOffset": len(blob),
-                                                      "byteLength": len(im.data)})
+            doc.setdefault("bufferViews", []).append({"buffer": 0, "byteOffset": len(blob), "byteLength": len(im.data)})
             blob += im.data
             image.update(bufferView=len(doc["bufferViews"]) - 1, mimeType=im.mime)
         else:

@@ -64,13 +64,30 @@ INSTALL_HINT = "reading and writing MaterialX needs its Python package: pip inst
 
 #: shader node category -> {its input: gltf:metal-rough parameter}; the base colour weight is applied apart
 SHADERS: dict[str, dict[str, str]] = {
-    "gltf_pbr": {"base_color": "baseColor", "metallic": "metallic", "roughness": "roughness", "ior": "ior",
-                 "specular": "specular", "specular_color": "specularColor"},
-    "standard_surface": {"base_color": "baseColor", "metalness": "metallic", "specular_roughness": "roughness",
-                         "specular_IOR": "ior", "specular": "specular", "specular_color": "specularColor"},
-    "open_pbr_surface": {"base_color": "baseColor", "base_metalness": "metallic",
-                         "specular_roughness": "roughness", "specular_ior": "ior", "specular_weight": "specular",
-                         "specular_color": "specularColor"},
+    "gltf_pbr": {
+        "base_color": "baseColor",
+        "metallic": "metallic",
+        "roughness": "roughness",
+        "ior": "ior",
+        "specular": "specular",
+        "specular_color": "specularColor",
+    },
+    "standard_surface": {
+        "base_color": "baseColor",
+        "metalness": "metallic",
+        "specular_roughness": "roughness",
+        "specular_IOR": "ior",
+        "specular": "specular",
+        "specular_color": "specularColor",
+    },
+    "open_pbr_surface": {
+        "base_color": "baseColor",
+        "base_metalness": "metallic",
+        "specular_roughness": "roughness",
+        "specular_ior": "ior",
+        "specular_weight": "specular",
+        "specular_color": "specularColor",
+    },
 }
 #: the input that multiplies base_color
 _WEIGHT = {"standard_surface": "base", "open_pbr_surface": "base_weight"}
@@ -137,27 +154,34 @@ def _texture(ctx: _Ctx, node, param: str, colour: bool) -> TextureRef:
         channels = (int(float(idx.getValueString())) if idx is not None else 0,)
         node = up
     if node.getCategory() not in _IMAGES:
-        raise MatremapError(f"{ctx.path}: {param} is driven by a {node.getCategory()!r} node; matremap reads "
-                            f"{', '.join(_IMAGES)} textures (bake the graph into an image)")
+        raise MatremapError(
+            f"{ctx.path}: {param} is driven by a {node.getCategory()!r} node; matremap reads "
+            f"{', '.join(_IMAGES)} textures (bake the graph into an image)"
+        )
     f = node.getInput("file")
     if f is None or not f.getResolvedValueString():
         raise MatremapError(f"{ctx.path}: image node {node.getName()!r} for {param} has no file; set its file input")
     rel = Path(f.getResolvedValueString())
     path = rel if rel.is_absolute() else ctx.path.resolve().parent / rel
     if not path.is_file():
-        raise MatremapError(f"{ctx.path}: texture {rel} for {param} not found at {path}; put it beside the "
-                            f"document or fix its file input")
+        raise MatremapError(
+            f"{ctx.path}: texture {rel} for {param} not found at {path}; put it beside the "
+            f"document or fix its file input"
+        )
     cs = (f.getActiveColorSpace() or "").strip()
     if cs.lower() in _SRGB:
         colorspace = "srgb"
     elif cs.lower() in _LINEAR:
         colorspace = "linear"
     else:
-        raise MatremapError(f"{ctx.path}: texture {rel.name} has colour space {cs!r}; matremap reads srgb_texture "
-                            f"and lin_rec709 (raw) textures, convert it to one of these")
+        raise MatremapError(
+            f"{ctx.path}: texture {rel.name} has colour space {cs!r}; matremap reads srgb_texture "
+            f"and lin_rec709 (raw) textures, convert it to one of these"
+        )
     if colorspace == "srgb" and (not colour or node.getType() in ("float", "vector2", "vector3")):
-        ctx.notes.append(f"{rel.name}: {cs} ignored for {param}, a {node.getType()} texture (MaterialX transforms "
-                         f"colour data only)")
+        ctx.notes.append(
+            f"{rel.name}: {cs} ignored for {param}, a {node.getType()} texture (MaterialX transforms colour data only)"
+        )
         colorspace = "linear"
     scale: float | tuple[float, ...] = 1.0
     factor = node.getInput("factor")
@@ -166,15 +190,20 @@ def _texture(ctx: _Ctx, node, param: str, colour: bool) -> TextureRef:
         scale = nums[0] if len(nums) == 1 else tuple(nums)
         if channels is not None and len(nums) > 1:  # extract after the factor: the picked channel's factor
             if channels[0] >= len(nums):
-                raise MatremapError(f"{ctx.path}: extract index {channels[0]} for {param} is beyond the "
-                                    f"{node.getType()} image")
+                raise MatremapError(
+                    f"{ctx.path}: extract index {channels[0]} for {param} is beyond the {node.getType()} image"
+                )
             scale = nums[channels[0]]
     for unsupported in ("texcoord", "scale", "rotate", "offset", "uvtiling", "uvoffset"):
         i = node.getInput(unsupported)
-        if i is not None and (i.getValueString() or i.getConnectedNode() is not None) and \
-                not (node.getCategory() == "tiledimage" and i.getValueString() in ("1.0, 1.0", "1, 1", "0.0, 0.0")):
-            ctx.notes.append(f"{rel.name}: {unsupported} on {node.getName()!r} ignored (maps are read on the "
-                             f"sphere's own UVs)")
+        if (
+            i is not None
+            and (i.getValueString() or i.getConnectedNode() is not None)
+            and not (node.getCategory() == "tiledimage" and i.getValueString() in ("1.0, 1.0", "1, 1", "0.0, 0.0"))
+        ):
+            ctx.notes.append(
+                f"{rel.name}: {unsupported} on {node.getName()!r} ignored (maps are read on the sphere's own UVs)"
+            )
     return TextureRef(path.resolve(), channels, colorspace, scale)
 
 
@@ -183,8 +212,9 @@ def _connected(ctx: _Ctx, inp, param: str, colour: bool) -> TextureRef | None:
     node = inp.getConnectedNode()
     if node is None:
         if inp.getNodeName() or inp.getNodeGraphString() or inp.getInterfaceName():
-            raise MatremapError(f"{ctx.path}: input {inp.getName()} names a node or graph that does not exist; "
-                                f"fix the connection")
+            raise MatremapError(
+                f"{ctx.path}: input {inp.getName()} names a node or graph that does not exist; fix the connection"
+            )
         return None
     channel: int | None = None
     output = inp.getConnectedOutput()
@@ -205,8 +235,7 @@ def _connected(ctx: _Ctx, inp, param: str, colour: bool) -> TextureRef | None:
 def _shader_asset(ctx: _Ctx, shader, name: str, index: int, doc) -> MaterialAsset:
     cat = shader.getCategory()
     if cat not in SHADERS:
-        raise MatremapError(f"{ctx.path}: material {name!r} uses a {cat!r} shader; matremap reads "
-                            f"{', '.join(SHADERS)}")
+        raise MatremapError(f"{ctx.path}: material {name!r} uses a {cat!r} shader; matremap reads {', '.join(SHADERS)}")
     spec = get_model(MODEL)
     table = SHADERS[cat]
     defaults = _defaults(shader)
@@ -232,20 +261,24 @@ def _shader_asset(ctx: _Ctx, shader, name: str, index: int, doc) -> MaterialAsse
         if ref is not None:
             textures[param] = ref
         elif vals is not None:
-            constants[param] = vals[0] if spec.param(param).channels == 1 else \
-                (vals * 3 if len(vals) == 1 else vals)
+            constants[param] = vals[0] if spec.param(param).channels == 1 else (vals * 3 if len(vals) == 1 else vals)
     weight = _WEIGHT.get(cat)
     if weight is not None:
         wvals, wref = value_of(weight)
         if wref is not None:
-            raise MatremapError(f"{ctx.path}: {cat} {shader.getName()!r}: a texture on {weight} is not supported; "
-                                f"multiply it into base_color's texture")
+            raise MatremapError(
+                f"{ctx.path}: {cat} {shader.getName()!r}: a texture on {weight} is not supported; "
+                f"multiply it into base_color's texture"
+            )
         w = wvals[0] if wvals else 1.0
         if "baseColor" in textures:
             ref = textures["baseColor"]
-            textures["baseColor"] = TextureRef(ref.path, ref.channels, ref.colorspace,
-                                               tuple(float(x) * w for x in np.broadcast_to(ref.scale, (3,)))
-                                               if w != 1.0 else ref.scale)
+            textures["baseColor"] = TextureRef(
+                ref.path,
+                ref.channels,
+                ref.colorspace,
+                tuple(float(x) * w for x in np.broadcast_to(ref.scale, (3,))) if w != 1.0 else ref.scale,
+            )
         else:
             constants["baseColor"] = [float(x) * w for x in constants.get("baseColor", [1.0, 1.0, 1.0])]
     # the normal
@@ -292,10 +325,12 @@ def _shader_asset(ctx: _Ctx, shader, name: str, index: int, doc) -> MaterialAsse
     else:
         what = "Standard Surface" if cat == "standard_surface" else "OpenPBR Surface"
         names = ", ".join(f"{k} -> {v}" for k, v in table.items())
-        notes.insert(0, f"WARNING: {what} read through matremap's hand-made translation to gltf:metal-rough "
-                        f"(base_color x {weight} -> baseColor, {names}); it is approximate"
-                        + (f". Inputs NOT remapped: {', '.join(skipped)}" if skipped else
-                           "; every other input is at its default"))
+        notes.insert(
+            0,
+            f"WARNING: {what} read through matremap's hand-made translation to gltf:metal-rough "
+            f"(base_color x {weight} -> baseColor, {names}); it is approximate"
+            + (f". Inputs NOT remapped: {', '.join(skipped)}" if skipped else "; every other input is at its default"),
+        )
     spec = get_model(MODEL)
     for k, v in list(constants.items()):  # a colour past the model's range (e.g. gold's base colour 1.059)
         if k in spec.param_names and k not in textures and spec.param(k).channels == 3:
@@ -310,8 +345,18 @@ def _shader_asset(ctx: _Ctx, shader, name: str, index: int, doc) -> MaterialAsse
         Material.create(MODEL, uniform)  # ranges, with the model's messages
     except MatremapError as e:
         raise MatremapError(f"{ctx.path}: material {name!r}: {e}") from None
-    return MaterialAsset(path=ctx.path, format=FORMAT, name=name, model=MODEL, constants=constants,
-                         textures=textures, normal=normal, notes=notes, document=doc, index=index)
+    return MaterialAsset(
+        path=ctx.path,
+        format=FORMAT,
+        name=name,
+        model=MODEL,
+        constants=constants,
+        textures=textures,
+        normal=normal,
+        notes=notes,
+        document=doc,
+        index=index,
+    )
 
 
 def _same(a: str, b: str) -> bool:
@@ -337,8 +382,7 @@ def read(path: str | Path, material: str | int | None = None) -> MaterialAsset:
     try:
         mx.readFromXmlFile(doc, str(p))
     except Exception as e:  # MaterialX raises its own ExceptionParseError / ExceptionFileMissing
-        raise MatremapError(f"{p} is not a MaterialX document ({str(e).strip() or type(e).__name__})") \
-            from None
+        raise MatremapError(f"{p} is not a MaterialX document ({str(e).strip() or type(e).__name__})") from None
     if not re.search(rb"<\s*materialx[\s>]", head):
         raise MatremapError(f"{p} is not a MaterialX document: its root element is not <materialx>")
     ok, why = doc.validate()
@@ -355,8 +399,10 @@ def read(path: str | Path, material: str | int | None = None) -> MaterialAsset:
         if found:
             notes.append("no surfacematerial in the document: its shader nodes are read as materials")
     if not found:
-        raise MatremapError(f"{p} holds no surfacematerial or surface shader; matremap reads gltf_pbr, "
-                            f"standard_surface and open_pbr_surface materials")
+        raise MatremapError(
+            f"{p} holds no surfacematerial or surface shader; matremap reads gltf_pbr, "
+            f"standard_surface and open_pbr_surface materials"
+        )
     names = [n for n, _ in found]
     if material is None:
         index = 0
@@ -367,8 +413,7 @@ def read(path: str | Path, material: str | int | None = None) -> MaterialAsset:
     elif isinstance(material, str) and material in names:
         index = names.index(material)
     else:
-        raise MatremapError(f"{p} has no material named {material!r}; its materials are "
-                            f"{', '.join(map(repr, names))}")
+        raise MatremapError(f"{p} has no material named {material!r}; its materials are {', '.join(map(repr, names))}")
     name, shader = found[index]
     if shader is None:
         raise MatremapError(f"{p}: material {name!r} has no surface shader connected")
@@ -385,8 +430,9 @@ def _fmt(v: np.ndarray) -> str:
     return ", ".join(repr(float(x)) for x in np.asarray(v, dtype=float).reshape(-1))
 
 
-def build_document(m: Material, maps: dict[str, str], colorspace: dict[str, str], normal: str | None,
-                   name: str = "material"):
+def build_document(
+    m: Material, maps: dict[str, str], colorspace: dict[str, str], normal: str | None, name: str = "material"
+):
     """The MaterialX document of a gltf:metal-rough material: ``maps`` are file names (relative to
     the document) for textured parameters, ``colorspace`` their encodings (srgb/linear)."""
     mx = _mx()

@@ -64,11 +64,29 @@ FORMAT = "mitsuba-xml"
 #: Mitsuba 3's named indices of refraction (include/mitsuba/core/ior.h, after Hecht, Optics, 4th ed.;
 #: measured between 0 and 20 C at about 589 nm)
 IOR_TABLE: dict[str, float] = {
-    "vacuum": 1.0, "helium": 1.000036, "hydrogen": 1.000132, "air": 1.000277, "carbon dioxide": 1.00045,
-    "water": 1.3330, "acetone": 1.36, "ethanol": 1.361, "carbon tetrachloride": 1.461, "glycerol": 1.4729,
-    "benzene": 1.501, "silicone oil": 1.52045, "bromine": 1.661, "water ice": 1.31, "fused quartz": 1.458,
-    "pyrex": 1.470, "acrylic glass": 1.49, "polypropylene": 1.49, "bk7": 1.5046, "sodium chloride": 1.544,
-    "amber": 1.55, "pet": 1.5750, "diamond": 2.419,
+    "vacuum": 1.0,
+    "helium": 1.000036,
+    "hydrogen": 1.000132,
+    "air": 1.000277,
+    "carbon dioxide": 1.00045,
+    "water": 1.3330,
+    "acetone": 1.36,
+    "ethanol": 1.361,
+    "carbon tetrachloride": 1.461,
+    "glycerol": 1.4729,
+    "benzene": 1.501,
+    "silicone oil": 1.52045,
+    "bromine": 1.661,
+    "water ice": 1.31,
+    "fused quartz": 1.458,
+    "pyrex": 1.470,
+    "acrylic glass": 1.49,
+    "polypropylene": 1.49,
+    "bk7": 1.5046,
+    "sodium chloride": 1.544,
+    "amber": 1.55,
+    "pet": 1.5750,
+    "diamond": 2.419,
 }
 
 #: Mitsuba plugin -> matremap model
@@ -81,15 +99,41 @@ PLUGINS = {
 MODELS = tuple(PLUGINS.values())
 WRAPPERS = ("twosided", "normalmap", "bumpmap", "mask")
 
-_PRINCIPLED_SCALARS = ("roughness", "metallic", "spec_tint", "anisotropic", "sheen", "sheen_tint", "clearcoat",
-                       "clearcoat_gloss", "spec_trans")
+_PRINCIPLED_SCALARS = (
+    "roughness",
+    "metallic",
+    "spec_tint",
+    "anisotropic",
+    "sheen",
+    "sheen_tint",
+    "clearcoat",
+    "clearcoat_gloss",
+    "spec_trans",
+)
 #: parameters each plugin accepts (Mitsuba 3 plugin reference)
 _ACCEPTED = {
     "diffuse": ("reflectance",),
-    "roughconductor": ("distribution", "alpha", "alpha_u", "alpha_v", "material", "eta", "k",
-                       "specular_reflectance", "sample_visible"),
-    "roughplastic": ("distribution", "alpha", "int_ior", "ext_ior", "nonlinear", "specular_reflectance",
-                     "diffuse_reflectance", "sample_visible"),
+    "roughconductor": (
+        "distribution",
+        "alpha",
+        "alpha_u",
+        "alpha_v",
+        "material",
+        "eta",
+        "k",
+        "specular_reflectance",
+        "sample_visible",
+    ),
+    "roughplastic": (
+        "distribution",
+        "alpha",
+        "int_ior",
+        "ext_ior",
+        "nonlinear",
+        "specular_reflectance",
+        "diffuse_reflectance",
+        "sample_visible",
+    ),
     "principled": ("base_color", "specular", "eta", *_PRINCIPLED_SCALARS, "sample_visible"),
 }
 #: parameters Mitsuba 3 takes as plain numbers, not textures
@@ -147,8 +191,10 @@ class _Reader:
             if tag == "ref":
                 target = self.ids.get(child.get("id", ""))
                 if target is None:
-                    raise self.fail(f"{what} refers to id {child.get('id')!r}, which no top-level <bsdf> or "
-                                    f"<texture> has; define it or fix the id")
+                    raise self.fail(
+                        f"{what} refers to id {child.get('id')!r}, which no top-level <bsdf> or "
+                        f"<texture> has; define it or fix the id"
+                    )
                 tag, child = target.tag, target
             if tag == "bsdf":
                 key = name or f"#bsdf{nested}"
@@ -186,8 +232,10 @@ class _Reader:
     def numbers(self, value: str | None, name: str, what: str, tag: str) -> list[float]:
         parts = (value or "").replace(",", " ").split()
         if tag == "spectrum" and any(":" in p for p in parts):
-            raise self.fail(f"{what}: {name} is a spectrum given as wavelength:value pairs; matremap reads RGB "
-                            f"materials, give it as <rgb name=\"{name}\" value=\"r, g, b\"/>")
+            raise self.fail(
+                f"{what}: {name} is a spectrum given as wavelength:value pairs; matremap reads RGB "
+                f'materials, give it as <rgb name="{name}" value="r, g, b"/>'
+            )
         try:
             nums = [float(p) for p in parts]
         except ValueError:
@@ -215,7 +263,7 @@ class _Reader:
         normal: TextureRef | None = None
         while el.get("type") in WRAPPERS:
             kind = el.get("type")
-            what = f"<bsdf type=\"{kind}\">"
+            what = f'<bsdf type="{kind}">'
             props = self.props(el, what)
             inner = [p.value for p in props.values() if p.kind == "bsdf"]
             if not inner:
@@ -227,12 +275,14 @@ class _Reader:
             elif kind == "normalmap":
                 tex = props.get("normalmap")
                 if tex is None or tex.kind != "texture":
-                    raise self.fail(f"{what} has no <texture name=\"normalmap\">; add the normal map's bitmap")
+                    raise self.fail(f'{what} has no <texture name="normalmap">; add the normal map\'s bitmap')
                 ref = self.texture(tex.value, "normal map", colour=False)
                 if normal is None:
                     if ref.colorspace != "linear":
-                        notes.append("the normal map's bitmap is not raw: Mitsuba decodes it from sRGB, "
-                                     "which bends the normals; matremap reads it as linear (set raw=\"true\")")
+                        notes.append(
+                            "the normal map's bitmap is not raw: Mitsuba decodes it from sRGB, "
+                            'which bends the normals; matremap reads it as linear (set raw="true")'
+                        )
                     normal = TextureRef(ref.path)
                     notes.append(f"normalmap wrapper: its bitmap {ref.path.name} is the asset's normal map")
                 else:
@@ -250,21 +300,23 @@ class _Reader:
         kind = el.get("type")
         what = f"texture for {param}"
         if kind != "bitmap":
-            raise self.fail(f"{what} is a {kind!r} texture; matremap reads bitmap textures only (bake it into an "
-                            f"image)")
+            raise self.fail(
+                f"{what} is a {kind!r} texture; matremap reads bitmap textures only (bake it into an image)"
+            )
         props = self.props(el, what)
         unknown = set(props) - {"filename", "raw", "filter_type", "wrap_mode", "to_uv", "format", "accel"}
         if unknown:
             raise self.fail(f"{what}: unknown bitmap parameter(s) {', '.join(sorted(unknown))}")
         fname = props.get("filename")
         if fname is None or fname.kind != "string" or not fname.value:
-            raise self.fail(f"{what}: the bitmap has no <string name=\"filename\">; add the image's file name")
+            raise self.fail(f'{what}: the bitmap has no <string name="filename">; add the image\'s file name')
         path = Path(fname.value)
         if not path.is_absolute():
             path = self.path.resolve().parent / path
         if not path.is_file():
-            raise self.fail(f"bitmap {fname.value} for {param} not found at {path}; put it beside the XML or fix "
-                            f"its filename")
+            raise self.fail(
+                f"bitmap {fname.value} for {param} not found at {path}; put it beside the XML or fix its filename"
+            )
         raw = props.get("raw")
         if raw is not None and raw.kind != "boolean":
             raise self.fail(f"{what}: raw must be a <boolean>")
@@ -277,16 +329,19 @@ class _Reader:
         core, normal = self.unwrap(el, notes)
         plugin = core.get("type")
         if plugin not in PLUGINS:
-            raise self.fail(f"material {label!r} is a {plugin!r} BSDF; matremap reads {', '.join(PLUGINS)} "
-                            f"(inside {', '.join(WRAPPERS)} wrappers)")
+            raise self.fail(
+                f"material {label!r} is a {plugin!r} BSDF; matremap reads {', '.join(PLUGINS)} "
+                f"(inside {', '.join(WRAPPERS)} wrappers)"
+            )
         model = PLUGINS[plugin]
         spec = get_model(model)
-        what = f"<bsdf type=\"{plugin}\"> {label!r}"
+        what = f'<bsdf type="{plugin}"> {label!r}'
         props = self.props(core, what)
         extra = sorted(set(props) - set(_ACCEPTED[plugin]))
         if extra:
-            raise self.fail(f"{what}: unknown parameter(s) {', '.join(extra)}; {plugin} takes "
-                            f"{', '.join(_ACCEPTED[plugin])}")
+            raise self.fail(
+                f"{what}: unknown parameter(s) {', '.join(extra)}; {plugin} takes {', '.join(_ACCEPTED[plugin])}"
+            )
         constants: dict[str, Any] = {}
         textures: dict[str, TextureRef] = {}
 
@@ -319,8 +374,9 @@ class _Reader:
         if "distribution" in props:
             dist = string("distribution")
             if dist not in spec.option("distribution").choices:
-                raise self.fail(f"{what}: distribution {dist!r} is not one of "
-                                f"{', '.join(spec.option('distribution').choices)}")
+                raise self.fail(
+                    f"{what}: distribution {dist!r} is not one of {', '.join(spec.option('distribution').choices)}"
+                )
             constants["distribution"] = dist
         for name in _NO_EFFECT:
             if name in props:
@@ -349,8 +405,10 @@ class _Reader:
                 material = material or "none"
                 choices = spec.option("material").choices
                 if material not in choices:
-                    raise self.fail(f"{what}: material {material!r} is not one of Mitsuba's conductors "
-                                    f"({', '.join(c for c in choices if c != 'custom')})")
+                    raise self.fail(
+                        f"{what}: material {material!r} is not one of Mitsuba's conductors "
+                        f"({', '.join(c for c in choices if c != 'custom')})"
+                    )
                 constants["material"] = material
         elif plugin == "roughplastic":
             take("alpha")
@@ -361,8 +419,10 @@ class _Reader:
                 if prop.kind == "string":
                     key = prop.value.strip().lower()
                     if key not in IOR_TABLE:
-                        raise self.fail(f"{what}: {name}={prop.value!r} is not one of Mitsuba's named IORs "
-                                        f"({', '.join(IOR_TABLE)}); give a number")
+                        raise self.fail(
+                            f"{what}: {name}={prop.value!r} is not one of Mitsuba's named IORs "
+                            f"({', '.join(IOR_TABLE)}); give a number"
+                        )
                     constants[name] = IOR_TABLE[key]
                     notes.append(f"{name} {prop.value!r} = {IOR_TABLE[key]:g} (Mitsuba's IOR table)")
                 else:
@@ -386,8 +446,10 @@ class _Reader:
                 f0 = ((prop.value - 1.0) / (prop.value + 1.0)) ** 2
                 spec_value = f0 / 0.08
                 if spec_value > 1.0:
-                    raise self.fail(f"{what}: eta={prop.value:g} is beyond specular = 1 (eta 1.8); matremap's "
-                                    f"principled model takes specular in [0, 1]")
+                    raise self.fail(
+                        f"{what}: eta={prop.value:g} is beyond specular = 1 (eta 1.8); matremap's "
+                        f"principled model takes specular in [0, 1]"
+                    )
                 constants["specular"] = spec_value
                 notes.append(f"eta {prop.value:g} read as specular {spec_value:.6g} (F0 = 0.08 specular)")
             else:
@@ -400,8 +462,18 @@ class _Reader:
             raise self.fail(f"material {label!r}: {e}") from None
         if normal is not None and not textures:
             notes.append("the material is uniform apart from its normal map")
-        return MaterialAsset(path=self.path, format=FORMAT, name=label, model=model, constants=constants,
-                             textures=textures, normal=normal, notes=notes, document=self.root, index=index)
+        return MaterialAsset(
+            path=self.path,
+            format=FORMAT,
+            name=label,
+            model=model,
+            constants=constants,
+            textures=textures,
+            normal=normal,
+            notes=notes,
+            document=self.root,
+            index=index,
+        )
 
     def _alpha(self, props: dict[str, _Prop], what: str) -> None:
         if "alpha_u" in props or "alpha_v" in props:
@@ -409,8 +481,10 @@ class _Reader:
             if "alpha" in props or au is None or av is None:
                 raise self.fail(f"{what}: give alpha, or alpha_u and alpha_v together")
             if au.kind != "float" or av.kind != "float" or au.value != av.value:
-                raise self.fail(f"{what}: anisotropic roughness (alpha_u != alpha_v) is not supported; matremap's "
-                                f"roughconductor is isotropic, give one alpha")
+                raise self.fail(
+                    f"{what}: anisotropic roughness (alpha_u != alpha_v) is not supported; matremap's "
+                    f"roughconductor is isotropic, give one alpha"
+                )
             props["alpha"] = au
             del props["alpha_u"], props["alpha_v"]
 
@@ -427,8 +501,10 @@ def _substitute(root: ET.Element, path: Path) -> None:
 
     def repl(m: re.Match) -> str:
         if m.group(1) not in defaults:
-            raise MatremapError(f"{path}: ${m.group(1)} is used but no <default name=\"{m.group(1)}\" value=...> "
-                                f"gives it a value; add one")
+            raise MatremapError(
+                f'{path}: ${m.group(1)} is used but no <default name="{m.group(1)}" value=...> '
+                f"gives it a value; add one"
+            )
         return defaults[m.group(1)]
 
     for el in root.iter():
@@ -475,8 +551,9 @@ def read(path: str | Path, material: str | int | None = None) -> MaterialAsset:
         raise MatremapError(f"{p} has no BSDF named {material!r}; its BSDFs are {', '.join(map(repr, names))}")
     asset = reader.material(*found[index], index)
     if reader.legacy:
-        asset.notes.insert(0, f"version {root.get('version')} file: camelCase parameter names read as Mitsuba 3's "
-                              f"snake_case names")
+        asset.notes.insert(
+            0, f"version {root.get('version')} file: camelCase parameter names read as Mitsuba 3's snake_case names"
+        )
     return asset
 
 
@@ -514,26 +591,30 @@ def place_map(src: Path, dest_stem: Path, keep: bool, colorspace: str, channels:
     elif channels == 3:
         image = image[..., :3]
     dest = dest_stem.with_suffix(".exr")
-    write_image_like(dest, image, info.like(format="exr", pixel_type="float", colorspace="linear", compression=None),
-                     force=True)
+    write_image_like(
+        dest, image, info.like(format="exr", pixel_type="float", colorspace="linear", compression=None), force=True
+    )
     return dest
 
 
-def _split(result: Any, what: str, models: tuple[str, ...]) -> tuple[Material, dict[str, Path], dict[str, str],
-                                                                         Path | None]:
+def _split(
+    result: Any, what: str, models: tuple[str, ...]
+) -> tuple[Material, dict[str, Path], dict[str, str], Path | None]:
     """(material with the uniform values, maps, their colour spaces, normal map) of a Material or MapSet."""
     from matremap.svbrdf.textures import MapSet
 
     if isinstance(result, Material):
         if result.model not in models:
-            raise MatremapError(f"{what} writes {', '.join(models)} materials, not {result.model}; remap to one of "
-                                f"these first")
+            raise MatremapError(
+                f"{what} writes {', '.join(models)} materials, not {result.model}; remap to one of these first"
+            )
         return result, {}, {}, None
     if isinstance(result, MapSet):
         spec = get_model(result.model)
         if spec.id not in models:
-            raise MatremapError(f"{what} writes {', '.join(models)} materials, not {spec.id}; remap to one of these "
-                                f"first")
+            raise MatremapError(
+                f"{what} writes {', '.join(models)} materials, not {spec.id}; remap to one of these first"
+            )
         consts = {k: v for k, v in result.constants.items() if k not in result.maps}
         m = Material.create(spec.id, consts)
         for name, f in result.maps.items():
@@ -542,8 +623,10 @@ def _split(result: Any, what: str, models: tuple[str, ...]) -> tuple[Material, d
                 raise MatremapError(f"map {f} for {name} not found")
         if result.normal is not None and not Path(result.normal).is_file():
             raise MatremapError(f"normal map {result.normal} not found")
-        cs = {name: result.colorspace.get(name) or _default_cs(Path(f), spec.param(name).channels == 3)
-              for name, f in result.maps.items()}
+        cs = {
+            name: result.colorspace.get(name) or _default_cs(Path(f), spec.param(name).channels == 3)
+            for name, f in result.maps.items()
+        }
         return m, {k: Path(v) for k, v in result.maps.items()}, cs, (Path(result.normal) if result.normal else None)
     raise MatremapError(f"{what} writes a Material or a MapSet, not {type(result).__name__}")
 
@@ -630,8 +713,9 @@ def _probe_scene(bsdf: ET.Element) -> ET.Element:
     ET.SubElement(sensor, "float", {"name": "fov", "value": _num(probe.effective_fov)})
     ET.SubElement(sensor, "string", {"name": "fov_axis", "value": "x"})
     tw = ET.SubElement(sensor, "transform", {"name": "to_world"})
-    ET.SubElement(tw, "lookat", {"origin": f"0, 0, {_num(probe.camera_distance)}", "target": "0, 0, 0",
-                                 "up": "0, 1, 0"})
+    ET.SubElement(
+        tw, "lookat", {"origin": f"0, 0, {_num(probe.camera_distance)}", "target": "0, 0, 0", "up": "0, 1, 0"}
+    )
     sampler = ET.SubElement(sensor, "sampler", {"type": "independent"})
     ET.SubElement(sampler, "integer", {"name": "sample_count", "value": "$spp"})
     film = ET.SubElement(sensor, "film", {"type": "hdrfilm"})
@@ -664,8 +748,7 @@ def write(out: str | Path, result: Any, source: MaterialAsset | None = None, for
     plugin = next(k for k, v in PLUGINS.items() if v == spec.id)
     for name in maps:
         if name in _CONSTANT_ONLY.get(plugin, ()):
-            raise MatremapError(f"{spec.id}: Mitsuba 3 takes {name} as a number, not a texture; give it as a "
-                                f"constant")
+            raise MatremapError(f"{spec.id}: Mitsuba 3 takes {name} as a number, not a texture; give it as a constant")
         if name in ("eta", "k") and m.options.get("material") != "custom":
             raise MatremapError(f"{spec.id}: a map for {name} needs material=custom")
     _check_targets(out, [*maps, *(["normal"] if normal else [])], force)

@@ -35,9 +35,17 @@ class TrainingData:
         return v is not None and bool(np.ptp(v) > 1e-12)
 
     def subset(self, keep: np.ndarray) -> TrainingData:
-        return TrainingData(self.source, self.target, self.source_options, self.target_options,
-                            {k: v[keep] for k, v in self.x.items()}, {k: v[keep] for k, v in self.y.items()},
-                            self.template, self.provenance, self.source_template)
+        return TrainingData(
+            self.source,
+            self.target,
+            self.source_options,
+            self.target_options,
+            {k: v[keep] for k, v in self.x.items()},
+            {k: v[keep] for k, v in self.y.items()},
+            self.template,
+            self.provenance,
+            self.source_template,
+        )
 
 
 def _values(spec: ModelSpec, params: list[dict[str, Any]]) -> dict[str, np.ndarray]:
@@ -79,8 +87,12 @@ def load_training_data(db: str | Path, reverse: bool = False, exclude_flagged: b
     template_src = config.source.to_dict()["params"]
     template_tgt = Material.create(tgt_spec.id, tgt_params[0]).to_dict()["params"]
     provenance = {
-        "database": str(Path(db).name), "sweep": store_config_summary(config), "rows": len(rows),
-        "used": len(ok), "excluded_flagged": flagged, "reverse": reverse,
+        "database": str(Path(db).name),
+        "sweep": store_config_summary(config),
+        "rows": len(rows),
+        "used": len(ok),
+        "excluded_flagged": flagged,
+        "reverse": reverse,
     }
     if reverse:
         return TrainingData(tgt_spec, src_spec, tgt_opts, src_opts, y, x, template_src, provenance, template_tgt)

@@ -57,42 +57,109 @@ _CYCLES_GRID = "Roughness=0.15:0.95:10,Color=0.02:0.9:6,Diffuse Color=0;0.5"
 PAIRS: tuple[Pair, ...] = (
     Pair("ward-as", "mitsuba06:ward", "mitsuba06:pbr", _WARD_GRID, fix={"distribution": "as"}),
     Pair("ward-ggx", "mitsuba06:ward", "mitsuba06:pbr", _WARD_GRID, fix={"distribution": "ggx"}),
-    Pair("blender27ward-ward", "blender27:ward", "mitsuba06:ward",
-         "specular_slope=0.03:0.4:10,specular_color=0.02:0.5:6,diffuse_color=0;0.5",
-         source_params={"specular_intensity": 1.0, "diffuse_intensity": 1.0}),
+    Pair(
+        "blender27ward-ward",
+        "blender27:ward",
+        "mitsuba06:ward",
+        "specular_slope=0.03:0.4:10,specular_color=0.02:0.5:6,diffuse_color=0;0.5",
+        source_params={"specular_intensity": 1.0, "diffuse_intensity": 1.0},
+    ),
     Pair("ward-cycles", "mitsuba06:ward", "cycles:glossy", _WARD_GRID, fix={"distribution": "ggx"}),
-    Pair("as-cycles", "mitsuba06:pbr", "cycles:glossy", _ALPHA_F0, source_params={"distribution": "as"},
-         fix={"distribution": "ggx"}),
-    Pair("ggx-cycles", "mitsuba06:pbr", "cycles:glossy", _ALPHA_F0, source_params={"distribution": "ggx"},
-         fix={"distribution": "ggx"}),
-    Pair("ward-gltf-metal", "mitsuba06:ward", "gltf:metal-rough",
-         "alpha=0.03:0.7:10,specularReflectance=0.02:0.98:6", source_params={"diffuseReflectance": 0.0},
-         fix={"metallic": 1.0}),
-    Pair("ward-gltf-dielectric", "mitsuba06:ward", "gltf:metal-rough",
-         "alpha=0.03:0.7:10,specularReflectance=0.02:0.3:6,diffuseReflectance=0.1;0.6",
-         fix={"metallic": 0.0}),
-    Pair("plastic-gltf-dielectric", "mitsuba06:roughplastic", "gltf:metal-rough",
-         "alpha=0.03:0.7:10,intIOR=1.3:2.0:6,diffuseReflectance=0.1;0.6", source_params={"distribution": "ggx"},
-         fix={"metallic": 0.0}),
-    Pair("ggx-gltf-metal", "mitsuba06:pbr", "gltf:metal-rough", "alpha=0.03:0.9:10,F0=0.03:0.98:6",
-         source_params={"distribution": "ggx"}, fix={"metallic": 1.0}),
-    Pair("conductor-cycles", "mitsuba06:roughconductor", "cycles:glossy", "alpha=0.03:0.9:10,k=0.4:14:6",
-         source_params={"distribution": "ggx", "eta": 1.0}, fix={"distribution": "ggx"}),
-    Pair("conductor-gltf-metal", "mitsuba06:roughconductor", "gltf:metal-rough", "alpha=0.03:0.9:10,k=0.4:14:6",
-         source_params={"distribution": "ggx", "eta": 1.0}, fix={"metallic": 1.0}),
+    Pair(
+        "as-cycles",
+        "mitsuba06:pbr",
+        "cycles:glossy",
+        _ALPHA_F0,
+        source_params={"distribution": "as"},
+        fix={"distribution": "ggx"},
+    ),
+    Pair(
+        "ggx-cycles",
+        "mitsuba06:pbr",
+        "cycles:glossy",
+        _ALPHA_F0,
+        source_params={"distribution": "ggx"},
+        fix={"distribution": "ggx"},
+    ),
+    Pair(
+        "ward-gltf-metal",
+        "mitsuba06:ward",
+        "gltf:metal-rough",
+        "alpha=0.03:0.7:10,specularReflectance=0.02:0.98:6",
+        source_params={"diffuseReflectance": 0.0},
+        fix={"metallic": 1.0},
+    ),
+    Pair(
+        "ward-gltf-dielectric",
+        "mitsuba06:ward",
+        "gltf:metal-rough",
+        "alpha=0.03:0.7:10,specularReflectance=0.02:0.3:6,diffuseReflectance=0.1;0.6",
+        fix={"metallic": 0.0},
+    ),
+    Pair(
+        "plastic-gltf-dielectric",
+        "mitsuba06:roughplastic",
+        "gltf:metal-rough",
+        "alpha=0.03:0.7:10,intIOR=1.3:2.0:6,diffuseReflectance=0.1;0.6",
+        source_params={"distribution": "ggx"},
+        fix={"metallic": 0.0},
+    ),
+    Pair(
+        "ggx-gltf-metal",
+        "mitsuba06:pbr",
+        "gltf:metal-rough",
+        "alpha=0.03:0.9:10,F0=0.03:0.98:6",
+        source_params={"distribution": "ggx"},
+        fix={"metallic": 1.0},
+    ),
+    Pair(
+        "conductor-cycles",
+        "mitsuba06:roughconductor",
+        "cycles:glossy",
+        "alpha=0.03:0.9:10,k=0.4:14:6",
+        source_params={"distribution": "ggx", "eta": 1.0},
+        fix={"distribution": "ggx"},
+    ),
+    Pair(
+        "conductor-gltf-metal",
+        "mitsuba06:roughconductor",
+        "gltf:metal-rough",
+        "alpha=0.03:0.9:10,k=0.4:14:6",
+        source_params={"distribution": "ggx", "eta": 1.0},
+        fix={"metallic": 1.0},
+    ),
     # measured with the real renderers
-    Pair("mitsuba3conductor-gltf-metal", "mitsuba3:roughconductor", "gltf:metal-rough",
-         "alpha=0.03:0.9:10,k=0.4:14:6", source_params={"distribution": "ggx", "eta": 1.0}, fix={"metallic": 1.0},
-         source_renderer="mitsuba3"),
-    Pair("ward-cyclesprincipled", "mitsuba06:ward", "cycles:principled", _WARD_GRID.replace(":10,", ":6,"),
-         fix={"distribution": "ggx"}, renderer="cycles"),
-    Pair("cycles-gltf-metal", "cycles:glossy", "gltf:metal-rough", "Roughness=0.15:0.95:10,Color=0.03:0.98:6",
-         source_params={"distribution": "ggx"}, fix={"metallic": 1.0}),
+    Pair(
+        "mitsuba3conductor-gltf-metal",
+        "mitsuba3:roughconductor",
+        "gltf:metal-rough",
+        "alpha=0.03:0.9:10,k=0.4:14:6",
+        source_params={"distribution": "ggx", "eta": 1.0},
+        fix={"metallic": 1.0},
+        source_renderer="mitsuba3",
+    ),
+    Pair(
+        "ward-cyclesprincipled",
+        "mitsuba06:ward",
+        "cycles:principled",
+        _WARD_GRID.replace(":10,", ":6,"),
+        fix={"distribution": "ggx"},
+        renderer="cycles",
+    ),
+    Pair(
+        "cycles-gltf-metal",
+        "cycles:glossy",
+        "gltf:metal-rough",
+        "Roughness=0.15:0.95:10,Color=0.03:0.98:6",
+        source_params={"distribution": "ggx"},
+        fix={"metallic": 1.0},
+    ),
 )
 
 
 # ---------------------------------------------------------------------------------------------
 # nodes and entries
+
 
 def node_key(model: str, options: Mapping[str, Any], values: Mapping[str, Any] | None = None) -> tuple:
     """A library node: the model, its options, and the values of the parameters its spec
@@ -109,8 +176,9 @@ def node_key(model: str, options: Mapping[str, Any], values: Mapping[str, Any] |
 def describe_node(key: tuple) -> str:
     model, opts, held = key
     spec = get_model(model)
-    shown = [f"{k}={v}" for k, v in opts if v != spec.option(k).default] + [f"{k}={v:g}" for k, v in held
-                                                                              if v is not None]
+    shown = [f"{k}={v}" for k, v in opts if v != spec.option(k).default] + [
+        f"{k}={v:g}" for k, v in held if v is not None
+    ]
     return model + (f" ({', '.join(shown)})" if shown else "")
 
 
@@ -157,15 +225,17 @@ def listing(directory: str | Path | None = None) -> list[dict[str, Any]]:
     rows = []
     for e in entries(directory):
         t = e.transform
-        rows.append({
-            "name": e.name,
-            "source": describe_node(e.source),
-            "target": describe_node(e.target),
-            "method": t.method,
-            "heldout_rmse": {k: v.get("heldout_rmse") for k, v in t.errors.items()},
-            "domain": t.domain,
-            "renderers": _renderers(t),
-        })
+        rows.append(
+            {
+                "name": e.name,
+                "source": describe_node(e.source),
+                "target": describe_node(e.target),
+                "method": t.method,
+                "heldout_rmse": {k: v.get("heldout_rmse") for k, v in t.errors.items()},
+                "domain": t.domain,
+                "renderers": _renderers(t),
+            }
+        )
     return rows
 
 
@@ -180,6 +250,7 @@ def _renderers(t: Transform) -> dict[str, str]:
 # ---------------------------------------------------------------------------------------------
 # routes
 
+
 @dataclass
 class Route:
     steps: list[Entry]
@@ -193,12 +264,14 @@ class Route:
     def error(self) -> float:
         """Accumulated held-out error: the root of the summed squares of the steps' errors (errors of
         independent steps, each in the quantity units of its own step)."""
-        return float(np.sqrt(sum(e.error ** 2 for e in self.steps)))
+        return float(np.sqrt(sum(e.error**2 for e in self.steps)))
 
     def describe(self) -> str:
         nodes = [describe_node(self.steps[0].source)] + [describe_node(e.target) for e in self.steps]
-        return " -> ".join(nodes) + f"  ({len(self.steps)} step{'s' * (len(self.steps) > 1)}, " \
+        return (
+            " -> ".join(nodes) + f"  ({len(self.steps)} step{'s' * (len(self.steps) > 1)}, "
             f"accumulated held-out RMSE {self.error:.3g}; " + ", ".join(e.name for e in self.steps) + ")"
+        )
 
 
 def _matches(node: tuple, want: tuple) -> bool:
@@ -206,12 +279,14 @@ def _matches(node: tuple, want: tuple) -> bool:
     the wanted one names them."""
     if node[0] != want[0] or node[1] != want[1]:
         return False
-    return all(w is None or (v is not None and abs(v - w) < 1e-9) for (_, v), (_, w) in zip(node[2], want[2],
-                                                                                               strict=True))
+    return all(
+        w is None or (v is not None and abs(v - w) < 1e-9) for (_, v), (_, w) in zip(node[2], want[2], strict=True)
+    )
 
 
-def route(source: tuple, target: tuple, directory: str | Path | None = None,
-          max_steps: int = MAX_STEPS) -> Route | None:
+def route(
+    source: tuple, target: tuple, directory: str | Path | None = None, max_steps: int = MAX_STEPS
+) -> Route | None:
     """The shortest chain of library transforms from ``source`` to ``target`` (node keys, see
     :func:`node_key`; ties broken by accumulated error), or None."""
     lib = entries(directory)
@@ -219,7 +294,7 @@ def route(source: tuple, target: tuple, directory: str | Path | None = None,
     counter = 0
     for e in lib:
         if _matches(e.source, source):
-            heapq.heappush(heap, (1, e.error ** 2, counter, [e]))
+            heapq.heappush(heap, (1, e.error**2, counter, [e]))
             counter += 1
     seen: set[tuple] = set()
     while heap:
@@ -232,26 +307,36 @@ def route(source: tuple, target: tuple, directory: str | Path | None = None,
         seen.add(end)
         for e in lib:
             if e.source == end and e not in path:
-                heapq.heappush(heap, (n + 1, err2 + e.error ** 2, counter, [*path, e]))
+                heapq.heappush(heap, (n + 1, err2 + e.error**2, counter, [*path, e]))
                 counter += 1
     return None
 
 
-def find_route(source_model: str, source_options: Mapping[str, Any], target_model: str,
-               fix: Mapping[str, Any], directory: str | Path | None = None,
-               source_values: Mapping[str, Any] | None = None) -> Route | None:
+def find_route(
+    source_model: str,
+    source_options: Mapping[str, Any],
+    target_model: str,
+    fix: Mapping[str, Any],
+    directory: str | Path | None = None,
+    source_values: Mapping[str, Any] | None = None,
+) -> Route | None:
     """The route for remapping ``source_model`` (with its options, and ``source_values`` for the
     parameters its spec specialises on) onto ``target_model`` with the user's ``fix`` (options and
     held values)."""
-    return route(node_key(source_model, source_options, source_values or source_options),
-                 node_key(target_model, fix, fix), directory)
+    return route(
+        node_key(source_model, source_options, source_values or source_options),
+        node_key(target_model, fix, fix),
+        directory,
+    )
 
 
 # ---------------------------------------------------------------------------------------------
 # building
 
-def build_pair(pair: Pair, out_dir: str | Path, workers: int | None = None, size: int | None = None,
-               log=print) -> list[Path]:
+
+def build_pair(
+    pair: Pair, out_dir: str | Path, workers: int | None = None, size: int | None = None, log=print
+) -> list[Path]:
     """Sweep one pair and write its transform(s) into ``out_dir``; returns the files written."""
     from matremap.core.models import Material
     from matremap.core.scene import Scene
@@ -264,14 +349,22 @@ def build_pair(pair: Pair, out_dir: str | Path, workers: int | None = None, size
     out.mkdir(parents=True, exist_ok=True)
     source = Material.create(pair.source, dict(pair.source_params))
     scene = Scene(resolution=size) if size else Scene()
-    config = SweepConfig(source=source, target=pair.target, fix=dict(pair.fix), free=pair.free, strategy="two-stage",
-                         scene=scene,
-                         source_renderer=pair.source_renderer, target_renderer=pair.renderer)
+    config = SweepConfig(
+        source=source,
+        target=pair.target,
+        fix=dict(pair.fix),
+        free=pair.free,
+        strategy="two-stage",
+        scene=scene,
+        source_renderer=pair.source_renderer,
+        target_renderer=pair.renderer,
+    )
     grid = parse_grid(pair.grid, source.spec)
     db = out / f".{pair.name}.sqlite"
     with make_executor(workers) as (executor, desc):
-        summary = run_sweep(config, grid, str(db), executor, executor_name=desc,
-                            in_flight=2 * getattr(executor, "slots", 1))
+        summary = run_sweep(
+            config, grid, str(db), executor, executor_name=desc, in_flight=2 * getattr(executor, "slots", 1)
+        )
     log(f"{pair.name}: {describe(summary)}")
     written = []
     directions = [(False, pair.name)] + ([(True, _reverse_name(pair.name))] if pair.reverse else [])
@@ -281,8 +374,10 @@ def build_pair(pair: Pair, out_dir: str | Path, workers: int | None = None, size
         path = out / f"{name}.json"
         t.save(path, force=True)
         written.append(path)
-        log(f"  {name}: {t.describe()}; held-out RMSE "
-            + ", ".join(f"{k} {v['heldout_rmse']:.3g}" for k, v in t.errors.items() if "heldout_rmse" in v))
+        log(
+            f"  {name}: {t.describe()}; held-out RMSE "
+            + ", ".join(f"{k} {v['heldout_rmse']:.3g}" for k, v in t.errors.items() if "heldout_rmse" in v)
+        )
     db.unlink(missing_ok=True)
     for extra in ("-wal", "-shm"):
         Path(str(db) + extra).unlink(missing_ok=True)
@@ -314,5 +409,16 @@ def max_prediction_difference(a: Transform, b: Transform, samples: int = 200, se
     return {k: float(np.max(np.abs(qa[k] - qb[k]))) for k in qa}
 
 
-__all__ = ["LIBRARY_DIR", "PAIRS", "Entry", "Pair", "Route", "build_pair", "entries", "find_route", "listing",
-           "node_key", "route"]
+__all__ = [
+    "LIBRARY_DIR",
+    "PAIRS",
+    "Entry",
+    "Pair",
+    "Route",
+    "build_pair",
+    "entries",
+    "find_route",
+    "listing",
+    "node_key",
+    "route",
+]

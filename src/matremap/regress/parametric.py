@@ -105,8 +105,14 @@ def fit_roughness(x: np.ndarray, y: np.ndarray, holdout: float = 0.2, seed: int 
         raise MatremapError("too few distinct roughness values to fit a polynomial (need at least 2)")
     degree = min(scores, key=lambda d: (scores[d] > 1.02 * min(scores.values()), d))  # simplest within 2 %
     coef = np.polyfit(x, y, degree)
-    return {"kind": "polynomial", "input": "roughness", "coef": coef.tolist(), "degree": degree,
-            "heldout_rmse": scores[degree], "heldout_rmse_by_degree": {str(d): s for d, s in scores.items()}}
+    return {
+        "kind": "polynomial",
+        "input": "roughness",
+        "coef": coef.tolist(),
+        "degree": degree,
+        "heldout_rmse": scores[degree],
+        "heldout_rmse_by_degree": {str(d): s for d, s in scores.items()},
+    }
 
 
 def _fit_k(alpha: np.ndarray, s1: np.ndarray, s2: np.ndarray, terms: int) -> np.ndarray:
@@ -122,15 +128,15 @@ def _fit_k(alpha: np.ndarray, s1: np.ndarray, s2: np.ndarray, terms: int) -> np.
     return best.x
 
 
-def fit_reflectance(alpha: np.ndarray | None, s1: np.ndarray, s2: np.ndarray, holdout: float = 0.2,
-                    seed: int = 0) -> dict[str, Any]:
+def fit_reflectance(
+    alpha: np.ndarray | None, s1: np.ndarray, s2: np.ndarray, holdout: float = 0.2, seed: int = 0
+) -> dict[str, Any]:
     """s2 = k(alpha) s1 per channel; with no source roughness, a constant k."""
     a = None if alpha is None else np.repeat(alpha, s1.shape[-1])
     s1f, s2f = s1.ravel(), s2.ravel()
     if a is None:
         k = float(np.sum(s1f * s2f) / max(np.sum(s1f * s1f), 1e-300))
-        return {"kind": "k_alpha", "input": "reflectance", "roughness": False, "coef": [k],
-                "heldout_rmse_by_form": {}}
+        return {"kind": "k_alpha", "input": "reflectance", "roughness": False, "coef": [k], "heldout_rmse_by_form": {}}
     n = len(alpha)
     train, test = _split(n, holdout, seed)
     ch = s1.shape[-1]
@@ -143,8 +149,15 @@ def fit_reflectance(alpha: np.ndarray | None, s1: np.ndarray, s2: np.ndarray, ho
         coefs[name] = terms
     form = min(scores, key=lambda f: (scores[f] > 1.02 * min(scores.values()), coefs[f]))
     c = _fit_k(a, s1f, s2f, coefs[form])
-    return {"kind": "k_alpha", "input": "reflectance", "roughness": True, "form": form, "coef": c.tolist(),
-            "heldout_rmse": scores[form], "heldout_rmse_by_form": scores}
+    return {
+        "kind": "k_alpha",
+        "input": "reflectance",
+        "roughness": True,
+        "form": form,
+        "coef": c.tolist(),
+        "heldout_rmse": scores[form],
+        "heldout_rmse_by_form": scores,
+    }
 
 
 def fit_diffuse(d1: np.ndarray, d2: np.ndarray, holdout: float = 0.2, seed: int = 0) -> dict[str, Any]:

@@ -73,8 +73,9 @@ def read(spec: ModelSpec, values: Mapping[str, np.ndarray]) -> dict[str, np.ndar
         elif kind == "metal-rough":  # glTF: F0 = mix(dielectric f0, baseColor, metallic)
             base, metallic, ior, specular, tint = names
             m = as_floats(values[metallic])[..., None]
-            f0_d = dielectric_f0(as_floats(values[ior])[..., None], as_floats(values[specular])[..., None],
-                                 _rgb(values[tint], 3))
+            f0_d = dielectric_f0(
+                as_floats(values[ior])[..., None], as_floats(values[specular])[..., None], _rgb(values[tint], 3)
+            )
             out["reflectance"] = f0_d * (1.0 - m) + _rgb(values[base], 3) * m
         else:  # pragma: no cover - specs are checked by tests
             raise ValueError(kind)
@@ -102,8 +103,9 @@ def write(spec: ModelSpec, quantities: Mapping[str, np.ndarray], template: Mappi
     out: dict[str, np.ndarray] = {}
     for p in spec.params:
         v = np.asarray(template[p.name], dtype=float)
-        out[p.name] = np.broadcast_to(v if p.channels == 3 else v.reshape(()), (*shape, 3) if p.channels == 3
-                                      else shape)
+        out[p.name] = np.broadcast_to(
+            v if p.channels == 3 else v.reshape(()), (*shape, 3) if p.channels == 3 else shape
+        )
     driven: list[str] = []
     rp = roughness_param(spec)
     if rp is not None and "roughness" in quantities:
@@ -143,8 +145,9 @@ def write(spec: ModelSpec, quantities: Mapping[str, np.ndarray], template: Mappi
     return out
 
 
-def _write_metal_rough(names: list[str], f0: np.ndarray, diffuse: np.ndarray | None,
-                       out: dict[str, np.ndarray]) -> list[str]:
+def _write_metal_rough(
+    names: list[str], f0: np.ndarray, diffuse: np.ndarray | None, out: dict[str, np.ndarray]
+) -> list[str]:
     """glTF metallic-roughness from F0 and albedo, the template's metallic deciding per texel:
     a metal (metallic >= 0.5) takes F0 as base colour; a dielectric takes the albedo as base colour
     and F0 through specularColor = F0 / f0(ior) / specular (KHR_materials_specular), written only
@@ -157,8 +160,9 @@ def _write_metal_rough(names: list[str], f0: np.ndarray, diffuse: np.ndarray | N
     if not np.all(metal):
         f0_ior = dielectric_f0(np.asarray(out[ior])[..., None], 1.0, 1.0)
         scale = np.maximum(np.asarray(out[specular])[..., None] * f0_ior, 1e-12)
-        current = dielectric_f0(np.asarray(out[ior])[..., None], np.asarray(out[specular])[..., None],
-                                np.asarray(out[tint]))
+        current = dielectric_f0(
+            np.asarray(out[ior])[..., None], np.asarray(out[specular])[..., None], np.asarray(out[tint])
+        )
         if np.max(np.abs(np.where(metal, current, f0) - current)) > 1e-4 * max(float(np.max(current)), 1e-12):
             out[tint] = np.where(metal, np.asarray(out[tint]), f0 / scale)
             driven.append(tint)

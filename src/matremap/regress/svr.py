@@ -42,11 +42,17 @@ def _design(mapping: dict[str, Any], x: dict[str, np.ndarray]) -> tuple[np.ndarr
     if mapping["per_channel"]:
         ch = next(np.asarray(x[n], dtype=float) for n in inputs if n in PER_CHANNEL)
         shape = ch.shape
-        cols = [np.broadcast_to(np.asarray(x[n], dtype=float)[..., None], shape) if n not in PER_CHANNEL
-                else np.asarray(x[n], dtype=float) for n in inputs]
+        cols = [
+            np.broadcast_to(np.asarray(x[n], dtype=float)[..., None], shape)
+            if n not in PER_CHANNEL
+            else np.asarray(x[n], dtype=float)
+            for n in inputs
+        ]
     else:
-        cols = [np.asarray(x[n], dtype=float) if n not in PER_CHANNEL else np.asarray(x[n], dtype=float).mean(axis=-1)
-                for n in inputs]
+        cols = [
+            np.asarray(x[n], dtype=float) if n not in PER_CHANNEL else np.asarray(x[n], dtype=float).mean(axis=-1)
+            for n in inputs
+        ]
         shape = np.broadcast_shapes(*(c.shape for c in cols))
         cols = [np.broadcast_to(c, shape) for c in cols]
     return np.stack([c.reshape(-1) for c in cols], axis=1), shape
@@ -64,12 +70,12 @@ def predict_standardised(mapping: dict[str, Any], z: np.ndarray) -> np.ndarray:
     sv_sq = np.einsum("ij,ij->i", sv, sv)
     step = max(1, CHUNK_ENTRIES // len(sv))
     for i in range(0, len(z), step):
-        zc = z[i:i + step]
+        zc = z[i : i + step]
         d2 = np.einsum("ij,ij->i", zc, zc)[:, None] + sv_sq[None, :] - 2.0 * (zc @ sv.T)
         np.maximum(d2, 0.0, out=d2)
         d2 *= -gamma
         np.exp(d2, out=d2)
-        out[i:i + step] = d2 @ coef + b
+        out[i : i + step] = d2 @ coef + b
     return out
 
 
@@ -127,8 +133,9 @@ def _svr(C: float, gamma: float, epsilon: float):
     return SVR(kernel="rbf", C=C, gamma=gamma, epsilon=epsilon, tol=1e-4, cache_size=100)
 
 
-def fit_svr(X: np.ndarray, y: np.ndarray, inputs: list[str], per_channel: bool, holdout: float = 0.2,
-            seed: int = 0) -> dict[str, Any]:
+def fit_svr(
+    X: np.ndarray, y: np.ndarray, inputs: list[str], per_channel: bool, holdout: float = 0.2, seed: int = 0
+) -> dict[str, Any]:
     """One SVR mapping from material rows: X [n, d] and y [n] (scalar target) or X [n, 3, d] and
     y [n, 3] (per channel). Hyper-parameters by validation RMSE on held-out materials."""
     train, test = _split(len(X), holdout, seed)
@@ -154,25 +161,40 @@ def fit_svr(X: np.ndarray, y: np.ndarray, inputs: list[str], per_channel: bool, 
     y_mean, y_scale = float(ya.mean()), float(ya.std()) or 1.0
     model = _svr(C, gamma, eps).fit((Xa - x_mean) / x_scale, (ya - y_mean) / y_scale)
     mapping = mapping_from_model(model, inputs, per_channel, x_mean, x_scale, y_mean, y_scale)
-    mapping.update({"n_train": len(Xa), "heldout_rmse": best[0],
-                    "heldout_rmse_grid": [[c, g, e, s] for s, c, g, e in scores]})
+    mapping.update(
+        {"n_train": len(Xa), "heldout_rmse": best[0], "heldout_rmse_grid": [[c, g, e, s] for s, c, g, e in scores]}
+    )
     return mapping
 
 
-def mapping_from_model(model: Any, inputs: list[str], per_channel: bool, x_mean: np.ndarray, x_scale: np.ndarray,
-                       y_mean: float, y_scale: float) -> dict[str, Any]:
+def mapping_from_model(
+    model: Any,
+    inputs: list[str],
+    per_channel: bool,
+    x_mean: np.ndarray,
+    x_scale: np.ndarray,
+    y_mean: float,
+    y_scale: float,
+) -> dict[str, Any]:
     """A fitted ``sklearn.svm.SVR`` (RBF kernel, numeric gamma, trained on standardised data) as
     a plain-JSON mapping."""
     if model.kernel != "rbf" or not isinstance(model.gamma, (int, float)):
         raise MatremapError("only RBF SVRs with a numeric gamma can be stored")
     return {
-        "kind": "svr", "kernel": "rbf", "inputs": list(inputs), "per_channel": bool(per_channel),
-        "x_mean": [float(v) for v in x_mean], "x_scale": [float(v) for v in x_scale],
-        "y_mean": float(y_mean), "y_scale": float(y_scale),
+        "kind": "svr",
+        "kernel": "rbf",
+        "inputs": list(inputs),
+        "per_channel": bool(per_channel),
+        "x_mean": [float(v) for v in x_mean],
+        "x_scale": [float(v) for v in x_scale],
+        "y_mean": float(y_mean),
+        "y_scale": float(y_scale),
         "support_vectors": np.asarray(model.support_vectors_, dtype=float).tolist(),
         "dual_coef": np.asarray(model.dual_coef_, dtype=float).ravel().tolist(),
         "intercept": float(model.intercept_[0]),
-        "gamma": float(model.gamma), "C": float(model.C), "epsilon": float(model.epsilon),
+        "gamma": float(model.gamma),
+        "C": float(model.C),
+        "epsilon": float(model.epsilon),
     }
 
 
@@ -198,8 +220,9 @@ def learn(data: TrainingData, holdout: float = 0.2, seed: int = 0) -> dict[str, 
             mappings[name] = fit_svr(X, y[name], inputs, False, holdout, seed)
         else:
             inputs = rough + [name]
-            X = np.stack([np.broadcast_to(x[n][:, None], x[name].shape) if n == "roughness" else x[n]
-                          for n in inputs], axis=-1)
+            X = np.stack(
+                [np.broadcast_to(x[n][:, None], x[name].shape) if n == "roughness" else x[n] for n in inputs], axis=-1
+            )
             mappings[name] = fit_svr(X, y[name], inputs, True, holdout, seed)
     if all(m["kind"] == "constant" for m in mappings.values()):
         raise MatremapError("the sweep varies no source quantity the target can follow: nothing to learn")

@@ -90,9 +90,16 @@ class Transform:
             raise MatremapError(f"{where}: method {method!r} is not one of {', '.join(METHODS)}")
         try:
             src, tgt = d["source"], d["target"]
-            t = cls(method, src["model"], tgt["model"], dict(src.get("options", {})), dict(tgt.get("options", {})),
-                    domain={k: [float(a), float(b)] for k, (a, b) in d.get("domain", {}).items()},
-                    errors=dict(d.get("errors", {})), provenance=dict(d.get("provenance", {})))
+            t = cls(
+                method,
+                src["model"],
+                tgt["model"],
+                dict(src.get("options", {})),
+                dict(tgt.get("options", {})),
+                domain={k: [float(a), float(b)] for k, (a, b) in d.get("domain", {}).items()},
+                errors=dict(d.get("errors", {})),
+                provenance=dict(d.get("provenance", {})),
+            )
         except (KeyError, TypeError, ValueError) as e:
             raise MatremapError(f"{where}: malformed source/target/domain ({e})") from None
         get_model(t.source), get_model(t.target)  # known models
@@ -144,8 +151,9 @@ class Transform:
         for start in range(0, n, CHUNK):
             part = slice(start, min(start + CHUNK, n))
             m = part.stop - part.start
-            chunk = {k: (a[part] if a.shape[0] == n else np.broadcast_to(a[0], (m, *a.shape[1:])))
-                     for k, a in flat.items()}
+            chunk = {
+                k: (a[part] if a.shape[0] == n else np.broadcast_to(a[0], (m, *a.shape[1:]))) for k, a in flat.items()
+            }
             o, off = self._apply(chunk, (m,))
             outside[part] = off
             for k, a in o.items():
@@ -177,9 +185,7 @@ class Transform:
             if np.isfinite(vmin) and np.isfinite(vmax) and lo - slack <= vmin and vmax <= hi + slack:
                 continue
             if not np.all(np.isfinite(probe)):
-                raise MatremapError(
-                    f"{self.source} input {name} holds NaN or infinite values; fix or mask them first"
-                )
+                raise MatremapError(f"{self.source} input {name} holds NaN or infinite values; fix or mask them first")
             off = (v < lo - slack) | (v > hi + slack)
             if off.ndim == outside.ndim:
                 outside |= off
@@ -208,19 +214,35 @@ class Transform:
             steps += t.steps if t.method == "chain" else [t]
         for a, b in zip(steps, steps[1:], strict=False):
             if a.target != b.source:
-                raise MatremapError(f"cannot chain: {a.source} -> {a.target} is followed by {b.source} -> {b.target}; "
-                                    f"the models must link up")
-            clash = {k for k in set(a.target_options) & set(b.source_options)
-                     if a.target_options[k] != b.source_options[k]}
+                raise MatremapError(
+                    f"cannot chain: {a.source} -> {a.target} is followed by {b.source} -> {b.target}; "
+                    f"the models must link up"
+                )
+            clash = {
+                k for k in set(a.target_options) & set(b.source_options) if a.target_options[k] != b.source_options[k]
+            }
             if clash:
                 k = sorted(clash)[0]
-                raise MatremapError(f"cannot chain: {a.target} with {k}={a.target_options[k]} is followed by a "
-                                    f"transform trained on {k}={b.source_options[k]}")
+                raise MatremapError(
+                    f"cannot chain: {a.target} with {k}={a.target_options[k]} is followed by a "
+                    f"transform trained on {k}={b.source_options[k]}"
+                )
         errors = {f"step {i + 1}": {k: v.get("heldout_rmse") for k, v in s.errors.items()} for i, s in enumerate(steps)}
-        return cls("chain", steps[0].source, steps[-1].target, steps[0].source_options, steps[-1].target_options,
-                   domain=steps[0].domain, errors=errors, steps=steps,
-                   provenance={"chained": [f"{s.source} -> {s.target} ({s.method})" for s in steps],
-                               "created": time.strftime("%Y-%m-%dT%H:%M:%S"), "matremap": __version__})
+        return cls(
+            "chain",
+            steps[0].source,
+            steps[-1].target,
+            steps[0].source_options,
+            steps[-1].target_options,
+            domain=steps[0].domain,
+            errors=errors,
+            steps=steps,
+            provenance={
+                "chained": [f"{s.source} -> {s.target} ({s.method})" for s in steps],
+                "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
+                "matremap": __version__,
+            },
+        )
 
     def describe(self) -> str:
         if self.method == "chain":
@@ -294,15 +316,22 @@ def _evaluate(method: str, mapping: dict[str, Any], x: dict[str, np.ndarray]) ->
 
 
 # ---------------------------------------------------------------------------------------------
-def learn_transform(db: str | Path, method: str = "parametric", reverse: bool = False, holdout: float = 0.2,
-                    seed: int = 0, exclude_flagged: bool = True) -> Transform:
+def learn_transform(
+    db: str | Path,
+    method: str = "parametric",
+    reverse: bool = False,
+    holdout: float = 0.2,
+    seed: int = 0,
+    exclude_flagged: bool = True,
+) -> Transform:
     """Learn a transform from a sweep database (``reverse``: the target -> source direction)."""
     from matremap.regress.data import load_training_data
 
     if method not in ("parametric", "svr"):
         raise MatremapError(f"unknown method {method!r}; choose parametric or svr")
-    return transform_from_data(load_training_data(db, reverse=reverse, exclude_flagged=exclude_flagged),
-                               method, holdout, seed)
+    return transform_from_data(
+        load_training_data(db, reverse=reverse, exclude_flagged=exclude_flagged), method, holdout, seed
+    )
 
 
 def transform_from_data(data: Any, method: str = "parametric", holdout: float = 0.2, seed: int = 0) -> Transform:
@@ -322,8 +351,21 @@ def transform_from_data(data: Any, method: str = "parametric", holdout: float = 
         if "heldout_rmse" in m:
             errors[name]["heldout_rmse"] = m["heldout_rmse"]
     return Transform(
-        method, data.source.id, data.target.id, data.source_options, data.target_options, mappings,
-        data.template, data.source_template, domain, errors,
-        {**data.provenance, "created": time.strftime("%Y-%m-%dT%H:%M:%S"), "matremap": __version__,
-         "holdout": holdout, "seed": seed},
+        method,
+        data.source.id,
+        data.target.id,
+        data.source_options,
+        data.target_options,
+        mappings,
+        data.template,
+        data.source_template,
+        domain,
+        errors,
+        {
+            **data.provenance,
+            "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
+            "matremap": __version__,
+            "holdout": holdout,
+            "seed": seed,
+        },
     )

@@ -58,8 +58,14 @@ class ConvertReport:
         return self.outside / self.texels if self.texels else 0.0
 
     def to_dict(self) -> dict[str, Any]:
-        return {"texels": self.texels, "outside": self.outside, "files": [str(f) for f in self.files],
-                "seconds": self.seconds, "model": self.model, "notes": self.notes}
+        return {
+            "texels": self.texels,
+            "outside": self.outside,
+            "files": [str(f) for f in self.files],
+            "seconds": self.seconds,
+            "model": self.model,
+            "notes": self.notes,
+        }
 
 
 # ---------------------------------------------------------------------------------------------
@@ -122,25 +128,33 @@ def _check_transform(map_set: MapSet, t: Transform) -> list[str]:
     notes: list[str] = []
     src = get_model(t.source)
     if src.id != map_set.model:
-        raise MatremapError(f"the transform maps {t.source} -> {t.target} but the maps are for {map_set.model}; "
-                            f"use a transform learned from {map_set.model}")
+        raise MatremapError(
+            f"the transform maps {t.source} -> {t.target} but the maps are for {map_set.model}; "
+            f"use a transform learned from {map_set.model}"
+        )
     for k, v in t.source_options.items():
         given = map_set.constants.get(k)
         if given is None:
             notes.append(f"{k} not given by the map set; taking the transform's {k}={v}")
         elif given != v:
-            raise MatremapError(f"the maps use {k}={given} but the transform was trained on {k}={v}; "
-                                f"use a transform learned for {k}={given}")
+            raise MatremapError(
+                f"the maps use {k}={given} but the transform was trained on {k}={v}; "
+                f"use a transform learned for {k}={given}"
+            )
     first = t.steps[0] if t.method == "chain" else t
     for q, (lo, hi) in first.domain.items():
         for name in source_params(src, q):
             if hi > lo and name not in map_set.maps and name not in map_set.constants:
-                raise MatremapError(f"the map set has no map or value for {name} ({q}), which the transform "
-                                    f"needs; add a *_{_CONVENTION.get(q, q)} map or set params.{name} in "
-                                    f"material.json")
+                raise MatremapError(
+                    f"the map set has no map or value for {name} ({q}), which the transform "
+                    f"needs; add a *_{_CONVENTION.get(q, q)} map or set params.{name} in "
+                    f"material.json"
+                )
             if hi <= lo and name in map_set.maps:
-                notes.append(f"the transform was trained with {q} held at {lo:g}; texels of "
-                             f"{map_set.maps[name].name} with other values count as outside its domain")
+                notes.append(
+                    f"the transform was trained with {q} held at {lo:g}; texels of "
+                    f"{map_set.maps[name].name} with other values count as outside its domain"
+                )
     return notes
 
 
@@ -164,8 +178,10 @@ def _band_values(plan: _Plan, readers: dict[str, MapReader], y0: int, y1: int) -
         if name in spec.param_names and name not in values:
             p = spec.param(name)
             a = np.asarray(v, dtype=np.float32)
-            values[name] = np.broadcast_to(a.reshape(-1)[0] if p.channels == 1 else np.broadcast_to(a, (3,)),
-                                           shape if p.channels == 1 else (*shape, 3))
+            values[name] = np.broadcast_to(
+                a.reshape(-1)[0] if p.channels == 1 else np.broadcast_to(a, (3,)),
+                shape if p.channels == 1 else (*shape, 3),
+            )
     return values
 
 
@@ -220,9 +236,16 @@ def _split(outputs: list[_Output], n: int) -> list[list[_Output]]:
 # ---------------------------------------------------------------------------------------------
 
 
-def convert(map_set: MapSet, transforms: Transform | Sequence[Transform], out_dir: str | os.PathLike,
-            tile_rows: int | None = None, workers: int = 2, progress: Callable[[int, int], None] | None = None,
-            force: bool = False, out_format: str | None = None) -> ConvertReport:
+def convert(
+    map_set: MapSet,
+    transforms: Transform | Sequence[Transform],
+    out_dir: str | os.PathLike,
+    tile_rows: int | None = None,
+    workers: int = 2,
+    progress: Callable[[int, int], None] | None = None,
+    force: bool = False,
+    out_format: str | None = None,
+) -> ConvertReport:
     """Apply a transform (or a chain of them) to every texel of ``map_set``; write the target maps,
     ``outside_domain.png``, a copy of the normal map and ``material.json`` into ``out_dir``.
 
@@ -253,8 +276,11 @@ def convert(map_set: MapSet, transforms: Transform | Sequence[Transform], out_di
         if name is None or m.get("kind") == "constant":
             continue
         srcs = [n for n in source_params(src, q) if n in map_set.info]
-        base = map_set.info[srcs[0]] if srcs else any_info.like(
-            colorspace="srgb" if any_info.integer and q != "roughness" else "linear")
+        base = (
+            map_set.info[srcs[0]]
+            if srcs
+            else any_info.like(colorspace="srgb" if any_info.integer and q != "roughness" else "linear")
+        )
         p = tgt.param(name)
         info = output_info(base.like(channels=p.channels, width=width, height=height, path=""), out_format)
         if out_format is None and info.integer and p.role == "fresnel" and p.bounds[1] > 1.0:
@@ -287,11 +313,25 @@ def convert(map_set: MapSet, transforms: Transform | Sequence[Transform], out_di
         return tmp
 
     try:
-        outputs = [_Output(name, path, tmp_for(path), info,
-                           cost=info.channels * (4.0 if info.format == "png" else 1.0) if name else 0.3)
-                   for name, path, info in planned]
-        plan = _Plan(t.to_dict(), map_set.model, {k: str(v) for k, v in map_set.maps.items()}, dict(map_set.info),
-                     _constants(map_set, t), (height, width), rows)
+        outputs = [
+            _Output(
+                name,
+                path,
+                tmp_for(path),
+                info,
+                cost=info.channels * (4.0 if info.format == "png" else 1.0) if name else 0.3,
+            )
+            for name, path, info in planned
+        ]
+        plan = _Plan(
+            t.to_dict(),
+            map_set.model,
+            {k: str(v) for k, v in map_set.maps.items()},
+            dict(map_set.info),
+            _constants(map_set, t),
+            (height, width),
+            rows,
+        )
         results = _execute(plan, outputs, workers, progress)
         outside = results[0]["outside"]
         clipped: dict[str, int] = {}
@@ -300,8 +340,10 @@ def convert(map_set: MapSet, transforms: Transform | Sequence[Transform], out_di
         for name, n in clipped.items():
             if n:
                 o = next(o for o in outputs if o.param == name)
-                notes.append(f"{n} values of {name} lay outside [0, 1] and were clipped in {o.path.name} "
-                             f"({o.info.pixel_type}); write a float format (out_format='exr') to keep them")
+                notes.append(
+                    f"{n} values of {name} lay outside [0, 1] and were clipped in {o.path.name} "
+                    f"({o.info.pixel_type}); write a float format (out_format='exr') to keep them"
+                )
         # the manifest: driven maps, and every other target parameter as a constant
         first = results[0]["first"]
         constants: dict[str, Any] = dict(last.target_options)
@@ -315,8 +357,12 @@ def convert(map_set: MapSet, transforms: Transform | Sequence[Transform], out_di
             doc["normal"] = final_normal.name
         doc["params"] = constants
         doc["colorspace"] = {o.path.name: o.info.colorspace for o in outputs if o.param}
-        doc["provenance"] = {"source": str(map_set.root), "source_model": map_set.model,
-                             "transform": t.describe(), "outside_domain": {"file": MASK_NAME, "texels": outside}}
+        doc["provenance"] = {
+            "source": str(map_set.root),
+            "source_model": map_set.model,
+            "transform": t.describe(),
+            "outside_domain": {"file": MASK_NAME, "texels": outside},
+        }
         manifest_tmp = tmp_for(out / MANIFEST_NAME)
         Path(manifest_tmp).write_text(json.dumps(doc, indent=1) + "\n")
         normal_tmp = None
@@ -343,8 +389,11 @@ def convert(map_set: MapSet, transforms: Transform | Sequence[Transform], out_di
         raise
     texels = height * width
     if outside:
-        warnings.warn(f"{outside} of {texels} texels ({100 * outside / texels:.1f}%) lie outside the transform's "
-                      f"training domain; {out / MASK_NAME} marks them", stacklevel=2)
+        warnings.warn(
+            f"{outside} of {texels} texels ({100 * outside / texels:.1f}%) lie outside the transform's "
+            f"training domain; {out / MASK_NAME} marks them",
+            stacklevel=2,
+        )
     files = [path for _, path in moves]
     return ConvertReport(texels, outside, files, time.perf_counter() - start, tgt.id, notes)
 
@@ -393,8 +442,13 @@ def _execute(plan: _Plan, outputs: list[_Output], workers: int, progress) -> lis
     return results
 
 
-def convert_paths(maps: str | os.PathLike, transforms: Sequence[str | os.PathLike], out_dir: str | os.PathLike,
-                  model: str | None = None, **kwargs: Any) -> ConvertReport:
+def convert_paths(
+    maps: str | os.PathLike,
+    transforms: Sequence[str | os.PathLike],
+    out_dir: str | os.PathLike,
+    model: str | None = None,
+    **kwargs: Any,
+) -> ConvertReport:
     """:func:`convert` from file names (what ``matremap convert`` calls)."""
     from matremap.svbrdf.textures import load_map_set
 

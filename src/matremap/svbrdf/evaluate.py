@@ -226,8 +226,17 @@ class _MitsubaRender:
 
     label = "Mitsuba 3"
 
-    def __init__(self, model: str, params: Mapping[str, Any], options: Mapping[str, str], geometry: str,
-                 resolution: int, part: str, normal: np.ndarray | None, env: EnvMap) -> None:
+    def __init__(
+        self,
+        model: str,
+        params: Mapping[str, Any],
+        options: Mapping[str, str],
+        geometry: str,
+        resolution: int,
+        part: str,
+        normal: np.ndarray | None,
+        env: EnvMap,
+    ) -> None:
         if geometry != "sphere":
             raise MatremapError(f"{model} is drawn by Mitsuba 3, which renders the sphere only; use --geometry sphere")
         from matremap.renderers.mitsuba3.environment import render_svbrdf_mitsuba3
@@ -238,8 +247,16 @@ class _MitsubaRender:
 
     def render_at(self, directions: np.ndarray, intensities: np.ndarray, rotation: float) -> np.ndarray:
         model, params, options, env = self.args
-        return self._render(model, params, options, env, rotation_deg=rotation, resolution=self.resolution,
-                            part=self.part, normal_map=self.normal)
+        return self._render(
+            model,
+            params,
+            options,
+            env,
+            rotation_deg=rotation,
+            resolution=self.resolution,
+            part=self.part,
+            normal_map=self.normal,
+        )
 
 
 class _CyclesRender:
@@ -248,8 +265,16 @@ class _CyclesRender:
     environment map itself, with the interface of :class:`SVBRDFRender` (the discrete lights are not
     used). The parameters are checked here, before anything renders."""
 
-    def __init__(self, model: str, params: Mapping[str, Any], options: Mapping[str, str], resolution: int,
-                 part: str, normal: np.ndarray | None, env: EnvMap) -> None:
+    def __init__(
+        self,
+        model: str,
+        params: Mapping[str, Any],
+        options: Mapping[str, str],
+        resolution: int,
+        part: str,
+        normal: np.ndarray | None,
+        env: EnvMap,
+    ) -> None:
         from matremap.renderers.cycles.environment import DEFAULT_SPP, render_svbrdf_cycles
         from matremap.renderers.embedded.environment import _check_params, check_normal_map
 
@@ -262,8 +287,16 @@ class _CyclesRender:
 
     def render_at(self, directions: np.ndarray, intensities: np.ndarray, rotation: float) -> np.ndarray:
         model, params, options, env = self.args
-        return self._render(model, params, options, env, rotation_deg=rotation, resolution=self.resolution,
-                            part=self.part, normal_map=self.normal)
+        return self._render(
+            model,
+            params,
+            options,
+            env,
+            rotation_deg=rotation,
+            resolution=self.resolution,
+            part=self.part,
+            normal_map=self.normal,
+        )
 
 
 class _EmbeddedRender(SVBRDFRender):
@@ -276,12 +309,24 @@ class _EmbeddedRender(SVBRDFRender):
 def _cycles_fallback(model: str, why: str) -> None:
     import warnings
 
-    warnings.warn(f"{model} is drawn with matremap's embedded emulation of Cycles, not with Blender Cycles: {why}",
-                  RuntimeWarning, stacklevel=3)
+    warnings.warn(
+        f"{model} is drawn with matremap's embedded emulation of Cycles, not with Blender Cycles: {why}",
+        RuntimeWarning,
+        stacklevel=3,
+    )
 
 
-def _prepare(model: str, params: Mapping[str, Any], options: Mapping[str, str], geometry: str, resolution: int,
-             part: str, normal: np.ndarray | None, env: EnvMap, real: bool = True) -> Any:
+def _prepare(
+    model: str,
+    params: Mapping[str, Any],
+    options: Mapping[str, str],
+    geometry: str,
+    resolution: int,
+    part: str,
+    normal: np.ndarray | None,
+    env: EnvMap,
+    real: bool = True,
+) -> Any:
     """The renderer of a material: real Mitsuba 3 and real Blender Cycles for their own models, else
     the embedded one. ``cycles:glossy`` / ``cycles:diffuse`` fall back to their embedded emulation,
     with a warning, where real Cycles cannot draw them (no bpy venv, or not the sphere); ``real=False``
@@ -315,8 +360,17 @@ def _irradiance_scale(source: SVMaterial, target: SVMaterial, env: EnvMap, light
     imgs = []
     for fam in (fs, ft):
         ref = white_reference(fam)
-        r = _prepare(ref.model, {k: v for k, v in ref.values.items()}, dict(ref.options), "sphere", 32, "full",
-                     None, env, real=False)
+        r = _prepare(
+            ref.model,
+            {k: v for k, v in ref.values.items()},
+            dict(ref.options),
+            "sphere",
+            32,
+            "full",
+            None,
+            env,
+            real=False,
+        )
         imgs.append(r.render_at(d, i, 0.0).astype(float))
     denom = float(np.sum(imgs[0] * imgs[0]))
     if not denom > 0.0:
@@ -387,8 +441,10 @@ def evaluate(
     dssim_img = {p: [] for p in PARTS}
     exposure: dict[str, float] = {}
     # a part whose overrides change nothing (a conductor's specular part) is the full render: reuse it
-    same_as_full = {who: get_model(m.model).part_overrides("specular", m.params) == {}
-                    for who, m in (("source", src), ("target", tgt))}
+    same_as_full = {
+        who: get_model(m.model).part_overrides("specular", m.params) == {}
+        for who, m in (("source", src), ("target", tgt))
+    }
     for k, rot in enumerate(rotations):
         d, i = directional_lights(env, lights, rot)
         drawn: dict[tuple[str, str], np.ndarray] = {}

@@ -46,17 +46,33 @@ from matremap.core.models import ModelSpec, get_model
 from matremap.errors import MatremapError
 
 COLORSPACES = ("srgb", "linear")
-_CS_ALIASES = {"srgb": "srgb", "s-rgb": "srgb", "srgb_texture": "srgb", "linear": "linear", "lin": "linear",
-               "raw": "linear", "data": "linear", "non-color": "linear", "lin_srgb": "linear"}
+_CS_ALIASES = {
+    "srgb": "srgb",
+    "s-rgb": "srgb",
+    "srgb_texture": "srgb",
+    "linear": "linear",
+    "lin": "linear",
+    "raw": "linear",
+    "data": "linear",
+    "non-color": "linear",
+    "lin_srgb": "linear",
+}
 #: OIIO format names -> the extensions matremap writes
 _FORMATS = {"png": "png", "jpeg": "jpg", "tiff": "tif", "openexr": "exr"}
 MAP_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr")
 MANIFESTS = ("material.json", "material.toml")
 CONVENTIONS = ("diffuse", "specular", "roughness", "normal")
 #: output format overrides: name -> (format, pixel type)
-OUT_FORMATS = {"png8": ("png", "uint8"), "png16": ("png", "uint16"), "jpg": ("jpg", "uint8"),
-               "tif8": ("tif", "uint8"), "tif16": ("tif", "uint16"), "tif32": ("tif", "float"),
-               "exr": ("exr", "float"), "exr16": ("exr", "half")}
+OUT_FORMATS = {
+    "png8": ("png", "uint8"),
+    "png16": ("png", "uint16"),
+    "jpg": ("jpg", "uint8"),
+    "tif8": ("tif", "uint8"),
+    "tif16": ("tif", "uint16"),
+    "tif32": ("tif", "float"),
+    "exr": ("exr", "float"),
+    "exr16": ("exr", "half"),
+}
 
 
 def _oiio():
@@ -143,8 +159,10 @@ def _open_input(path: str | os.PathLike):
     inp = oiio.ImageInput.open(str(p), config)
     if inp is None:
         msg = oiio.geterror().strip().splitlines()
-        raise MatremapError(f"cannot read {p}: it is not a readable image ({msg[0] if msg else 'unknown error'}); "
-                            f"re-export it as PNG, JPEG, TIFF or EXR")
+        raise MatremapError(
+            f"cannot read {p}: it is not a readable image ({msg[0] if msg else 'unknown error'}); "
+            f"re-export it as PNG, JPEG, TIFF or EXR"
+        )
     return inp
 
 
@@ -175,8 +193,9 @@ class MapReader:
     The file stays open between bands: sequential formats (PNG, JPEG) are decoded once from top to
     bottom however many bands are read."""
 
-    def __init__(self, path: str | os.PathLike, colorspace: str | None = None, colour: bool = True,
-                 check_finite: bool = True):
+    def __init__(
+        self, path: str | os.PathLike, colorspace: str | None = None, colour: bool = True, check_finite: bool = True
+    ):
         self.path = Path(path)
         self._inp = _open_input(path)
         self.info = _info_from(self._inp, path, colorspace, colour)
@@ -191,8 +210,10 @@ class MapReader:
         raw = self._inp.read_scanlines(0, 0, y0, y1, 0, 0, info.channels, fmt)
         if raw is None or not isinstance(raw, np.ndarray) or raw.size != (y1 - y0) * info.width * info.channels:
             msg = (self._inp.geterror() or oiio.geterror() or "no pixel data").strip().splitlines()
-            raise MatremapError(f"cannot read rows {y0}-{y1 - 1} of {self.path}: the file is corrupt or truncated "
-                                f"({msg[0] if msg else 'read failed'}); re-export it")
+            raise MatremapError(
+                f"cannot read rows {y0}-{y1 - 1} of {self.path}: the file is corrupt or truncated "
+                f"({msg[0] if msg else 'read failed'}); re-export it"
+            )
         raw = raw.reshape(y1 - y0, info.width, info.channels)
         if info.integer:
             return _decode_lut(info.pixel_type, info.colorspace)[raw]
@@ -201,8 +222,10 @@ class MapReader:
             bad = ~np.isfinite(out).all(axis=(1, 2))
             if bad.any():
                 row = y0 + int(np.argmax(bad))
-                raise MatremapError(f"{self.path} holds NaN or infinite texels (first in row {row}); "
-                                    f"replace them with finite values before converting")
+                raise MatremapError(
+                    f"{self.path} holds NaN or infinite texels (first in row {row}); "
+                    f"replace them with finite values before converting"
+                )
         if info.colorspace == "srgb":
             out = srgb_to_linear(np.clip(out, 0.0, 1.0))
         return out
@@ -219,16 +242,18 @@ class MapReader:
         self.close()
 
 
-def read_region(path: str | os.PathLike, y0: int, y1: int, colorspace: str | None = None,
-                colour: bool = True) -> tuple[np.ndarray, ImageInfo]:
+def read_region(
+    path: str | os.PathLike, y0: int, y1: int, colorspace: str | None = None, colour: bool = True
+) -> tuple[np.ndarray, ImageInfo]:
     """Rows ``y0:y1`` of an image as linear float32 ``[y1 - y0, W, C]``. To stream a whole
     sequential file (PNG, JPEG) band after band, keep one :class:`MapReader` open instead."""
     with MapReader(path, colorspace, colour) as r:
         return r.read_rows(y0, y1), r.info
 
 
-def read_image(path: str | os.PathLike, colorspace: str | None = None,
-               colour: bool = True) -> tuple[np.ndarray, ImageInfo]:
+def read_image(
+    path: str | os.PathLike, colorspace: str | None = None, colour: bool = True
+) -> tuple[np.ndarray, ImageInfo]:
     """A whole image as linear float32 ``[H, W, C]`` and its :class:`ImageInfo`. ``colour`` False
     reads 8/16-bit files as data (linear) unless ``colorspace`` says otherwise."""
     with MapReader(path, colorspace, colour) as r:
@@ -270,8 +295,11 @@ class MapWriter:
         if info.integer:
             top = 255 if info.pixel_type == "uint8" else 65535
             self.clipped += int(np.count_nonzero((data < 0) | (data > 1)))
-            enc = linear_to_srgb(data.astype(np.float32, copy=False)) if info.colorspace == "srgb" else \
-                np.clip(data, 0.0, 1.0).astype(np.float32)
+            enc = (
+                linear_to_srgb(data.astype(np.float32, copy=False))
+                if info.colorspace == "srgb"
+                else np.clip(data, 0.0, 1.0).astype(np.float32)
+            )
             enc *= top
             enc += 0.5
             out = enc.astype(np.uint8 if top == 255 else np.uint16)
@@ -327,8 +355,9 @@ def output_info(info: ImageInfo, out_format: str | None) -> ImageInfo:
     cs = info.colorspace if pixel_type in ("uint8", "uint16") else "linear"
     if info.colorspace == "srgb" and not info.integer and pixel_type in ("uint8", "uint16"):
         cs = "srgb"
-    return info.like(format=fmt, pixel_type=pixel_type, colorspace=cs,
-                     compression=info.compression if fmt == info.format else None)
+    return info.like(
+        format=fmt, pixel_type=pixel_type, colorspace=cs, compression=info.compression if fmt == info.format else None
+    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -392,8 +421,10 @@ def _find_by_convention(root: Path) -> dict[str, Path]:
                 found.setdefault(role, []).append(f)
     for role, files in found.items():
         if len(files) > 1:
-            raise MatremapError(f"{root}: several files match *_{role} ({', '.join(f.name for f in files)}); "
-                                f"keep one or bind them in a material.json")
+            raise MatremapError(
+                f"{root}: several files match *_{role} ({', '.join(f.name for f in files)}); "
+                f"keep one or bind them in a material.json"
+            )
     return {role: files[0] for role, files in found.items()}
 
 
@@ -406,8 +437,7 @@ def _read_manifest(path: Path) -> dict[str, Any]:
     return obj
 
 
-def load_map_set(path: str | os.PathLike, model: str | None = None,
-                 params: Mapping[str, Any] | None = None) -> MapSet:
+def load_map_set(path: str | os.PathLike, model: str | None = None, params: Mapping[str, Any] | None = None) -> MapSet:
     """Load a map set from a folder (with a manifest, else by file-name conventions) or from a
     manifest file. ``model`` is required for conventions (and must agree with a manifest);
     ``params`` adds constants/options (a manifest's win)."""
@@ -425,14 +455,16 @@ def load_map_set(path: str | os.PathLike, model: str | None = None,
         obj = _read_manifest(manifest)
         unknown = set(obj) - {"model", "maps", "normal", "params", "colorspace", "size", "notes", "provenance"}
         if unknown:
-            raise MatremapError(f"{manifest}: unknown keys {', '.join(sorted(unknown))}; "
-                                f"use model, maps, normal, params, colorspace")
+            raise MatremapError(
+                f"{manifest}: unknown keys {', '.join(sorted(unknown))}; use model, maps, normal, params, colorspace"
+            )
         mmodel = obj.get("model")
         if not isinstance(mmodel, str):
             raise MatremapError(f"{manifest}: 'model' must name a model, e.g. \"mitsuba06:ward\"")
         if model is not None and get_model(model).id != get_model(mmodel).id:
-            raise MatremapError(f"{manifest} says the maps are for {mmodel}, not {model}; drop the model argument "
-                                f"or fix the manifest")
+            raise MatremapError(
+                f"{manifest} says the maps are for {mmodel}, not {model}; drop the model argument or fix the manifest"
+            )
         model = mmodel
         maps_obj = obj.get("maps", {})
         if not isinstance(maps_obj, dict) or not all(isinstance(v, str) for v in maps_obj.values()):
@@ -449,14 +481,18 @@ def load_map_set(path: str | os.PathLike, model: str | None = None,
         where = str(manifest)
     else:
         if model is None:
-            raise MatremapError(f"{p} has no material.json or material.toml; name the maps' model "
-                                f"(e.g. --model mitsuba06:ward) to use the *_diffuse/*_specular/*_roughness/"
-                                f"*_normal file-name conventions")
+            raise MatremapError(
+                f"{p} has no material.json or material.toml; name the maps' model "
+                f"(e.g. --model mitsuba06:ward) to use the *_diffuse/*_specular/*_roughness/"
+                f"*_normal file-name conventions"
+            )
         spec = get_model(model)
         found = _find_by_convention(root)
         if not found:
-            raise MatremapError(f"{root} holds no maps named *_diffuse, *_specular, *_roughness or *_normal "
-                                f"(png, jpg, tif, exr); rename them or write a material.json")
+            raise MatremapError(
+                f"{root} holds no maps named *_diffuse, *_specular, *_roughness or *_normal "
+                f"(png, jpg, tif, exr); rename them or write a material.json"
+            )
         bind = convention_params(spec)
         files = {}
         for role, f in found.items():
@@ -464,8 +500,9 @@ def load_map_set(path: str | os.PathLike, model: str | None = None,
                 normal = f
                 continue
             if bind[role] is None:
-                raise MatremapError(f"{f.name}: model {spec.id} has no {role} parameter to bind it to; "
-                                    f"bind the maps in a material.json")
+                raise MatremapError(
+                    f"{f.name}: model {spec.id} has no {role} parameter to bind it to; bind the maps in a material.json"
+                )
             files[bind[role]] = f
         where = str(root)
     spec = get_model(model)
@@ -481,13 +518,22 @@ def load_map_set(path: str | os.PathLike, model: str | None = None,
         from matremap.core.models import Material
 
         Material.create(model, constants)  # validates names, ranges and options
-        constants = {k: (v if k in spec.option_names else
-                         (float(np.asarray(v, dtype=float).reshape(-1)[0]) if np.size(v) == 1 else
-                          [float(x) for x in np.asarray(v, dtype=float).reshape(-1)]))
-                     for k, v in constants.items()}
+        constants = {
+            k: (
+                v
+                if k in spec.option_names
+                else (
+                    float(np.asarray(v, dtype=float).reshape(-1)[0])
+                    if np.size(v) == 1
+                    else [float(x) for x in np.asarray(v, dtype=float).reshape(-1)]
+                )
+            )
+            for k, v in constants.items()
+        }
     if not files:
-        raise MatremapError(f"{where} binds no map to a parameter of {model}; add maps or use the file-name "
-                            f"conventions")
+        raise MatremapError(
+            f"{where} binds no map to a parameter of {model}; add maps or use the file-name conventions"
+        )
     ms = MapSet(model, files, root, normal=normal, constants=constants)
     for name, f in files.items():
         cs = cs_given.get(f.name, cs_given.get(name))
@@ -498,12 +544,15 @@ def load_map_set(path: str | os.PathLike, model: str | None = None,
     if normal is not None:
         ninfo = image_info(normal, cs_given.get(normal.name, "linear"), colour=False)
         if ninfo.channels not in (3, 4):
-            raise MatremapError(f"normal map {normal.name} has {ninfo.channels} channel(s); a tangent-space normal "
-                                f"map needs 3 (RGB)")
+            raise MatremapError(
+                f"normal map {normal.name} has {ninfo.channels} channel(s); a tangent-space normal map needs 3 (RGB)"
+            )
         sizes["normal map"] = (ninfo.height, ninfo.width)
     if len(set(sizes.values())) > 1:
-        listing = ", ".join(f"{files[k].name if k in files else normal.name} {h}x{w}"  # type: ignore[union-attr]
-                            for k, (h, w) in sizes.items())
+        listing = ", ".join(
+            f"{files[k].name if k in files else normal.name} {h}x{w}"  # type: ignore[union-attr]
+            for k, (h, w) in sizes.items()
+        )
         raise MatremapError(f"the maps differ in size ({listing}); resample them to one size")
     ms.size = next(iter(sizes.values()))
     return ms
@@ -516,14 +565,16 @@ def _check_channels(spec: ModelSpec, name: str, info: ImageInfo, notes: list[str
         if info.channels == 4:
             notes.append(f"{fname}: alpha channel ignored")
         elif info.channels not in (1, 3):
-            raise MatremapError(f"{fname} has {info.channels} channels but {name} is RGB; save it as RGB (3 channels) "
-                                f"or grey (1)")
+            raise MatremapError(
+                f"{fname} has {info.channels} channels but {name} is RGB; save it as RGB (3 channels) or grey (1)"
+            )
     else:
         if info.channels in (3, 4):
             notes.append(f"{fname}: {name} is a scalar; using the first channel of this RGB file (it must be grey)")
         elif info.channels != 1:
-            raise MatremapError(f"{fname} has {info.channels} channels but {name} is a scalar; save it as a grey "
-                                f"(1-channel) image")
+            raise MatremapError(
+                f"{fname} has {info.channels} channels but {name} is a scalar; save it as a grey (1-channel) image"
+            )
 
 
 def map_values(spec: ModelSpec, name: str, band: np.ndarray, path: Path, y0: int) -> np.ndarray:
@@ -541,8 +592,13 @@ def map_values(spec: ModelSpec, name: str, band: np.ndarray, path: Path, y0: int
     return band[..., 0]
 
 
-def save_manifest(out_dir: str | os.PathLike, map_set: MapSet, extra: Mapping[str, Any] | None = None,
-                  name: str = "material.json", force: bool = True) -> Path:
+def save_manifest(
+    out_dir: str | os.PathLike,
+    map_set: MapSet,
+    extra: Mapping[str, Any] | None = None,
+    name: str = "material.json",
+    force: bool = True,
+) -> Path:
     """Write ``material.json`` describing ``map_set`` (file names relative to ``out_dir``)."""
     out = Path(out_dir)
     doc = manifest_dict(map_set, out)

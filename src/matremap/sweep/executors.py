@@ -109,8 +109,12 @@ def _dask_executor(scheduler: str | None, dask_local: int | None) -> Iterator[tu
             if dask_local < 1:
                 raise MatremapError(f"--dask-local must be at least 1, got {dask_local}")
             cluster = LocalCluster(
-                n_workers=dask_local, threads_per_worker=1, processes=True, host="127.0.0.1",
-                dashboard_address=None, silence_logs=40,
+                n_workers=dask_local,
+                threads_per_worker=1,
+                processes=True,
+                host="127.0.0.1",
+                dashboard_address=None,
+                silence_logs=40,
             )
             client = Client(cluster)
             desc = f"Dask LocalCluster with {dask_local} workers ({cluster.scheduler_address})"

@@ -182,11 +182,14 @@ def load_grid_toml(path: Path, spec: ModelSpec) -> Grid:
         elif isinstance(entry, dict):
             unknown = set(entry) - {"start", "stop", "count", "spacing"}
             if unknown or not {"start", "stop", "count"} <= set(entry):
-                raise MatremapError(
-                    f"grid file {path}: {label} needs start, stop, count (and optionally spacing)"
-                )
-            values = _range(float(entry["start"]), float(entry["stop"]), int(entry["count"]),
-                            str(entry.get("spacing", "linear")), label)
+                raise MatremapError(f"grid file {path}: {label} needs start, stop, count (and optionally spacing)")
+            values = _range(
+                float(entry["start"]),
+                float(entry["stop"]),
+                int(entry["count"]),
+                str(entry.get("spacing", "linear")),
+                label,
+            )
         else:
             values = (entry,)
         axes.append(_axis(spec, label, values))

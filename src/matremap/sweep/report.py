@@ -111,8 +111,11 @@ def round_trip_stats(rows: Sequence[Mapping[str, Any]], grid: Grid | Mapping[str
     for axis in grid.axes:
         if not all(_is_number(v) for v in axis.values):
             continue
-        samples = [(r["key"], float(r["swept"][axis.label]), r["back"].get(axis.name))
-                   for r in done if axis.label in (r.get("swept") or {}) and r["back"].get(axis.name) is not None]
+        samples = [
+            (r["key"], float(r["swept"][axis.label]), r["back"].get(axis.name))
+            for r in done
+            if axis.label in (r.get("swept") or {}) and r["back"].get(axis.name) is not None
+        ]
         if not samples:
             continue
         if axis.channel is not None:
@@ -187,13 +190,16 @@ def summary(data: SweepData, skipped: Sequence[str] = (), written: Sequence[Path
     swept = {ax.name for ax in grid.axes} if grid is not None else set()
     opts = {k: v for k, v in src["params"].items() if isinstance(v, str) and k not in swept}
     tgt = cfg["target"]
-    extras = [f"fix {', '.join(f'{k}={v}' for k, v in tgt.get('fix', {}).items())}" if tgt.get("fix") else "",
-              f"free {', '.join(tgt['free'])}" if tgt.get("free") else ""]
+    extras = [
+        f"fix {', '.join(f'{k}={v}' for k, v in tgt.get('fix', {}).items())}" if tgt.get("fix") else "",
+        f"free {', '.join(tgt['free'])}" if tgt.get("free") else "",
+    ]
     modes = [m for m, on in (("continuation", cfg.get("continuation")), ("round trip", cfg.get("round_trip"))) if on]
     lines.append(
         f"  {src['model']}{_opts(opts)} -> {tgt['model']}"
         + (f" ({'; '.join(e for e in extras if e)})" if any(extras) else "")
-        + f", strategy {cfg.get('strategy')}" + (f", {', '.join(modes)}" if modes else "")
+        + f", strategy {cfg.get('strategy')}"
+        + (f", {', '.join(modes)}" if modes else "")
     )
     ok, failed = a.ok_rows, a.failed_rows
     if grid is not None:
@@ -220,30 +226,41 @@ def summary(data: SweepData, skipped: Sequence[str] = (), written: Sequence[Path
 
     losses = np.array([r["loss"] for r in ok if r.get("loss") is not None], dtype=float)
     if losses.size:
-        lines.append(f"  loss (relative RMSE): median {np.median(losses):.4g}, p95 {np.percentile(losses, 95):.4g}, "
-                     f"max {losses.max():.4g}")
+        lines.append(
+            f"  loss (relative RMSE): median {np.median(losses):.4g}, p95 {np.percentile(losses, 95):.4g}, "
+            f"max {losses.max():.4g}"
+        )
     renders = [r["renders"] for r in ok if r.get("renders") is not None]
     seconds = [r["seconds"] for r in a.rows if r.get("seconds") is not None]
     if renders or seconds:
-        lines.append(f"  per fit: median {np.median(renders) if renders else float('nan'):.0f} renders, "
-                     f"median {np.median(seconds) if seconds else float('nan'):.3g} s")
+        lines.append(
+            f"  per fit: median {np.median(renders) if renders else float('nan'):.0f} renders, "
+            f"median {np.median(seconds) if seconds else float('nan'):.3g} s"
+        )
     lines.append(f"  warm-started: {sum(1 for r in ok if r.get('warm'))} of {len(ok)}")
 
     trips = round_trip_stats(data.rows, grid)
     if trips:
-        lines.append("  round trip, recovered vs original (least-squares line with intercept; "
-                     "R² of that line, and of y = x):")
+        lines.append(
+            "  round trip, recovered vs original (least-squares line with intercept; R² of that line, and of y = x):"
+        )
         for t in trips.values():
-            lines.append(f"    {t.param}: slope {t.slope:.4f}, intercept {t.intercept:+.4g}, R² {t.r2:.4f} "
-                         f"(y = x: {t.r2_identity:.4f}), n = {t.n}")
+            lines.append(
+                f"    {t.param}: slope {t.slope:.4f}, intercept {t.intercept:+.4g}, R² {t.r2:.4f} "
+                f"(y = x: {t.r2_identity:.4f}), n = {t.n}"
+            )
         unflagged = [r for r in data.rows if not a.flags.get(r["key"])]
         if len(unflagged) < len(data.rows):
             clean = round_trip_stats(unflagged, grid)
-            lines.append(f"    without the {len(data.rows) - len(unflagged)} flagged points (as the paper filters "
-                         "unstable cases):")
+            lines.append(
+                f"    without the {len(data.rows) - len(unflagged)} flagged points (as the paper filters "
+                "unstable cases):"
+            )
             for t in clean.values():
-                lines.append(f"    {t.param}: slope {t.slope:.4f}, intercept {t.intercept:+.4g}, R² {t.r2:.4f} "
-                             f"(y = x: {t.r2_identity:.4f}), n = {t.n}")
+                lines.append(
+                    f"    {t.param}: slope {t.slope:.4f}, intercept {t.intercept:+.4g}, R² {t.r2:.4f} "
+                    f"(y = x: {t.r2_identity:.4f}), n = {t.n}"
+                )
         back = [r["back_loss"] for r in ok if r.get("back_loss") is not None]
         if back:
             lines.append(f"    back-fit loss: median {np.median(back):.4g}, max {max(back):.4g}")
@@ -334,8 +351,9 @@ def _plan(data: SweepData) -> tuple[list[tuple[str, Callable]], list[str]]:
     elif not have_ok:
         skipped.append("roughness.png skipped: no finished point on the grid")
     else:
-        plots.append(("roughness.png", lambda fig: _curves(fig, data, rough_axis, spec_axis, rough_param, "plasma",
-                                                           thin=True)))
+        plots.append(
+            ("roughness.png", lambda fig: _curves(fig, data, rough_axis, spec_axis, rough_param, "plasma", thin=True))
+        )
     if any(r["status"] == "ok" and r.get("loss") is not None for r in a.rows):
         plots.append(("loss.png", lambda fig: _loss_plot(fig, data, spec_axis, rough_axis)))
     else:
@@ -363,8 +381,15 @@ def _flag_legend(ax, n: int) -> None:  # noqa: ANN001
         ax.legend(loc="best", fontsize="small")
 
 
-def _curves(fig, data: SweepData, x_axis: int, colour_axis: int | None, param: str, cmap_name: str,  # noqa: ANN001
-            thin: bool = False) -> None:
+def _curves(
+    fig,
+    data: SweepData,
+    x_axis: int,
+    colour_axis: int | None,
+    param: str,
+    cmap_name: str,  # noqa: ANN001
+    thin: bool = False,
+) -> None:
     """Target ``param`` against the source values of ``x_axis``: one curve per other grid line,
     coloured by the value of ``colour_axis``."""
     from matplotlib import colormaps
@@ -416,8 +441,11 @@ def _edges(v: np.ndarray) -> np.ndarray:
     """Cell edges around the axis values (midpoints; geometric midpoints on log-spaced axes)."""
     if len(v) == 1:
         return np.array([v[0] - 0.5, v[0] + 0.5]) if v[0] == 0 else np.array([v[0] * 0.9, v[0] * 1.1])
-    logs = np.all(v > 0) and np.allclose(v[1:] / v[:-1], v[1] / v[0], rtol=1e-6) and not np.allclose(
-        np.diff(v), v[1] - v[0], rtol=1e-6)
+    logs = (
+        np.all(v > 0)
+        and np.allclose(v[1:] / v[:-1], v[1] / v[0], rtol=1e-6)
+        and not np.allclose(np.diff(v), v[1] - v[0], rtol=1e-6)
+    )
     w = np.log(v) if logs else v
     mid = (w[1:] + w[:-1]) / 2
     e = np.concatenate([[w[0] - (mid[0] - w[0])], mid, [w[-1] + (w[-1] - mid[-1])]])
@@ -460,8 +488,8 @@ def _loss_plot(fig, data: SweepData, spec_axis: int | None, rough_axis: int | No
     flagged = np.moveaxis(flagged, order, list(range(len(order))))
     if others:
         with np.errstate(all="ignore"):
-            loss = np.fmax.reduce(loss.reshape(-1, *loss.shape[len(others):]), axis=0)
-            flagged = np.any(flagged.reshape(-1, *flagged.shape[len(others):]), axis=0)
+            loss = np.fmax.reduce(loss.reshape(-1, *loss.shape[len(others) :]), axis=0)
+            flagged = np.any(flagged.reshape(-1, *flagged.shape[len(others) :]), axis=0)
         reduced_note = f" (largest over {', '.join(grid.axes[i].label for i in others)})"
     finite = loss[np.isfinite(loss)]
     x = np.asarray(grid.axes[xa].values, dtype=float)
@@ -508,8 +536,14 @@ def _round_trip_plot(fig, data: SweepData, trips: Mapping[str, RoundTrip]) -> No
         ax.plot([lo, hi], [lo, hi], "--", color="0.5", lw=1, label="y = x")
         if math.isfinite(t.slope):
             xs = np.array([t.original.min(), t.original.max()])
-            ax.plot(xs, t.slope * xs + t.intercept, "-", color="C1", lw=1.2,
-                    label=f"slope {t.slope:.3f}, R\u00b2 {t.r2:.3f}")
+            ax.plot(
+                xs,
+                t.slope * xs + t.intercept,
+                "-",
+                color="C1",
+                lw=1.2,
+                label=f"slope {t.slope:.3f}, R\u00b2 {t.r2:.3f}",
+            )
         sel = np.array([a.is_flagged(key) for key in t.keys], dtype=bool)
         if np.any(sel):
             ax.plot(t.original[sel], t.recovered[sel], label=f"flagged ({int(sel.sum())})", **FLAG_STYLE)
@@ -602,8 +636,10 @@ def export_table(db: str | Path, path: Path) -> int:
                     w.writerow(["" if v is None else repr(v) if isinstance(v, float) else v for v in row])
         else:
             types = {"float": pa.float64(), "int": pa.int64(), "str": pa.string(), "bool": pa.bool_()}
-            columns = {n: pa.array([row[i] for row in rows], type=types[k])
-                       for i, (n, k) in enumerate(zip(names, kinds, strict=True))}
+            columns = {
+                n: pa.array([row[i] for row in rows], type=types[k])
+                for i, (n, k) in enumerate(zip(names, kinds, strict=True))
+            }
             with atomic_output(path) as tmp:
                 pq.write_table(pa.table(columns), tmp)
     except OSError as e:

@@ -88,8 +88,9 @@ class SweepConfig:
 # Work (runs in workers: plain data in, plain data out)
 
 
-def fit_line(config: dict[str, Any], points: list[tuple[str, dict[str, Any], dict[str, Any]]],
-             warm: dict[str, Any] | None) -> list[dict[str, Any]]:
+def fit_line(
+    config: dict[str, Any], points: list[tuple[str, dict[str, Any], dict[str, Any]]], warm: dict[str, Any] | None
+) -> list[dict[str, Any]]:
     """Fit the points of one grid line in order; ``points`` are (key, swept values, source params).
     With continuation each point starts from the previous result (``warm`` for the first)."""
     limit_blas_threads()
@@ -101,15 +102,37 @@ def fit_line(config: dict[str, Any], points: list[tuple[str, dict[str, Any], dic
         try:
             source = Material.create(cfg.source.model, source_params)
             start = warm if cfg.continuation else None
-            result = fit(source, cfg.target, cfg.strategy, cfg.scene, cfg.source_renderer, cfg.target_renderer,
-                         fix=cfg.fix, free=cfg.free, start=start)
+            result = fit(
+                source,
+                cfg.target,
+                cfg.strategy,
+                cfg.scene,
+                cfg.source_renderer,
+                cfg.target_renderer,
+                fix=cfg.fix,
+                free=cfg.free,
+                start=start,
+            )
             row.update(
-                target=result.params, loss=result.loss, renders=result.renders, status="ok", message="",
-                stages=[s.to_dict() for s in result.stages], warnings=result.warnings, warm=int(start is not None),
+                target=result.params,
+                loss=result.loss,
+                renders=result.renders,
+                status="ok",
+                message="",
+                stages=[s.to_dict() for s in result.stages],
+                warnings=result.warnings,
+                warm=int(start is not None),
             )
             if cfg.round_trip:
-                back = fit(result.target, cfg.source.model, cfg.strategy, cfg.scene, cfg.target_renderer,
-                           cfg.source_renderer, fix=dict(cfg.source.options))
+                back = fit(
+                    result.target,
+                    cfg.source.model,
+                    cfg.strategy,
+                    cfg.scene,
+                    cfg.target_renderer,
+                    cfg.source_renderer,
+                    fix=dict(cfg.source.options),
+                )
                 row.update(back=back.params, back_loss=back.loss, renders=result.renders + back.renders)
             warm = {k: v for k, v in result.params.items() if k not in cfg.fix}
         except Exception as e:  # noqa: BLE001 - a failed point is recorded, the sweep goes on
@@ -246,9 +269,11 @@ __all__ = ["SweepConfig", "SweepSummary", "check_grid_for", "fit_line", "plan", 
 
 def describe(summary: SweepSummary) -> str:
     state = "interrupted" if summary.interrupted else "done"
-    return (f"{state}: {summary.done} points fitted ({summary.failed} failed), {summary.skipped} already in the "
-            f"database, {summary.total} in the grid; {summary.seconds:.1f} s, {summary.rate:.1f} points/s "
-            f"on {summary.executor}")
+    return (
+        f"{state}: {summary.done} points fitted ({summary.failed} failed), {summary.skipped} already in the "
+        f"database, {summary.total} in the grid; {summary.seconds:.1f} s, {summary.rate:.1f} points/s "
+        f"on {summary.executor}"
+    )
 
 
 def sources_of(grid: Grid, base: Material) -> Sequence[Material]:

@@ -199,8 +199,7 @@ class Analysis:
 # Entry point
 
 
-def analyse(rows: Sequence[Mapping[str, Any]], grid: Grid | Mapping[str, Any] | None,
-            config: Any) -> Analysis:
+def analyse(rows: Sequence[Mapping[str, Any]], grid: Grid | Mapping[str, Any] | None, config: Any) -> Analysis:
     """Flag the points of a sweep (see the module docstring for the rules).
 
     ``grid`` is a :class:`Grid` or its JSON form (``store.grid``), or None when unknown (then no
@@ -245,8 +244,12 @@ def analyse(rows: Sequence[Mapping[str, Any]], grid: Grid | Mapping[str, Any] | 
 
 def _config_parts(config: Any) -> tuple[str, str, set[str], set[str]]:
     if isinstance(config, Mapping):
-        return (config["source"]["model"], config["target"]["model"], set(config["target"].get("fix") or {}),
-                set(config["target"].get("free") or ()))
+        return (
+            config["source"]["model"],
+            config["target"]["model"],
+            set(config["target"].get("fix") or {}),
+            set(config["target"].get("free") or ()),
+        )
     return config.source.model, config.target, set(config.fix), set(config.free)
 
 
@@ -298,8 +301,9 @@ def _channels(value: Any) -> list[float]:
 # Per-point tests
 
 
-def _value_tests(row: Mapping[str, Any], target: ModelSpec, tested: Iterable[str], reasons: list[str],
-                 details: list[str]) -> None:
+def _value_tests(
+    row: Mapping[str, Any], target: ModelSpec, tested: Iterable[str], reasons: list[str], details: list[str]
+) -> None:
     values = row["target"]
     optimised = _optimised(row)
     for name in tested:
@@ -320,8 +324,9 @@ def _value_tests(row: Mapping[str, Any], target: ModelSpec, tested: Iterable[str
             at_lo = []  # a black part is an answer, not a stuck fit
         if at_lo or at_hi:
             reasons.append(f"bound:{name}")
-            details.append(f"{name} = {_fmt(chans)} at its {'lower' if at_lo else 'upper'} bound "
-                           f"{lo if at_lo else hi:g}")
+            details.append(
+                f"{name} = {_fmt(chans)} at its {'lower' if at_lo else 'upper'} bound {lo if at_lo else hi:g}"
+            )
 
 
 def _optimised(row: Mapping[str, Any]) -> set[str] | None:
@@ -336,8 +341,7 @@ def _optimised(row: Mapping[str, Any]) -> set[str] | None:
     return out
 
 
-def _loss_test(ok: Sequence[Mapping[str, Any]], flags: dict[str, list[str]],
-               details: dict[str, list[str]]) -> None:
+def _loss_test(ok: Sequence[Mapping[str, Any]], flags: dict[str, list[str]], details: dict[str, list[str]]) -> None:
     losses = [(r["key"], float(r["loss"])) for r in ok if r.get("loss") is not None and r["loss"] > 0]
     if len(losses) < 3:
         return
@@ -361,9 +365,16 @@ def _fmt(chans: Sequence[float]) -> str:
 # Neighbour (jump) tests
 
 
-def _jump_tests(ok: Sequence[Mapping[str, Any]], grid: Grid, index: Mapping[str, tuple[int, ...]],
-                target: ModelSpec, tested: Sequence[str], flags: dict[str, list[str]],
-                details: dict[str, list[str]], notes: list[str]) -> None:
+def _jump_tests(
+    ok: Sequence[Mapping[str, Any]],
+    grid: Grid,
+    index: Mapping[str, tuple[int, ...]],
+    target: ModelSpec,
+    tested: Sequence[str],
+    flags: dict[str, list[str]],
+    details: dict[str, list[str]],
+    notes: list[str],
+) -> None:
     on_grid = [r for r in ok if r["key"] in index]
     keys = np.full(grid.shape, None, dtype=object)
     for r in on_grid:
@@ -374,8 +385,9 @@ def _jump_tests(ok: Sequence[Mapping[str, Any]], grid: Grid, index: Mapping[str,
             if len(axis.values) >= JUMP_MIN_POINTS:
                 numeric_axes.append(a)
             else:
-                notes.append(f"axis {axis.label} has {len(axis.values)} values: too few for jump tests "
-                             f"(needs {JUMP_MIN_POINTS})")
+                notes.append(
+                    f"axis {axis.label} has {len(axis.values)} values: too few for jump tests (needs {JUMP_MIN_POINTS})"
+                )
         else:
             notes.append(f"axis {axis.label} is an option: no jump tests along it")
     for name in tested:
@@ -400,8 +412,9 @@ def _jump_tests(ok: Sequence[Mapping[str, Any]], grid: Grid, index: Mapping[str,
                     for i, kind, size in found:
                         key = moved_keys[other][i]
                         flags[key].append(f"jump:{name}")
-                        details[key].append(f"{label} {kind} along {grid.axes[a].label} "
-                                            f"({size:.3g}{' in log' if use_log else ''})")
+                        details[key].append(
+                            f"{label} {kind} along {grid.axes[a].label} ({size:.3g}{' in log' if use_log else ''})"
+                        )
 
 
 def is_grey(value: Any, rtol: float = GREY_RTOL) -> bool:

@@ -41,8 +41,23 @@ CREATE TABLE IF NOT EXISTS points (
 );
 """
 
-COLUMNS = ("key", "swept", "source", "target", "loss", "renders", "seconds", "status", "message", "stages",
-           "warnings", "warm", "back", "back_loss", "finished")
+COLUMNS = (
+    "key",
+    "swept",
+    "source",
+    "target",
+    "loss",
+    "renders",
+    "seconds",
+    "status",
+    "message",
+    "stages",
+    "warnings",
+    "warm",
+    "back",
+    "back_loss",
+    "finished",
+)
 JSON_COLUMNS = ("swept", "source", "target", "stages", "warnings", "back")
 
 
@@ -111,8 +126,11 @@ class SweepStore:
                 conn.executescript(_SCHEMA)
                 conn.executemany(
                     "INSERT INTO meta (key, value) VALUES (?, ?)",
-                    [("schema", json.dumps(SCHEMA_VERSION)), ("config", json.dumps(config, sort_keys=True)),
-                     ("created", json.dumps(time.time()))],
+                    [
+                        ("schema", json.dumps(SCHEMA_VERSION)),
+                        ("config", json.dumps(config, sort_keys=True)),
+                        ("created", json.dumps(time.time())),
+                    ],
                 )
         except sqlite3.Error as e:
             raise MatremapError(f"cannot create database {p}: {e}") from None
@@ -163,10 +181,9 @@ class SweepStore:
         """Insert finished points in one transaction; a point already present is left as it is."""
         values = []
         for r in rows:
-            values.append(tuple(
-                json.dumps(r.get(c)) if c in JSON_COLUMNS and r.get(c) is not None else r.get(c)
-                for c in COLUMNS
-            ))
+            values.append(
+                tuple(json.dumps(r.get(c)) if c in JSON_COLUMNS and r.get(c) is not None else r.get(c) for c in COLUMNS)
+            )
         with self.conn:
             cur = self.conn.executemany(
                 f"INSERT OR IGNORE INTO points ({', '.join(COLUMNS)}) VALUES ({', '.join('?' * len(COLUMNS))})",

@@ -54,14 +54,16 @@ def _renderer(renderer: CyclesRenderer | None) -> CyclesRenderer:
     return _shared
 
 
-def _split_params(spec: ModelSpec, params: Mapping[str, Any],
-                  overrides: Mapping[str, Any]) -> tuple[dict[str, list[float]], dict[str, np.ndarray]]:
+def _split_params(
+    spec: ModelSpec, params: Mapping[str, Any], overrides: Mapping[str, Any]
+) -> tuple[dict[str, list[float]], dict[str, np.ndarray]]:
     """Constants as lists (for the worker's JSON) and textures as float32 [h, w, 3] images."""
     from matremap.renderers.embedded.environment import split_texture_params
 
     consts, textures = split_texture_params(spec, params, overrides)
-    images = {k: (t if t.ndim == 3 else np.repeat(t[..., None], 3, axis=2)).astype(np.float32)
-              for k, t in textures.items()}
+    images = {
+        k: (t if t.ndim == 3 else np.repeat(t[..., None], 3, axis=2)).astype(np.float32) for k, t in textures.items()
+    }
     return {k: [float(x) for x in v] for k, v in consts.items() if k not in textures}, images
 
 
@@ -120,9 +122,12 @@ def render_svbrdf_cycles(
         request = {
             "op": "svbrdf",
             "dir": d,
-            "scene": {"resolution": res, "fov": float(scene.effective_fov),
-                      "camera_distance": float(scene.camera_distance),
-                      "sphere_radius": float(scene.sphere_radius)},
+            "scene": {
+                "resolution": res,
+                "fov": float(scene.effective_fov),
+                "camera_distance": float(scene.camera_distance),
+                "sphere_radius": float(scene.sphere_radius),
+            },
             "geometry": geometry,
             "model": spec.id,
             "options": dict(opts),

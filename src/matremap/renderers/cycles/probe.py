@@ -69,16 +69,35 @@ PRINCIPLED = register(
         id="cycles:principled",
         summary="Principled BSDF (Blender 5.0 Cycles; multiscatter GGX, F82-tint metals); real Cycles only",
         params=(
-            ParamSpec("Base Color", "diffuse", (0.8,) * 3, (0.0, 1.0), channels=3,
-                      doc="diffuse albedo; metal reflectance at normal incidence"),
+            ParamSpec(
+                "Base Color",
+                "diffuse",
+                (0.8,) * 3,
+                (0.0, 1.0),
+                channels=3,
+                doc="diffuse albedo; metal reflectance at normal incidence",
+            ),
             ParamSpec("Metallic", "specular", 0.0, (0.0, 1.0), fit=False, doc="metallicity (held at 0 in fits)"),
             ParamSpec("Roughness", "roughness", 0.5, (0.0, 1.0), doc="alpha = Roughness^2"),
             ParamSpec("IOR", "fresnel", 1.5, (1.0, 4.0), doc="dielectric IOR (fitted: sets the specular level)"),
-            ParamSpec("Specular IOR Level", "specular", 0.5, (0.0, 1.0), fit=False,
-                      doc="scales the dielectric F0 (0.5 = the IOR's own; 0 = no specular); held at 0.5 in "
-                          "fits, where IOR sets the level"),
-            ParamSpec("Specular Tint", "other", (1.0,) * 3, (0.0, 1.0), channels=3, fit=False,
-                      doc="dielectric specular colour (held at white in fits)"),
+            ParamSpec(
+                "Specular IOR Level",
+                "specular",
+                0.5,
+                (0.0, 1.0),
+                fit=False,
+                doc="scales the dielectric F0 (0.5 = the IOR's own; 0 = no specular); held at 0.5 in "
+                "fits, where IOR sets the level",
+            ),
+            ParamSpec(
+                "Specular Tint",
+                "other",
+                (1.0,) * 3,
+                (0.0, 1.0),
+                channels=3,
+                fit=False,
+                doc="dielectric specular colour (held at white in fits)",
+            ),
         ),
         options=(OptionSpec("distribution", ("multi_ggx", "ggx"), "multi_ggx", "microfacet distribution"),),
         diffuse_only={"Metallic": 0.0, "Specular IOR Level": 0.0},
@@ -169,8 +188,11 @@ class CyclesRenderer:
             "op": "render",
             "scene": self.scene_dict(scene),
             "materials": [
-                {"model": m.model, "options": dict(m.options),
-                 "values": {k: [float(x) for x in v] for k, v in m.values.items()}}
+                {
+                    "model": m.model,
+                    "options": dict(m.options),
+                    "values": {k: [float(x) for x in v] for k, v in m.values.items()},
+                }
                 for m in materials
             ],
         }
@@ -191,8 +213,13 @@ class CyclesRenderer:
             "camera_distance": float(scene.camera_distance),
             "sphere_radius": float(scene.sphere_radius),
             "geometry": self.geometry,
-            "lights": [{"position": [float(x) for x in scene.light_position(lt)],
-                        "intensity": float(scene.light_intensity(lt))} for lt in scene.lights],
+            "lights": [
+                {
+                    "position": [float(x) for x in scene.light_position(lt)],
+                    "intensity": float(scene.light_intensity(lt)),
+                }
+                for lt in scene.lights
+            ],
         }
 
     # -- the worker ----------------------------------------------------------------------------
@@ -209,8 +236,9 @@ class CyclesRenderer:
         self.close()
         self._log = tempfile.TemporaryFile()
         try:
-            self._proc = subprocess.Popen([self.python, str(WORKER)], stdin=subprocess.PIPE,
-                                          stdout=subprocess.PIPE, stderr=self._log)
+            self._proc = subprocess.Popen(
+                [self.python, str(WORKER)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._log
+            )
         except OSError as e:
             raise MatremapError(f"cannot start the Cycles worker with {self.python}: {e}; {INSTALL_HINT}") from e
         try:

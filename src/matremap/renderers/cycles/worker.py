@@ -46,8 +46,12 @@ sys.path[:] = [p for p in sys.path if os.path.abspath(p or os.curdir) != _HERE]
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 
-DISTRIBUTIONS = {"ggx": "GGX", "beckmann": "BECKMANN", "ashikhmin_shirley": "ASHIKHMIN_SHIRLEY",
-                 "multi_ggx": "MULTI_GGX"}
+DISTRIBUTIONS = {
+    "ggx": "GGX",
+    "beckmann": "BECKMANN",
+    "ashikhmin_shirley": "ASHIKHMIN_SHIRLEY",
+    "multi_ggx": "MULTI_GGX",
+}
 
 
 def _read_exact(f, n: int) -> bytes | None:
@@ -313,7 +317,6 @@ def _uv_sphere(radius: float, segments: int, rings: int):
     return obj, uv.name
 
 
-
 def _exr_output(scene) -> None:  # noqa: ANN001
     """Linear float pixels: 32-bit uncompressed EXR, no view transform, no exposure."""
     im = scene.render.image_settings
@@ -341,6 +344,7 @@ def _add_camera(bpy, scene, s: dict) -> None:  # noqa: ANN001
     cam.rotation_euler = (0.0, 0.0, 0.0)
     scene.collection.objects.link(cam)
     scene.camera = cam
+
 
 def render_svbrdf(request: dict, tmp: str) -> np.ndarray:
     """One textured sphere under an environment map -> float32 [1, res, res, 3]."""
@@ -468,8 +472,10 @@ def _material_nodes(nt, model: str, options: dict) -> tuple[dict, list]:  # noqa
         p = nt.nodes.new("ShaderNodeBsdfPrincipled")
         p.distribution = DISTRIBUTIONS[options.get("distribution", "multi_ggx")]
         nt.links.new(p.outputs[0], out.inputs["Surface"])
-        sockets = {n: p.inputs[n] for n in ("Base Color", "Metallic", "Roughness", "IOR", "Specular IOR Level",
-                                             "Specular Tint")}
+        sockets = {
+            n: p.inputs[n]
+            for n in ("Base Color", "Metallic", "Roughness", "IOR", "Specular IOR Level", "Specular Tint")
+        }
         return sockets, [p]
     if model == "cycles:glossy":
         glossy = nt.nodes.new("ShaderNodeBsdfGlossy")
@@ -483,8 +489,14 @@ def _material_nodes(nt, model: str, options: dict) -> tuple[dict, list]:  # noqa
         nt.links.new(glossy.outputs[0], add.inputs[0])
         nt.links.new(diffuse.outputs[0], add.inputs[1])
         nt.links.new(add.outputs[0], out.inputs["Surface"])
-        return ({"Color": glossy.inputs["Color"], "Roughness": glossy.inputs["Roughness"],
-                 "Diffuse Color": diffuse.inputs["Color"]}, [glossy, diffuse])
+        return (
+            {
+                "Color": glossy.inputs["Color"],
+                "Roughness": glossy.inputs["Roughness"],
+                "Diffuse Color": diffuse.inputs["Color"],
+            },
+            [glossy, diffuse],
+        )
     if model == "cycles:diffuse":
         diffuse = nt.nodes.new("ShaderNodeBsdfDiffuse")
         diffuse.inputs["Roughness"].default_value = 0.0
@@ -579,24 +591,41 @@ def inspect_blend(request: dict) -> dict:
             continue
         nodes = {}
         for n in mat.node_tree.nodes:
-            d = {"type": n.bl_idname,
-                 "inputs": {i.identifier: _value(i.default_value) for i in n.inputs
-                            if not i.is_linked and hasattr(i, "default_value")}}
+            d = {
+                "type": n.bl_idname,
+                "inputs": {
+                    i.identifier: _value(i.default_value)
+                    for i in n.inputs
+                    if not i.is_linked and hasattr(i, "default_value")
+                },
+            }
             for attr in ("distribution", "space", "uv_map", "interpolation", "extension"):
                 if hasattr(n, attr):
                     d[attr] = getattr(n, attr)
             if getattr(n, "image", None) is not None:
                 img = n.image
-                d["image"] = {"name": img.name, "colorspace": img.colorspace_settings.name,
-                              "packed": img.packed_file is not None, "size": list(img.size)}
+                d["image"] = {
+                    "name": img.name,
+                    "colorspace": img.colorspace_settings.name,
+                    "packed": img.packed_file is not None,
+                    "size": list(img.size),
+                }
             nodes[n.name] = d
-        links = [[lk.from_node.name, lk.from_socket.identifier, lk.to_node.name, lk.to_socket.identifier]
-                 for lk in mat.node_tree.links]
+        links = [
+            [lk.from_node.name, lk.from_socket.identifier, lk.to_node.name, lk.to_socket.identifier]
+            for lk in mat.node_tree.links
+        ]
         materials[mat.name] = {"nodes": nodes, "links": links}
-    objects = {o.name: {"type": o.type, "materials": [m.name for m in o.data.materials if m is not None],
-                        "uv_layers": [uv.name for uv in o.data.uv_layers],
-                        "vertices": len(o.data.vertices)}
-               for o in bpy.data.objects if o.type == "MESH"}
+    objects = {
+        o.name: {
+            "type": o.type,
+            "materials": [m.name for m in o.data.materials if m is not None],
+            "uv_layers": [uv.name for uv in o.data.uv_layers],
+            "vertices": len(o.data.vertices),
+        }
+        for o in bpy.data.objects
+        if o.type == "MESH"
+    }
     return {"materials": materials, "objects": objects}
 
 

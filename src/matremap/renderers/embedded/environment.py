@@ -234,7 +234,9 @@ def check_normal_map(normal_map: Any) -> np.ndarray:
 
 
 def split_texture_params(
-    spec: ModelSpec, params: Mapping[str, Any], overrides: Mapping[str, Any],
+    spec: ModelSpec,
+    params: Mapping[str, Any],
+    overrides: Mapping[str, Any],
     check: Callable[[ParamSpec, np.ndarray], None] | None = None,
 ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """Every model parameter as a constant ``[channels]`` or a texture (scalar ``[h, w]``, RGB
@@ -263,7 +265,8 @@ def split_texture_params(
                 if not np.all(a == a[..., :1]):
                     raise MatremapError(
                         f"{spec.id}: {p.name} is a scalar parameter but its texture has different R, G, B; "
-                        "give a single-channel map")
+                        "give a single-channel map"
+                    )
                 a = a[..., 0]
         elif a.ndim == 2:
             a = np.repeat(a[..., None], 3, axis=2)
@@ -324,8 +327,7 @@ class SVBRDFRender:
         self.has_diffuse = part != "specular"
         self.glossy_normals = self.normals
         if spec.family == "cycles" and normal_map is not None and not self.black:
-            self.glossy_normals = ensure_valid_specular_reflection(self.surface.normal, self.surface.view,
-                                                                   self.normals)
+            self.glossy_normals = ensure_valid_specular_reflection(self.surface.normal, self.surface.view, self.normals)
             self.bump_alpha2 = bump_alpha2(self.surface.normal, self.normals)
             spec_over = spec.part_overrides("specular", params)
             if part == "specular":
@@ -378,8 +380,9 @@ class SVBRDFRender:
                     gi = wi @ ng.T
                     go = np.broadcast_to(np.sum(ng * wo, axis=-1), gi.shape)
                     lit_g = (gi > 0.0) & (go > 0.0) & (cos_g > 0.0)
-                    ggeo = LocalGeometry(np.where(lit_g, gi, 1.0), np.where(lit_g, go, 1.0),
-                                         np.where(lit_g, i_dot_o, 1.0))
+                    ggeo = LocalGeometry(
+                        np.where(lit_g, gi, 1.0), np.where(lit_g, go, 1.0), np.where(lit_g, i_dot_o, 1.0)
+                    )
                     fcos = np.where(lit_g, self._evaluate(self.specular_params, sl, ggeo, gi.shape), 0.0)
                 term = bump_shadowing(self.bump_alpha2[sl], cos_g)
                 fcos = fcos + np.where(lit_d, diffuse, 0.0) * term
@@ -389,8 +392,9 @@ class SVBRDFRender:
         out[surf.pixels] = radiance
         return out.reshape(res, res, 3)
 
-    def _evaluate(self, per_pixel: Mapping[str, np.ndarray], sl: slice, geo: LocalGeometry,
-                  shape: tuple[int, int]) -> np.ndarray:
+    def _evaluate(
+        self, per_pixel: Mapping[str, np.ndarray], sl: slice, geo: LocalGeometry, shape: tuple[int, int]
+    ) -> np.ndarray:
         """f cos(theta_i) [C, L, p] of the pixels ``sl``."""
         params = {k: (v[..., sl] if v.shape[-1] > 1 else v) for k, v in per_pixel.items()}
         fcos = np.asarray(self.evaluator(params, self.options, geo))

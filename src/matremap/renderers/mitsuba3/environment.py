@@ -86,12 +86,12 @@ def _bitmap(mi, arr: np.ndarray) -> dict[str, Any]:
     data = np.ascontiguousarray(arr, dtype=np.float32)
     if data.ndim == 2:
         data = data[..., None]
-    return {"type": "bitmap", "data": mi.TensorXf(data), "raw": True, "filter_type": "bilinear",
-            "wrap_mode": "clamp"}
+    return {"type": "bitmap", "data": mi.TensorXf(data), "raw": True, "filter_type": "bilinear", "wrap_mode": "clamp"}
 
 
-def _split_params(spec: ModelSpec, params: Mapping[str, Any], overrides: Mapping[str, Any],
-                  options: Mapping[str, str]) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+def _split_params(
+    spec: ModelSpec, params: Mapping[str, Any], overrides: Mapping[str, Any], options: Mapping[str, str]
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """(constant values [channels], textures [h, w] or [h, w, 3]) of every model parameter, with
     Mitsuba 3's own limits on what may be a texture."""
     from matremap.renderers.embedded.environment import split_texture_params

@@ -72,13 +72,78 @@ INSTALL_HINT = (
 
 #: conductor names Mitsuba 3.9 ships spectral IOR data for (``data/ior``), plus ``none`` (F = 1)
 CONDUCTORS = (
-    "none", "a-C", "Ag", "Al", "AlAs", "AlAs_palik", "AlSb", "AlSb_palik", "Au", "Be", "Be_palik", "Cr", "CsI",
-    "CsI_palik", "Cu", "Cu_palik", "Cu2O", "Cu2O_palik", "CuO", "CuO_palik", "d-C", "d-C_palik", "Hg", "Hg_palik",
-    "HgTe", "HgTe_palik", "Ir", "Ir_palik", "K", "K_palik", "Li", "Li_palik", "MgO", "MgO_palik", "Mo",
-    "Mo_palik", "Na_palik", "Nb", "Nb_palik", "Ni_palik", "Rh", "Rh_palik", "Se", "Se_palik", "Se-e",
-    "Se-e_palik", "SiC", "SiC_palik", "SnTe", "SnTe_palik", "Ta", "Ta_palik", "Te", "Te_palik", "Te-e",
-    "Te-e_palik", "ThF4", "ThF4_palik", "TiC", "TiC_palik", "TiN", "TiN_palik", "TiO2", "TiO2_palik", "TiO2-e",
-    "TiO2-e_palik", "VC", "VC_palik", "V_palik", "VN", "VN_palik", "W",
+    "none",
+    "a-C",
+    "Ag",
+    "Al",
+    "AlAs",
+    "AlAs_palik",
+    "AlSb",
+    "AlSb_palik",
+    "Au",
+    "Be",
+    "Be_palik",
+    "Cr",
+    "CsI",
+    "CsI_palik",
+    "Cu",
+    "Cu_palik",
+    "Cu2O",
+    "Cu2O_palik",
+    "CuO",
+    "CuO_palik",
+    "d-C",
+    "d-C_palik",
+    "Hg",
+    "Hg_palik",
+    "HgTe",
+    "HgTe_palik",
+    "Ir",
+    "Ir_palik",
+    "K",
+    "K_palik",
+    "Li",
+    "Li_palik",
+    "MgO",
+    "MgO_palik",
+    "Mo",
+    "Mo_palik",
+    "Na_palik",
+    "Nb",
+    "Nb_palik",
+    "Ni_palik",
+    "Rh",
+    "Rh_palik",
+    "Se",
+    "Se_palik",
+    "Se-e",
+    "Se-e_palik",
+    "SiC",
+    "SiC_palik",
+    "SnTe",
+    "SnTe_palik",
+    "Ta",
+    "Ta_palik",
+    "Te",
+    "Te_palik",
+    "Te-e",
+    "Te-e_palik",
+    "ThF4",
+    "ThF4_palik",
+    "TiC",
+    "TiC_palik",
+    "TiN",
+    "TiN_palik",
+    "TiO2",
+    "TiO2_palik",
+    "TiO2-e",
+    "TiO2-e_palik",
+    "VC",
+    "VC_palik",
+    "V_palik",
+    "VN",
+    "VN_palik",
+    "W",
 )
 
 DISTRIBUTIONS = ("beckmann", "ggx")
@@ -88,8 +153,9 @@ DISTRIBUTIONS = ("beckmann", "ggx")
 # Models (data only: listing them needs no Mitsuba)
 
 
-def _rgb(name: str, role: str, default: float, hi: float, fit: bool = True, fit_value: float | None = None,
-         doc: str = "") -> ParamSpec:
+def _rgb(
+    name: str, role: str, default: float, hi: float, fit: bool = True, fit_value: float | None = None, doc: str = ""
+) -> ParamSpec:
     return ParamSpec(name, role, (default,) * 3, (0.0, hi), channels=3, fit=fit, fit_value=fit_value, doc=doc)
 
 
@@ -118,16 +184,33 @@ ROUGHCONDUCTOR = register(
         summary="rough conductor, exact conductor Fresnel (Mitsuba 3 roughconductor)",
         params=(
             _alpha(),
-            _rgb("eta", "fresnel", 0.0, 100.0, fit=False, fit_value=1.0,
-                 doc="real part of the IOR (material=custom); held at 1 in fits so that F0 = k^2/(4 + k^2)"),
+            _rgb(
+                "eta",
+                "fresnel",
+                0.0,
+                100.0,
+                fit=False,
+                fit_value=1.0,
+                doc="real part of the IOR (material=custom); held at 1 in fits so that F0 = k^2/(4 + k^2)",
+            ),
             _rgb("k", "fresnel", 1.0, 100.0, doc="absorption coefficient (material=custom)"),
-            _rgb("specular_reflectance", "specular", 1.0, 1.0, fit=False,
-                 doc="multiplier that should not be touched for realism"),
+            _rgb(
+                "specular_reflectance",
+                "specular",
+                1.0,
+                1.0,
+                fit=False,
+                doc="multiplier that should not be touched for realism",
+            ),
         ),
         options=(
             _distribution(),
-            OptionSpec("material", ("custom", *CONDUCTORS), "custom",
-                       "named conductor (Mitsuba's spectral data); custom uses eta and k"),
+            OptionSpec(
+                "material",
+                ("custom", *CONDUCTORS),
+                "custom",
+                "named conductor (Mitsuba's spectral data); custom uses eta and k",
+            ),
         ),
         diffuse_only=None,
         specular_only={},
@@ -167,8 +250,14 @@ PRINCIPLED = register(
             _rgb("base_color", "diffuse", 0.5, 1.0, doc="base colour (diffuse albedo; metal reflectance)"),
             ParamSpec("roughness", "roughness", 0.5, (1e-3, 1.0), doc="roughness (alpha = roughness^2)"),
             ParamSpec("metallic", "specular", 0.0, (0.0, 1.0), doc="metallicity"),
-            ParamSpec("specular", "specular", 0.5, (0.0, 1.0), linear=True,
-                      doc="dielectric specular amount (eta = 2/(1 - sqrt(0.08 specular)) - 1)"),
+            ParamSpec(
+                "specular",
+                "specular",
+                0.5,
+                (0.0, 1.0),
+                linear=True,
+                doc="dielectric specular amount (eta = 2/(1 - sqrt(0.08 specular)) - 1)",
+            ),
             *(ParamSpec(n, "other", 0.0, (0.0, 1.0), fit=False, doc="held at 0 in fits") for n in _PRINCIPLED_HELD),
         ),
         diffuse_only={"metallic": 0.0, "specular": 0.0, "clearcoat": 0.0, "spec_trans": 0.0},
@@ -202,13 +291,20 @@ def _bsdf(model: str, options: dict[str, str], m: Material) -> tuple[dict[str, A
         return float(m.values[name][0])
 
     if model == "mitsuba3:diffuse":
-        return {"type": "diffuse", "reflectance": rgb("reflectance")}, [_Binding("reflectance", "reflectance.value",
-                                                                                    True)]
+        return {"type": "diffuse", "reflectance": rgb("reflectance")}, [
+            _Binding("reflectance", "reflectance.value", True)
+        ]
     if model == "mitsuba3:roughconductor":
-        d: dict[str, Any] = {"type": "roughconductor", "distribution": options["distribution"],
-                             "alpha": scalar("alpha"), "specular_reflectance": rgb("specular_reflectance")}
-        b = [_Binding("alpha", "alpha.value", False),
-             _Binding("specular_reflectance", "specular_reflectance.value", True)]
+        d: dict[str, Any] = {
+            "type": "roughconductor",
+            "distribution": options["distribution"],
+            "alpha": scalar("alpha"),
+            "specular_reflectance": rgb("specular_reflectance"),
+        }
+        b = [
+            _Binding("alpha", "alpha.value", False),
+            _Binding("specular_reflectance", "specular_reflectance.value", True),
+        ]
         if options["material"] == "custom":
             d.update(eta=rgb("eta"), k=rgb("k"))
             b += [_Binding("eta", "eta.value", True), _Binding("k", "k.value", True)]
@@ -216,12 +312,22 @@ def _bsdf(model: str, options: dict[str, str], m: Material) -> tuple[dict[str, A
             d["material"] = options["material"]
         return d, b
     if model == "mitsuba3:roughplastic":
-        d = {"type": "roughplastic", "distribution": options["distribution"], "alpha": scalar("alpha"),
-             "int_ior": scalar("int_ior"), "ext_ior": scalar("ext_ior"), "nonlinear": options["nonlinear"] == "true",
-             "specular_reflectance": rgb("specular_reflectance"), "diffuse_reflectance": rgb("diffuse_reflectance")}
+        d = {
+            "type": "roughplastic",
+            "distribution": options["distribution"],
+            "alpha": scalar("alpha"),
+            "int_ior": scalar("int_ior"),
+            "ext_ior": scalar("ext_ior"),
+            "nonlinear": options["nonlinear"] == "true",
+            "specular_reflectance": rgb("specular_reflectance"),
+            "diffuse_reflectance": rgb("diffuse_reflectance"),
+        }
         # eta (= int_ior / ext_ior) is handled separately in _Loaded.set
-        b = [_Binding("alpha", "alpha", False), _Binding("specular_reflectance", "specular_reflectance.value", True),
-             _Binding("diffuse_reflectance", "diffuse_reflectance.value", True)]
+        b = [
+            _Binding("alpha", "alpha", False),
+            _Binding("specular_reflectance", "specular_reflectance.value", True),
+            _Binding("diffuse_reflectance", "diffuse_reflectance.value", True),
+        ]
         return d, b
     if model == "mitsuba3:principled":
         d = {"type": "principled", "base_color": rgb("base_color")}
@@ -434,8 +540,7 @@ class Mitsuba3Renderer:
             "sensor": probe_sensor(
                 mi, scene, {"type": "stratified", "sample_count": self.spp, "jitter": jitter, "seed": self.seed}
             ),
-            "sphere": {"type": "sphere", "center": [0.0, 0.0, 0.0], "radius": float(scene.sphere_radius),
-                       "bsdf": bsdf},
+            "sphere": {"type": "sphere", "center": [0.0, 0.0, 0.0], "radius": float(scene.sphere_radius), "bsdf": bsdf},
             "light": {
                 "type": "point",
                 "position": [float(x) for x in scene.light_position(lt)],
@@ -511,15 +616,18 @@ def fit_roughconductor_autodiff(
         raise MatremapError(f"the target image must be [{res}, {res}, 3], got shape {target.shape}")
     if distribution not in DISTRIBUTIONS:
         raise MatremapError(f"distribution must be one of {', '.join(DISTRIBUTIONS)}, got {distribution!r}")
-    m0 = start or Material.create("mitsuba3:roughconductor",
-                                  {"distribution": distribution, "alpha": 0.2, "eta": 1.0, "k": 2.0})
+    m0 = start or Material.create(
+        "mitsuba3:roughconductor", {"distribution": distribution, "alpha": 0.2, "eta": 1.0, "k": 2.0}
+    )
     if m0.model != "mitsuba3:roughconductor" or m0.options.get("material", "custom") != "custom":
         raise MatremapError("the start must be a mitsuba3:roughconductor with material=custom")
     m0 = m0.with_params({"distribution": distribution})
     renderer = Mitsuba3Renderer(variant="llvm_ad_rgb")  # for its scene_dict: centre rays, 1 spp
     bsdf, _ = _bsdf(m0.model, dict(m0.options), m0)
-    scenes = [_call(mi, "load the probe scene", mi.load_dict, renderer.scene_dict(scene, i, bsdf))
-              for i in range(len(scene.lights))]
+    scenes = [
+        _call(mi, "load the probe scene", mi.load_dict, renderer.scene_dict(scene, i, bsdf))
+        for i in range(len(scene.lights))
+    ]
     params = [mi.traverse(s) for s in scenes]
     mask = np.repeat(scene.mask()[..., None], 3, axis=2).astype(np.float32)
     tgt = mi.TensorXf(target * mask)
@@ -552,8 +660,17 @@ def fit_roughconductor_autodiff(
     hi_k = spec.param("k").bounds[1]
     x0 = np.log(np.concatenate([m0.values["alpha"][:1], np.clip(m0.values["k"], 1e-3, hi_k)]))
     bounds = [(np.log(lo_a), np.log(hi_a))] + [(np.log(1e-3), np.log(hi_k))] * 3
-    r = _call(mi, "fit", minimize, loss_and_grad, x0, jac=True, method="L-BFGS-B", bounds=bounds,
-              options={"maxfun": max_evaluations, "ftol": 1e-12, "gtol": 1e-9})
+    r = _call(
+        mi,
+        "fit",
+        minimize,
+        loss_and_grad,
+        x0,
+        jac=True,
+        method="L-BFGS-B",
+        bounds=bounds,
+        options={"maxfun": max_evaluations, "ftol": 1e-12, "gtol": 1e-9},
+    )
     best = m0.with_params({"alpha": float(np.exp(r.x[0])), "k": np.exp(r.x[1:]).tolist()})
     return AutodiffFit(best, float(r.fun), evaluations, time.perf_counter() - t0)
 

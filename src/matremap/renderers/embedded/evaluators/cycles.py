@@ -183,7 +183,7 @@ def _build_albedo_tables() -> tuple[np.ndarray, np.ndarray]:
     mus = np.concatenate([a + (b - a) * x for a, b in zip(edges[:-1], edges[1:], strict=False)])
     wts = np.concatenate([(b - a) * w for a, b in zip(edges[:-1], edges[1:], strict=False)])
     e_avg = np.array([np.sum(2.0 * mus * ggx_directional_albedo(mus, r) * wts) for r in nodes])
-    mirror = nodes ** 4 <= 2e-10  # alpha^2 at or below Cycles' roughness threshold: a mirror, E = 1
+    mirror = nodes**4 <= 2e-10  # alpha^2 at or below Cycles' roughness threshold: a mirror, E = 1
     e[:, mirror] = 1.0
     e_avg[mirror] = 1.0
     return np.clip(e, 0.0, 1.0), np.clip(e_avg, 0.0, 1.0)

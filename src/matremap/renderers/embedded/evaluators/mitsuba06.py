@@ -165,7 +165,13 @@ ROUGHCONDUCTOR = ModelSpec(
     params=(
         _alpha(),
         ParamSpec(
-            "eta", "fresnel", CU_ETA, (0.0, 100.0), channels=3, fit=False, fit_value=1.0,
+            "eta",
+            "fresnel",
+            CU_ETA,
+            (0.0, 100.0),
+            channels=3,
+            fit=False,
+            fit_value=1.0,
             doc="real part of the IOR (default: Cu); held at 1 in fits so that F0 = k^2/(4 + k^2) is one-to-one",
         ),
         ParamSpec("k", "fresnel", CU_K, (0.0, 100.0), channels=3, doc="absorption coefficient (default: Cu)"),
