@@ -1,0 +1,179 @@
+"""AtomicFiles: a group of files is written entirely or not at all."""
+
+from __future__ import annotations
+
+import os
+import stat
+import subprocess
+import sys
+
+import pytest
+
+from matremap.core import atomic
+from matremap.core.atomic import STAGING_PREFIX, AtomicFiles
+from matremap.errors import MatremapError
+
+
+def listing(folder):
+    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
+
+
+def test_files_appear_together_when_the_block_ends(tmp_path):
+    with AtomicFiles() as files:
+        files.write_bytes(tmp_path / "a.bin", b"\0\1")
+        staged = files.stage(tmp_path / "b.png")
+        staged.write_bytes(b"png")
+        assert staged.name == "b.png" and staged.parent.parent.name.startswith(STAGING_PREFIX)
+        files.copy(staged, tmp_path / "c.png")
+        files.write_text(tmp_path / "main.gltf", "{}")
+        assert not (tmp_path / "a.bin").exists() and not (tmp_path / "main.gltf").exists()  # nothing yet
+        assert files.destinations == [tmp_path / n for n in ("a.bin", "b.png", "c.png", "main.gltf")]
+    assert listing(tmp_path) == ["a.bin", "b.png", "c.png", "main.gltf"]  # and no staging folder
+    assert (tmp_path / "a.bin").read_bytes() == b"\0\1" and (tmp_path / "c.png").read_bytes() == b"png"
+    assert (tmp_path / "main.gltf").read_text() == "{}"
+
+
+def test_a_failure_in_the_block_leaves_nothing(tmp_path):
+    (tmp_path / "keep.txt").write_text("mine")
+    with pytest.raises(ValueError, match="encoding failed"), AtomicFiles() as files:
+        files.write_bytes(tmp_path / "a.png", b"a")
+        files.write_bytes(tmp_path / "b.png", b"b")
+        raise ValueError("encoding failed")
+    assert listing(tmp_path) == ["keep.txt"]
+
+
+def test_an_interrupt_leaves_nothing(tmp_path):
+    with pytest.raises(KeyboardInterrupt), AtomicFiles() as files:
+        files.write_bytes(tmp_path / "a.png", b"a")
+        raise KeyboardInterrupt
+    assert listing(tmp_path) == []
+
+
+def test_an_existing_file_is_refused_before_anything_is_written(tmp_path):
+    (tmp_path / "b.png").write_bytes(b"old")
+    with pytest.raises(MatremapError) as e, AtomicFiles() as files:
+        files.write_bytes(tmp_path / "a.png", b"a")
+        files.write_bytes(tmp_path / "b.png", b"new")
+    assert str(e.value) == f"{tmp_path / 'b.png'} already exists; pass --force to overwrite it"
+    assert listing(tmp_path) == ["b.png"] and (tmp_path / "b.png").read_bytes() == b"old"
+
+
+def test_check_refuses_up_front_and_the_hint_can_be_changed(tmp_path):
+    (tmp_path / "x.exr").write_bytes(b"old")
+    files = AtomicFiles(exists_hint="choose an empty output folder or pass --force")
+    with pytest.raises(MatremapError, match=r"x\.exr already exists; choose an empty output folder or pass --force"):
+        files.check(tmp_path / "x.exr")
+    assert files.check(tmp_path / "y.exr") == tmp_path / "y.exr"
+    assert AtomicFiles(force=True).check(tmp_path / "x.exr") == tmp_path / "x.exr"
+    with pytest.raises(MatremapError, match="folder .* does not exist"):
+        files.check(tmp_path / "nope" / "y.exr")
+    assert listing(tmp_path) == ["x.exr"]
+
+
+def test_force_replaces_existing_files(tmp_path):
+    (tmp_path / "a.png").write_bytes(b"old")
+    with AtomicFiles(force=True) as files:
+        files.write_bytes(tmp_path / "a.png", b"new")
+        files.write_bytes(tmp_path / "b.png", b"b")
+    assert listing(tmp_path) == ["a.png", "b.png"] and (tmp_path / "a.png").read_bytes() == b"new"
+
+
+def test_a_file_that_appears_meanwhile_is_not_clobbered(tmp_path):
+    with pytest.raises(MatremapError, match="already exists"), AtomicFiles() as files:
+        files.write_bytes(tmp_path / "a.png", b"a")
+        files.write_bytes(tmp_path / "b.png", b"b")
+        (tmp_path / "b.png").write_bytes(b"someone else's")
+    assert listing(tmp_path) == ["b.png"] and (tmp_path / "b.png").read_bytes() == b"someone else's"
+
+
+def test_a_failed_move_takes_back_every_file_and_restores_replaced_ones(tmp_path, monkeypatch):
+    (tmp_path / "a.png").write_bytes(b"old a")
+    real = os.replace
+    calls = []
+
+    def replace(src, dst):
+        calls.append(dst)
+        if str(dst) == str(tmp_path / "c.gltf"):
+            raise OSError("disk full")
+        real(src, dst)
+
+    monkeypatch.setattr(atomic.os, "replace", replace)
+    with pytest.raises(OSError, match="disk full"), AtomicFiles(force=True) as files:
+        files.write_bytes(tmp_path / "a.png", b"new a")
+        files.write_bytes(tmp_path / "b.png", b"b")
+        files.write_bytes(tmp_path / "c.gltf", b"main")
+    assert tmp_path / "b.png" in calls  # a.png and b.png were moved before c.gltf failed
+    assert listing(tmp_path) == ["a.png"] and (tmp_path / "a.png").read_bytes() == b"old a"
+
+
+def test_a_staged_file_never_written_fails_the_group(tmp_path):
+    with pytest.raises(MatremapError, match=r"cannot write .*b\.png: nothing was written"), AtomicFiles() as files:
+        files.write_bytes(tmp_path / "a.png", b"a")
+        files.stage(tmp_path / "b.png")
+    assert listing(tmp_path) == []
+
+
+def test_one_destination_is_staged_once(tmp_path):
+    with pytest.raises(MatremapError, match="two outputs would be written to"), AtomicFiles(force=True) as files:
+        files.write_bytes(tmp_path / "a.png", b"a")
+        files.write_bytes(tmp_path / "a.png", b"b")
+    assert listing(tmp_path) == []
+
+
+def test_folders_are_made_on_request_and_removed_with_a_failed_group(tmp_path):
+    out = tmp_path / "new" / "maps"
+    with pytest.raises(MatremapError, match="does not exist"), AtomicFiles() as files:
+        files.write_bytes(out / "a.png", b"a")
+    with pytest.raises(RuntimeError), AtomicFiles(make_folders=True) as files:
+        files.write_bytes(out / "a.png", b"a")
+        raise RuntimeError
+    assert listing(tmp_path) == []
+    with AtomicFiles(make_folders=True) as files:
+        files.write_bytes(out / "a.png", b"a")
+    assert listing(tmp_path) == ["new", "new/maps", "new/maps/a.png"]
+
+
+def test_files_in_several_folders(tmp_path):
+    (tmp_path / "one").mkdir()
+    (tmp_path / "two").mkdir()
+    with pytest.raises(RuntimeError), AtomicFiles() as files:
+        files.write_bytes(tmp_path / "one" / "a", b"a")
+        files.write_bytes(tmp_path / "two" / "b", b"b")
+        raise RuntimeError
+    assert listing(tmp_path) == ["one", "two"]
+    with AtomicFiles() as files:
+        files.write_bytes(tmp_path / "one" / "a", b"a")
+        files.write_bytes(tmp_path / "two" / "b", b"b")
+    assert listing(tmp_path) == ["one", "one/a", "two", "two/b"]
+
+
+@pytest.mark.skipif(not hasattr(os, "umask"), reason="POSIX permissions")
+def test_files_get_the_permissions_of_a_new_file(tmp_path):
+    umask = os.umask(0o022)
+    try:
+        with AtomicFiles() as files:
+            files.write_bytes(tmp_path / "a.png", b"a")
+            staged = files.stage(tmp_path / "b.png")
+            staged.write_bytes(b"b")
+            os.chmod(staged, 0o600)  # as tempfile.mkstemp makes them
+    finally:
+        os.umask(umask)
+    for name in ("a.png", "b.png"):
+        assert stat.S_IMODE((tmp_path / name).stat().st_mode) == 0o644
+
+
+def test_another_process_can_write_a_staged_file(tmp_path):
+    with AtomicFiles() as files:
+        staged = files.stage(tmp_path / "band.txt")
+        subprocess.run([sys.executable, "-c", f"open({str(staged)!r}, 'w').write('rows')"], check=True)
+    assert (tmp_path / "band.txt").read_text() == "rows"
+
+
+def test_staging_is_only_inside_the_block(tmp_path):
+    files = AtomicFiles()
+    with pytest.raises(RuntimeError, match="inside a `with AtomicFiles"):
+        files.stage(tmp_path / "a.png")
+    with files:
+        pass
+    with pytest.raises(RuntimeError, match="used once"), files:
+        pass
