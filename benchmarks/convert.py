@@ -41,7 +41,7 @@ FORMATS = {"png8": ("png", "uint8"), "png16": ("png", "uint16"), "exr": ("exr", 
 
 
 def learn(tmp: Path):
-    from matremap.core.models import Material
+    from matremap.core.material import Material
     from matremap.core.scene import Scene
     from matremap.regress.transform import learn_transform
     from matremap.sweep.executors import InlineExecutor

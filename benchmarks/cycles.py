@@ -9,11 +9,11 @@ import time
 
 import numpy as np
 
-from matremap.core.fit import fit
-from matremap.core.models import Material
+from matremap.core.material import Material
 from matremap.core.scene import Scene
 from matremap.renderers import get_renderer
 from matremap.renderers.cycles.probe import CyclesRenderer
+from matremap.uniform import fit
 
 
 def rel(a, b, mask):

@@ -20,9 +20,10 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from matremap.core.fit import STRATEGIES, fit  # noqa: E402
-from matremap.core.models import Material  # noqa: E402
+from matremap.core.fit import STRATEGIES  # noqa: E402
+from matremap.core.material import Material  # noqa: E402
 from matremap.core.scene import Scene  # noqa: E402
+from matremap.uniform import fit  # noqa: E402
 
 
 def sources(model: str, n: int, rng: np.random.Generator) -> list[Material]:

@@ -48,14 +48,16 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from matremap.core.envmap import directional_lights, resolve  # noqa: E402
-from matremap.core.fit import fit  # noqa: E402
 from matremap.core.imageio import linear_to_srgb  # noqa: E402
-from matremap.core.models import Material, get_model  # noqa: E402
+from matremap.core.material import Material  # noqa: E402
 from matremap.core.scene import Scene  # noqa: E402
+from matremap.dialects import get_model  # noqa: E402
 from matremap.errors import MatremapError  # noqa: E402
-from matremap.renderers.base import get_renderer  # noqa: E402
-from matremap.renderers.embedded.environment import SVBRDFRender, object_mask  # noqa: E402
+from matremap.renderers import get_renderer  # noqa: E402
+from matremap.renderers.embedded.environment import SVBRDFRender  # noqa: E402
+from matremap.renderers.textured import object_mask  # noqa: E402
 from matremap.svbrdf.evaluate import ssim_map  # noqa: E402
+from matremap.uniform import fit  # noqa: E402
 
 TARGET = "gltf:metal-rough"
 FIT_LIGHTS = (0.0,)

@@ -25,10 +25,10 @@ import time
 
 import numpy as np
 
-from matremap.core.fit import fit
-from matremap.core.models import Material
+from matremap.core.material import Material
 from matremap.core.scene import Scene
 from matremap.renderers.mitsuba3.probe import Mitsuba3Renderer
+from matremap.uniform import fit
 
 
 def sources(model: str, n: int, rng: np.random.Generator) -> list[Material]:
@@ -93,7 +93,7 @@ def relative_rmse(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
 
 
 def autodiff(args: argparse.Namespace) -> None:
-    from matremap.renderers.base import get_renderer
+    from matremap.renderers import get_renderer
     from matremap.renderers.mitsuba3.probe import fit_roughconductor_autodiff, llvm_renders
 
     if not llvm_renders():

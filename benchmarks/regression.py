@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from matremap.core.models import Material
+from matremap.core.material import Material
 from matremap.core.scene import Scene
 from matremap.errors import MatremapError
 from matremap.regress import parametric

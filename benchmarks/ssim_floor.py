@@ -26,12 +26,13 @@ import numpy as np
 from scipy.optimize import least_squares, minimize
 
 from matremap.core.envmap import directional_lights, resolve
-from matremap.core.fit import fit
-from matremap.core.models import Material
+from matremap.core.material import Material
 from matremap.remap import load_arrays, remap
-from matremap.renderers.embedded.environment import SVBRDFRender, object_mask
+from matremap.renderers.embedded.environment import SVBRDFRender
+from matremap.renderers.textured import object_mask
 from matremap.svbrdf.evaluate import evaluate, ssim_map
 from matremap.svbrdf.textures import load_map_set
+from matremap.uniform import fit
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ("bronze", "blue-plastic", "scratched-gold")

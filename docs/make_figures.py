@@ -7,11 +7,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from matremap.core.compare import comparison_strip
-from matremap.core.fit import fit
 from matremap.core.imageio import write_image
-from matremap.core.models import parse_material
+from matremap.core.material import parse_material
 from matremap.core.scene import Scene
+from matremap.uniform import comparison_strip, fit
 
 OUT = Path(__file__).resolve().parent / "img"
 

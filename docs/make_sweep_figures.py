@@ -17,7 +17,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from matremap.core.models import parse_material  # noqa: E402
+from matremap.core.material import parse_material  # noqa: E402
 from matremap.core.scene import Scene  # noqa: E402
 from matremap.sweep.executors import make_executor  # noqa: E402
 from matremap.sweep.grid import parse_grid  # noqa: E402

@@ -4,7 +4,7 @@ import warnings
 import numpy as np
 import pytest
 
-from matremap.core.models import Material
+from matremap.core.material import Material
 from matremap.core.scene import Scene
 from matremap.errors import MatremapError
 from matremap.regress.transform import Transform, learn_transform

@@ -13,12 +13,13 @@ import time
 import numpy as np
 import pytest
 
-from matremap.core.fit import fit
-from matremap.core.models import Material, get_model
+from matremap.core.material import Material
 from matremap.core.scene import Scene
+from matremap.dialects import get_model
 from matremap.errors import MatremapError
-from matremap.renderers.base import register_renderer
+from matremap.renderers import register_renderer
 from matremap.renderers.cycles.probe import ENV_PYTHON, CyclesRenderer, bpy_available, find_python
+from matremap.uniform import fit
 
 needs_bpy = pytest.mark.skipif(
     not bpy_available(),
@@ -45,8 +46,8 @@ def test_principled_is_data_without_bpy():
     spec = get_model("cycles:principled")
     assert spec.param_names == ("Base Color", "Metallic", "Roughness", "IOR", "Specular IOR Level", "Specular Tint")
     assert spec.family == "cycles"
-    assert CyclesRenderer.supports(None, "cycles:glossy") and CyclesRenderer.supports(None, "cycles:principled")
-    assert not CyclesRenderer.supports(None, "mitsuba06:ward")
+    assert CyclesRenderer.can_render("cycles:glossy") and CyclesRenderer.can_render("cycles:principled")
+    assert not CyclesRenderer.can_render("mitsuba06:ward")
 
 
 def test_missing_bpy_venv_says_how_to_set_it_up(monkeypatch, tmp_path):

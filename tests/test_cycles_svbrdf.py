@@ -11,7 +11,8 @@ from matremap.core import envmap
 from matremap.errors import MatremapError
 from matremap.renderers.cycles.environment import render_svbrdf_cycles
 from matremap.renderers.cycles.probe import ENV_PYTHON, CyclesRenderer, bpy_available
-from matremap.renderers.embedded.environment import object_mask, render_svbrdf
+from matremap.renderers.embedded.environment import render_svbrdf
+from matremap.renderers.textured import object_mask
 
 needs_bpy = pytest.mark.skipif(
     not bpy_available(),
@@ -147,7 +148,7 @@ def test_normal_mapped_diffuse_has_no_bias_against_cycles(cycles, env):
 
 @needs_bpy
 def test_probe_renders_still_work_after_an_svbrdf_request(cycles):
-    from matremap.core.models import Material
+    from matremap.core.material import Material
     from matremap.core.scene import Scene
 
     scene = Scene.probe(resolution=32)
@@ -219,7 +220,9 @@ def test_evaluate_falls_back_to_the_emulation_without_bpy(env, tmp_path, monkeyp
     import json
 
     import matremap.renderers.cycles.probe as cycles_module
-    from matremap.svbrdf.evaluate import _prepare, evaluate
+    from matremap.core.material import SVMaterial
+    from matremap.renderers.base import EnvironmentLight
+    from matremap.svbrdf.evaluate import evaluate, prepare
 
     monkeypatch.setattr(cycles_module, "bpy_available", lambda: False)
     source = _glossy_maps()
@@ -229,7 +232,7 @@ def test_evaluate_falls_back_to_the_emulation_without_bpy(env, tmp_path, monkeyp
     assert settings["renderers"] == "source: embedded emulation, target: embedded emulation"
     monkeypatch.undo()
     with pytest.warns(RuntimeWarning, match="sphere only"):
-        r = _prepare(*source, "plane", 32, "full", None, env)
+        r = prepare(SVMaterial.of(source), EnvironmentLight(env, 32), "plane", 32, "full")
     assert r.label == "embedded emulation"
 
 

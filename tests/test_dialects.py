@@ -17,7 +17,7 @@ import math
 import numpy as np
 import pytest
 
-from matremap.core.models import Material
+from matremap.core.material import Material
 from matremap.errors import MatremapError
 from matremap.renderers.embedded.evaluators import EVALUATORS
 from matremap.renderers.embedded.geometry import from_directions

@@ -10,7 +10,8 @@ import pytest
 from matremap.core import envmap
 from matremap.core.imageio import write_image
 from matremap.errors import MatremapError
-from matremap.renderers.embedded.environment import decode_normal_map, object_mask, render_svbrdf, sample_texture
+from matremap.renderers.embedded.environment import render_svbrdf
+from matremap.renderers.textured import decode_normal_map, object_mask, sample_texture
 
 RES = 48
 LIGHTS = 64

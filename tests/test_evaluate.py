@@ -14,9 +14,11 @@ import pytest
 
 pytest.importorskip("skimage", reason="scikit-image is needed by matremap evaluate: pip install scikit-image")
 
-from matremap import envmap  # noqa: E402
+from matremap.core import envmap  # noqa: E402
+from matremap.core.material import SVMaterial  # noqa: E402
 from matremap.errors import MatremapError  # noqa: E402
-from matremap.svbrdf.evaluate import SVMaterial, _irradiance_scale, evaluate, parse_rotations, ssim_map  # noqa: E402
+from matremap.renderers.base import EnvironmentLight  # noqa: E402
+from matremap.svbrdf.evaluate import evaluate, irradiance_scale_under, parse_rotations, ssim_map  # noqa: E402
 
 CHROMIUM = Path("/usr/bin/chromium")
 KW = dict(resolution=32, lights=48)
@@ -90,8 +92,9 @@ def test_dssim_is_zero_for_the_same_material_and_grows_with_a_change(tmp_path, s
 def test_irradiance_matching_across_families(studio):
     blender = SVMaterial("blender27:ward", {})
     mitsuba = SVMaterial("mitsuba06:ward", {})
-    assert _irradiance_scale(blender, mitsuba, studio, 32) == pytest.approx(1.0 / math.pi, rel=1e-6)
-    assert _irradiance_scale(mitsuba, SVMaterial("cycles:glossy", {}), studio, 32) == pytest.approx(1.0, rel=1e-6)
+    light = EnvironmentLight(studio, 32)
+    assert irradiance_scale_under(light, blender.model, mitsuba.model) == pytest.approx(1.0 / math.pi, rel=1e-6)
+    assert irradiance_scale_under(light, mitsuba.model, "cycles:glossy") == pytest.approx(1.0, rel=1e-6)
 
 
 def test_report_files_and_numbers(report):

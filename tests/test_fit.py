@@ -3,12 +3,13 @@ import math
 import numpy as np
 import pytest
 
-from matremap.core.fit import fit, part
-from matremap.core.models import Material
+from matremap.core.fit import part
+from matremap.core.material import Material
 from matremap.core.optics import f0_from_ior
 from matremap.core.scene import Scene
 from matremap.errors import MatremapError
 from matremap.renderers import get_renderer
+from matremap.uniform import fit
 
 
 def rel(a, b):
@@ -130,8 +131,8 @@ class CountingRenderer:
     def __init__(self, inner):
         self.inner, self.name, self.images = inner, inner.name, 0
 
-    def supports(self, model_id):
-        return self.inner.supports(model_id)
+    def can_render(self, model_id):
+        return self.inner.can_render(model_id)
 
     def render(self, materials, scene):
         self.images += len(materials)

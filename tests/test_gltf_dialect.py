@@ -18,14 +18,15 @@ import math
 import numpy as np
 import pytest
 
-from matremap.core.fit import fit
-from matremap.core.models import Material, get_model, white_reference
+from matremap.core.material import Material, white_reference
 from matremap.core.optics import f0_from_ior
 from matremap.core.scene import PointLight, Scene
+from matremap.dialects import get_model
 from matremap.regress import quantities as q
 from matremap.renderers import get_renderer
 from matremap.renderers.embedded.evaluators import EVALUATORS
 from matremap.renderers.embedded.geometry import from_directions
+from matremap.uniform import fit
 
 MR = "gltf:metal-rough"
 

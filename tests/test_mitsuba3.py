@@ -11,12 +11,13 @@ import pickle
 import numpy as np
 import pytest
 
-from matremap.core.fit import fit
-from matremap.core.models import Material, get_model, white_reference
+from matremap.core.material import Material, white_reference
 from matremap.core.scene import Scene
+from matremap.dialects import get_model
 from matremap.errors import MatremapError
-from matremap.renderers.base import get_renderer, register_renderer
+from matremap.renderers import get_renderer, register_renderer
 from matremap.renderers.mitsuba3.probe import CONDUCTORS, Mitsuba3Renderer, import_mitsuba
+from matremap.uniform import fit
 
 needs_mitsuba = pytest.mark.skipif(
     importlib.util.find_spec("mitsuba") is None, reason="Mitsuba 3 not installed: pip install 'matremap[mitsuba]'"
@@ -226,7 +227,7 @@ def test_two_stage_fit_beckmann_round_trip_is_close(mitsuba3):
 
 @needs_mitsuba
 def test_auto_variant_falls_back_to_scalar(monkeypatch):
-    from matremap.renderers.mitsuba3.probe import probe as m3
+    from matremap.renderers.mitsuba3 import probe as m3
 
     mi = import_mitsuba()
     monkeypatch.setattr(m3, "llvm_renders", lambda: False)
@@ -288,8 +289,9 @@ def test_autodiff_fit_recovers_a_conductor(mitsuba3):
 
 def test_the_regression_reads_and_writes_a_mitsuba3_conductor_as_f0():
     """F0 of eta + i k (no exterior IOR), and back to k with eta held (models are data: no Mitsuba needed)."""
-    from matremap.core.models import Material, get_model
+    from matremap.core.material import Material
     from matremap.core.optics import f0_from_ior
+    from matremap.dialects import get_model
     from matremap.regress import quantities as qty
 
     spec = get_model("mitsuba3:roughconductor")

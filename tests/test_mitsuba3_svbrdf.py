@@ -12,8 +12,9 @@ from scipy.ndimage import binary_erosion
 
 from matremap.core.envmap import EnvMap, builtin
 from matremap.errors import MatremapError
-from matremap.renderers.embedded.environment import object_mask, render_svbrdf
+from matremap.renderers.embedded.environment import render_svbrdf
 from matremap.renderers.mitsuba3.environment import envmap_vertex_rows, render_svbrdf_mitsuba3
+from matremap.renderers.textured import object_mask
 
 needs_mitsuba = pytest.mark.skipif(
     importlib.util.find_spec("mitsuba") is None, reason="Mitsuba 3 not installed: pip install 'matremap[mitsuba]'"

@@ -3,7 +3,8 @@ import json
 import numpy as np
 import pytest
 
-from matremap.core.models import Material, get_model, list_models, parse_material
+from matremap.core.material import Material, parse_material
+from matremap.dialects import get_model, list_models
 from matremap.errors import MatremapError
 
 

@@ -3,7 +3,7 @@ import math
 import numpy as np
 import pytest
 
-from matremap.core.models import Material
+from matremap.core.material import Material
 from matremap.core.scene import PointLight, Scene
 from matremap.errors import MatremapError
 

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from matremap.cli import main
-from matremap.core.models import Material, get_model
+from matremap.core.material import Material
+from matremap.dialects import get_model
 from matremap.errors import MatremapError
 from matremap.sweep.executors import InlineExecutor, make_executor
 from matremap.sweep.grid import parse_grid

@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from matremap.core.models import Material
+from matremap.core.material import Material
 from matremap.errors import MatremapError
 from matremap.sweep.executors import InlineExecutor
 from matremap.sweep.grid import Grid, parse_grid

@@ -1,4 +1,4 @@
-"""Regenerate matremap's transform library (src/matremap/transforms/*.json).
+"""Regenerate matremap's transform library (src/matremap/regress/transforms/*.json).
 
 Runs every sweep of matremap.regress.library.PAIRS (or the ones named) and learns the forward and reverse
 transforms of each. Usage:

@@ -6,17 +6,18 @@ material appearance", JCGT 8(4), 2019.
 
 __version__ = "0.1.0"
 
-from matremap.core.models import Material, get_model, list_models  # noqa: E402
+from matremap.core.material import Material  # noqa: E402
 from matremap.core.scene import PointLight, Scene  # noqa: E402
+from matremap.dialects import get_model, list_models  # noqa: E402
 from matremap.errors import MatremapError  # noqa: E402
 
 
 def fit(*args, **kwargs):  # noqa: D103 - thin lazy wrapper
-    from matremap.core.fit import fit as _fit
+    from matremap.uniform import fit as _fit
 
     return _fit(*args, **kwargs)
 
 
-fit.__doc__ = "Uniform remapping; see :func:`matremap.core.fit.fit`."
+fit.__doc__ = "Uniform remapping with renderers resolved by name; see :func:`matremap.uniform.fit`."
 
 __all__ = ["Material", "MatremapError", "PointLight", "Scene", "__version__", "fit", "get_model", "list_models"]

@@ -25,8 +25,9 @@ from typing import Any
 import numpy as np
 
 from matremap import __version__
-from matremap.core.models import Material, get_model
+from matremap.core.material import Material
 from matremap.core.scene import Scene
+from matremap.dialects import get_model
 from matremap.errors import MatremapError
 from matremap.regress import quantities as qty
 from matremap.regress.transform import Transform
@@ -186,7 +187,7 @@ def cached_transform(
     spec = map_set.spec
     base = Material.create(spec.id, {k: v for k, v in map_set.constants.items() if k not in map_set.maps})
     grid_text = sweep_grid(map_set, params)
-    from matremap.renderers.base import renderer_for
+    from matremap.renderers import renderer_for
 
     config = SweepConfig(
         source=base,
@@ -269,7 +270,7 @@ def remap(
     seconds: dict[str, float] = {}
     map_set = load_map_set(maps, source_model)
     target = get_model(target_model).id
-    from matremap.renderers.base import renderer_for
+    from matremap.renderers import renderer_for
 
     target_renderer = target_renderer or renderer_for(target)
     out = Path(out)
@@ -383,9 +384,9 @@ def remap_file(
     input's name with the target format's suffix). A textured material goes through :func:`remap`
     (``out/source`` holds its maps as matremap reads them, ``out/maps`` the converted ones); a
     uniform one is fitted directly. ``options`` go to :func:`remap`."""
-    from matremap.core.fit import fit
     from matremap.formats import format_for, read_asset, write_asset
-    from matremap.renderers.base import renderer_for
+    from matremap.renderers import renderer_for
+    from matremap.uniform import fit
 
     p = Path(path)
     asset = read_asset(p, material)
@@ -434,8 +435,8 @@ def remap_file(
         from matremap.core.imageio import write_text
 
         write_text(out / "material.json", json.dumps(r.target.to_dict(), indent=1) + "\n")
-        from matremap.core.compare import comparison_strip
         from matremap.core.imageio import write_image
+        from matremap.uniform import comparison_strip
 
         write_image(out / "compare.png", comparison_strip(r), force=True)  # source | target | difference x10
         log(f"wrote {out / 'compare.png'} (source | target | difference x10 on the probe)")

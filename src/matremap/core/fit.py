@@ -28,10 +28,12 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from matremap.core.calibrate import irradiance_scale
-from matremap.core.models import SPECULAR_ROLES, Material, ModelSpec, ParamSpec, get_model
+from matremap.core.material import Material
+from matremap.core.models import SPECULAR_ROLES, ModelSpec, ParamSpec
 from matremap.core.scene import Scene
+from matremap.dialects import get_model
 from matremap.errors import MatremapError
-from matremap.renderers.base import Renderer, get_renderer, render_pixels
+from matremap.renderers.base import Renderer, render_pixels
 
 STRATEGIES = ("simple", "two-stage", "three-stage")
 DIFFUSE, SPECULAR, FULL = "diffuse", "specular", "full"
@@ -336,8 +338,8 @@ def fit(
     target_model: str | ModelSpec,
     strategy: str = "two-stage",
     scene: Scene | None = None,
-    source_renderer: str | Renderer | None = None,
-    target_renderer: str | Renderer | None = None,
+    source_renderer: Renderer | None = None,
+    target_renderer: Renderer | None = None,
     *,
     fix: Mapping[str, Any] | None = None,
     free: Sequence[str] = (),
@@ -356,9 +358,16 @@ def fit(
         raise MatremapError(f"unknown strategy {strategy!r}; choose one of {', '.join(STRATEGIES)}")
     spec = target_model if isinstance(target_model, ModelSpec) else get_model(target_model)
     scene = scene or Scene()
-    src_r, tgt_r = get_renderer(source_renderer), get_renderer(target_renderer)
+    if (
+        source_renderer is None
+        or target_renderer is None
+        or isinstance(source_renderer, str)
+        or isinstance(target_renderer, str)
+    ):
+        raise TypeError("core.fit.fit draws with Renderer objects; matremap.fit resolves renderer names")
+    src_r, tgt_r = source_renderer, target_renderer
     for r, model in ((src_r, source.model), (tgt_r, spec.id)):
-        if not r.supports(model):
+        if not r.can_render(model):
             raise MatremapError(f"renderer {r.name!r} cannot render model {model}")
     template, free_params = target_template(spec, fix)
     spec = spec.specialise(template.values)

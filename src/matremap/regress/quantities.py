@@ -19,7 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from matremap.core.models import Material, ModelSpec, ParamSpec
+from matremap.core.material import Material
+from matremap.core.models import ModelSpec, ParamSpec
 from matremap.core.optics import dielectric_f0, f0_from_ior, ior_from_f0
 from matremap.errors import MatremapError
 

@@ -1,21 +1,73 @@
-"""The renderer protocol, and the registry of renderer backends.
+"""The renderer protocol: one interface with two faces.
 
-A renderer turns a batch of materials and a :class:`~matremap.core.scene.Scene` into linear HDR RGB
-images, float32 ``[N, H, W, 3]``. The fitter only ever calls :meth:`Renderer.render`: a renderer
-is a black box, and a new one is a module implementing this protocol.
+* **Probe face** -- :meth:`Renderer.render` turns a batch of uniform materials and a
+  :class:`~matremap.core.scene.Scene` (the sphere under point lights) into linear HDR RGB images,
+  float32 ``[N, H, W, 3]``. The fitter only ever calls this face: a renderer is a black box.
+* **Environment face** -- :meth:`Renderer.prepare_environment` takes a textured material
+  (:class:`~matremap.core.material.SVMaterial`), an :class:`EnvironmentLight`, the evaluation geometry,
+  resolution and part, and returns an :class:`EnvironmentRender` that draws it at any rotation of the
+  environment. Evaluation only ever calls this face.
+
+Capabilities are queries, never family names: :meth:`Renderer.can_render` (probe),
+:meth:`Renderer.environment_support` (``None`` when it can draw the material under an environment, else
+the reason) and :meth:`Renderer.supports_textures` (whether a parameter may be a texture map).
+A new renderer is one subpackage implementing this protocol, registered in
+:mod:`matremap.renderers.registry`.
 """
 
 from __future__ import annotations
 
-import difflib
-from collections.abc import Callable, Sequence
-from typing import Protocol, runtime_checkable
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
 
-from matremap.core.models import Material
-from matremap.core.scene import Scene
+from matremap.core.envmap import EnvMap, directional_lights
 from matremap.errors import MatremapError
+
+if TYPE_CHECKING:
+    from matremap.core.material import Material, SVMaterial
+    from matremap.core.scene import Scene
+
+#: the parts of a material a render can draw
+PARTS = ("full", "specular", "diffuse")
+#: the evaluation geometries
+GEOMETRIES = ("sphere", "plane")
+
+
+@dataclass(frozen=True, eq=False)
+class EnvironmentLight:
+    """An environment map as a light source. Renderers that trace the map itself (Mitsuba 3, Cycles)
+    use ``env``; the embedded renderer samples it into ``lights`` directional lights (importance
+    sampled with ``seed``, see :func:`~matremap.core.envmap.directional_lights`), the same set for every
+    material at a given rotation."""
+
+    env: EnvMap
+    lights: int = 256
+    seed: int = 0
+    _cache: dict[float, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict, repr=False)
+
+    def directional(self, rotation_deg: float) -> tuple[np.ndarray, np.ndarray]:
+        """Unit directions towards the lights [L, 3] and their RGB intensities [L, 3] with the
+        environment turned by ``rotation_deg`` about +y."""
+        key = float(rotation_deg)
+        if key not in self._cache:
+            self._cache[key] = directional_lights(self.env, self.lights, key, self.seed)
+        return self._cache[key]
+
+
+@runtime_checkable
+class EnvironmentRender(Protocol):
+    """A textured material prepared for one renderer, geometry, resolution and part."""
+
+    #: who draws it, for reports ("embedded emulation", "Mitsuba 3", ...)
+    label: str
+
+    def render(self, rotation_deg: float) -> np.ndarray:
+        """Linear radiance float32 [res, res, 3] with the environment turned by ``rotation_deg``,
+        black off the object."""
+        ...
 
 
 @runtime_checkable
@@ -23,13 +75,46 @@ class Renderer(Protocol):
     #: registry name, e.g. "embedded", "mitsuba3"
     name: str
 
-    def supports(self, model_id: str) -> bool:
-        """Whether this renderer can draw materials of the model."""
+    def can_render(self, model_id: str) -> bool:
+        """Whether this renderer draws materials of the model (probe face)."""
         ...
 
     def render(self, materials: Sequence[Material], scene: Scene) -> np.ndarray:
         """Render each material on the scene's sphere: float32 [N, H, W, 3], linear radiance."""
         ...
+
+    def environment_support(self, model_id: str, geometry: str) -> str | None:
+        """None when this renderer draws the model on ``geometry`` under an environment (and is
+        installed); else the reason, one line a user can act on."""
+        ...
+
+    def supports_textures(self, model_id: str, param: str) -> bool:
+        """Whether the parameter may be a texture map in this renderer's environment renders."""
+        ...
+
+    def prepare_environment(
+        self, material: SVMaterial, light: EnvironmentLight, geometry: str, resolution: int, part: str
+    ) -> EnvironmentRender:
+        """Validate ``material`` (raising before anything renders) and prepare it for environment
+        renders; see :class:`EnvironmentRender`."""
+        ...
+
+
+def check_can_render(renderer: Renderer, materials: Sequence[Material]) -> None:
+    """Raise, naming the renderer and the model, when the renderer cannot draw one of the materials."""
+    for m in materials:
+        if not renderer.can_render(m.model):
+            raise MatremapError(f"renderer {renderer.name!r} cannot render model {m.model}")
+
+
+def check_environment_args(geometry: str, resolution: int, part: str) -> None:
+    """Validate the arguments every environment render takes."""
+    if geometry not in GEOMETRIES:
+        raise MatremapError(f"unknown geometry {geometry!r}; use one of {', '.join(GEOMETRIES)}")
+    if part not in PARTS:
+        raise MatremapError(f"unknown render part {part!r}; use one of {', '.join(PARTS)}")
+    if not isinstance(resolution, int) or not 16 <= resolution <= 4096:
+        raise MatremapError(f"the resolution must be an integer in [16, 4096], got {resolution!r}")
 
 
 def render_pixels(renderer: Renderer, materials: Sequence[Material], scene: Scene) -> np.ndarray:
@@ -45,64 +130,13 @@ def render_pixels(renderer: Renderer, materials: Sequence[Material], scene: Scen
     return np.take(images.reshape(len(materials), -1, 3), scene.pixel_indices(), axis=1)
 
 
-_FACTORIES: dict[str, Callable[[], Renderer]] = {}
-_INSTANCES: dict[str, Renderer] = {}
-
-
-def register_renderer(name: str, factory: Callable[[], Renderer]) -> None:
-    _FACTORIES[name] = factory
-
-
-def renderer_names() -> list[str]:
-    _load_builtin()
-    return sorted(_FACTORIES)
-
-
-def get_renderer(name: str | Renderer | None = None) -> Renderer:
-    """A renderer by name (default: the embedded one); renderer objects pass through."""
-    if name is None:
-        name = "embedded"
-    if not isinstance(name, str):
-        return name
-    _load_builtin()
-    if name not in _FACTORIES:
-        near = difflib.get_close_matches(name, list(_FACTORIES), n=2)
-        hint = f"; did you mean {' or '.join(near)}?" if near else f"; known renderers: {', '.join(sorted(_FACTORIES))}"
-        raise MatremapError(f"unknown renderer {name!r}{hint}")
-    if name not in _INSTANCES:
-        _INSTANCES[name] = _FACTORIES[name]()
-    return _INSTANCES[name]
-
-
-def check_supported(renderer: Renderer, materials: Sequence[Material]) -> None:
-    for m in materials:
-        if not renderer.supports(m.model):
-            raise MatremapError(f"renderer {renderer.name!r} cannot render model {m.model}")
-
-
-def _load_builtin() -> None:
-    if "embedded" not in _FACTORIES:
-        from matremap.renderers.embedded import EmbeddedRenderer
-
-        register_renderer("embedded", EmbeddedRenderer)
-    if "mitsuba3" not in _FACTORIES:
-        from matremap.renderers.mitsuba3.probe import Mitsuba3Renderer  # imports Mitsuba itself only when first used
-
-        register_renderer("mitsuba3", Mitsuba3Renderer)
-    if "cycles" not in _FACTORIES:
-        from matremap.renderers.cycles.probe import CyclesRenderer  # bpy runs in a worker process of its own venv
-
-        register_renderer("cycles", CyclesRenderer)
-
-
-def renderer_for(model_id: str) -> str:
-    """The renderer that draws a model by default: the embedded one when it emulates the model,
-    else the real renderer of the model's family (``mitsuba3:*`` -> mitsuba3)."""
-    embedded = get_renderer("embedded")
-    if embedded.supports(model_id):
-        return "embedded"
-    family = model_id.split(":", 1)[0]
-    _load_builtin()
-    if family in _FACTORIES:
-        return family
-    raise MatremapError(f"no renderer draws model {model_id}")
+__all__ = [
+    "GEOMETRIES",
+    "PARTS",
+    "EnvironmentLight",
+    "EnvironmentRender",
+    "Renderer",
+    "check_can_render",
+    "check_environment_args",
+    "render_pixels",
+]

@@ -32,7 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from matremap.core.models import ModelSpec, get_model
+from matremap.core.models import ModelSpec
+from matremap.dialects import get_model
 from matremap.errors import MatremapError
 from matremap.regress import quantities as qty
 from matremap.regress.transform import Transform

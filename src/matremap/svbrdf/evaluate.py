@@ -18,48 +18,26 @@ import json
 import math
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from matremap.core.envmap import EnvMap, directional_lights
+from matremap.core.calibrate import irradiance_ratio, same_units
+from matremap.core.envmap import EnvMap
 from matremap.core.imageio import atomic_output, linear_to_srgb
-from matremap.core.models import get_model, white_reference
+from matremap.core.material import SVMaterial, white_reference
+from matremap.dialects import get_model
 from matremap.errors import MatremapError
-from matremap.renderers.embedded.environment import GEOMETRIES, SVBRDFRender, object_mask
+from matremap.renderers.base import EnvironmentLight, EnvironmentRender, check_environment_args
+from matremap.renderers.registry import environment_renderer_for
+from matremap.renderers.textured import object_mask
 
 PARTS = ("full", "specular")
 
 #: 1 - SSIM colour maps span [0, SSIM_MAP_MAX]
 SSIM_MAP_MAX = 1.0
-
-
-@dataclass(frozen=True)
-class SVMaterial:
-    """A spatially varying material: a model, its parameter maps (or constants), its options and
-    an optional tangent-space normal map in [-1, 1]."""
-
-    model: str
-    params: Mapping[str, Any]
-    options: Mapping[str, str] = field(default_factory=dict)
-    normal: np.ndarray | None = None
-
-    @classmethod
-    def of(cls, m: Any) -> SVMaterial:
-        """From an SVMaterial, a (model, params, options, normal) tuple (options and normal may be
-        left out) or a mapping with those keys."""
-        if isinstance(m, SVMaterial):
-            return m
-        if isinstance(m, Mapping):
-            return cls(m["model"], m.get("params", {}), m.get("options") or {}, m.get("normal"))
-        if isinstance(m, (tuple, list)) and 2 <= len(m) <= 4:
-            model, params, *rest = m
-            options = rest[0] if rest else {}
-            normal = rest[1] if len(rest) > 1 else None
-            return cls(model, params, options or {}, normal)
-        raise MatremapError("a material to evaluate is (model, params, options, normal_map)")
 
 
 @dataclass
@@ -220,162 +198,30 @@ def _colorbar() -> bytes:
     return _png_bytes(_colormap(ramp))
 
 
-class _MitsubaRender:
-    """A material drawn by real Mitsuba 3 (``mitsuba3:*`` models) under the environment map itself,
-    with the interface of :class:`SVBRDFRender` (the discrete lights are not used)."""
-
-    label = "Mitsuba 3"
-
-    def __init__(
-        self,
-        model: str,
-        params: Mapping[str, Any],
-        options: Mapping[str, str],
-        geometry: str,
-        resolution: int,
-        part: str,
-        normal: np.ndarray | None,
-        env: EnvMap,
-    ) -> None:
-        if geometry != "sphere":
-            raise MatremapError(f"{model} is drawn by Mitsuba 3, which renders the sphere only; use --geometry sphere")
-        from matremap.renderers.mitsuba3.environment import render_svbrdf_mitsuba3
-
-        self._render = render_svbrdf_mitsuba3
-        self.args = (model, params, options, env)
-        self.resolution, self.part, self.normal = resolution, part, normal
-
-    def render_at(self, directions: np.ndarray, intensities: np.ndarray, rotation: float) -> np.ndarray:
-        model, params, options, env = self.args
-        return self._render(
-            model,
-            params,
-            options,
-            env,
-            rotation_deg=rotation,
-            resolution=self.resolution,
-            part=self.part,
-            normal_map=self.normal,
-        )
+def prepare(
+    material: SVMaterial, light: EnvironmentLight, geometry: str, resolution: int, part: str, real: bool = True
+) -> EnvironmentRender:
+    """``material`` prepared for environment renders by the renderer that draws it
+    (:func:`~matremap.renderers.registry.environment_renderer_for`: its real renderer where it can, else
+    the embedded emulation with a warning; ``real=False`` asks for the emulation outright)."""
+    renderer = environment_renderer_for(material.model, geometry, real=real)
+    return renderer.prepare_environment(material, light, geometry, resolution, part)
 
 
-class _CyclesRender:
-    """A material drawn by real Blender Cycles (``cycles:glossy``, ``cycles:diffuse``) through the bpy
-    worker (:func:`~matremap.renderers.cycles.environment.render_svbrdf_cycles`, 64 spp, seed 0) under the
-    environment map itself, with the interface of :class:`SVBRDFRender` (the discrete lights are not
-    used). The parameters are checked here, before anything renders."""
-
-    def __init__(
-        self,
-        model: str,
-        params: Mapping[str, Any],
-        options: Mapping[str, str],
-        resolution: int,
-        part: str,
-        normal: np.ndarray | None,
-        env: EnvMap,
-    ) -> None:
-        from matremap.renderers.cycles.environment import DEFAULT_SPP, render_svbrdf_cycles
-        from matremap.renderers.embedded.environment import _check_params, check_normal_map
-
-        opts = _check_params(get_model(model), params, options)
-        self._render = render_svbrdf_cycles
-        self.args = (model, params, opts, env)
-        self.resolution, self.part = resolution, part
-        self.normal = None if normal is None else check_normal_map(normal)
-        self.label = f"Blender Cycles (bpy worker, {DEFAULT_SPP} spp)"
-
-    def render_at(self, directions: np.ndarray, intensities: np.ndarray, rotation: float) -> np.ndarray:
-        model, params, options, env = self.args
-        return self._render(
-            model,
-            params,
-            options,
-            env,
-            rotation_deg=rotation,
-            resolution=self.resolution,
-            part=self.part,
-            normal_map=self.normal,
-        )
-
-
-class _EmbeddedRender(SVBRDFRender):
-    label = "embedded emulation"
-
-    def render_at(self, directions: np.ndarray, intensities: np.ndarray, rotation: float) -> np.ndarray:
-        return self.render(directions, intensities)
-
-
-def _cycles_fallback(model: str, why: str) -> None:
-    import warnings
-
-    warnings.warn(
-        f"{model} is drawn with matremap's embedded emulation of Cycles, not with Blender Cycles: {why}",
-        RuntimeWarning,
-        stacklevel=3,
-    )
-
-
-def _prepare(
-    model: str,
-    params: Mapping[str, Any],
-    options: Mapping[str, str],
-    geometry: str,
-    resolution: int,
-    part: str,
-    normal: np.ndarray | None,
-    env: EnvMap,
-    real: bool = True,
-) -> Any:
-    """The renderer of a material: real Mitsuba 3 and real Blender Cycles for their own models, else
-    the embedded one. ``cycles:glossy`` / ``cycles:diffuse`` fall back to their embedded emulation,
-    with a warning, where real Cycles cannot draw them (no bpy venv, or not the sphere); ``real=False``
-    asks for the emulation outright."""
-    spec = get_model(model)
-    if spec.family == "mitsuba3":
-        return _MitsubaRender(model, params, options, geometry, resolution, part, normal, env)
-    if spec.family == "cycles" and real:
-        from matremap.renderers.cycles.environment import MODELS as CYCLES_SVBRDF
-        from matremap.renderers.cycles.probe import INSTALL_HINT, bpy_available
-
-        if spec.id in CYCLES_SVBRDF:
-            if geometry != "sphere":
-                _cycles_fallback(model, f"the Cycles renders are of the sphere only, not the {geometry}")
-            elif not bpy_available():
-                _cycles_fallback(model, INSTALL_HINT)
-            else:
-                return _CyclesRender(model, params, options, resolution, part, normal, env)
-    return _EmbeddedRender(model, params, options, geometry, resolution, part, normal)
-
-
-def _irradiance_scale(source: SVMaterial, target: SVMaterial, env: EnvMap, lights: int) -> float:
-    """Scale that brings source renders to the target family's irradiance units (1 in the same
-    family): least-squares ratio of white Lambertian references rendered under ``env``. Cycles'
-    reference is its embedded emulation, noise free and in the same units as real Cycles (5e-7 apart
-    on the probe; the mean brightness of Cycles' environment renders is within 0.03 % of it)."""
-    fs, ft = get_model(source.model).family, get_model(target.model).family
-    if fs == ft:
+def irradiance_scale_under(light: EnvironmentLight, source_model: str, target_model: str) -> float:
+    """Scale that brings source renders to the target's irradiance units under ``light`` (1 when they
+    share a renderer family, :func:`~matremap.core.calibrate.same_units`): least-squares ratio of the
+    white Lambertian references drawn by the embedded renderer, noise free and in each family's units
+    (the mean brightness of Cycles' environment renders is within 0.03 % of its emulation's)."""
+    if same_units(source_model, target_model):
         return 1.0
-    d, i = directional_lights(env, lights, 0.0)
-    imgs = []
-    for fam in (fs, ft):
-        ref = white_reference(fam)
-        r = _prepare(
-            ref.model,
-            {k: v for k, v in ref.values.items()},
-            dict(ref.options),
-            "sphere",
-            32,
-            "full",
-            None,
-            env,
-            real=False,
-        )
-        imgs.append(r.render_at(d, i, 0.0).astype(float))
-    denom = float(np.sum(imgs[0] * imgs[0]))
-    if not denom > 0.0:
-        raise MatremapError(f"irradiance matching failed: the white reference of {fs} renders black")
-    return float(np.sum(imgs[0] * imgs[1]) / denom)
+    families = [get_model(m).family for m in (source_model, target_model)]
+    images = []
+    for family in families:
+        ref = white_reference(family)
+        white = SVMaterial(ref.model, dict(ref.values), dict(ref.options))
+        images.append(prepare(white, light, "sphere", 32, "full", real=False).render(0.0))
+    return irradiance_ratio(images[0], images[1], families[0])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -403,83 +249,42 @@ def evaluate(
     rotations = [float(r) for r in rotations]
     if not rotations:
         raise MatremapError("no rotations to evaluate")
-    if geometry not in GEOMETRIES:
-        raise MatremapError(f"unknown geometry {geometry!r}; use one of {', '.join(GEOMETRIES)}")
-    if not isinstance(resolution, int) or not 16 <= resolution <= 4096:
-        raise MatremapError(f"the resolution must be an integer in [16, 4096], got {resolution!r}")
-    out = Path(out_dir)
-    if not out.parent.exists():
-        raise MatremapError(f"cannot write to {out}: folder {out.parent} does not exist")
-    if out.exists() and not out.is_dir():
-        raise MatremapError(f"{out} exists and is not a folder")
-    report = out / "report.html"
-    if report.exists() and not force:
-        raise MatremapError(f"{report} already exists; pass --force to overwrite it")
-
+    check_environment_args(geometry, resolution, "full")
+    out = _check_out_dir(Path(out_dir), force)
+    light = EnvironmentLight(env, lights)
     # prepare everything (validates both materials) before writing anything
+    materials = {"source": src, "target": tgt}
     prepared = {
-        (who, part): _prepare(m.model, m.params, m.options, geometry, resolution, part, m.normal, env)
-        for who, m in (("source", src), ("target", tgt))
-        for part in PARTS
+        (who, part): prepare(m, light, geometry, resolution, part) for who, m in materials.items() for part in PARTS
     }
-    scale = _irradiance_scale(src, tgt, env, lights) if match_irradiance else 1.0
+    scale = irradiance_scale_under(light, src.model, tgt.model) if match_irradiance else 1.0
     mask = object_mask(geometry, resolution)
-    out.mkdir(exist_ok=True)
-    img_dir = out / "images"
-    img_dir.mkdir(exist_ok=True)
-
-    files: list[Path] = []
-    embedded: dict[str, str] = {}
-
-    def emit(name: str, data: bytes) -> None:
-        path = img_dir / name
-        _write_bytes(path, data)
-        files.append(path)
-        embedded[name] = "data:image/png;base64," + base64.b64encode(data).decode("ascii")
-
-    dssim = {p: [] for p in PARTS}
-    dssim_img = {p: [] for p in PARTS}
-    exposure: dict[str, float] = {}
+    images = _ReportImages(out / "images")
+    comparison = _Comparison(mask, scale)
     # a part whose overrides change nothing (a conductor's specular part) is the full render: reuse it
-    same_as_full = {
-        who: get_model(m.model).part_overrides("specular", m.params) == {}
-        for who, m in (("source", src), ("target", tgt))
-    }
+    same_as_full = {who: get_model(m.model).part_overrides("specular", m.params) == {} for who, m in materials.items()}
     for k, rot in enumerate(rotations):
-        d, i = directional_lights(env, lights, rot)
         drawn: dict[tuple[str, str], np.ndarray] = {}
         for part in PARTS:
-            for who in ("source", "target"):
+            for who in materials:
                 key = (who, "full" if part == "specular" and same_as_full[who] else part)
                 if key not in drawn:
-                    drawn[key] = prepared[key].render_at(d, i, rot)
+                    drawn[key] = prepared[key].render(rot)
                 drawn[(who, part)] = drawn[key]
-            s_img = drawn[("source", part)]
-            if scale != 1.0:
-                s_img = (s_img.astype(np.float64) * scale).astype(np.float32)
-            t_img = drawn[("target", part)]
-            mssim, smap = ssim_map(s_img, t_img)
-            dmap = 1.0 - smap
-            dssim[part].append(float(dmap[mask].mean()) if mask.any() else float(1.0 - mssim))
-            dssim_img[part].append(float(1.0 - mssim))
-            if part not in exposure:  # one exposure per part for the whole report (the first source)
-                exposure[part] = _exposure(s_img, mask)
-            emit(f"r{k:03d}_{part}_source.png", _png_bytes(tonemap(s_img, exposure[part])))
-            emit(f"r{k:03d}_{part}_target.png", _png_bytes(tonemap(t_img, exposure[part])))
-            emit(f"r{k:03d}_{part}_dssim.png", _png_bytes(_colormap(np.where(mask, dmap, 0.0))))
-    emit("dssim_vs_rotation.png", _plot(rotations, dssim["full"], dssim["specular"]))
-    emit("colorbar.png", _colorbar())
+            comparison.add(k, part, drawn[("source", part)], drawn[("target", part)], images)
+    images.emit("dssim_vs_rotation.png", _plot(rotations, comparison.dssim["full"], comparison.dssim["specular"]))
+    images.emit("colorbar.png", _colorbar())
 
     result = EvaluationResult(
         rotations=rotations,
-        dssim_full=dssim["full"],
-        dssim_specular=dssim["specular"],
-        dssim_full_image=dssim_img["full"],
-        dssim_specular_image=dssim_img["specular"],
+        dssim_full=comparison.dssim["full"],
+        dssim_specular=comparison.dssim["specular"],
+        dssim_full_image=comparison.dssim_image["full"],
+        dssim_specular_image=comparison.dssim_image["specular"],
         irradiance_scale=scale,
         out_dir=out,
-        report=report,
-        files=files,
+        report=out / "report.html",
+        files=images.files,
     )
     info = {
         "source": _describe(src),
@@ -489,16 +294,71 @@ def evaluate(
         "lights": f"{lights} directional lights importance-sampled from the environment",
         "renderers": f"source: {prepared[('source', 'full')].label}, target: {prepared[('target', 'full')].label}",
         "irradiance": f"source scaled by {scale:.6g}" if scale != 1.0 else "same renderer family (no scaling)",
-        "exposure": ", ".join(f"{p} x{exposure[p]:.4g}" for p in PARTS),
+        "exposure": ", ".join(f"{p} x{comparison.exposure[p]:.4g}" for p in PARTS),
     }
-    results_json = out / "results.json"
-    with atomic_output(results_json) as tmp, open(tmp, "w") as f:
-        json.dump({**result.to_dict(), "settings": info}, f, indent=2)
-    files.append(results_json)
-    text = _html(result, embedded, info, title or f"matremap evaluation: {src.model} \u2192 {tgt.model}")
-    with atomic_output(report) as tmp, open(tmp, "w", encoding="utf-8") as f:
-        f.write(text)
+    _write_results(result, info, images, title or f"matremap evaluation: {src.model} \u2192 {tgt.model}")
     return result
+
+
+def _check_out_dir(out: Path, force: bool) -> Path:
+    """The evaluation folder, checked before anything renders."""
+    if not out.parent.exists():
+        raise MatremapError(f"cannot write to {out}: folder {out.parent} does not exist")
+    if out.exists() and not out.is_dir():
+        raise MatremapError(f"{out} exists and is not a folder")
+    if (out / "report.html").exists() and not force:
+        raise MatremapError(f"{out / 'report.html'} already exists; pass --force to overwrite it")
+    return out
+
+
+class _ReportImages:
+    """The report's PNGs: written to a folder and kept as data URIs for the self-contained HTML."""
+
+    def __init__(self, folder: Path) -> None:
+        self.folder = folder
+        self.files: list[Path] = []
+        self.embedded: dict[str, str] = {}
+
+    def emit(self, name: str, data: bytes) -> None:
+        self.folder.mkdir(parents=True, exist_ok=True)
+        path = self.folder / name
+        _write_bytes(path, data)
+        self.files.append(path)
+        self.embedded[name] = "data:image/png;base64," + base64.b64encode(data).decode("ascii")
+
+
+class _Comparison:
+    """SSIM of source and target renders per part and rotation, and the pictures of each."""
+
+    def __init__(self, mask: np.ndarray, scale: float) -> None:
+        self.mask, self.scale = mask, scale
+        self.dssim: dict[str, list[float]] = {p: [] for p in PARTS}
+        self.dssim_image: dict[str, list[float]] = {p: [] for p in PARTS}
+        self.exposure: dict[str, float] = {}
+
+    def add(self, k: int, part: str, s_img: np.ndarray, t_img: np.ndarray, images: _ReportImages) -> None:
+        if self.scale != 1.0:
+            s_img = (s_img.astype(np.float64) * self.scale).astype(np.float32)
+        mssim, smap = ssim_map(s_img, t_img)
+        dmap = 1.0 - smap
+        mask = self.mask
+        self.dssim[part].append(float(dmap[mask].mean()) if mask.any() else float(1.0 - mssim))
+        self.dssim_image[part].append(float(1.0 - mssim))
+        if part not in self.exposure:  # one exposure per part for the whole report (the first source)
+            self.exposure[part] = _exposure(s_img, mask)
+        images.emit(f"r{k:03d}_{part}_source.png", _png_bytes(tonemap(s_img, self.exposure[part])))
+        images.emit(f"r{k:03d}_{part}_target.png", _png_bytes(tonemap(t_img, self.exposure[part])))
+        images.emit(f"r{k:03d}_{part}_dssim.png", _png_bytes(_colormap(np.where(mask, dmap, 0.0))))
+
+
+def _write_results(result: EvaluationResult, info: Mapping[str, str], images: _ReportImages, title: str) -> None:
+    results_json = result.out_dir / "results.json"
+    with atomic_output(results_json) as tmp, open(tmp, "w") as f:
+        json.dump({**result.to_dict(), "settings": dict(info)}, f, indent=2)
+    result.files.append(results_json)
+    text = _html(result, images.embedded, info, title)
+    with atomic_output(result.report) as tmp, open(tmp, "w", encoding="utf-8") as f:
+        f.write(text)
 
 
 def _describe(m: SVMaterial) -> str:

@@ -42,7 +42,8 @@ from typing import Any
 import numpy as np
 
 from matremap.core.imageio import atomic_output, check_output, linear_to_srgb, srgb_to_linear
-from matremap.core.models import ModelSpec, get_model
+from matremap.core.models import ModelSpec
+from matremap.dialects import get_model
 from matremap.errors import MatremapError
 
 COLORSPACES = ("srgb", "linear")
@@ -515,7 +516,7 @@ def load_map_set(path: str | os.PathLike, model: str | None = None, params: Mapp
     if clash:
         raise MatremapError(f"{where}: {sorted(clash)[0]} is given both as a map and as a value; keep one")
     if constants:
-        from matremap.core.models import Material
+        from matremap.core.material import Material
 
         Material.create(model, constants)  # validates names, ranges and options
         constants = {

@@ -22,13 +22,16 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from matremap import __version__
-from matremap.core.fit import STRATEGIES, fit
-from matremap.core.models import Material, get_model
+from matremap.core.fit import STRATEGIES
+from matremap.core.material import Material
 from matremap.core.scene import Scene
+from matremap.dialects import get_model
 from matremap.errors import MatremapError
+from matremap.renderers.registry import renderer_for
 from matremap.sweep.executors import limit_blas_threads
 from matremap.sweep.grid import Grid
 from matremap.sweep.store import SweepStore, point_key
+from matremap.uniform import fit
 
 
 @dataclass(frozen=True)
@@ -41,12 +44,18 @@ class SweepConfig:
     free: tuple[str, ...] = ()
     strategy: str = "two-stage"
     scene: Scene = field(default_factory=Scene)
-    source_renderer: str = "embedded"
-    target_renderer: str = "embedded"
+    #: renderer names; None: the model's own renderer (:func:`~matremap.renderers.registry.renderer_for`),
+    #: stored resolved so that the database records which renderer drew its rows
+    source_renderer: str | None = None
+    target_renderer: str | None = None
     continuation: bool = False
     round_trip: bool = False
 
     def __post_init__(self) -> None:
+        if self.source_renderer is None:
+            object.__setattr__(self, "source_renderer", renderer_for(self.source.model))
+        if self.target_renderer is None:
+            object.__setattr__(self, "target_renderer", renderer_for(self.target))
         if self.strategy not in STRATEGIES:
             raise MatremapError(f"unknown strategy {self.strategy!r}; choose one of {', '.join(STRATEGIES)}")
         spec = get_model(self.target)

@@ -31,21 +31,23 @@ from typing import Any
 import numpy as np
 
 from matremap.core.envmap import EnvMap
-from matremap.core.models import ModelSpec, get_model
+from matremap.core.material import SVMaterial
+from matremap.core.models import ModelSpec
 from matremap.core.scene import Scene
+from matremap.dialects import get_model
 from matremap.errors import MatremapError
-from matremap.renderers.cycles.probe import CyclesRenderer
-
-MODELS = ("cycles:glossy", "cycles:diffuse", "cycles:principled")
-PARTS = ("full", "specular", "diffuse")
+from matremap.renderers.base import PARTS
+from matremap.renderers.cycles.probe import MODELS, CyclesRenderer
+from matremap.renderers.textured import check_normal_map, check_options, split_texture_params
 
 #: default samples per pixel
 DEFAULT_SPP = 64
 
-_shared: CyclesRenderer | None = None
+_shared: CyclesRenderer | None = None  # the renderer environment renders share by default
 
 
-def _renderer(renderer: CyclesRenderer | None) -> CyclesRenderer:
+def shared_renderer(renderer: CyclesRenderer | None = None) -> CyclesRenderer:
+    """``renderer``, or the one Cycles renderer (its worker, 600 s timeout) this process shares."""
     global _shared
     if renderer is not None:
         return renderer
@@ -58,7 +60,6 @@ def _split_params(
     spec: ModelSpec, params: Mapping[str, Any], overrides: Mapping[str, Any]
 ) -> tuple[dict[str, list[float]], dict[str, np.ndarray]]:
     """Constants as lists (for the worker's JSON) and textures as float32 [h, w, 3] images."""
-    from matremap.renderers.embedded.environment import split_texture_params
 
     consts, textures = split_texture_params(spec, params, overrides)
     images = {
@@ -89,7 +90,6 @@ def render_svbrdf_cycles(
     :class:`~matremap.renderers.cycles.probe.CyclesRenderer` whose worker renders (default: one shared by
     this module). Returns linear radiance float32 [res, res, 3], black off the sphere.
     """
-    from matremap.renderers.embedded.environment import _check_params
 
     spec = get_model(model)
     if spec.id not in MODELS:
@@ -100,17 +100,16 @@ def render_svbrdf_cycles(
         raise MatremapError(f"env must be an EnvMap, got {type(env).__name__}")
     if not (isinstance(spp, (int, np.integer)) and spp >= 1):
         raise MatremapError(f"spp must be a positive integer, got {spp!r}")
-    opts = _check_params(spec, params, options or {})
+    opts = check_options(spec, params, options or {})
     res = int(resolution)
     overrides = spec.part_overrides(part, params)
     if overrides is None:
         return np.zeros((res, res, 3), dtype=np.float32)
     consts, textures = _split_params(spec, params, overrides)
-    from matremap.renderers.embedded.environment import check_normal_map
 
     nm = None if normal_map is None else check_normal_map(normal_map)
     scene = Scene(resolution=res)
-    r = _renderer(renderer)
+    r = shared_renderer(renderer)
     with tempfile.TemporaryDirectory(prefix="matremap-cycles-svbrdf-") as d:
         names = {}
         for i, (name, tex) in enumerate(textures.items()):
@@ -138,10 +137,37 @@ def render_svbrdf_cycles(
             "spp": int(spp),
             "seed": int(seed),
         }
-        images = r._request(request)
+        images = r.request(request)
     if images.shape != (1, res, res, 3):
         raise MatremapError(f"the Cycles worker returned an image of shape {images.shape}")
     return images[0].astype(np.float32, copy=False)
 
 
 __all__ = ["DEFAULT_SPP", "MODELS", "render_svbrdf_cycles"]
+
+
+class CyclesEnvironmentRender:
+    """Cycles' :class:`~matremap.renderers.base.EnvironmentRender`: a ``cycles:*`` material drawn by real
+    Blender Cycles through the bpy worker (:func:`render_svbrdf_cycles`, 64 spp, seed 0) under the
+    environment map itself. The parameters and normal map are checked here, before anything renders."""
+
+    label = f"Blender Cycles (bpy worker, {DEFAULT_SPP} spp)"
+
+    def __init__(self, material: SVMaterial, env: EnvMap, resolution: int, part: str) -> None:
+        options = check_options(get_model(material.model), material.params, material.options)
+        self.material = SVMaterial(material.model, material.params, options, material.normal)
+        self.normal = None if material.normal is None else check_normal_map(material.normal)
+        self.env, self.resolution, self.part = env, resolution, part
+
+    def render(self, rotation_deg: float) -> np.ndarray:
+        m = self.material
+        return render_svbrdf_cycles(
+            m.model,
+            m.params,
+            m.options,
+            self.env,
+            rotation_deg=rotation_deg,
+            resolution=self.resolution,
+            part=self.part,
+            normal_map=self.normal,
+        )

@@ -45,14 +45,19 @@ from typing import Any
 
 import numpy as np
 
-from matremap.core.models import Material, ModelSpec, OptionSpec, ParamSpec, register
+from matremap.core.material import Material, SVMaterial
 from matremap.core.scene import Scene
+from matremap.dialects import cycles as cycles_dialect
+from matremap.dialects.cycles import PRINCIPLED
 from matremap.errors import MatremapError
-from matremap.renderers.base import check_supported
+from matremap.renderers.base import EnvironmentLight, EnvironmentRender, check_can_render, check_environment_args
 
 ENV_PYTHON = "MATREMAP_BPY_PYTHON"
+
 REPO = Path(__file__).resolve().parents[4]
+
 DEFAULT_PYTHON = REPO / ".venv-bpy" / "bin" / "python"
+
 WORKER = Path(__file__).with_name("worker.py")
 
 INSTALL_HINT = (
@@ -61,56 +66,8 @@ INSTALL_HINT = (
     f"{ENV_PYTHON} at a Python that can `import bpy` (bpy 5.0.1 pins numpy<2, so not the main venv)"
 )
 
-# ---------------------------------------------------------------------------------------------
-# Models (data only). cycles:glossy and cycles:diffuse are registered by the embedded dialects.
-
-PRINCIPLED = register(
-    ModelSpec(
-        id="cycles:principled",
-        summary="Principled BSDF (Blender 5.0 Cycles; multiscatter GGX, F82-tint metals); real Cycles only",
-        params=(
-            ParamSpec(
-                "Base Color",
-                "diffuse",
-                (0.8,) * 3,
-                (0.0, 1.0),
-                channels=3,
-                doc="diffuse albedo; metal reflectance at normal incidence",
-            ),
-            ParamSpec("Metallic", "specular", 0.0, (0.0, 1.0), fit=False, doc="metallicity (held at 0 in fits)"),
-            ParamSpec("Roughness", "roughness", 0.5, (0.0, 1.0), doc="alpha = Roughness^2"),
-            ParamSpec("IOR", "fresnel", 1.5, (1.0, 4.0), doc="dielectric IOR (fitted: sets the specular level)"),
-            ParamSpec(
-                "Specular IOR Level",
-                "specular",
-                0.5,
-                (0.0, 1.0),
-                fit=False,
-                doc="scales the dielectric F0 (0.5 = the IOR's own; 0 = no specular); held at 0.5 in "
-                "fits, where IOR sets the level",
-            ),
-            ParamSpec(
-                "Specular Tint",
-                "other",
-                (1.0,) * 3,
-                (0.0, 1.0),
-                channels=3,
-                fit=False,
-                doc="dielectric specular colour (held at white in fits)",
-            ),
-        ),
-        options=(OptionSpec("distribution", ("multi_ggx", "ggx"), "multi_ggx", "microfacet distribution"),),
-        diffuse_only={"Metallic": 0.0, "Specular IOR Level": 0.0},
-        # with Metallic = 0 (held in fits) a black base leaves the dielectric specular lobe alone;
-        # a metal's lobe takes Base Color's colour, so this isolates nothing when Metallic > 0
-        specular_only={"Base Color": 0.0},
-        # F0 of the IOR, with Specular IOR Level held at 0.5 (where Cycles leaves F0 as the IOR gives it)
-        reflectance=("dielectric", "IOR"),
-        channel_separable=False,
-    )
-)
-
-MODELS = ("cycles:diffuse", "cycles:glossy", "cycles:principled")
+#: the models Cycles draws: those of its dialect
+MODELS = tuple(spec.id for spec in cycles_dialect.MODELS)
 
 
 def find_python(python: str | os.PathLike | None = None) -> str:
@@ -174,13 +131,38 @@ class CyclesRenderer:
             pass
 
     # -- protocol ----------------------------------------------------------------------------
-    def supports(self, model_id: str) -> bool:
+    @classmethod
+    def can_render(cls, model_id: str) -> bool:
         return model_id in MODELS
+
+    @classmethod
+    def environment_support(cls, model_id: str, geometry: str) -> str | None:
+        """Cycles draws its own models on the sphere, when the bpy venv is set up."""
+        if model_id not in MODELS:
+            return f"Cycles does not draw {model_id}"
+        if geometry != "sphere":
+            return f"the Cycles renders are of the sphere only, not the {geometry}"
+        return None if bpy_available() else INSTALL_HINT
+
+    @classmethod
+    def supports_textures(cls, model_id: str, param: str) -> bool:
+        return True
+
+    def prepare_environment(
+        self, material: SVMaterial, light: EnvironmentLight, geometry: str, resolution: int, part: str
+    ) -> EnvironmentRender:
+        from matremap.renderers.cycles.environment import CyclesEnvironmentRender
+
+        check_environment_args(geometry, resolution, part)
+        why = self.environment_support(material.model, geometry)
+        if why is not None:
+            raise MatremapError(why)
+        return CyclesEnvironmentRender(material, light.env, resolution, part)
 
     def render(self, materials: Sequence[Material], scene: Scene) -> np.ndarray:
         """float32 [N, H, W, 3], linear radiance."""
         materials = list(materials)
-        check_supported(self, materials)
+        check_can_render(self, materials)
         res = scene.resolution
         if not materials:
             return np.zeros((0, res, res, 3), dtype=np.float32)
@@ -196,7 +178,7 @@ class CyclesRenderer:
                 for m in materials
             ],
         }
-        images = self._request(request)
+        images = self.request(request)
         if images.shape != (len(materials), res, res, 3):
             raise MatremapError(f"the Cycles worker returned images of shape {images.shape}")
         self.renders += len(materials) * len(scene.lights)
@@ -262,7 +244,7 @@ class CyclesRenderer:
             self._log.close()
             self._log = None
 
-    def _request(self, request: dict[str, Any]) -> np.ndarray:
+    def request(self, request: dict[str, Any]) -> np.ndarray:
         """Send a request whose reply carries images; returns them."""
         header, payload = self._exchange(request)
         if not header.get("nbytes"):

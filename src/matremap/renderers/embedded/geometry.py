@@ -7,6 +7,7 @@ Everything is derived from three cosines (n.i, n.o, i.o), which is all an isotro
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -107,3 +108,8 @@ def direction(theta_deg: float, phi_deg: float = 0.0) -> np.ndarray:
     """Unit vector at polar angle theta from +z and azimuth phi (degrees)."""
     t, p = np.radians(theta_deg), np.radians(phi_deg)
     return np.array([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)])
+
+
+#: f(params, options, geometry) -> f * cos(theta_i); params are [N, C, 1, 1] (C = 1 or 3 channels),
+#: geometry arrays [L, P] (lights, pixels), the result broadcasts to [N, C, L, P]
+Evaluator = Callable[[Mapping[str, np.ndarray], Mapping[str, str], LocalGeometry], np.ndarray]

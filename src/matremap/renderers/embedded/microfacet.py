@@ -15,7 +15,6 @@ from __future__ import annotations
 import numpy as np
 
 ALPHA_MIN = 1e-4
-DISTRIBUTIONS = ("beckmann", "ggx", "phong", "as")
 
 
 def phong_exponent(alpha: np.ndarray) -> np.ndarray:

@@ -14,9 +14,9 @@ from functools import lru_cache
 
 import numpy as np
 
-from matremap.core.models import Material
+from matremap.core.material import Material, SVMaterial
 from matremap.core.scene import Scene
-from matremap.renderers.base import check_supported
+from matremap.renderers.base import EnvironmentLight, EnvironmentRender, check_can_render, check_environment_args
 from matremap.renderers.embedded.geometry import LocalGeometry
 
 
@@ -61,10 +61,28 @@ class EmbeddedRenderer:
 
     name = "embedded"
 
-    def supports(self, model_id: str) -> bool:
+    def can_render(self, model_id: str) -> bool:
         from matremap.renderers.embedded.evaluators import EVALUATORS
 
         return model_id in EVALUATORS
+
+    def environment_support(self, model_id: str, geometry: str) -> str | None:
+        """The embedded renderer draws every model it emulates, on every evaluation geometry."""
+        return None if self.can_render(model_id) else f"model {model_id} has no embedded evaluator"
+
+    def supports_textures(self, model_id: str, param: str) -> bool:
+        return True
+
+    def prepare_environment(
+        self, material: SVMaterial, light: EnvironmentLight, geometry: str, resolution: int, part: str
+    ) -> EnvironmentRender:
+        from matremap.renderers.embedded.environment import EmbeddedEnvironmentRender, SVBRDFRender
+
+        check_environment_args(geometry, resolution, part)
+        prepared = SVBRDFRender(
+            material.model, material.params, material.options, geometry, resolution, part, material.normal
+        )
+        return EmbeddedEnvironmentRender(prepared, light)
 
     def render(self, materials: Sequence[Material], scene: Scene) -> np.ndarray:
         materials = list(materials)
@@ -94,7 +112,7 @@ class EmbeddedRenderer:
         inner loops run over pixels): parameters come as [N, C, 1, 1], geometry as [L, P]."""
         from matremap.renderers.embedded.evaluators import EVALUATORS
 
-        check_supported(self, materials)
+        check_can_render(self, materials)
         geo = scene_geometry(scene)
         groups: dict[tuple, list[int]] = {}
         for i, m in enumerate(materials):

@@ -40,15 +40,24 @@ from typing import Any
 import numpy as np
 
 from matremap.core.envmap import EnvMap
-from matremap.core.models import Material, ModelSpec, ParamSpec, get_model
+from matremap.core.material import Material, SVMaterial
+from matremap.core.models import ModelSpec, ParamSpec
 from matremap.core.scene import Scene
+from matremap.dialects import get_model
 from matremap.errors import MatremapError
-from matremap.renderers.mitsuba3.probe import MODELS, _bsdf, _call, choose_variant, import_mitsuba, probe_sensor
-
-PARTS = ("full", "specular", "diffuse")
+from matremap.renderers.base import PARTS
+from matremap.renderers.mitsuba3.probe import (
+    MODELS,
+    bsdf_dict,
+    choose_variant,
+    import_mitsuba,
+    mitsuba_call,
+    probe_sensor,
+)
+from matremap.renderers.textured import check_normal_map, check_options, split_texture_params
 
 #: parameters that Mitsuba 3 takes as plain floats, not textures
-_NOT_TEXTURABLE = {
+NOT_TEXTURABLE = {
     "mitsuba3:roughplastic": ("alpha", "int_ior", "ext_ior"),
     "mitsuba3:principled": ("specular",),
 }
@@ -94,10 +103,9 @@ def _split_params(
 ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """(constant values [channels], textures [h, w] or [h, w, 3]) of every model parameter, with
     Mitsuba 3's own limits on what may be a texture."""
-    from matremap.renderers.embedded.environment import split_texture_params
 
     def check(p: ParamSpec, a: np.ndarray) -> None:
-        if p.name in _NOT_TEXTURABLE.get(spec.id, ()):
+        if p.name in NOT_TEXTURABLE.get(spec.id, ()):
             raise MatremapError(f"{spec.id}: Mitsuba 3 takes {p.name} as a constant, not a texture")
         if p.name in ("eta", "k") and options.get("material", "custom") != "custom":
             raise MatremapError(f"{spec.id}: a texture for {p.name} needs material=custom")
@@ -119,7 +127,6 @@ def scene_dict(
     seed: int = 0,
 ) -> dict[str, Any] | None:
     """The ``mi.load_dict`` dictionary of the scene, or None when the part is black."""
-    from matremap.renderers.embedded.environment import _check_params
 
     spec = get_model(model)
     if spec.id not in MODELS:
@@ -130,17 +137,15 @@ def scene_dict(
         raise MatremapError(f"env must be an EnvMap, got {type(env).__name__}")
     if not (isinstance(spp, (int, np.integer)) and spp >= 1):
         raise MatremapError(f"spp must be a positive integer, got {spp!r}")
-    opts = _check_params(spec, params, options or {})
+    opts = check_options(spec, params, options or {})
     overrides = spec.part_overrides(part, params)
     if overrides is None:
         return None
     consts, textures = _split_params(spec, params, overrides, opts)
-    bsdf, _ = _bsdf(spec.id, opts, Material(spec.id, consts, opts))
+    bsdf, _ = bsdf_dict(spec.id, opts, Material(spec.id, consts, opts))
     for name, tex in textures.items():
         bsdf[name] = _bitmap(mi, tex)
     if normal_map is not None:
-        from matremap.renderers.embedded.environment import check_normal_map
-
         nm = check_normal_map(normal_map)
         bsdf = {"type": "normalmap", "normalmap": _bitmap(mi, (nm + 1.0) / 2.0), "bsdf": bsdf}
 
@@ -192,9 +197,32 @@ def render_svbrdf_mitsuba3(
     res = int(resolution)
     if d is None:
         return np.zeros((res, res, 3), dtype=np.float32)
-    scene = _call(mi, "load the SVBRDF scene", mi.load_dict, d)
-    img = _call(mi, "render", mi.render, scene, spp=int(spp), seed=int(seed))
+    scene = mitsuba_call(mi, "load the SVBRDF scene", mi.load_dict, d)
+    img = mitsuba_call(mi, "render", mi.render, scene, spp=int(spp), seed=int(seed))
     return np.asarray(img, dtype=np.float32).reshape(res, res, -1)[..., :3].copy()
 
 
 __all__ = ["DEFAULT_SPP", "envmap_vertex_rows", "render_svbrdf_mitsuba3", "scene_dict"]
+
+
+class Mitsuba3EnvironmentRender:
+    """Mitsuba 3's :class:`~matremap.renderers.base.EnvironmentRender`: a ``mitsuba3:*`` material drawn
+    under the environment map itself (not its discrete lights) by :func:`render_svbrdf_mitsuba3`."""
+
+    label = "Mitsuba 3"
+
+    def __init__(self, material: SVMaterial, env: EnvMap, resolution: int, part: str) -> None:
+        self.material, self.env, self.resolution, self.part = material, env, resolution, part
+
+    def render(self, rotation_deg: float) -> np.ndarray:
+        m = self.material
+        return render_svbrdf_mitsuba3(
+            m.model,
+            m.params,
+            m.options,
+            self.env,
+            rotation_deg=rotation_deg,
+            resolution=self.resolution,
+            part=self.part,
+            normal_map=m.normal,
+        )

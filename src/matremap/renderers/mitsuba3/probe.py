@@ -60,216 +60,25 @@ from typing import Any
 
 import numpy as np
 
-from matremap.core.models import Material, ModelSpec, OptionSpec, ParamSpec, register, register_white_reference
+from matremap.core.material import Material, SVMaterial
 from matremap.core.scene import Scene
+from matremap.dialects import mitsuba3 as mitsuba3_dialect
+from matremap.dialects.mitsuba3 import (
+    CONDUCTORS,
+    DIFFUSE,
+    DISTRIBUTIONS,
+    PRINCIPLED,
+    PRINCIPLED_HELD,
+    ROUGHCONDUCTOR,
+    ROUGHPLASTIC,
+)
 from matremap.errors import MatremapError
-from matremap.renderers.base import check_supported
+from matremap.renderers.base import EnvironmentLight, EnvironmentRender, check_can_render, check_environment_args
 
 INSTALL_HINT = (
     "Mitsuba 3 is not installed; install it with `pip install 'matremap[mitsuba]'` "
     "(or `pip install mitsuba`, which brings drjit)"
 )
-
-#: conductor names Mitsuba 3.9 ships spectral IOR data for (``data/ior``), plus ``none`` (F = 1)
-CONDUCTORS = (
-    "none",
-    "a-C",
-    "Ag",
-    "Al",
-    "AlAs",
-    "AlAs_palik",
-    "AlSb",
-    "AlSb_palik",
-    "Au",
-    "Be",
-    "Be_palik",
-    "Cr",
-    "CsI",
-    "CsI_palik",
-    "Cu",
-    "Cu_palik",
-    "Cu2O",
-    "Cu2O_palik",
-    "CuO",
-    "CuO_palik",
-    "d-C",
-    "d-C_palik",
-    "Hg",
-    "Hg_palik",
-    "HgTe",
-    "HgTe_palik",
-    "Ir",
-    "Ir_palik",
-    "K",
-    "K_palik",
-    "Li",
-    "Li_palik",
-    "MgO",
-    "MgO_palik",
-    "Mo",
-    "Mo_palik",
-    "Na_palik",
-    "Nb",
-    "Nb_palik",
-    "Ni_palik",
-    "Rh",
-    "Rh_palik",
-    "Se",
-    "Se_palik",
-    "Se-e",
-    "Se-e_palik",
-    "SiC",
-    "SiC_palik",
-    "SnTe",
-    "SnTe_palik",
-    "Ta",
-    "Ta_palik",
-    "Te",
-    "Te_palik",
-    "Te-e",
-    "Te-e_palik",
-    "ThF4",
-    "ThF4_palik",
-    "TiC",
-    "TiC_palik",
-    "TiN",
-    "TiN_palik",
-    "TiO2",
-    "TiO2_palik",
-    "TiO2-e",
-    "TiO2-e_palik",
-    "VC",
-    "VC_palik",
-    "V_palik",
-    "VN",
-    "VN_palik",
-    "W",
-)
-
-DISTRIBUTIONS = ("beckmann", "ggx")
-
-
-# ---------------------------------------------------------------------------------------------
-# Models (data only: listing them needs no Mitsuba)
-
-
-def _rgb(
-    name: str, role: str, default: float, hi: float, fit: bool = True, fit_value: float | None = None, doc: str = ""
-) -> ParamSpec:
-    return ParamSpec(name, role, (default,) * 3, (0.0, hi), channels=3, fit=fit, fit_value=fit_value, doc=doc)
-
-
-def _alpha() -> ParamSpec:
-    return ParamSpec("alpha", "roughness", 0.1, (1e-4, 1.0), doc="microfacet roughness (RMS slope)")
-
-
-def _distribution() -> OptionSpec:
-    return OptionSpec("distribution", DISTRIBUTIONS, "beckmann", "microfacet normal distribution")
-
-
-DIFFUSE = register(
-    ModelSpec(
-        id="mitsuba3:diffuse",
-        summary="Lambertian (Mitsuba 3 diffuse)",
-        params=(_rgb("reflectance", "diffuse", 0.5, 1.0, doc="albedo"),),
-        diffuse_only={},
-        specular_only=None,
-    )
-)
-register_white_reference("mitsuba3", "mitsuba3:diffuse", {"reflectance": 1.0})
-
-ROUGHCONDUCTOR = register(
-    ModelSpec(
-        id="mitsuba3:roughconductor",
-        summary="rough conductor, exact conductor Fresnel (Mitsuba 3 roughconductor)",
-        params=(
-            _alpha(),
-            _rgb(
-                "eta",
-                "fresnel",
-                0.0,
-                100.0,
-                fit=False,
-                fit_value=1.0,
-                doc="real part of the IOR (material=custom); held at 1 in fits so that F0 = k^2/(4 + k^2)",
-            ),
-            _rgb("k", "fresnel", 1.0, 100.0, doc="absorption coefficient (material=custom)"),
-            _rgb(
-                "specular_reflectance",
-                "specular",
-                1.0,
-                1.0,
-                fit=False,
-                doc="multiplier that should not be touched for realism",
-            ),
-        ),
-        options=(
-            _distribution(),
-            OptionSpec(
-                "material",
-                ("custom", *CONDUCTORS),
-                "custom",
-                "named conductor (Mitsuba's spectral data); custom uses eta and k",
-            ),
-        ),
-        diffuse_only=None,
-        specular_only={},
-        # F0 of eta + i k (no exterior IOR in Mitsuba 3); with a named `material` eta/k are unused
-        reflectance=("conductor", "eta", "k"),
-    )
-)
-
-ROUGHPLASTIC = register(
-    ModelSpec(
-        id="mitsuba3:roughplastic",
-        summary="rough dielectric coating over a Lambertian base (Mitsuba 3 roughplastic)",
-        params=(
-            _alpha(),
-            ParamSpec("int_ior", "fresnel", 1.49, (1.0001, 4.0), doc="interior IOR (polypropylene)"),
-            ParamSpec("ext_ior", "other", 1.000277, (1.0, 4.0), fit=False, doc="exterior IOR (air)"),
-            _rgb("specular_reflectance", "specular", 1.0, 1.0, fit=False, doc="multiplier, held at 1"),
-            _rgb("diffuse_reflectance", "diffuse", 0.5, 1.0, doc="albedo of the base under the coating"),
-        ),
-        options=(
-            OptionSpec("distribution", DISTRIBUTIONS, "beckmann", "microfacet normal distribution"),
-            OptionSpec("nonlinear", ("false", "true"), "false", "account for internal scattering nonlinearly"),
-        ),
-        diffuse_only={"specular_reflectance": 0.0},
-        specular_only={"diffuse_reflectance": 0.0},
-        reflectance=("dielectric", "int_ior", "ext_ior"),
-    )
-)
-
-_PRINCIPLED_HELD = ("spec_tint", "anisotropic", "sheen", "sheen_tint", "clearcoat", "clearcoat_gloss", "spec_trans")
-
-PRINCIPLED = register(
-    ModelSpec(
-        id="mitsuba3:principled",
-        summary="Disney principled BSDF (Mitsuba 3 principled); fit it with --strategy simple",
-        params=(
-            _rgb("base_color", "diffuse", 0.5, 1.0, doc="base colour (diffuse albedo; metal reflectance)"),
-            ParamSpec("roughness", "roughness", 0.5, (1e-3, 1.0), doc="roughness (alpha = roughness^2)"),
-            ParamSpec("metallic", "specular", 0.0, (0.0, 1.0), doc="metallicity"),
-            ParamSpec(
-                "specular",
-                "specular",
-                0.5,
-                (0.0, 1.0),
-                linear=True,
-                doc="dielectric specular amount (eta = 2/(1 - sqrt(0.08 specular)) - 1)",
-            ),
-            *(ParamSpec(n, "other", 0.0, (0.0, 1.0), fit=False, doc="held at 0 in fits") for n in _PRINCIPLED_HELD),
-        ),
-        diffuse_only={"metallic": 0.0, "specular": 0.0, "clearcoat": 0.0, "spec_trans": 0.0},
-        # the metallic lobe takes base_color's colour: no parameter override isolates the specular part
-        specular_only=None,
-        channel_separable=False,  # tints use the luminance of base_color
-    )
-)
-
-
-# ---------------------------------------------------------------------------------------------
-# Plugin dictionaries and the parameters changed with mi.traverse
 
 
 @dataclass(frozen=True)
@@ -281,7 +90,7 @@ class _Binding:
     rgb: bool
 
 
-def _bsdf(model: str, options: dict[str, str], m: Material) -> tuple[dict[str, Any], list[_Binding]]:
+def bsdf_dict(model: str, options: dict[str, str], m: Material) -> tuple[dict[str, Any], list[_Binding]]:
     """The BSDF's plugin dictionary for material ``m`` and the parameters to update per material."""
 
     def rgb(name: str) -> dict[str, Any]:
@@ -333,18 +142,22 @@ def _bsdf(model: str, options: dict[str, str], m: Material) -> tuple[dict[str, A
         d = {"type": "principled", "base_color": rgb("base_color")}
         b = [_Binding("base_color", "base_color.value", True), _Binding("specular", "specular", False)]
         d["specular"] = scalar("specular")
-        for name in ("roughness", "metallic", *_PRINCIPLED_HELD):
+        for name in ("roughness", "metallic", *PRINCIPLED_HELD):
             d[name] = scalar(name)
             b.append(_Binding(name, f"{name}.value", False))
         return d, b
     raise MatremapError(f"renderer 'mitsuba3' cannot render model {model}")  # pragma: no cover
 
 
-MODELS = ("mitsuba3:diffuse", "mitsuba3:roughconductor", "mitsuba3:roughplastic", "mitsuba3:principled")
+#: the models Mitsuba 3 draws: those of its dialect
+MODELS = tuple(spec.id for spec in mitsuba3_dialect.MODELS)
 
 
-# ---------------------------------------------------------------------------------------------
-# Mitsuba import and variant
+def mitsuba_installed() -> bool:
+    """Whether the ``mitsuba`` package can be found (without importing it)."""
+    import importlib.util
+
+    return importlib.util.find_spec("mitsuba") is not None
 
 
 def import_mitsuba():
@@ -403,17 +216,13 @@ def choose_variant(mi, variant: str | None) -> str:
     return variant
 
 
-# ---------------------------------------------------------------------------------------------
-# The renderer
-
-
 class _Loaded:
     """One loaded Mitsuba scene (one light) and its traversed parameters."""
 
     def __init__(self, mi, scene_dict: dict[str, Any], bindings: list[_Binding], model: str) -> None:
         self.mi = mi
         self.model = model
-        self.scene = _call(mi, "load the probe scene", mi.load_dict, scene_dict)
+        self.scene = mitsuba_call(mi, "load the probe scene", mi.load_dict, scene_dict)
         self.params = mi.traverse(self.scene)
         self.bindings = bindings
         self.current: dict[str, np.ndarray] = {}
@@ -437,10 +246,11 @@ class _Loaded:
                 self.current["eta"] = eta
                 changed = True
         if changed:
-            _call(mi, "update the material", self.params.update)
+            mitsuba_call(mi, "update the material", self.params.update)
 
 
-def _call(mi, what: str, fn, *args, **kwargs):
+def mitsuba_call(mi, what: str, fn, *args, **kwargs):
+    """``fn(*args, **kwargs)``, with Mitsuba's own errors turned into one MatremapError naming ``what``."""
     try:
         return fn(*args, **kwargs)
     except (RuntimeError, ValueError, TypeError) as e:
@@ -484,13 +294,40 @@ class Mitsuba3Renderer:
             self._cache.clear()  # scenes of another variant are unusable
 
     # -- protocol ----------------------------------------------------------------------------
-    def supports(self, model_id: str) -> bool:
+    @classmethod
+    def can_render(cls, model_id: str) -> bool:
         return model_id in MODELS
+
+    @classmethod
+    def environment_support(cls, model_id: str, geometry: str) -> str | None:
+        """Mitsuba 3 draws its own models on the sphere, when it is installed."""
+        if model_id not in MODELS:
+            return f"Mitsuba 3 does not draw {model_id}"
+        if geometry != "sphere":
+            return f"{model_id} is drawn by Mitsuba 3, which renders the sphere only; use --geometry sphere"
+        return None if mitsuba_installed() else INSTALL_HINT
+
+    @classmethod
+    def supports_textures(cls, model_id: str, param: str) -> bool:
+        from matremap.renderers.mitsuba3.environment import NOT_TEXTURABLE
+
+        return param not in NOT_TEXTURABLE.get(model_id, ())
+
+    def prepare_environment(
+        self, material: SVMaterial, light: EnvironmentLight, geometry: str, resolution: int, part: str
+    ) -> EnvironmentRender:
+        from matremap.renderers.mitsuba3.environment import Mitsuba3EnvironmentRender
+
+        check_environment_args(geometry, resolution, part)
+        why = self.environment_support(material.model, geometry)
+        if why is not None:
+            raise MatremapError(why)
+        return Mitsuba3EnvironmentRender(material, light.env, resolution, part)
 
     def render(self, materials: Sequence[Material], scene: Scene) -> np.ndarray:
         """float32 [N, H, W, 3], linear radiance."""
         materials = list(materials)
-        check_supported(self, materials)
+        check_can_render(self, materials)
         self._activate()
         res = scene.resolution
         out = np.zeros((len(materials), res, res, 3), dtype=np.float32)
@@ -508,7 +345,7 @@ class Mitsuba3Renderer:
     def _render_one(self, m: Material, scene: Scene, light: int) -> np.ndarray:
         loaded = self._loaded(m, scene, light)
         loaded.set(m)
-        img = _call(self.mi, "render", self.mi.render, loaded.scene, spp=self.spp, seed=self.seed)
+        img = mitsuba_call(self.mi, "render", self.mi.render, loaded.scene, spp=self.spp, seed=self.seed)
         self.renders += 1
         return np.asarray(img, dtype=np.float32).reshape(scene.resolution, scene.resolution, -1)[..., :3]
 
@@ -519,7 +356,7 @@ class Mitsuba3Renderer:
         if hit is not None:
             self._cache.move_to_end(key)
             return hit
-        bsdf, bindings = _bsdf(m.model, options, m)
+        bsdf, bindings = bsdf_dict(m.model, options, m)
         loaded = _Loaded(self.mi, self.scene_dict(scene, light, bsdf), bindings, m.model)
         loaded.current = {b.param: m.values[b.param].copy() for b in bindings}
         if m.model == "mitsuba3:roughplastic":
@@ -565,10 +402,6 @@ def probe_sensor(mi, scene: Scene, sampler: dict[str, Any]) -> dict[str, Any]:  
         "sampler": sampler,
         "film": {"type": "hdrfilm", "width": res, "height": res, "pixel_format": "rgb", "rfilter": {"type": "box"}},
     }
-
-
-# ---------------------------------------------------------------------------------------------
-# Gradient-based fitting through Mitsuba's autodiff (llvm_ad_rgb)
 
 
 @dataclass(frozen=True)
@@ -623,9 +456,9 @@ def fit_roughconductor_autodiff(
         raise MatremapError("the start must be a mitsuba3:roughconductor with material=custom")
     m0 = m0.with_params({"distribution": distribution})
     renderer = Mitsuba3Renderer(variant="llvm_ad_rgb")  # for its scene_dict: centre rays, 1 spp
-    bsdf, _ = _bsdf(m0.model, dict(m0.options), m0)
+    bsdf, _ = bsdf_dict(m0.model, dict(m0.options), m0)
     scenes = [
-        _call(mi, "load the probe scene", mi.load_dict, renderer.scene_dict(scene, i, bsdf))
+        mitsuba_call(mi, "load the probe scene", mi.load_dict, renderer.scene_dict(scene, i, bsdf))
         for i in range(len(scene.lights))
     ]
     params = [mi.traverse(s) for s in scenes]
@@ -660,7 +493,7 @@ def fit_roughconductor_autodiff(
     hi_k = spec.param("k").bounds[1]
     x0 = np.log(np.concatenate([m0.values["alpha"][:1], np.clip(m0.values["k"], 1e-3, hi_k)]))
     bounds = [(np.log(lo_a), np.log(hi_a))] + [(np.log(1e-3), np.log(hi_k))] * 3
-    r = _call(
+    r = mitsuba_call(
         mi,
         "fit",
         minimize,

@@ -29,26 +29,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from matremap.core.models import ModelSpec, ParamSpec, register_white_reference
-from matremap.renderers.embedded.evaluators import dialect
-
-WARD = ModelSpec(
-    id="blender27:ward",
-    summary="Blender Internal Lambert + WardIso specular (shadeoutput.c)",
-    params=(
-        ParamSpec("diffuse_color", "diffuse", (0.8,) * 3, (0.0, 1.0), channels=3, doc="Lambert colour"),
-        ParamSpec("diffuse_intensity", "diffuse", 0.8, (0.0, 1.0), fit=False, fit_value=1.0),
-        ParamSpec("specular_color", "specular", (1.0,) * 3, (0.0, 1.0), channels=3),
-        ParamSpec("specular_intensity", "specular", 0.5, (0.0, 1.0), fit=False, fit_value=1.0),
-        ParamSpec("specular_slope", "roughness", 0.1, (0.0, 0.4), doc="WardIso rms slope"),
-    ),
-    diffuse_only={"specular_intensity": 0.0},
-    specular_only={"diffuse_intensity": 0.0},
-    reflectance=("param", "specular_color"),
-)
+from matremap.dialects.blender27 import WARD
 
 
-@dialect(WARD)
 def ward(p, opt, g):
     alpha = np.maximum(p["specular_slope"], 0.001)
     a2 = alpha * alpha
@@ -57,6 +40,5 @@ def ward(p, opt, g):
     return spec + (p["diffuse_intensity"] * p["diffuse_color"]) * g.cos_i
 
 
-register_white_reference(
-    "blender27", "blender27:ward", {"diffuse_color": 1.0, "diffuse_intensity": 1.0, "specular_intensity": 0.0}
-)
+#: model id -> evaluator
+EVALUATORS = {WARD.id: ward}

@@ -52,28 +52,12 @@ from pathlib import Path
 import numpy as np
 
 from matremap.core.diskcache import cache_dir, save_tables
-from matremap.core.models import ModelSpec, OptionSpec, ParamSpec, register_white_reference
+from matremap.dialects.cycles import DIFFUSE, GLOSSY
 from matremap.renderers.embedded import microfacet as mf
-from matremap.renderers.embedded.evaluators import dialect
 
 INV_PI = 1.0 / np.pi
 
-GLOSSY = ModelSpec(
-    id="cycles:glossy",
-    summary="Glossy BSDF (+ Diffuse BSDF), alpha = Roughness^2",
-    params=(
-        ParamSpec("Color", "specular", (0.8,) * 3, (0.0, 1.0), channels=3),
-        ParamSpec("Roughness", "roughness", 0.5, (0.0, 1.0), doc="alpha = Roughness^2"),
-        ParamSpec("Diffuse Color", "diffuse", (0.0,) * 3, (0.0, 1.0), channels=3),
-    ),
-    options=(OptionSpec("distribution", ("ggx", "beckmann", "ashikhmin_shirley", "multi_ggx"), "ggx"),),
-    diffuse_only={"Color": 0.0},
-    specular_only={"Diffuse Color": 0.0},
-    reflectance=("param", "Color"),
-)
 
-
-@dialect(GLOSSY)
 def glossy(p, opt, g):
     alpha = p["Roughness"] ** 2
     distribution = opt["distribution"]
@@ -93,14 +77,10 @@ def glossy(p, opt, g):
     return p["Color"] * lobe + p["Diffuse Color"] * g.lambert
 
 
-# ---------------------------------------------------------------------------------------------
-# Multiscatter GGX: energy compensation from directional albedo tables
-
-
-#: nodes per axis of Cycles' ``ggx_E`` (mu x roughness) and ``ggx_Eavg`` (roughness) tables
 ALBEDO_NODES = 32
+
 _ALBEDO_FORMAT = 1
-# Gauss-Legendre nodes per panel: microfacet polar variable, azimuth, and mu for E_avg
+
 _ALBEDO_QUAD = (64, 64, 48)
 
 
@@ -272,18 +252,9 @@ def _ashikhmin_shirley(alpha: np.ndarray, g) -> np.ndarray:
     return np.where(alpha <= 1e-4, 0.0, lobe)
 
 
-DIFFUSE = ModelSpec(
-    id="cycles:diffuse",
-    summary="Diffuse BSDF (Lambert)",
-    params=(ParamSpec("Color", "diffuse", (0.8,) * 3, (0.0, 1.0), channels=3),),
-    diffuse_only={},
-    specular_only=None,
-)
-
-
-@dialect(DIFFUSE)
 def diffuse(p, opt, g):
     return p["Color"] * g.lambert
 
 
-register_white_reference("cycles", "cycles:diffuse", {"Color": 1.0})
+#: model id -> evaluator
+EVALUATORS = {GLOSSY.id: glossy, DIFFUSE.id: diffuse}

@@ -26,75 +26,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from matremap.core.models import ModelSpec, OptionSpec, ParamSpec, register_white_reference
 from matremap.core.optics import dielectric_f0
+from matremap.dialects.gltf import METAL_ROUGH
 from matremap.renderers.embedded import microfacet as mf
-from matremap.renderers.embedded.evaluators import dialect
-
-METAL_ROUGH = ModelSpec(
-    id="gltf:metal-rough",
-    summary="glTF 2.0 metallic-roughness PBR (GGX, Schlick), with KHR_materials_ior/specular",
-    params=(
-        ParamSpec(
-            "baseColor",
-            "diffuse",
-            (1.0,) * 3,
-            (0.0, 1.0),
-            channels=3,
-            doc="albedo of a dielectric, F0 of a metal (baseColorFactor x texture)",
-        ),
-        ParamSpec(
-            "metallic",
-            "other",
-            1.0,
-            (0.0, 1.0),
-            fit=False,
-            doc="0 dielectric, 1 metal (held in fits: fix it to 0 or 1)",
-        ),
-        ParamSpec("roughness", "roughness", 1.0, (0.0, 1.0), doc="perceptual roughness, alpha = roughness^2"),
-        ParamSpec("ior", "fresnel", 1.5, (1.0, 5.0), doc="KHR_materials_ior: sets a dielectric's F0"),
-        ParamSpec(
-            "specular",
-            "other",
-            1.0,
-            (0.0, 1.0),
-            fit=False,
-            doc="KHR_materials_specular specularFactor: scales the dielectric F0 and F90",
-        ),
-        ParamSpec(
-            "specularColor",
-            "fresnel",
-            (1.0,) * 3,
-            (0.0, 25.0),
-            channels=3,
-            fit=False,
-            linear=True,
-            doc="KHR_materials_specular specularColorFactor: tints the dielectric F0 (clamped to 1)",
-        ),
-    ),
-    options=(
-        OptionSpec(
-            "visibility",
-            ("height-correlated", "separable"),
-            "height-correlated",
-            "Smith GGX visibility: height-correlated (sample viewer) or separable (spec appendix)",
-        ),
-    ),
-    # the diffuse part keeps its Fresnel weight (1 - specular max F): roughness 0 switches the lobe off
-    diffuse_only={"metallic": 0.0, "roughness": 0.0},
-    specular_only={"baseColor": 0.0},
-    specialisations=(
-        (
-            "metallic",
-            1.0,
-            {"roles": {"baseColor": "specular", "ior": "other"}, "diffuse_only": None, "specular_only": {}},
-        ),
-    ),
-    reflectance=("metal-rough", "baseColor", "metallic", "ior", "specular", "specularColor"),
-)
 
 
-@dialect(METAL_ROUGH)
 def metal_rough(p, opt, g):
     alpha = p["roughness"] ** 2
     a = np.maximum(alpha, 1e-7)
@@ -114,4 +50,5 @@ def metal_rough(p, opt, g):
     return (1.0 - metallic) * dielectric + metallic * metal
 
 
-register_white_reference("gltf", "gltf:metal-rough", {"baseColor": 1.0, "metallic": 0.0, "specular": 0.0})
+#: model id -> evaluator
+EVALUATORS = {METAL_ROUGH.id: metal_rough}

@@ -45,32 +45,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from matremap.core.models import ModelSpec, OptionSpec, ParamSpec, register_white_reference
 from matremap.core.optics import fresnel_conductor, fresnel_dielectric
+from matremap.dialects.mitsuba06 import DIFFUSE, PBR, PHONG, ROUGHCONDUCTOR, ROUGHPLASTIC, WARD
 from matremap.renderers.embedded import microfacet as mf
-from matremap.renderers.embedded.evaluators import dialect, energy_clamp
 
 INV_PI = 1.0 / np.pi
 
-#: RGB complex IOR of copper as commonly used for Mitsuba's default conductor ``Cu``
-CU_ETA = (0.200438, 0.924033, 1.102212)
-CU_K = (3.912949, 2.452848, 2.142188)
 
-
-def _alpha(default: float = 0.1, hi: float = 1.0) -> ParamSpec:
-    return ParamSpec("alpha", "roughness", default, (1e-4, hi), doc="microfacet roughness (RMS slope)")
-
-
-def _diffuse(default: float = 0.5, doc: str = "Lambertian albedo") -> ParamSpec:
-    return ParamSpec("diffuseReflectance", "diffuse", (default,) * 3, (0.0, 1.0), channels=3, doc=doc)
-
-
-def _specular(default: float, hi: float, fit: bool = True, doc: str = "") -> ParamSpec:
-    return ParamSpec("specularReflectance", "specular", (default,) * 3, (0.0, hi), channels=3, fit=fit, doc=doc)
-
-
-def _distribution(choices: tuple[str, ...], default: str) -> OptionSpec:
-    return OptionSpec("distribution", choices, default, "microfacet normal distribution")
+def energy_clamp(rho_s: np.ndarray, rho_d: np.ndarray) -> np.ndarray:
+    """Mitsuba 0.6 ``BSDF::ensureEnergyConservation`` (``src/librender/bsdf.cpp``): when the largest
+    per-channel sum rho_s + rho_d exceeds 1, both are scaled by 0.99 / (that sum).
+    Returns the scale factor, broadcastable to the inputs."""
+    total = np.max(rho_s + rho_d, axis=1, keepdims=True)  # parameters are [N, C, 1, 1]
+    return np.where(total > 1.0, 0.99 / np.maximum(total, 1e-300), 1.0)
 
 
 def _microfacet(distribution: str, alpha: np.ndarray, g) -> np.ndarray:
@@ -80,41 +67,10 @@ def _microfacet(distribution: str, alpha: np.ndarray, g) -> np.ndarray:
     return d * gg / (4.0 * g.cos_o)
 
 
-# ---------------------------------------------------------------------------------------------
-DIFFUSE = ModelSpec(
-    id="mitsuba06:diffuse",
-    summary="Lambertian (diffuse.cpp)",
-    params=(ParamSpec("reflectance", "diffuse", (0.5,) * 3, (0.0, 1.0), channels=3, doc="albedo"),),
-    diffuse_only={},
-    specular_only=None,
-)
-
-
-@dialect(DIFFUSE)
 def diffuse(p, opt, g):
     return p["reflectance"] * g.lambert
 
 
-register_white_reference("mitsuba06", "mitsuba06:diffuse", {"reflectance": 1.0})
-
-# ---------------------------------------------------------------------------------------------
-WARD = ModelSpec(
-    id="mitsuba06:ward",
-    summary="Ward anisotropic model, isotropic use (ward.cpp)",
-    params=(
-        _alpha(hi=2.0),
-        _specular(0.2, 10.0, doc="rho_s; the energy clamp rescales it when rho_s + rho_d > 1"),
-        _diffuse(),
-    ),
-    options=(OptionSpec("variant", ("ward", "ward-duer", "balanced"), "balanced", "normalisation variant"),),
-    diffuse_only={"specularReflectance": 0.0},
-    specular_only={"diffuseReflectance": 0.0},
-    channel_separable=False,  # the energy clamp looks at all channels at once
-    reflectance=("param", "specularReflectance"),
-)
-
-
-@dialect(WARD)
 def ward(p, opt, g):
     alpha = p["alpha"]
     a2 = alpha * alpha
@@ -133,23 +89,6 @@ def ward(p, opt, g):
     return (scale * rho_s) * (lobe * g.cos_i) + (scale * rho_d) * g.lambert
 
 
-# ---------------------------------------------------------------------------------------------
-PHONG = ModelSpec(
-    id="mitsuba06:phong",
-    summary="modified Phong (phong.cpp)",
-    params=(
-        ParamSpec("exponent", "roughness", 30.0, (1e-2, 1e5), log=True, doc="Phong exponent"),
-        _specular(0.2, 10.0, doc="rho_s; energy clamp as Ward"),
-        _diffuse(),
-    ),
-    diffuse_only={"specularReflectance": 0.0},
-    specular_only={"diffuseReflectance": 0.0},
-    channel_separable=False,  # the energy clamp looks at all channels at once
-    reflectance=("param", "specularReflectance"),
-)
-
-
-@dialect(PHONG)
 def phong(p, opt, g):
     e = p["exponent"]
     lobe = (e + 2.0) * (0.5 * INV_PI) * np.power(np.maximum(g.cos_reflect, 0.0), e)
@@ -158,62 +97,12 @@ def phong(p, opt, g):
     return (scale * rho_s) * (lobe * g.cos_i) + (scale * rho_d) * g.lambert
 
 
-# ---------------------------------------------------------------------------------------------
-ROUGHCONDUCTOR = ModelSpec(
-    id="mitsuba06:roughconductor",
-    summary="rough conductor, exact conductor Fresnel (roughconductor.cpp)",
-    params=(
-        _alpha(),
-        ParamSpec(
-            "eta",
-            "fresnel",
-            CU_ETA,
-            (0.0, 100.0),
-            channels=3,
-            fit=False,
-            fit_value=1.0,
-            doc="real part of the IOR (default: Cu); held at 1 in fits so that F0 = k^2/(4 + k^2) is one-to-one",
-        ),
-        ParamSpec("k", "fresnel", CU_K, (0.0, 100.0), channels=3, doc="absorption coefficient (default: Cu)"),
-        _specular(1.0, 1.0, fit=False, doc="ks, a multiplier that should not be touched for realism"),
-        ParamSpec("extEta", "other", 1.000277, (1.0, 10.0), fit=False, doc="exterior IOR (air)"),
-    ),
-    options=(_distribution(mf.DISTRIBUTIONS, "beckmann"),),
-    diffuse_only=None,
-    specular_only={},
-    reflectance=("conductor", "eta", "k", "extEta"),
-)
-
-
-@dialect(ROUGHCONDUCTOR)
 def roughconductor(p, opt, g):
     ext = p["extEta"]
     f = fresnel_conductor(g.i_dot_h, p["eta"] / ext, p["k"] / ext)
     return p["specularReflectance"] * f * _microfacet(opt["distribution"], p["alpha"], g)
 
 
-# ---------------------------------------------------------------------------------------------
-ROUGHPLASTIC = ModelSpec(
-    id="mitsuba06:roughplastic",
-    summary="rough dielectric coating over a Lambertian base (roughplastic.cpp)",
-    params=(
-        _alpha(),
-        ParamSpec("intIOR", "fresnel", 1.49, (1.0001, 4.0), doc="interior IOR (polypropylene)"),
-        ParamSpec("extIOR", "other", 1.000277, (1.0, 4.0), fit=False, doc="exterior IOR (air)"),
-        _specular(1.0, 1.0, fit=False, doc="ks, a multiplier that should not be touched for realism"),
-        _diffuse(doc="albedo of the base under the coating"),
-    ),
-    options=(
-        _distribution(("beckmann", "ggx", "phong"), "beckmann"),
-        OptionSpec("nonlinear", ("false", "true"), "false", "account for internal scattering nonlinearly"),
-    ),
-    diffuse_only={"specularReflectance": 0.0},
-    specular_only={"diffuseReflectance": 0.0},
-    reflectance=("dielectric", "intIOR", "extIOR"),
-)
-
-
-@dialect(ROUGHPLASTIC)
 def roughplastic(p, opt, g):
     from matremap.renderers.embedded.rough_transmittance import diffuse_fresnel_reflectance, transmittance
 
@@ -230,28 +119,19 @@ def roughplastic(p, opt, g):
     return spec + rho * (g.lambert * t12 * t21 / (eta * eta))
 
 
-# ---------------------------------------------------------------------------------------------
-PBR = ModelSpec(
-    id="mitsuba06:pbr",
-    summary="the paper authors' microfacet plugin with Schlick Fresnel (pbr.cpp)",
-    params=(
-        _alpha(),
-        ParamSpec(
-            "F0", "fresnel", (0.04,) * 3, (0.0, 1.0), channels=3, linear=True, doc="normal-incidence reflectance"
-        ),
-        _specular(1.0, 10.0, fit=False, doc="ks multiplier"),
-        _diffuse(0.0, doc="optional Lambertian term (not in the original plugin)"),
-    ),
-    options=(_distribution(mf.DISTRIBUTIONS, "as"),),
-    diffuse_only={"specularReflectance": 0.0},
-    specular_only={"diffuseReflectance": 0.0},
-    reflectance=("param", "F0"),
-)
-
-
-@dialect(PBR)
 def pbr(p, opt, g):
     f0 = p["F0"]
     fresnel = f0 + (1.0 - f0) * g.schlick_weight  # Schlick
     lobe = _microfacet(opt["distribution"], p["alpha"], g)
     return (p["specularReflectance"] * fresnel) * lobe + p["diffuseReflectance"] * g.lambert
+
+
+#: model id -> evaluator
+EVALUATORS = {
+    DIFFUSE.id: diffuse,
+    WARD.id: ward,
+    PHONG.id: phong,
+    ROUGHCONDUCTOR.id: roughconductor,
+    ROUGHPLASTIC.id: roughplastic,
+    PBR.id: pbr,
+}

@@ -1,0 +1,94 @@
+"""glTF 2.0 metallic-roughness material, emulated as its specification defines it.
+
+Source: the glTF 2.0 specification, Appendix B "BRDF Implementation" (Khronos, 2021), and the
+extensions KHR_materials_ior and KHR_materials_specular. In the spec's notation (V view, L light,
+H half vector, all dot products clamped to [0, 1]):
+
+* alpha = roughness^2;
+* D = alpha^2 / (pi ((N.H)^2 (alpha^2 - 1) + 1)^2)  (Trowbridge-Reitz / GGX);
+* the visibility term V = G / (4 |N.L| |N.V|) with Smith's GGX masking-shadowing, by default in
+  its height-correlated form, G = 1 / (1 + Lambda(L) + Lambda(V)) (what the Khronos sample viewer
+  and most engines evaluate; option ``visibility=separable`` gives the product G1(L) G1(V) the
+  appendix writes out);
+* Schlick's Fresnel F(f0, f90) = f0 + (f90 - f0) (1 - |V.H|)^5;
+* metal_brdf = F(baseColor, 1) D V;
+* dielectric_brdf = (1 - specular max_c(fr)) baseColor / pi + specular fr D V, where
+  fr = F(min(((ior - 1)/(ior + 1))^2 specularColor, 1), 1) per channel: KHR_materials_ior and
+  the ratified KHR_materials_specular (its ``fresnel_mix``: the diffuse base is weighted by one
+  number, the largest channel of fr). Without the extensions ior = 1.5 gives f0 = 0.04 and
+  specular = specularColor = 1, the core spec's mix(diffuse, specular, F(0.04, 1));
+* material = mix(dielectric_brdf, metal_brdf, metallic).
+
+The parameter names are the glTF JSON property names without ``Factor``.
+"""
+
+from __future__ import annotations
+
+from matremap.core.models import ModelSpec, OptionSpec, ParamSpec
+
+METAL_ROUGH = ModelSpec(
+    id="gltf:metal-rough",
+    summary="glTF 2.0 metallic-roughness PBR (GGX, Schlick), with KHR_materials_ior/specular",
+    params=(
+        ParamSpec(
+            "baseColor",
+            "diffuse",
+            (1.0,) * 3,
+            (0.0, 1.0),
+            channels=3,
+            doc="albedo of a dielectric, F0 of a metal (baseColorFactor x texture)",
+        ),
+        ParamSpec(
+            "metallic",
+            "other",
+            1.0,
+            (0.0, 1.0),
+            fit=False,
+            doc="0 dielectric, 1 metal (held in fits: fix it to 0 or 1)",
+        ),
+        ParamSpec("roughness", "roughness", 1.0, (0.0, 1.0), doc="perceptual roughness, alpha = roughness^2"),
+        ParamSpec("ior", "fresnel", 1.5, (1.0, 5.0), doc="KHR_materials_ior: sets a dielectric's F0"),
+        ParamSpec(
+            "specular",
+            "other",
+            1.0,
+            (0.0, 1.0),
+            fit=False,
+            doc="KHR_materials_specular specularFactor: scales the dielectric F0 and F90",
+        ),
+        ParamSpec(
+            "specularColor",
+            "fresnel",
+            (1.0,) * 3,
+            (0.0, 25.0),
+            channels=3,
+            fit=False,
+            linear=True,
+            doc="KHR_materials_specular specularColorFactor: tints the dielectric F0 (clamped to 1)",
+        ),
+    ),
+    options=(
+        OptionSpec(
+            "visibility",
+            ("height-correlated", "separable"),
+            "height-correlated",
+            "Smith GGX visibility: height-correlated (sample viewer) or separable (spec appendix)",
+        ),
+    ),
+    # the diffuse part keeps its Fresnel weight (1 - specular max F): roughness 0 switches the lobe off
+    diffuse_only={"metallic": 0.0, "roughness": 0.0},
+    specular_only={"baseColor": 0.0},
+    specialisations=(
+        (
+            "metallic",
+            1.0,
+            {"roles": {"baseColor": "specular", "ior": "other"}, "diffuse_only": None, "specular_only": {}},
+        ),
+    ),
+    reflectance=("metal-rough", "baseColor", "metallic", "ior", "specular", "specularColor"),
+)
+
+#: the models of this dialect, in the order they are listed
+MODELS = (METAL_ROUGH,)
+#: a white Lambertian surface of albedo 1 in this renderer family (irradiance matching)
+WHITE_REFERENCE = ("gltf:metal-rough", {"baseColor": 1.0, "metallic": 0.0, "specular": 0.0})

@@ -1,0 +1,70 @@
+"""Uniform remapping as users call it: renderers given by name (or not at all) and resolved here.
+
+:func:`matremap.core.fit.fit` draws with the :class:`~matremap.renderers.base.Renderer` objects it is
+handed and never looks one up. This façade is where names become renderers: ``None`` means the
+model's own renderer (:func:`~matremap.renderers.registry.renderer_for`), so
+``fit(mitsuba3_material, "mitsuba06:ward")`` renders the source in Mitsuba 3 without being told.
+:func:`comparison_strip` draws the source | target | difference picture of a result.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from matremap.core import fit as core_fit
+from matremap.core.material import Material
+from matremap.core.models import ModelSpec
+from matremap.core.scene import Scene
+from matremap.dialects import get_model
+from matremap.renderers.base import Renderer
+from matremap.renderers.registry import get_renderer, resolve_renderer
+
+
+def fit(
+    source: Material,
+    target_model: str | ModelSpec,
+    strategy: str = "two-stage",
+    scene: Scene | None = None,
+    source_renderer: str | Renderer | None = None,
+    target_renderer: str | Renderer | None = None,
+    *,
+    fix: Mapping[str, Any] | None = None,
+    free: Sequence[str] = (),
+    start: Mapping[str, Any] | None = None,
+    coarse: bool | None = None,
+) -> core_fit.FitResult:
+    """:func:`matremap.core.fit.fit` with renderers given by name, object or None (the model's own)."""
+    spec = target_model if isinstance(target_model, ModelSpec) else get_model(target_model)
+    return core_fit.fit(
+        source,
+        spec,
+        strategy,
+        scene,
+        resolve_renderer(source_renderer, source.model),
+        resolve_renderer(target_renderer, spec.id),
+        fix=fix,
+        free=free,
+        start=start,
+        coarse=coarse,
+    )
+
+
+def comparison_strip(result: core_fit.FitResult, gap: int = 4) -> np.ndarray:
+    """[H, 3W + 2 gap, 3] linear image of a fit: source (irradiance-matched), target, and
+    |target - source| scaled so that 10 % of the source's peak reads as the peak; exposure puts the
+    source's 99.5th percentile at 1 (sRGB-encoded when written as PNG)."""
+    scene = result.scene
+    src = get_renderer(result.source_renderer).render([result.source], scene)[0] * result.irradiance_scale
+    tgt = get_renderer(result.target_renderer).render([result.target], scene)[0]
+    peak = float(np.percentile(src[scene.mask()], 99.5)) or 1.0
+    diff = np.abs(tgt - src) / (0.1 * peak) * peak
+    h = scene.resolution
+    spacer = np.full((h, gap, 3), 0.02 * peak, dtype=np.float32)
+    strip = np.concatenate([src, spacer, tgt, spacer, diff.astype(np.float32)], axis=1)
+    return strip / peak
+
+
+__all__ = ["comparison_strip", "fit"]
