@@ -3,19 +3,17 @@ import json
 import numpy as np
 import pytest
 
-pytest.importorskip("sklearn")
+from matremap.core.material import Material
+from matremap.core.scene import Scene
+from matremap.regress import svr
+from matremap.regress.data import load_training_data
+from matremap.regress.transform import Transform, learn_transform
+from matremap.sweep.executors import InlineExecutor
+from matremap.sweep.grid import parse_grid
+from matremap.sweep.run import SweepConfig, run_sweep
+from matremap.sweep.store import SweepStore
 
-from sklearn.svm import SVR  # noqa: E402
-
-from matremap.core.models import Material  # noqa: E402
-from matremap.core.scene import Scene  # noqa: E402
-from matremap.regress import svr  # noqa: E402
-from matremap.regress.data import load_training_data  # noqa: E402
-from matremap.regress.transform import Transform, learn_transform  # noqa: E402
-from matremap.sweep.executors import InlineExecutor  # noqa: E402
-from matremap.sweep.grid import parse_grid  # noqa: E402
-from matremap.sweep.run import SweepConfig, run_sweep  # noqa: E402
-from matremap.sweep.store import SweepStore  # noqa: E402
+SVR = pytest.importorskip("sklearn.svm").SVR
 
 WARD = Material.create("mitsuba06:ward", {"variant": "ward", "diffuseReflectance": 0.0})
 GRID = "alpha=0.05:0.9:8,specularReflectance=0.02:0.25:6"
@@ -98,7 +96,7 @@ def test_evaluate_matches_sklearn_predict_on_the_learned_mapping(ward_db, svr_t)
     data = load_training_data(ward_db)
     m = svr_t.mappings["reflectance"]
     X = np.stack([np.broadcast_to(data.x["roughness"][:, None], (len(data), 3)), data.x["reflectance"]], axis=-1)
-    Xa, ya = svr._cap(*svr._rows(X, data.y["reflectance"], np.arange(len(data)), True), 0)
+    Xa, ya = svr.subsample(*svr.pooled_points(X, data.y["reflectance"], np.arange(len(data)), True), 0)
     x_mean, x_scale = np.array(m["x_mean"]), np.array(m["x_scale"])
     model = SVR(kernel="rbf", C=m["C"], gamma=m["gamma"], epsilon=m["epsilon"], tol=1e-4)
     model.fit((Xa - x_mean) / x_scale, (ya - m["y_mean"]) / m["y_scale"])

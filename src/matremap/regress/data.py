@@ -8,7 +8,9 @@ from typing import Any
 
 import numpy as np
 
-from matremap.core.models import Material, ModelSpec, get_model
+from matremap.core.material import Material
+from matremap.core.models import ModelSpec
+from matremap.dialects import get_model
 from matremap.errors import MatremapError
 from matremap.regress import quantities as qty
 from matremap.sweep.store import SweepStore
@@ -16,6 +18,8 @@ from matremap.sweep.store import SweepStore
 
 @dataclass
 class TrainingData:
+    """A sweep's rows as source quantities ``x`` and target quantities ``y`` (one row per point)."""
+
     source: ModelSpec
     target: ModelSpec
     source_options: dict[str, str]
@@ -35,6 +39,7 @@ class TrainingData:
         return v is not None and bool(np.ptp(v) > 1e-12)
 
     def subset(self, keep: np.ndarray) -> TrainingData:
+        """The rows ``keep`` (indices or a boolean mask)."""
         return TrainingData(
             self.source,
             self.target,
@@ -46,6 +51,14 @@ class TrainingData:
             self.provenance,
             self.source_template,
         )
+
+
+def holdout_split(n: int, holdout: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Row indices of ``n`` points split at random into training and held-out sets: round(holdout * n)
+    held out (at least one), the same split for the same ``seed``."""
+    idx = np.random.default_rng(seed).permutation(n)
+    m = max(1, int(round(holdout * n)))
+    return idx[m:], idx[:m]
 
 
 def _values(spec: ModelSpec, params: list[dict[str, Any]]) -> dict[str, np.ndarray]:
@@ -100,5 +113,6 @@ def load_training_data(db: str | Path, reverse: bool = False, exclude_flagged: b
 
 
 def store_config_summary(config: Any) -> dict[str, Any]:
+    """The parts of a sweep configuration a transform's provenance records."""
     d = config.to_dict()
     return {k: d[k] for k in ("source", "target", "strategy", "scene", "renderers", "matremap")}

@@ -18,7 +18,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from matremap.errors import MatremapError
-from matremap.regress.data import TrainingData
+from matremap.regress.data import TrainingData, holdout_split
 
 MAX_DEGREE = 4
 MIN_POINTS = 6
@@ -81,20 +81,13 @@ def evaluate(mapping: dict[str, Any], x: dict[str, np.ndarray]) -> np.ndarray:
 
 
 # -- fitting -------------------------------------------------------------------------------------
-def _split(n: int, holdout: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    rng = np.random.default_rng(seed)
-    idx = rng.permutation(n)
-    m = max(1, int(round(holdout * n)))
-    return idx[m:], idx[:m]
-
-
 def _rmse(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.sqrt(np.mean((np.asarray(a) - np.asarray(b)) ** 2)))
 
 
 def fit_roughness(x: np.ndarray, y: np.ndarray, holdout: float = 0.2, seed: int = 0) -> dict[str, Any]:
     """Polynomial y = p(x), degree chosen by held-out RMSE, then refitted on all points."""
-    train, test = _split(len(x), holdout, seed)
+    train, test = holdout_split(len(x), holdout, seed)
     scores = {}
     for d in range(1, MAX_DEGREE + 1):
         if len(np.unique(x[train])) <= d:
@@ -118,27 +111,27 @@ def fit_roughness(x: np.ndarray, y: np.ndarray, holdout: float = 0.2, seed: int 
 def _fit_k(alpha: np.ndarray, s1: np.ndarray, s2: np.ndarray, terms: int) -> np.ndarray:
     """Least squares on k(alpha) s1 - s2 (pooled channels), from a few starts."""
     ratio = np.median(s2[s1 > 0] / s1[s1 > 0]) if np.any(s1 > 0) else 1.0
-    best = None
-    for c2, c4 in ((1.0, 1.0), (5.0, 5.0), (20.0, 2.0), (0.5, 20.0)):
+
+    def from_start(c2: float, c4: float) -> Any:
         x0 = [ratio, 0.0, c2, 0.0, c4] + ([0.0] * (terms - 5))
         lo = [-np.inf, -np.inf, 0.0, -np.inf, 0.0] + [-np.inf] * (terms - 5)
-        sol = least_squares(lambda c: k_alpha(alpha, c) * s1 - s2, x0, bounds=(lo, np.inf), method="trf")
-        if best is None or sol.cost < best.cost:
-            best = sol
-    return best.x
+        return least_squares(lambda c: k_alpha(alpha, c) * s1 - s2, x0, bounds=(lo, np.inf), method="trf")
+
+    starts = ((1.0, 1.0), (5.0, 5.0), (20.0, 2.0), (0.5, 20.0))
+    return min((from_start(c2, c4) for c2, c4 in starts), key=lambda sol: sol.cost).x  # the first of the lowest
 
 
 def fit_reflectance(
     alpha: np.ndarray | None, s1: np.ndarray, s2: np.ndarray, holdout: float = 0.2, seed: int = 0
 ) -> dict[str, Any]:
     """s2 = k(alpha) s1 per channel; with no source roughness, a constant k."""
-    a = None if alpha is None else np.repeat(alpha, s1.shape[-1])
     s1f, s2f = s1.ravel(), s2.ravel()
-    if a is None:
+    if alpha is None:
         k = float(np.sum(s1f * s2f) / max(np.sum(s1f * s1f), 1e-300))
         return {"kind": "k_alpha", "input": "reflectance", "roughness": False, "coef": [k], "heldout_rmse_by_form": {}}
+    a = np.repeat(alpha, s1.shape[-1])
     n = len(alpha)
-    train, test = _split(n, holdout, seed)
+    train, test = holdout_split(n, holdout, seed)
     ch = s1.shape[-1]
     tr = (train[:, None] * ch + np.arange(ch)).ravel()
     te = (test[:, None] * ch + np.arange(ch)).ravel()
@@ -166,7 +159,7 @@ def fit_diffuse(d1: np.ndarray, d2: np.ndarray, holdout: float = 0.2, seed: int 
     def scale_of(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return np.sum(a * b, axis=0) / np.maximum(np.sum(a * a, axis=0), 1e-300)
 
-    train, test = _split(len(d1), holdout, seed)
+    train, test = holdout_split(len(d1), holdout, seed)
     heldout = _rmse(d1[test] * scale_of(d1[train], d2[train]), d2[test])
     return {"kind": "scale", "input": "diffuse", "coef": scale_of(d1, d2).tolist(), "heldout_rmse": heldout}
 

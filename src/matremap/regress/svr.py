@@ -17,12 +17,13 @@ numpy, in bounded-memory chunks, for arrays of any shape.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
 from matremap.errors import MatremapError
-from matremap.regress.data import TrainingData
+from matremap.regress.data import TrainingData, holdout_split
 
 MIN_POINTS = 6
 #: most training points (after pooling channels and dropping duplicates) an SVR is fitted on
@@ -99,14 +100,7 @@ def evaluate(mapping: dict[str, Any], x: dict[str, np.ndarray]) -> np.ndarray:
 
 
 # -- fitting -------------------------------------------------------------------------------------
-def _split(n: int, holdout: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    rng = np.random.default_rng(seed)
-    idx = rng.permutation(n)
-    m = max(1, int(round(holdout * n)))
-    return idx[m:], idx[:m]
-
-
-def _rows(X: np.ndarray, y: np.ndarray, rows: np.ndarray, per_channel: bool) -> tuple[np.ndarray, np.ndarray]:
+def pooled_points(X: np.ndarray, y: np.ndarray, rows: np.ndarray, per_channel: bool) -> tuple[np.ndarray, np.ndarray]:
     """Training points of the materials ``rows``: channels pooled, exact duplicates dropped."""
     Xr, yr = X[rows], y[rows]
     if per_channel:  # X [n, 3, d], y [n, 3]
@@ -116,7 +110,8 @@ def _rows(X: np.ndarray, y: np.ndarray, rows: np.ndarray, per_channel: bool) -> 
     return Xr[first], yr[first]
 
 
-def _cap(X: np.ndarray, y: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
+def subsample(X: np.ndarray, y: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """At most :data:`MAX_POINTS` of the points (a random subset in their order), the same for the same ``seed``."""
     if len(X) <= MAX_POINTS:
         return X, y
     keep = np.sort(np.random.default_rng(seed).choice(len(X), MAX_POINTS, replace=False))
@@ -134,13 +129,13 @@ def _svr(C: float, gamma: float, epsilon: float):
 
 
 def fit_svr(
-    X: np.ndarray, y: np.ndarray, inputs: list[str], per_channel: bool, holdout: float = 0.2, seed: int = 0
+    X: np.ndarray, y: np.ndarray, inputs: Sequence[str], per_channel: bool, holdout: float = 0.2, seed: int = 0
 ) -> dict[str, Any]:
     """One SVR mapping from material rows: X [n, d] and y [n] (scalar target) or X [n, 3, d] and
     y [n, 3] (per channel). Hyper-parameters by validation RMSE on held-out materials."""
-    train, test = _split(len(X), holdout, seed)
-    Xt, yt = _cap(*_rows(X, y, train, per_channel), seed)
-    Xv, yv = _rows(X, y, test, per_channel)
+    train, test = holdout_split(len(X), holdout, seed)
+    Xt, yt = subsample(*pooled_points(X, y, train, per_channel), seed)
+    Xv, yv = pooled_points(X, y, test, per_channel)
     x_mean, x_scale = Xt.mean(axis=0), Xt.std(axis=0)
     x_scale[x_scale < 1e-12] = 1.0
     y_mean, y_scale = float(yt.mean()), float(yt.std()) or 1.0
@@ -155,7 +150,7 @@ def fit_svr(
     _, C, gamma, eps = best
 
     # refit on every training point (validation materials included) with the chosen parameters
-    Xa, ya = _cap(*_rows(X, y, np.arange(len(X)), per_channel), seed)
+    Xa, ya = subsample(*pooled_points(X, y, np.arange(len(X)), per_channel), seed)
     x_mean, x_scale = Xa.mean(axis=0), Xa.std(axis=0)
     x_scale[x_scale < 1e-12] = 1.0
     y_mean, y_scale = float(ya.mean()), float(ya.std()) or 1.0
@@ -169,7 +164,7 @@ def fit_svr(
 
 def mapping_from_model(
     model: Any,
-    inputs: list[str],
+    inputs: Sequence[str],
     per_channel: bool,
     x_mean: np.ndarray,
     x_scale: np.ndarray,
@@ -204,7 +199,7 @@ def learn(data: TrainingData, holdout: float = 0.2, seed: int = 0) -> dict[str, 
     if len(data) < MIN_POINTS:
         raise MatremapError(f"{len(data)} usable points: too few to learn a transform (need {MIN_POINTS})")
     x, y = data.x, data.y
-    varying = [n for n in ("roughness", "reflectance", "diffuse") if n in x and data.varies(n)]
+    varying: list[str] = [n for n in ("roughness", "reflectance", "diffuse") if n in x and data.varies(n)]
     rough = ["roughness"] if "roughness" in varying else []
     mappings: dict[str, dict[str, Any]] = {}
     for name in ("roughness", "reflectance", "diffuse"):
