@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from matremap.cli import main
-from matremap.core.models import Material
+from matremap.core.material import Material
 from matremap.core.optics import f0_from_ior
 from matremap.core.scene import Scene
 from matremap.errors import MatremapError
@@ -233,3 +233,19 @@ def test_uniform_inputs_stay_views_and_equal_full_maps(ward_to_as, monkeypatch):
     assert outside_view.sum() == 1 and outside_view[3, 4]
     flat, _ = ward_to_as.apply({"alpha": np.broadcast_to(0.3, (20, 30)), "specularReflectance": rho})
     assert flat["F0"].strides[:2] == (0, 0)  # computed once, no memory per texel
+
+
+def test_learner_table_and_holdout_split():
+    from matremap.regress.data import holdout_split
+    from matremap.regress.learners import LEARNERS, get_learner
+    from matremap.regress.transform import METHODS
+
+    assert set(LEARNERS) == {"parametric", "svr"} and METHODS == (*LEARNERS, "chain")
+    with pytest.raises(MatremapError, match="unknown method 'ridge'; choose parametric or svr"):
+        get_learner("ridge")
+    with pytest.raises(MatremapError, match="unknown method 'ridge'"):
+        learn_transform("never-read.sqlite", method="ridge")  # refused before the database is opened
+    train, held = holdout_split(10, 0.2, seed=3)
+    assert len(held) == 2 and sorted([*train, *held]) == list(range(10))
+    np.testing.assert_array_equal(holdout_split(10, 0.2, seed=3)[1], held)
+    assert len(holdout_split(3, 0.01, seed=0)[1]) == 1  # at least one point held out

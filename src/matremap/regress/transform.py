@@ -20,21 +20,27 @@ import time
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from matremap import __version__
-from matremap.core.models import get_model
+from matremap.core.models import ModelSpec
+from matremap.dialects import get_model
 from matremap.errors import MatremapError
 from matremap.regress import quantities as qty
+from matremap.regress.learners import LEARNERS, evaluate_mapping, get_learner
 
 SCHEMA = "matremap.transform/1"
-METHODS = ("parametric", "svr", "chain")
+#: the ``method`` of a transform file: a learner's name, or a chain of transforms
+METHODS = (*LEARNERS, "chain")
 #: relative slack on the training domain before an input counts as outside it
 DOMAIN_SLACK = 1e-6
 #: texels per chunk when applying to large arrays
 CHUNK = 1 << 16
+
+if TYPE_CHECKING:
+    from matremap.regress.data import TrainingData
 
 
 @dataclass
@@ -48,7 +54,7 @@ class Transform:
     template: dict[str, Any] = field(default_factory=dict)
     source_template: dict[str, Any] = field(default_factory=dict)
     domain: dict[str, list[float]] = field(default_factory=dict)
-    errors: dict[str, dict[str, float]] = field(default_factory=dict)
+    errors: dict[str, dict[str, float | None]] = field(default_factory=dict)
     provenance: dict[str, Any] = field(default_factory=dict)
     steps: list[Transform] = field(default_factory=list)
 
@@ -197,10 +203,10 @@ class Transform:
             used = _inputs(m, x)
             if shape and shape[0] > 1 and used and all(qty.uniform(x[k]) for k in used):
                 # the same input everywhere (a constant map): evaluate once, broadcast the result
-                one = _evaluate(self.method, m, {k: v[:1] for k, v in x.items()})
+                one = evaluate_mapping(m, {k: v[:1] for k, v in x.items()})
                 y[name] = np.broadcast_to(one, (shape[0], *one.shape[1:]))
             else:
-                y[name] = _evaluate(self.method, m, x)
+                y[name] = evaluate_mapping(m, x)
         return qty.write(get_model(self.target), y, self.template), outside
 
     # -- composition -----------------------------------------------------------------------------
@@ -272,7 +278,7 @@ def _inputs(mapping: Mapping[str, Any], available: Iterable[str]) -> list[str]:
     return [mapping["input"]] if "input" in mapping else list(available)
 
 
-def _complete(spec, values: Mapping[str, Any], defaults: Mapping[str, Any]) -> dict[str, np.ndarray]:
+def _complete(spec: ModelSpec, values: Mapping[str, Any], defaults: Mapping[str, Any]) -> dict[str, np.ndarray]:
     unknown = set(values) - set(spec.param_names) - set(spec.option_names)
     if unknown:
         raise MatremapError(f"{spec.id} has no parameter {sorted(unknown)[0]!r}")
@@ -292,7 +298,7 @@ def _complete(spec, values: Mapping[str, Any], defaults: Mapping[str, Any]) -> d
     return out
 
 
-def _shape(spec, arrays: Mapping[str, np.ndarray]) -> tuple[int, ...]:
+def _shape(spec: ModelSpec, arrays: Mapping[str, np.ndarray]) -> tuple[int, ...]:
     """The leading (per-element) shape: that of the scalar parameters if any is given, else that
     of the RGB ones without their channel axis."""
     channels = {p.name: p.channels for p in spec.params}
@@ -303,16 +309,6 @@ def _shape(spec, arrays: Mapping[str, np.ndarray]) -> tuple[int, ...]:
         if channels.get(k) == 3:
             return a.shape[:-1] if a.ndim and a.shape[-1] == 3 else a.shape
     return ()
-
-
-def _evaluate(method: str, mapping: dict[str, Any], x: dict[str, np.ndarray]) -> np.ndarray:
-    if mapping["kind"] == "svr":
-        from matremap.regress.svr import evaluate as svr_evaluate
-
-        return svr_evaluate(mapping, x)
-    from matremap.regress.parametric import evaluate
-
-    return evaluate(mapping, x)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -327,26 +323,21 @@ def learn_transform(
     """Learn a transform from a sweep database (``reverse``: the target -> source direction)."""
     from matremap.regress.data import load_training_data
 
-    if method not in ("parametric", "svr"):
-        raise MatremapError(f"unknown method {method!r}; choose parametric or svr")
+    get_learner(method)  # an unknown method fails before the database is read
     return transform_from_data(
         load_training_data(db, reverse=reverse, exclude_flagged=exclude_flagged), method, holdout, seed
     )
 
 
-def transform_from_data(data: Any, method: str = "parametric", holdout: float = 0.2, seed: int = 0) -> Transform:
+def transform_from_data(
+    data: TrainingData, method: str = "parametric", holdout: float = 0.2, seed: int = 0
+) -> Transform:
     """Learn a transform from training data in memory (:class:`.data.TrainingData`, e.g. a subset)."""
-    if method == "parametric":
-        from matremap.regress.parametric import learn
-    elif method == "svr":
-        from matremap.regress.svr import learn
-    else:
-        raise MatremapError(f"unknown method {method!r}; choose parametric or svr")
-    mappings = learn(data, holdout=holdout, seed=seed)
+    mappings = get_learner(method)(data, holdout=holdout, seed=seed)
     domain = {name: [float(np.min(v)), float(np.max(v))] for name, v in data.x.items()}
-    errors = {}
+    errors: dict[str, dict[str, float | None]] = {}
     for name, m in mappings.items():
-        pred = _evaluate(method, m, data.x)
+        pred = evaluate_mapping(m, data.x)
         errors[name] = {"train_rmse": float(np.sqrt(np.mean((pred - data.y[name]) ** 2)))}
         if "heldout_rmse" in m:
             errors[name]["heldout_rmse"] = m["heldout_rmse"]
