@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from matremap.cli import main
-from matremap.core.models import get_model
+from matremap.dialects import get_model
 from matremap.regress import library
 from matremap.regress.library import PAIRS, build_pair, entries, find_route, max_prediction_difference, node_key, route
 from matremap.regress.transform import Transform
@@ -19,7 +19,7 @@ def test_every_pair_is_shipped_in_both_directions_with_provenance():
     for pair in PAIRS:
         assert pair.name in names, f"{pair.name} missing: run tools/make_transform_library.py {pair.name}"
         if pair.reverse:
-            assert library._reverse_name(pair.name) in names
+            assert library.reverse_name(pair.name) in names
     for e in entries():
         t = e.transform
         get_model(t.source), get_model(t.target)  # ids that exist

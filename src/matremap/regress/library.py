@@ -16,7 +16,7 @@ held-out error) from a source node to a target node.
 from __future__ import annotations
 
 import heapq
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
 from pathlib import Path
@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from matremap.core.models import get_model
+from matremap.dialects import get_model
 from matremap.regress.transform import Transform
 
 LIBRARY_DIR = Path(__file__).with_name("transforms")
@@ -253,6 +253,8 @@ def _renderers(t: Transform) -> dict[str, str]:
 
 @dataclass
 class Route:
+    """A chain of library entries, each one's target node the next one's source."""
+
     steps: list[Entry]
 
     @property
@@ -335,10 +337,14 @@ def find_route(
 
 
 def build_pair(
-    pair: Pair, out_dir: str | Path, workers: int | None = None, size: int | None = None, log=print
+    pair: Pair,
+    out_dir: str | Path,
+    workers: int | None = None,
+    size: int | None = None,
+    log: Callable[[str], None] = print,
 ) -> list[Path]:
     """Sweep one pair and write its transform(s) into ``out_dir``; returns the files written."""
-    from matremap.core.models import Material
+    from matremap.core.material import Material
     from matremap.core.scene import Scene
     from matremap.regress.transform import learn_transform
     from matremap.sweep.executors import make_executor
@@ -367,7 +373,7 @@ def build_pair(
         )
     log(f"{pair.name}: {describe(summary)}")
     written = []
-    directions = [(False, pair.name)] + ([(True, _reverse_name(pair.name))] if pair.reverse else [])
+    directions = [(False, pair.name)] + ([(True, reverse_name(pair.name))] if pair.reverse else [])
     for reverse, name in directions:
         t = learn_transform(db, reverse=reverse)
         t.provenance["library"] = {"pair": pair.name, "grid": pair.grid, "reverse": reverse}
@@ -385,7 +391,8 @@ def build_pair(
     return written
 
 
-def _reverse_name(name: str) -> str:
+def reverse_name(name: str) -> str:
+    """The library name of a pair's reverse transform: ``ward-as`` -> ``as-ward``."""
     a, sep, b = name.partition("-")
     return f"{b}-{a}" if sep else f"{name}-reverse"
 
@@ -420,5 +427,6 @@ __all__ = [
     "find_route",
     "listing",
     "node_key",
+    "reverse_name",
     "route",
 ]
