@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from matremap.cli import main
-from matremap.core.models import Material
+from matremap.core.material import Material
 from matremap.core.scene import Scene
 from matremap.renderers import get_renderer
 
@@ -173,3 +173,62 @@ def test_renderers_lists_the_backends_and_their_models(capsys):
         assert "mitsuba3:roughconductor" in rows["mitsuba3"]["models"]
     else:
         assert "pip install" in rows["mitsuba3"]["reason"]
+
+
+def test_every_command_group_is_assembled_in_the_listed_order(capsys):
+    import argparse
+
+    import matremap.cli as cli
+
+    assert sorted(cli.COMMANDS) == sorted(cli.PARSERS)
+
+    class Recorder:
+        names: list[str] = []
+
+        def add_parser(self, name, **kwargs):
+            self.names.append(name)
+            return argparse.ArgumentParser(prog=name)
+
+    for name, add in cli.PARSERS.items():
+        add(Recorder())
+        assert Recorder.names[-1] == name  # each adder adds the command it is listed under
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    listed = capsys.readouterr().out.split("{", 1)[1].split("}", 1)[0].split(",")
+    assert listed == list(cli.COMMANDS)
+
+
+def test_choices_come_from_the_fit_strategies_and_the_learner_table():
+    from matremap.cli import build_parser
+    from matremap.core.fit import STRATEGIES
+    from matremap.regress.learners import LEARNERS
+
+    parser = build_parser()
+    fit = parser.parse_args(["fit", "--source", WARD, "--target", "mitsuba06:pbr"])
+    assert fit.strategy == "two-stage" and fit.source_renderer is None and fit.target_renderer is None
+    with pytest.raises(SystemExit):
+        parser.parse_args(["fit", "--source", WARD, "--target", "mitsuba06:pbr", "--strategy", "four-stage"])
+    for strategy in STRATEGIES:
+        assert parser.parse_args(["remap", "m", "--to", "x", "-o", "o", "--strategy", strategy]).strategy == strategy
+    for method in LEARNERS:
+        assert parser.parse_args(["learn", "db", "-o", "t.json", "--method", method]).method == method
+
+
+def test_fit_and_sweep_draw_a_model_with_its_own_renderer_by_default(capsys, tmp_path):
+    from matremap.errors import MatremapError
+    from matremap.sweep.store import SweepStore
+
+    try:
+        get_renderer("mitsuba3")
+    except MatremapError as e:
+        pytest.skip(str(e))
+    source = "mitsuba3:roughconductor,alpha=0.2,eta=1.0"
+    code, out, _ = run(capsys, "fit", "--source", source, "--target", "gltf:metal-rough", "--size", "32", "--json")
+    assert code == 0 and json.loads(out)["renderers"] == {"source": "mitsuba3", "target": "embedded"}
+    db = tmp_path / "m.sqlite"
+    argv = ["sweep", "--source", source, "--target", "gltf:metal-rough", "--fix", "metallic=1"]
+    argv += ["--grid", "alpha=0.1:0.2:2", "--db", str(db), "--workers", "1", "--no-progress", "--size", "32"]
+    assert run(capsys, *argv)[0] == 0
+    with SweepStore.open(db) as store:  # the database names the renderers, as before
+        assert store.config["renderers"] == {"source": "mitsuba3", "target": "embedded"}
+        assert len(store.rows("ok")) == 2

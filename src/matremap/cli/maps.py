@@ -1,0 +1,272 @@
+"""Textured materials: ``convert`` (apply transforms to a map set), ``evaluate`` (compare two map
+sets under an environment map) and ``remap`` (the main job: sweep, learn, convert, evaluate)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from matremap.cli.common import (
+    Subparsers,
+    add_command,
+    add_fix_option,
+    add_force_option,
+    add_strategy_option,
+    parse_assignments,
+)
+from matremap.core.scene import Scene, parse_lights
+from matremap.dialects import get_model
+from matremap.errors import MatremapError
+
+if TYPE_CHECKING:
+    from matremap.regress.transform import Transform
+    from matremap.svbrdf.textures import MapSet
+
+CONVERT_EXAMPLES = """examples:
+  matremap convert examples/bronze --transform ward2as.json -o out/bronze-as
+  matremap convert maps/ --model mitsuba06:ward --transform a.json --transform b.json -o out/
+  matremap convert examples/bronze --to cycles:glossy --fix distribution=ggx -o out/  (fails: bronze is
+      variant=ward, the library's Ward transforms are trained on variant=balanced)"""
+
+EVALUATE_EXAMPLES = """examples:
+  matremap evaluate examples/bronze out/bronze-as --envmap builtin --rotations 0:360:12 -o out/eval"""
+
+REMAP_EXAMPLES = """examples:
+  matremap remap examples/blue-plastic --from mitsuba06:ward --to mitsuba06:pbr --fix distribution=as -o out/plastic
+  (a second run reuses the cached transform)
+  matremap remap helmet.glb --to mitsuba3:roughconductor -o out/helmet      (writes out/helmet/helmet.xml)
+  matremap remap scene.xml --material gold --to gltf:metal-rough -o out/gold  (writes out/gold/scene.gltf)"""
+
+
+def add_convert(subparsers: Subparsers) -> None:
+    """The ``convert`` command."""
+    p = add_command(subparsers, "convert", "apply transforms to an SVBRDF map set", CONVERT_EXAMPLES)
+    p.add_argument(
+        "maps",
+        metavar="MAPS",
+        help="folder of maps (material.json, or *_diffuse/_specular/_roughness/_normal file names)",
+    )
+    p.add_argument(
+        "--transform",
+        action="append",
+        default=[],
+        metavar="T.json",
+        help="transform to apply; several are chained in order",
+    )
+    p.add_argument(
+        "--to",
+        dest="target",
+        metavar="MODEL",
+        help="instead of --transform: find a route to MODEL through the transform library",
+    )
+    add_fix_option(p, "with --to: target options/held values the route must have")
+    p.add_argument("-o", "--output", required=True, metavar="OUT", help="output folder")
+    p.add_argument("--model", "--from", dest="model", help="source model, when the folder has no manifest")
+    p.add_argument("--format", help="output format instead of the inputs' (e.g. exr, png16)")
+    p.add_argument("--workers", type=int, default=2, metavar="N")
+    add_force_option(p, "overwrite existing outputs")
+    p.set_defaults(func=cmd_convert)
+
+
+def library_transform(map_set: MapSet, target_model: str, fix_items: Sequence[str]) -> Transform:
+    """The transform of the library route from a map set to ``target_model`` with ``--fix``
+    ``fix_items``; raises when the library has none."""
+    from matremap.regress.library import find_route
+    from matremap.regress.quantities import diffuse_param
+    from matremap.remap import complete_fix, load_arrays
+
+    target = get_model(target_model).id
+    # what decides the route: whether the source has a diffuse part, and its held values (metallic)
+    spec = map_set.spec
+    dp = diffuse_param(spec)
+    params, _ = load_arrays(map_set, only={n for n, _, _ in spec.specialisations} | ({dp.name} if dp else set()))
+    fix = complete_fix(map_set.model, {**map_set.constants, **params}, target, parse_assignments(fix_items, "--fix"))
+    held = {n: params[n] for n, _, _ in map_set.spec.specialisations if n in params}
+    found = find_route(map_set.model, map_set.options, target, fix, source_values=held)
+    if found is None:
+        raise MatremapError(
+            f"no route from {map_set.model} to {target} in the transform library "
+            f"(`matremap transforms` lists it); run `matremap remap` to sweep one"
+        )
+    print(f"matremap: route {found.describe()}", file=sys.stderr)
+    return found.transform
+
+
+def cmd_convert(args: argparse.Namespace) -> int:
+    """Convert a map set with transform files, or with a route through the library (``--to``)."""
+    import warnings
+
+    from matremap.regress.transform import Transform
+    from matremap.svbrdf.convert import convert
+    from matremap.svbrdf.textures import load_map_set
+
+    map_set = load_map_set(args.maps, args.model)
+    if args.transform:
+        if args.target:
+            raise MatremapError("give either --transform files or --to MODEL (a route through the library), not both")
+        transforms = [Transform.load(p) for p in args.transform]
+    elif args.target:
+        transforms = [library_transform(map_set, args.target, args.fix)]
+    else:
+        raise MatremapError("name the transform(s) with --transform T.json, or a target model with --to MODEL")
+    for note in map_set.notes:
+        print(f"matremap: note: {note}", file=sys.stderr)
+    with warnings.catch_warnings():  # reported below, in one line
+        warnings.simplefilter("ignore", UserWarning)
+        report = convert(
+            map_set, transforms, args.output, workers=args.workers, force=args.force, out_format=args.format
+        )
+    for note in report.notes:
+        print(f"matremap: note: {note}", file=sys.stderr)
+    if report.outside:
+        print(
+            f"matremap: warning: {report.outside} of {report.texels} texels "
+            f"({100 * report.outside_fraction:.2f}%) lie outside the transform's training domain; "
+            f"see {Path(args.output) / 'outside_domain.png'}",
+            file=sys.stderr,
+        )
+    print(f"wrote {args.output}: {report.model}, {report.texels} texels in {report.seconds:.2f} s", file=sys.stderr)
+    return 0
+
+
+def add_evaluate(subparsers: Subparsers) -> None:
+    """The ``evaluate`` command."""
+    p = add_command(
+        subparsers,
+        "evaluate",
+        "compare two map sets under an environment map (SSIM, HTML report)",
+        EVALUATE_EXAMPLES,
+    )
+    p.add_argument("source_maps", metavar="SOURCE_MAPS")
+    p.add_argument("target_maps", metavar="TARGET_MAPS")
+    p.add_argument("--source-model", help="source model, when its folder has no manifest")
+    p.add_argument("--target-model", help="target model, when its folder has no manifest")
+    p.add_argument("--envmap", default="builtin", help="EXR/HDR file, or 'builtin' (default)")
+    p.add_argument("--rotations", default="0:360:12", help="START:STOP:COUNT in degrees (default 0:360:12)")
+    p.add_argument("--geometry", choices=("sphere", "plane"), default="sphere")
+    p.add_argument("--size", type=int, default=256, metavar="N", help="render resolution (default 256)")
+    p.add_argument("--lights", type=int, default=256, help="directional lights sampled from the map (256)")
+    p.add_argument("-o", "--output", required=True, metavar="DIR")
+    add_force_option(p, "overwrite an existing report")
+    p.set_defaults(func=cmd_evaluate)
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    """Render both map sets under the environment at each rotation; write the SSIM report."""
+    from matremap.core.envmap import resolve
+    from matremap.remap import load_arrays
+    from matremap.svbrdf.evaluate import evaluate, parse_rotations
+    from matremap.svbrdf.textures import load_map_set
+
+    rotations = parse_rotations(args.rotations)
+    env = resolve(args.envmap)
+    sets = [
+        load_map_set(p, m) for p, m in ((args.source_maps, args.source_model), (args.target_maps, args.target_model))
+    ]
+    materials = []
+    for ms in sets:
+        params, normal = load_arrays(ms)
+        materials.append((ms.model, params, ms.options, normal))
+    result = evaluate(
+        materials[0],
+        materials[1],
+        env,
+        rotations,
+        args.output,
+        geometry=args.geometry,
+        resolution=args.size,
+        lights=args.lights,
+        force=args.force,
+    )
+    print(
+        f"mean 1-SSIM {result.mean_full:.4f} (specular only {result.mean_specular:.4f}) over "
+        f"{len(rotations)} rotations; report {Path(args.output) / 'report.html'}"
+    )
+    return 0
+
+
+def add_remap(subparsers: Subparsers) -> None:
+    """The ``remap`` command."""
+    p = add_command(subparsers, "remap", "the main job: sweep, learn, convert and evaluate a map set", REMAP_EXAMPLES)
+    p.add_argument("maps", metavar="MAPS|FILE", help="a map set folder, or a .gltf/.glb/.mtlx/Mitsuba .xml file")
+    p.add_argument("--from", dest="source", metavar="MODEL", help="source model (default: the manifest's)")
+    p.add_argument("--material", metavar="NAME|INDEX", help="which material of the file (default: the first)")
+    p.add_argument(
+        "--write",
+        metavar="NAME.EXT",
+        help="the file to write into OUT (default: the input's name with "
+        "the target format's suffix: .gltf/.glb/.mtlx for gltf:*, .xml for mitsuba3:*, .blend for cycles:*)",
+    )
+    p.add_argument("--sweep", action="store_true", help="always sweep, even when the transform library has a route")
+    p.add_argument("--to", dest="target", required=True, metavar="MODEL", help="target model")
+    add_fix_option(p, "target options/held values")
+    add_strategy_option(p)
+    p.add_argument("-o", "--output", required=True, metavar="OUT", help="output folder (maps/ and report/)")
+    p.add_argument("--envmap", default="builtin")
+    p.add_argument("--rotations", default="0:360:6")
+    p.add_argument("--size", type=int, default=160, metavar="N", help="evaluation render resolution (160)")
+    p.add_argument("--lights", type=int, default=128)
+    p.add_argument("--workers", type=int, metavar="N")
+    p.add_argument("--cache", metavar="DIR", help="transform cache (default ~/.cache/matremap/transforms)")
+    p.add_argument(
+        "--light", nargs="+", metavar="DEG", help="light angles of the sweep's probe scene (default 0: headlight)"
+    )
+    p.add_argument(
+        "--target-renderer",
+        metavar="NAME",
+        help="renderer of the target model in the sweep (embedded, mitsuba3, cycles; default: embedded "
+        "where it emulates the model, else the model's own renderer)",
+    )
+    p.add_argument("--no-evaluate", action="store_true", help="skip the evaluation renders")
+    add_force_option(p, "write into an existing output folder")
+    p.set_defaults(func=cmd_remap)
+
+
+def cmd_remap(args: argparse.Namespace) -> int:
+    """Remap a map set folder, or one material of a glTF / MaterialX / Mitsuba file, onto the target model."""
+    from matremap.formats import is_material_file
+    from matremap.remap import remap, remap_file
+
+    material_file = is_material_file(args.maps)
+    if material_file and args.source:
+        raise MatremapError(f"{args.maps} names its own model; drop --from")
+    if not material_file and (args.material is not None or args.write is not None):
+        raise MatremapError("--material and --write apply to material files (.gltf, .glb, .mtlx, .xml)")
+    options: dict[str, Any] = {
+        "fix": parse_assignments(args.fix, "--fix"),
+        "strategy": args.strategy,
+        "envmap": args.envmap,
+        "rotations": args.rotations,
+        "resolution": args.size,
+        "lights": args.lights,
+        "workers": args.workers,
+        "cache": Path(args.cache) if args.cache else None,
+        "evaluate": not args.no_evaluate,
+        "force": args.force,
+        "log": lambda m: print(m, file=sys.stderr),
+        "target_renderer": args.target_renderer,
+        "library": not args.sweep,
+    }
+    if material_file:
+        fres = remap_file(args.maps, args.target, args.output, material=args.material, write=args.write, **options)
+        print(
+            f"done: {fres.source_model} -> {fres.target_model}"
+            + (f", wrote {fres.file}" if fres.file else "")
+            + (f", mean 1-SSIM {fres.remap.mean_dssim:.4f}" if fres.remap and fres.remap.mean_dssim is not None else "")
+        )
+        return 0
+    scene = Scene.probe(lights=parse_lights(args.light)) if args.light else None
+    result = remap(args.maps, args.source, args.target, args.output, scene=scene, **options)
+    print(
+        f"done in {result.seconds['total']:.1f} s: maps {result.maps}"
+        + (f", report {result.report}" if result.report else "")
+        + (f", mean 1-SSIM {result.mean_dssim:.4f}" if result.mean_dssim is not None else "")
+    )
+    return 0
+
+
+#: command name -> the function adding its parser
+PARSERS = {"convert": add_convert, "evaluate": add_evaluate, "remap": add_remap}
