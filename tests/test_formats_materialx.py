@@ -11,7 +11,7 @@ import pytest
 
 mx = pytest.importorskip("MaterialX", reason="MaterialX not installed: pip install 'matremap[materialx]'")
 
-from matremap.core.models import Material  # noqa: E402
+from matremap.core.material import Material  # noqa: E402
 from matremap.errors import MatremapError  # noqa: E402
 from matremap.formats.materialx import read, write  # noqa: E402
 from matremap.svbrdf.textures import ImageInfo, load_map_set, read_image, write_image_like  # noqa: E402
@@ -295,3 +295,24 @@ def test_a_colour_just_above_one_is_clamped_with_a_note(tmp_path):
     asset = read(p)
     np.testing.assert_allclose(asset.constants["baseColor"], [1.0, 0.773, 0.307])
     assert any("clamped" in n for n in asset.notes)
+
+
+def test_a_failure_after_the_maps_are_placed_leaves_nothing(tmp_path, monkeypatch):
+    from matremap.formats import materialx
+
+    d = tmp_path / "maps"
+    d.mkdir()
+    png(d / "base.png", np.full((8, 8, 3), 0.5, np.float32), "srgb")
+    png(d / "normal.png", np.tile(np.array([0.5, 0.5, 1.0], np.float32), (8, 8, 1)), "linear")
+    (d / "material.json").write_text(
+        '{"model": "gltf:metal-rough", "maps": {"baseColor": "base.png"}, "normal": "normal.png"}'
+    )
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(materialx, "build_document", broken)  # after the maps are copied
+    (tmp_path / "out").mkdir()
+    with pytest.raises(RuntimeError, match="disk full"):
+        write(tmp_path / "out" / "mat.mtlx", load_map_set(d))
+    assert list((tmp_path / "out").iterdir()) == []

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from matremap.core.models import Material
+from matremap.core.material import Material
 from matremap.core.scene import Scene
 from matremap.errors import MatremapError
 from matremap.formats import mitsuba_xml
@@ -224,7 +224,8 @@ def test_bitmaps_raw_vs_srgb_normalmap_and_bumpmap(tmp_path):
             "anisotropic",
         ),
         (
-            '<scene version="3.0.0"><bsdf type="roughplastic"><string name="int_ior" value="unobtainium"/></bsdf></scene>',
+            '<scene version="3.0.0"><bsdf type="roughplastic">'
+            '<string name="int_ior" value="unobtainium"/></bsdf></scene>',
             "named IORs",
         ),
         (
@@ -472,3 +473,18 @@ def test_mitsuba_probe_lights_match_scene_conventions():
         "mitsuba3:roughplastic",
         "mitsuba3:principled",
     )
+
+
+def test_a_failure_after_the_maps_are_placed_leaves_nothing(tmp_path, monkeypatch):
+    ms = load_map_set(make_map_set(tmp_path))
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "scene.xml").write_text("old")
+
+    def broken(bsdf):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(mitsuba_xml, "_probe_scene", broken)  # after every map is copied or converted
+    with pytest.raises(RuntimeError, match="disk full"):
+        write(tmp_path / "out" / "scene.xml", ms, force=True)
+    assert [p.name for p in (tmp_path / "out").iterdir()] == ["scene.xml"]  # no maps, no staging folder
+    assert (tmp_path / "out" / "scene.xml").read_text() == "old"

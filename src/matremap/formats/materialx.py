@@ -52,11 +52,13 @@ from typing import Any
 
 import numpy as np
 
-from matremap.core.imageio import atomic_output, check_output
-from matremap.core.models import Material, get_model
+from matremap.core.atomic import AtomicFiles
+from matremap.core.imageio import check_output
+from matremap.core.material import Material
+from matremap.dialects import get_model
 from matremap.errors import MatremapError
 from matremap.formats.asset import MaterialAsset, TextureRef
-from matremap.formats.mitsuba_xml import _check_targets, _map_dest, _split, place_map
+from matremap.formats.common import check_map_destinations, map_destination, pick_material, place_map, result_parts
 
 FORMAT = "mtlx"
 MODEL = "gltf:metal-rough"
@@ -233,113 +235,16 @@ def _connected(ctx: _Ctx, inp, param: str, colour: bool) -> TextureRef | None:
 
 
 def _shader_asset(ctx: _Ctx, shader, name: str, index: int, doc) -> MaterialAsset:
+    """The asset of surface shader node ``shader`` (material ``name``, the ``index``-th of ``doc``)."""
     cat = shader.getCategory()
     if cat not in SHADERS:
         raise MatremapError(f"{ctx.path}: material {name!r} uses a {cat!r} shader; matremap reads {', '.join(SHADERS)}")
-    spec = get_model(MODEL)
-    table = SHADERS[cat]
-    defaults = _defaults(shader)
-    constants: dict[str, Any] = {}
-    textures: dict[str, TextureRef] = {}
-    normal: TextureRef | None = None
-    notes = ctx.notes
-
-    def value_of(input_name: str) -> tuple[list[float] | None, TextureRef | None]:
-        inp = shader.getInput(input_name)
-        p = spec.param(table[input_name]) if input_name in table else None
-        colour = p is not None and p.channels == 3
-        if inp is None:
-            text = defaults.get(input_name, "")
-            return (_parse(text, f"{ctx.path}: {input_name}", 3 if colour else 1) if text else None), None
-        ref = _connected(ctx, inp, input_name, colour)
-        if ref is not None:
-            return None, ref
-        return _parse(inp.getValueString(), f"{ctx.path}: {shader.getName()}.{input_name}", 3 if colour else 1), None
-
-    for input_name, param in table.items():
-        vals, ref = value_of(input_name)
-        if ref is not None:
-            textures[param] = ref
-        elif vals is not None:
-            constants[param] = vals[0] if spec.param(param).channels == 1 else (vals * 3 if len(vals) == 1 else vals)
-    weight = _WEIGHT.get(cat)
-    if weight is not None:
-        wvals, wref = value_of(weight)
-        if wref is not None:
-            raise MatremapError(
-                f"{ctx.path}: {cat} {shader.getName()!r}: a texture on {weight} is not supported; "
-                f"multiply it into base_color's texture"
-            )
-        w = wvals[0] if wvals else 1.0
-        if "baseColor" in textures:
-            ref = textures["baseColor"]
-            textures["baseColor"] = TextureRef(
-                ref.path,
-                ref.channels,
-                ref.colorspace,
-                tuple(float(x) * w for x in np.broadcast_to(ref.scale, (3,))) if w != 1.0 else ref.scale,
-            )
-        else:
-            constants["baseColor"] = [float(x) * w for x in constants.get("baseColor", [1.0, 1.0, 1.0])]
-    # the normal
-    ninp = shader.getInput("normal" if cat != "open_pbr_surface" else "geometry_normal")
-    if ninp is not None:
-        nnode = ninp.getConnectedNode()
-        if nnode is not None and nnode.getCategory() in ("normalmap", "gltf_normalmap"):
-            if nnode.getCategory() == "gltf_normalmap":
-                img = nnode
-            else:
-                src = nnode.getInput("in")
-                img = src.getConnectedNode() if src is not None else None
-                if img is None:
-                    raise MatremapError(f"{ctx.path}: normalmap node {nnode.getName()!r} is not fed by an image")
-            if img.getCategory() not in (*_IMAGES, "gltf_normalmap"):
-                raise MatremapError(f"{ctx.path}: the normal map is a {img.getCategory()!r} node; use an image")
-            f = img.getInput("file")
-            rel = Path(f.getResolvedValueString()) if f is not None else None
-            if rel is None or not str(rel):
-                raise MatremapError(f"{ctx.path}: the normal map's image node has no file")
-            npath = rel if rel.is_absolute() else ctx.path.resolve().parent / rel
-            if not npath.is_file():
-                raise MatremapError(f"{ctx.path}: normal map {rel} not found at {npath}; put it beside the document")
-            normal = TextureRef(npath.resolve())
-            notes.append(f"normal map {rel.name} (through {nnode.getCategory()}) is the asset's normal map")
-        elif nnode is not None:
-            notes.append(f"normal input fed by a {nnode.getCategory()!r} node ignored (only normalmap is read)")
-    # what is not remapped
-    skipped = []
-    for inp in shader.getInputs():
-        n = inp.getName()
-        if n in table or n == weight or n in _NOT_LISTED:
-            continue
-        if inp.getConnectedNode() is not None:
-            skipped.append(f"{n} (textured)")
-            continue
-        text, default = inp.getValueString(), defaults.get(n)
-        if default is not None and _same(text, default):
-            continue
-        skipped.append(f"{n}={text}")
-    if cat == "gltf_pbr":
-        if skipped:
-            notes.append(f"gltf_pbr inputs not remapped: {', '.join(skipped)}")
-    else:
-        what = "Standard Surface" if cat == "standard_surface" else "OpenPBR Surface"
-        names = ", ".join(f"{k} -> {v}" for k, v in table.items())
-        notes.insert(
-            0,
-            f"WARNING: {what} read through matremap's hand-made translation to gltf:metal-rough "
-            f"(base_color x {weight} -> baseColor, {names}); it is approximate"
-            + (f". Inputs NOT remapped: {', '.join(skipped)}" if skipped else "; every other input is at its default"),
-        )
-    spec = get_model(MODEL)
-    for k, v in list(constants.items()):  # a colour past the model's range (e.g. gold's base colour 1.059)
-        if k in spec.param_names and k not in textures and spec.param(k).channels == 3:
-            lo, hi = spec.param(k).bounds
-            arr = np.asarray(v, dtype=float)
-            if np.all(np.isfinite(arr)) and (np.any(arr < lo) or np.any(arr > hi)):
-                clipped = np.clip(arr, lo, hi)
-                constants[k] = clipped.tolist() if clipped.ndim else float(clipped)
-                notes.append(f"{k}={v} lies outside [{lo:g}, {hi:g}] and was clamped to {constants[k]}")
+    inputs = _ShaderInputs(ctx, shader)
+    constants, textures = inputs.read_all()
+    inputs.apply_base_weight(constants, textures)
+    normal = _normal_map(ctx, shader)
+    _note_skipped(ctx, cat, inputs.skipped())
+    _clamp_colours(constants, textures, ctx.notes)
     uniform = {k: v for k, v in constants.items() if k not in textures}
     try:
         Material.create(MODEL, uniform)  # ranges, with the model's messages
@@ -353,10 +258,144 @@ def _shader_asset(ctx: _Ctx, shader, name: str, index: int, doc) -> MaterialAsse
         constants=constants,
         textures=textures,
         normal=normal,
-        notes=notes,
+        notes=ctx.notes,
         document=doc,
         index=index,
     )
+
+
+class _ShaderInputs:
+    """The inputs of one shader node in ``gltf:metal-rough`` terms (:data:`SHADERS`): values (or the
+    node definition's defaults) and the textures connected to them."""
+
+    def __init__(self, ctx: _Ctx, shader) -> None:
+        self.ctx, self.shader = ctx, shader
+        self.category = shader.getCategory()
+        self.table = SHADERS[self.category]
+        self.weight = _WEIGHT.get(self.category)
+        self.defaults = _defaults(shader)
+        self.spec = get_model(MODEL)
+
+    def value_of(self, input_name: str) -> tuple[list[float] | None, TextureRef | None]:
+        """(numbers, None) of a value or default, (None, texture) of a connection, (None, None) when
+        neither the node nor its definition gives a value."""
+        inp = self.shader.getInput(input_name)
+        p = self.spec.param(self.table[input_name]) if input_name in self.table else None
+        channels = 3 if p is not None and p.channels == 3 else 1
+        if inp is None:
+            text = self.defaults.get(input_name, "")
+            return (_parse(text, f"{self.ctx.path}: {input_name}", channels) if text else None), None
+        ref = _connected(self.ctx, inp, input_name, channels == 3)
+        if ref is not None:
+            return None, ref
+        where = f"{self.ctx.path}: {self.shader.getName()}.{input_name}"
+        return _parse(inp.getValueString(), where, channels), None
+
+    def read_all(self) -> tuple[dict[str, Any], dict[str, TextureRef]]:
+        """(constants, textures) of the inputs the table maps, by ``gltf:metal-rough`` parameter."""
+        constants: dict[str, Any] = {}
+        textures: dict[str, TextureRef] = {}
+        for input_name, param in self.table.items():
+            vals, ref = self.value_of(input_name)
+            if ref is not None:
+                textures[param] = ref
+            elif vals is not None:
+                scalar = self.spec.param(param).channels == 1
+                constants[param] = vals[0] if scalar else (vals * 3 if len(vals) == 1 else vals)
+        return constants, textures
+
+    def apply_base_weight(self, constants: dict[str, Any], textures: dict[str, TextureRef]) -> None:
+        """Multiply the base colour (its constant, or its texture's factor) by the base weight input."""
+        if self.weight is None:
+            return
+        wvals, wref = self.value_of(self.weight)
+        if wref is not None:
+            raise MatremapError(
+                f"{self.ctx.path}: {self.category} {self.shader.getName()!r}: a texture on {self.weight} is not "
+                f"supported; multiply it into base_color's texture"
+            )
+        w = wvals[0] if wvals else 1.0
+        if "baseColor" in textures:
+            ref = textures["baseColor"]
+            scale = tuple(float(x) * w for x in np.broadcast_to(ref.scale, (3,))) if w != 1.0 else ref.scale
+            textures["baseColor"] = TextureRef(ref.path, ref.channels, ref.colorspace, scale)
+        else:
+            constants["baseColor"] = [float(x) * w for x in constants.get("baseColor", [1.0, 1.0, 1.0])]
+
+    def skipped(self) -> list[str]:
+        """The inputs not remapped that are textured or differ from their defaults, as ``name=value``."""
+        out = []
+        for inp in self.shader.getInputs():
+            n = inp.getName()
+            if n in self.table or n == self.weight or n in _NOT_LISTED:
+                continue
+            if inp.getConnectedNode() is not None:
+                out.append(f"{n} (textured)")
+                continue
+            text, default = inp.getValueString(), self.defaults.get(n)
+            if default is not None and _same(text, default):
+                continue
+            out.append(f"{n}={text}")
+        return out
+
+
+def _normal_map(ctx: _Ctx, shader) -> TextureRef | None:
+    """The normal map fed to the shader's normal input through a ``normalmap`` (or
+    ``gltf_normalmap``) node; any other node there is noted and ignored."""
+    ninp = shader.getInput("normal" if shader.getCategory() != "open_pbr_surface" else "geometry_normal")
+    nnode = ninp.getConnectedNode() if ninp is not None else None
+    if nnode is None:
+        return None
+    if nnode.getCategory() not in ("normalmap", "gltf_normalmap"):
+        ctx.notes.append(f"normal input fed by a {nnode.getCategory()!r} node ignored (only normalmap is read)")
+        return None
+    if nnode.getCategory() == "gltf_normalmap":
+        img = nnode
+    else:
+        src = nnode.getInput("in")
+        img = src.getConnectedNode() if src is not None else None
+        if img is None:
+            raise MatremapError(f"{ctx.path}: normalmap node {nnode.getName()!r} is not fed by an image")
+    if img.getCategory() not in (*_IMAGES, "gltf_normalmap"):
+        raise MatremapError(f"{ctx.path}: the normal map is a {img.getCategory()!r} node; use an image")
+    f = img.getInput("file")
+    rel = Path(f.getResolvedValueString()) if f is not None else None
+    if rel is None or not str(rel):
+        raise MatremapError(f"{ctx.path}: the normal map's image node has no file")
+    npath = rel if rel.is_absolute() else ctx.path.resolve().parent / rel
+    if not npath.is_file():
+        raise MatremapError(f"{ctx.path}: normal map {rel} not found at {npath}; put it beside the document")
+    ctx.notes.append(f"normal map {rel.name} (through {nnode.getCategory()}) is the asset's normal map")
+    return TextureRef(npath.resolve())
+
+
+def _note_skipped(ctx: _Ctx, category: str, skipped: list[str]) -> None:
+    """Note the inputs not remapped; for a translated shader, warn first that the translation is approximate."""
+    if category == "gltf_pbr":
+        if skipped:
+            ctx.notes.append(f"gltf_pbr inputs not remapped: {', '.join(skipped)}")
+        return
+    what = "Standard Surface" if category == "standard_surface" else "OpenPBR Surface"
+    names = ", ".join(f"{k} -> {v}" for k, v in SHADERS[category].items())
+    ctx.notes.insert(
+        0,
+        f"WARNING: {what} read through matremap's hand-made translation to gltf:metal-rough "
+        f"(base_color x {_WEIGHT[category]} -> baseColor, {names}); it is approximate"
+        + (f". Inputs NOT remapped: {', '.join(skipped)}" if skipped else "; every other input is at its default"),
+    )
+
+
+def _clamp_colours(constants: dict[str, Any], textures: dict[str, TextureRef], notes: list[str]) -> None:
+    """Clamp uniform colours past the model's range (e.g. gold's base colour 1.059), with a note."""
+    spec = get_model(MODEL)
+    for k, v in list(constants.items()):
+        if k in spec.param_names and k not in textures and spec.param(k).channels == 3:
+            lo, hi = spec.param(k).bounds
+            arr = np.asarray(v, dtype=float)
+            if np.all(np.isfinite(arr)) and (np.any(arr < lo) or np.any(arr > hi)):
+                clipped = np.clip(arr, lo, hi)
+                constants[k] = clipped.tolist() if clipped.ndim else float(clipped)
+                notes.append(f"{k}={v} lies outside [{lo:g}, {hi:g}] and was clamped to {constants[k]}")
 
 
 def _same(a: str, b: str) -> bool:
@@ -403,17 +442,7 @@ def read(path: str | Path, material: str | int | None = None) -> MaterialAsset:
             f"{p} holds no surfacematerial or surface shader; matremap reads gltf_pbr, "
             f"standard_surface and open_pbr_surface materials"
         )
-    names = [n for n, _ in found]
-    if material is None:
-        index = 0
-    elif isinstance(material, int) and not isinstance(material, bool):
-        if not -len(found) <= material < len(found):
-            raise MatremapError(f"{p} has {len(found)} material(s); material index {material} is out of range")
-        index = material % len(found)
-    elif isinstance(material, str) and material in names:
-        index = names.index(material)
-    else:
-        raise MatremapError(f"{p} has no material named {material!r}; its materials are {', '.join(map(repr, names))}")
+    index = pick_material(p, [n for n, _ in found], material, "material")
     name, shader = found[index]
     if shader is None:
         raise MatremapError(f"{p}: material {name!r} has no surface shader connected")
@@ -467,50 +496,45 @@ def build_document(
 def write(out: str | Path, result: Any, source: MaterialAsset | None = None, force: bool = False) -> Path:
     """Write ``result`` (a ``gltf:metal-rough`` Material or MapSet) as a MaterialX document with a
     ``gltf_pbr`` shader and a ``surfacematerial``; maps are copied beside it. ``source`` names the
-    material when it came from a MaterialX file."""
+    material when it came from a MaterialX file. The document and its maps are written together or
+    not at all."""
     mx = _mx()
     out = Path(out)
-    m, maps, cs, normal = _split(result, "the MaterialX writer", (MODEL,))
+    m, maps, cs, normal = result_parts(result, "the MaterialX writer", (MODEL,))
     check_output(out, force, (".mtlx",))
-    _check_targets(out, [*maps, *(["normal"] if normal else [])], force)
-    from matremap.svbrdf.textures import image_info
-
+    check_map_destinations(out, [*maps, *(["normal"] if normal else [])], force)
     name = "material"
     if source is not None and re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", source.name or ""):
         name = source.name
-    written: list[Path] = []
-    try:
-        files: dict[str, str] = {}
+    with AtomicFiles(force) as files:
+        names: dict[str, str] = {}
         spaces: dict[str, str] = {}
         for param, src in maps.items():
-            p = m.spec.param(param)
-            info = image_info(src, cs[param])
-            colour = p.channels == 3
-            # colour maps keep any encoding (it is declared); data maps must hold linear values
-            keep = colour or cs[param] == "linear"
-            dest = place_map(src, _map_dest(out, param), keep, cs[param], p.channels)
-            written.append(dest)
-            files[param] = dest.name
-            kept = dest.suffix.lower() == "." + info.format and keep
-            spaces[param] = cs[param] if kept else "linear"
+            names[param], spaces[param] = _place_texture(m, param, src, cs[param], out, files)
         nfile = None
         if normal is not None:
-            dest = place_map(normal, _map_dest(out, "normal"), True, "linear", 3)
-            written.append(dest)
-            nfile = dest.name
-        doc = build_document(m, files, spaces, nfile, name)
+            nfile = place_map(normal, map_destination(out, "normal"), True, "linear", 3, files).name
+        doc = build_document(m, names, spaces, nfile, name)
         ok, why = doc.validate()
         if not ok:  # pragma: no cover - a bug here, not the user's
             raise MatremapError(f"the MaterialX document for {out} does not validate: {why}")
-        text = mx.writeToXmlString(doc)
-        with atomic_output(out) as tmp, open(tmp, "w") as f:
-            f.write(text)
-    except BaseException:
-        for f in written:
-            if f.exists() and all(f.resolve() != Path(s).resolve() for s in maps.values()):
-                f.unlink()
-        raise
+        files.write_text(out, mx.writeToXmlString(doc))
     return out
+
+
+def _place_texture(
+    m: Material, param: str, src: Path, colorspace: str, out: Path, files: AtomicFiles
+) -> tuple[str, str]:
+    """Stage the map of ``param`` beside ``out``; (its file name, the colour space to declare).
+    Colour maps keep any encoding (it is declared); data maps must hold linear values."""
+    from matremap.svbrdf.textures import image_info
+
+    p = m.spec.param(param)
+    info = image_info(src, colorspace)
+    keep = p.channels == 3 or colorspace == "linear"
+    dest = place_map(src, map_destination(out, param), keep, colorspace, p.channels, files)
+    kept = dest.suffix.lower() == "." + info.format and keep
+    return dest.name, colorspace if kept else "linear"
 
 
 __all__ = ["FORMAT", "MODEL", "SHADERS", "build_document", "read", "write"]

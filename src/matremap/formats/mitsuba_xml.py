@@ -45,7 +45,6 @@ white environment, seen by the probe camera; ``$spp``, ``$resolution`` and ``$ma
 from __future__ import annotations
 
 import re
-import shutil
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -54,10 +53,13 @@ from typing import Any
 
 import numpy as np
 
-from matremap.core.imageio import atomic_output, check_output
-from matremap.core.models import Material, get_model
+from matremap.core.atomic import AtomicFiles
+from matremap.core.imageio import check_output
+from matremap.core.material import Material
+from matremap.dialects import get_model
 from matremap.errors import MatremapError
 from matremap.formats.asset import MaterialAsset, TextureRef
+from matremap.formats.common import check_map_destinations, map_destination, pick_material, place_map, result_parts
 
 FORMAT = "mitsuba-xml"
 
@@ -325,6 +327,8 @@ class _Reader:
         return TextureRef(path.resolve(), None, colorspace)
 
     def material(self, label: str, el: ET.Element, index: int) -> MaterialAsset:
+        """The asset of BSDF element ``el`` (named ``label``, the ``index``-th of the file): its
+        wrappers unwrapped, its core plugin's parameters read as a ``mitsuba3:*`` material."""
         notes: list[str] = []
         core, normal = self.unwrap(el, notes)
         plugin = core.get("type")
@@ -333,8 +337,6 @@ class _Reader:
                 f"material {label!r} is a {plugin!r} BSDF; matremap reads {', '.join(PLUGINS)} "
                 f"(inside {', '.join(WRAPPERS)} wrappers)"
             )
-        model = PLUGINS[plugin]
-        spec = get_model(model)
         what = f'<bsdf type="{plugin}"> {label!r}'
         props = self.props(core, what)
         extra = sorted(set(props) - set(_ACCEPTED[plugin]))
@@ -342,151 +344,190 @@ class _Reader:
             raise self.fail(
                 f"{what}: unknown parameter(s) {', '.join(extra)}; {plugin} takes {', '.join(_ACCEPTED[plugin])}"
             )
-        constants: dict[str, Any] = {}
-        textures: dict[str, TextureRef] = {}
-
-        def take(name: str, target: str | None = None) -> None:
-            prop = props.get(name)
-            if prop is None:
-                return
-            target = target or name
-            p = spec.param(target)
-            if prop.kind == "texture":
-                if name in _CONSTANT_ONLY.get(plugin, ()):
-                    raise self.fail(f"{what}: Mitsuba 3 takes {name} as a number, not a texture")
-                textures[target] = self.texture(prop.value, name, colour=p.channels == 3 and p.role != "roughness")
-            elif prop.kind == "float":
-                constants[target] = float(prop.value)
-            elif prop.kind == "rgb" and p.channels == 3:
-                constants[target] = [float(x) for x in prop.value]
-            else:
-                kind = "an RGB colour, a number or a texture" if p.channels == 3 else "a number or a texture"
-                raise self.fail(f"{what}: {name} must be {kind}, not <{prop.tag}>")
-
-        def string(name: str) -> str | None:
-            prop = props.get(name)
-            if prop is None:
-                return None
-            if prop.kind != "string":
-                raise self.fail(f"{what}: {name} must be a <string>, not <{prop.tag}>")
-            return prop.value
-
-        if "distribution" in props:
-            dist = string("distribution")
-            if dist not in spec.option("distribution").choices:
-                raise self.fail(
-                    f"{what}: distribution {dist!r} is not one of {', '.join(spec.option('distribution').choices)}"
-                )
-            constants["distribution"] = dist
-        for name in _NO_EFFECT:
-            if name in props:
-                notes.append(f"{name} ignored: it changes how Mitsuba samples the BSDF, not the image")
-
-        if plugin == "diffuse":
-            take("reflectance")
-        elif plugin == "roughconductor":
-            self._alpha(props, what)
-            take("alpha")
-            take("specular_reflectance")
-            material = string("material")
-            has_ior = "eta" in props or "k" in props
-            if has_ior and material not in (None, "none"):
-                raise self.fail(f"{what}: give either material or eta/k, not both (Mitsuba refuses both)")
-            if has_ior:
-                constants["material"] = "custom"
-                constants.setdefault("eta", 0.0)  # Mitsuba's defaults when only one of them is given
-                constants.setdefault("k", 1.0)
-                take("eta")
-                take("k")
-                for name in ("eta", "k"):
-                    if name in textures:
-                        constants.pop(name, None)
-            else:
-                material = material or "none"
-                choices = spec.option("material").choices
-                if material not in choices:
-                    raise self.fail(
-                        f"{what}: material {material!r} is not one of Mitsuba's conductors "
-                        f"({', '.join(c for c in choices if c != 'custom')})"
-                    )
-                constants["material"] = material
-        elif plugin == "roughplastic":
-            take("alpha")
-            for name in ("int_ior", "ext_ior"):
-                prop = props.get(name)
-                if prop is None:
-                    continue
-                if prop.kind == "string":
-                    key = prop.value.strip().lower()
-                    if key not in IOR_TABLE:
-                        raise self.fail(
-                            f"{what}: {name}={prop.value!r} is not one of Mitsuba's named IORs "
-                            f"({', '.join(IOR_TABLE)}); give a number"
-                        )
-                    constants[name] = IOR_TABLE[key]
-                    notes.append(f"{name} {prop.value!r} = {IOR_TABLE[key]:g} (Mitsuba's IOR table)")
-                else:
-                    take(name)
-            if "nonlinear" in props:
-                if props["nonlinear"].kind != "boolean":
-                    raise self.fail(f"{what}: nonlinear must be a <boolean>")
-                constants["nonlinear"] = "true" if props["nonlinear"].value else "false"
-            take("specular_reflectance")
-            take("diffuse_reflectance")
-        else:  # principled
-            take("base_color")
-            for name in _PRINCIPLED_SCALARS:
-                take(name)
-            if "eta" in props and "specular" in props:
-                raise self.fail(f"{what}: give either eta or specular, not both")
-            if "eta" in props:
-                prop = props["eta"]
-                if prop.kind != "float" or not prop.value > 1.0:
-                    raise self.fail(f"{what}: eta must be a number above 1, not {prop.value!r}")
-                f0 = ((prop.value - 1.0) / (prop.value + 1.0)) ** 2
-                spec_value = f0 / 0.08
-                if spec_value > 1.0:
-                    raise self.fail(
-                        f"{what}: eta={prop.value:g} is beyond specular = 1 (eta 1.8); matremap's "
-                        f"principled model takes specular in [0, 1]"
-                    )
-                constants["specular"] = spec_value
-                notes.append(f"eta {prop.value:g} read as specular {spec_value:.6g} (F0 = 0.08 specular)")
-            else:
-                take("specular")
-
-        uniform = {k: v for k, v in constants.items() if k not in textures}
+        values = _BsdfValues(self, plugin, what, props, notes)
+        values.read()
+        model = PLUGINS[plugin]
+        uniform = {k: v for k, v in values.constants.items() if k not in values.textures}
         try:
             Material.create(model, uniform)  # names, ranges and options, with the model's own messages
         except MatremapError as e:
             raise self.fail(f"material {label!r}: {e}") from None
-        if normal is not None and not textures:
+        if normal is not None and not values.textures:
             notes.append("the material is uniform apart from its normal map")
         return MaterialAsset(
             path=self.path,
             format=FORMAT,
             name=label,
             model=model,
-            constants=constants,
-            textures=textures,
+            constants=values.constants,
+            textures=values.textures,
             normal=normal,
             notes=notes,
             document=self.root,
             index=index,
         )
 
-    def _alpha(self, props: dict[str, _Prop], what: str) -> None:
-        if "alpha_u" in props or "alpha_v" in props:
-            au, av = props.get("alpha_u"), props.get("alpha_v")
-            if "alpha" in props or au is None or av is None:
-                raise self.fail(f"{what}: give alpha, or alpha_u and alpha_v together")
-            if au.kind != "float" or av.kind != "float" or au.value != av.value:
-                raise self.fail(
-                    f"{what}: anisotropic roughness (alpha_u != alpha_v) is not supported; matremap's "
-                    f"roughconductor is isotropic, give one alpha"
-                )
-            props["alpha"] = au
-            del props["alpha_u"], props["alpha_v"]
+
+class _BsdfValues:
+    """The parameters of one core BSDF element read as a ``mitsuba3:*`` model's constants (model
+    units and options) and textures, the way Mitsuba 3 reads them (see the module doc)."""
+
+    def __init__(self, reader: _Reader, plugin: str, what: str, props: dict[str, _Prop], notes: list[str]) -> None:
+        self.reader, self.plugin, self.what, self.props, self.notes = reader, plugin, what, props, notes
+        self.spec = get_model(PLUGINS[plugin])
+        self.constants: dict[str, Any] = {}
+        self.textures: dict[str, TextureRef] = {}
+
+    def fail(self, msg: str) -> MatremapError:
+        return self.reader.fail(f"{self.what}: {msg}")
+
+    def read(self) -> None:
+        """Read the options every plugin shares, then the plugin's own parameters."""
+        if "distribution" in self.props:
+            dist = self.string("distribution")
+            choices = self.spec.option("distribution").choices
+            if dist not in choices:
+                raise self.fail(f"distribution {dist!r} is not one of {', '.join(choices)}")
+            self.constants["distribution"] = dist
+        for name in _NO_EFFECT:
+            if name in self.props:
+                self.notes.append(f"{name} ignored: it changes how Mitsuba samples the BSDF, not the image")
+        {
+            "diffuse": self.diffuse,
+            "roughconductor": self.roughconductor,
+            "roughplastic": self.roughplastic,
+            "principled": self.principled,
+        }[self.plugin]()
+
+    # -- one parameter -------------------------------------------------------------------------
+    def take(self, name: str, target: str | None = None) -> None:
+        """Read parameter ``name`` (if given) as a number, an RGB colour or a texture of ``target``."""
+        prop = self.props.get(name)
+        if prop is None:
+            return
+        target = target or name
+        p = self.spec.param(target)
+        if prop.kind == "texture":
+            if name in _CONSTANT_ONLY.get(self.plugin, ()):
+                raise self.fail(f"Mitsuba 3 takes {name} as a number, not a texture")
+            colour = p.channels == 3 and p.role != "roughness"
+            self.textures[target] = self.reader.texture(prop.value, name, colour=colour)
+        elif prop.kind == "float":
+            self.constants[target] = float(prop.value)
+        elif prop.kind == "rgb" and p.channels == 3:
+            self.constants[target] = [float(x) for x in prop.value]
+        else:
+            kind = "an RGB colour, a number or a texture" if p.channels == 3 else "a number or a texture"
+            raise self.fail(f"{name} must be {kind}, not <{prop.tag}>")
+
+    def string(self, name: str) -> str | None:
+        """The value of ``<string name=...>``, or None when it is not given."""
+        prop = self.props.get(name)
+        if prop is None:
+            return None
+        if prop.kind != "string":
+            raise self.fail(f"{name} must be a <string>, not <{prop.tag}>")
+        return prop.value
+
+    # -- the plugins ---------------------------------------------------------------------------
+    def diffuse(self) -> None:
+        self.take("reflectance")
+
+    def roughconductor(self) -> None:
+        """alpha, specular_reflectance and the conductor: a named ``material``, or ``eta``/``k``
+        (``material=custom``), or neither (Mitsuba's perfect mirror, ``material=none``)."""
+        self.isotropic_alpha()
+        self.take("alpha")
+        self.take("specular_reflectance")
+        material = self.string("material")
+        has_ior = "eta" in self.props or "k" in self.props
+        if has_ior and material not in (None, "none"):
+            raise self.fail("give either material or eta/k, not both (Mitsuba refuses both)")
+        if has_ior:
+            self.constants["material"] = "custom"
+            self.constants.setdefault("eta", 0.0)  # Mitsuba's defaults when only one of them is given
+            self.constants.setdefault("k", 1.0)
+            self.take("eta")
+            self.take("k")
+            for name in ("eta", "k"):
+                if name in self.textures:
+                    self.constants.pop(name, None)
+            return
+        material = material or "none"
+        choices = self.spec.option("material").choices
+        if material not in choices:
+            raise self.fail(
+                f"material {material!r} is not one of Mitsuba's conductors "
+                f"({', '.join(c for c in choices if c != 'custom')})"
+            )
+        self.constants["material"] = material
+
+    def isotropic_alpha(self) -> None:
+        """``alpha_u`` = ``alpha_v`` given together become ``alpha``; anisotropy is refused."""
+        props = self.props
+        if "alpha_u" not in props and "alpha_v" not in props:
+            return
+        au, av = props.get("alpha_u"), props.get("alpha_v")
+        if "alpha" in props or au is None or av is None:
+            raise self.fail("give alpha, or alpha_u and alpha_v together")
+        if au.kind != "float" or av.kind != "float" or au.value != av.value:
+            raise self.fail(
+                "anisotropic roughness (alpha_u != alpha_v) is not supported; matremap's "
+                "roughconductor is isotropic, give one alpha"
+            )
+        props["alpha"] = au
+        del props["alpha_u"], props["alpha_v"]
+
+    def roughplastic(self) -> None:
+        """alpha, the two IORs (numbers or names of Mitsuba's table), nonlinear, the reflectances."""
+        self.take("alpha")
+        for name in ("int_ior", "ext_ior"):
+            self.ior(name)
+        if "nonlinear" in self.props:
+            if self.props["nonlinear"].kind != "boolean":
+                raise self.fail("nonlinear must be a <boolean>")
+            self.constants["nonlinear"] = "true" if self.props["nonlinear"].value else "false"
+        self.take("specular_reflectance")
+        self.take("diffuse_reflectance")
+
+    def ior(self, name: str) -> None:
+        """An index of refraction given as a number or by name (:data:`IOR_TABLE`)."""
+        prop = self.props.get(name)
+        if prop is None:
+            return
+        if prop.kind != "string":
+            self.take(name)
+            return
+        key = prop.value.strip().lower()
+        if key not in IOR_TABLE:
+            raise self.fail(
+                f"{name}={prop.value!r} is not one of Mitsuba's named IORs ({', '.join(IOR_TABLE)}); give a number"
+            )
+        self.constants[name] = IOR_TABLE[key]
+        self.notes.append(f"{name} {prop.value!r} = {IOR_TABLE[key]:g} (Mitsuba's IOR table)")
+
+    def principled(self) -> None:
+        """base_color, the scalar lobes, and specular (given as such or as ``eta``)."""
+        self.take("base_color")
+        for name in _PRINCIPLED_SCALARS:
+            self.take(name)
+        if "eta" in self.props and "specular" in self.props:
+            raise self.fail("give either eta or specular, not both")
+        if "eta" not in self.props:
+            self.take("specular")
+            return
+        prop = self.props["eta"]
+        if prop.kind != "float" or not prop.value > 1.0:
+            raise self.fail(f"eta must be a number above 1, not {prop.value!r}")
+        f0 = ((prop.value - 1.0) / (prop.value + 1.0)) ** 2
+        spec_value = f0 / 0.08
+        if spec_value > 1.0:
+            raise self.fail(
+                f"eta={prop.value:g} is beyond specular = 1 (eta 1.8); matremap's "
+                f"principled model takes specular in [0, 1]"
+            )
+        self.constants["specular"] = spec_value
+        self.notes.append(f"eta {prop.value:g} read as specular {spec_value:.6g} (F0 = 0.08 specular)")
 
 
 def _substitute(root: ET.Element, path: Path) -> None:
@@ -494,9 +535,10 @@ def _substitute(root: ET.Element, path: Path) -> None:
     defaults: dict[str, str] = {}
     for el in list(root):
         if el.tag == "default":
-            if el.get("name") is None or el.get("value") is None:
+            name, value = el.get("name"), el.get("value")
+            if name is None or value is None:
                 raise MatremapError(f"{path}: a <default> needs name and value attributes")
-            defaults[el.get("name")] = el.get("value")  # type: ignore[index]
+            defaults[name] = value
     pattern = re.compile(r"\$(\w+)")
 
     def repl(m: re.Match) -> str:
@@ -538,17 +580,7 @@ def read(path: str | Path, material: str | int | None = None) -> MaterialAsset:
     found = reader.candidates()
     if not found:
         raise MatremapError(f"{p} holds no <bsdf>; matremap reads a scene's BSDFs (top-level or inside shapes)")
-    names = [n for n, _ in found]
-    if material is None:
-        index = 0
-    elif isinstance(material, int) and not isinstance(material, bool):
-        if not -len(found) <= material < len(found):
-            raise MatremapError(f"{p} has {len(found)} BSDF(s); material index {material} is out of range")
-        index = material % len(found)
-    elif isinstance(material, str) and material in names:
-        index = names.index(material)
-    else:
-        raise MatremapError(f"{p} has no BSDF named {material!r}; its BSDFs are {', '.join(map(repr, names))}")
+    index = pick_material(p, [n for n, _ in found], material, "BSDF")
     asset = reader.material(*found[index], index)
     if reader.legacy:
         asset.notes.insert(
@@ -567,88 +599,6 @@ def _num(x: float) -> str:
 
 def _rgb(v: np.ndarray) -> str:
     return ", ".join(_num(x) for x in np.asarray(v, dtype=float).reshape(-1))
-
-
-def place_map(src: Path, dest_stem: Path, keep: bool, colorspace: str, channels: int | None) -> Path:
-    """Put map ``src`` at ``dest_stem`` + suffix: copied as it is when ``keep`` (and it is a PNG or
-    EXR with the right channel count), else converted to a linear float EXR (decoded with
-    ``colorspace``; ``channels`` 1 keeps the first channel). Written atomically; returns the file."""
-    from matremap.svbrdf.textures import image_info, read_image, write_image_like
-
-    info = image_info(src, colorspace)
-    if keep and info.format in ("png", "exr") and (channels is None or info.channels == channels):
-        dest = dest_stem.with_suffix("." + info.format)
-        if dest.resolve() != src.resolve():
-            with atomic_output(dest) as tmp:
-                shutil.copyfile(src, tmp)
-        return dest
-    image, info = read_image(src, colorspace)
-    image = np.atleast_3d(image)
-    if channels == 1:
-        image = image[..., :1]
-    elif channels == 3 and image.shape[-1] == 1:
-        image = np.repeat(image, 3, axis=-1)
-    elif channels == 3:
-        image = image[..., :3]
-    dest = dest_stem.with_suffix(".exr")
-    write_image_like(
-        dest, image, info.like(format="exr", pixel_type="float", colorspace="linear", compression=None), force=True
-    )
-    return dest
-
-
-def _split(
-    result: Any, what: str, models: tuple[str, ...]
-) -> tuple[Material, dict[str, Path], dict[str, str], Path | None]:
-    """(material with the uniform values, maps, their colour spaces, normal map) of a Material or MapSet."""
-    from matremap.svbrdf.textures import MapSet
-
-    if isinstance(result, Material):
-        if result.model not in models:
-            raise MatremapError(
-                f"{what} writes {', '.join(models)} materials, not {result.model}; remap to one of these first"
-            )
-        return result, {}, {}, None
-    if isinstance(result, MapSet):
-        spec = get_model(result.model)
-        if spec.id not in models:
-            raise MatremapError(
-                f"{what} writes {', '.join(models)} materials, not {spec.id}; remap to one of these first"
-            )
-        consts = {k: v for k, v in result.constants.items() if k not in result.maps}
-        m = Material.create(spec.id, consts)
-        for name, f in result.maps.items():
-            spec.param(name)
-            if not Path(f).is_file():
-                raise MatremapError(f"map {f} for {name} not found")
-        if result.normal is not None and not Path(result.normal).is_file():
-            raise MatremapError(f"normal map {result.normal} not found")
-        cs = {
-            name: result.colorspace.get(name) or _default_cs(Path(f), spec.param(name).channels == 3)
-            for name, f in result.maps.items()
-        }
-        return m, {k: Path(v) for k, v in result.maps.items()}, cs, (Path(result.normal) if result.normal else None)
-    raise MatremapError(f"{what} writes a Material or a MapSet, not {type(result).__name__}")
-
-
-def _default_cs(path: Path, colour: bool) -> str:
-    from matremap.svbrdf.textures import image_info
-
-    return image_info(path, colour=colour).colorspace
-
-
-def _map_dest(out: Path, name: str) -> Path:
-    return out.parent / f"{out.stem}_{re.sub(r'[^A-Za-z0-9_.-]', '_', name)}"
-
-
-def _check_targets(out: Path, names: list[str], force: bool) -> None:
-    if force:
-        return
-    for name in names:
-        stem = _map_dest(out, name)
-        for suffix in (".png", ".exr"):
-            if stem.with_suffix(suffix).exists():
-                raise MatremapError(f"{stem.with_suffix(suffix)} already exists; pass --force to overwrite it")
 
 
 def _bsdf_xml(m: Material, textures: Mapping[str, ET.Element]) -> ET.Element:
@@ -740,36 +690,18 @@ def _probe_scene(bsdf: ET.Element) -> ET.Element:
 def write(out: str | Path, result: Any, source: MaterialAsset | None = None, force: bool = False) -> Path:
     """Write ``result`` (a Material or MapSet of a ``mitsuba3:*`` model) as a Mitsuba 3 scene XML
     that renders the material on the probe sphere; maps are copied beside it as
-    ``<stem>_<param>.png|.exr``. ``source`` is not used (the scene is written from scratch)."""
+    ``<stem>_<param>.png|.exr``. ``source`` is not used (the scene is written from scratch).
+    The scene and its maps are written together or not at all."""
     out = Path(out)
-    m, maps, cs, normal = _split(result, "Mitsuba 3 XML", MODELS)
+    m, maps, cs, normal = result_parts(result, "Mitsuba 3 XML", MODELS)
     check_output(out, force, (".xml",))
-    spec = m.spec
-    plugin = next(k for k, v in PLUGINS.items() if v == spec.id)
-    for name in maps:
-        if name in _CONSTANT_ONLY.get(plugin, ()):
-            raise MatremapError(f"{spec.id}: Mitsuba 3 takes {name} as a number, not a texture; give it as a constant")
-        if name in ("eta", "k") and m.options.get("material") != "custom":
-            raise MatremapError(f"{spec.id}: a map for {name} needs material=custom")
-    _check_targets(out, [*maps, *(["normal"] if normal else [])], force)
-    from matremap.svbrdf.textures import image_info
-
-    written: list[Path] = []
-    try:
-        textures: dict[str, ET.Element] = {}
-        for name, src in maps.items():
-            p = spec.param(name)
-            colour = p.channels == 3 and p.role != "roughness"
-            # what Mitsuba assumes of a file: non-raw -> integer files are sRGB, float files linear; raw -> as stored
-            info = image_info(src, cs[name])
-            expected = ("srgb" if info.integer else "linear") if colour else "linear"
-            dest = place_map(src, _map_dest(out, name), cs[name] == expected, cs[name], p.channels)
-            written.append(dest)
-            textures[name] = _bitmap(name, dest.name, raw=not colour)
+    _check_textured(m, maps)
+    check_map_destinations(out, [*maps, *(["normal"] if normal else [])], force)
+    with AtomicFiles(force) as files:
+        textures = {name: _place_texture(m, name, src, cs[name], out, files) for name, src in maps.items()}
         bsdf = _bsdf_xml(m, textures)
         if normal is not None:
-            dest = place_map(normal, _map_dest(out, "normal"), True, "linear", 3)
-            written.append(dest)
+            dest = place_map(normal, map_destination(out, "normal"), True, "linear", 3, files)
             wrapper = ET.Element("bsdf", {"type": "normalmap", "id": "material"})
             wrapper.append(_bitmap("normalmap", dest.name, raw=True))
             wrapper.append(bsdf)
@@ -778,17 +710,40 @@ def write(out: str | Path, result: Any, source: MaterialAsset | None = None, for
             bsdf.set("id", "material")
         scene = _probe_scene(bsdf)
         ET.indent(scene, space="    ")
-        text = ET.tostring(scene, encoding="unicode")
-        with atomic_output(out) as tmp, open(tmp, "w") as f:
-            f.write('<?xml version="1.0" encoding="utf-8"?>\n')
-            f.write(f"<!-- written by matremap: {spec.id} on the probe sphere under a white environment -->\n")
-            f.write(text + "\n")
-    except BaseException:
-        for f in written:
-            if f.exists() and (not maps or all(f.resolve() != Path(s).resolve() for s in maps.values())):
-                f.unlink()
-        raise
+        files.write_text(
+            out,
+            '<?xml version="1.0" encoding="utf-8"?>\n'
+            f"<!-- written by matremap: {m.spec.id} on the probe sphere under a white environment -->\n"
+            + ET.tostring(scene, encoding="unicode")
+            + "\n",
+        )
     return out
 
 
-__all__ = ["FORMAT", "IOR_TABLE", "MODELS", "PLUGINS", "place_map", "read", "write"]
+def _check_textured(m: Material, maps: Mapping[str, Path]) -> None:
+    """Refuse maps of parameters Mitsuba 3 takes as numbers only."""
+    plugin = next(k for k, v in PLUGINS.items() if v == m.spec.id)
+    for name in maps:
+        if name in _CONSTANT_ONLY.get(plugin, ()):
+            raise MatremapError(
+                f"{m.spec.id}: Mitsuba 3 takes {name} as a number, not a texture; give it as a constant"
+            )
+        if name in ("eta", "k") and m.options.get("material") != "custom":
+            raise MatremapError(f"{m.spec.id}: a map for {name} needs material=custom")
+
+
+def _place_texture(m: Material, name: str, src: Path, colorspace: str, out: Path, files: AtomicFiles) -> ET.Element:
+    """Stage the map of parameter ``name`` beside ``out`` and return its ``bitmap`` element: kept as it
+    is where Mitsuba would decode it as ``colorspace`` says (non-raw: integer files sRGB, float files
+    linear; raw: as stored), else converted to linear EXR."""
+    from matremap.svbrdf.textures import image_info
+
+    p = m.spec.param(name)
+    colour = p.channels == 3 and p.role != "roughness"
+    info = image_info(src, colorspace)
+    expected = ("srgb" if info.integer else "linear") if colour else "linear"
+    dest = place_map(src, map_destination(out, name), colorspace == expected, colorspace, p.channels, files)
+    return _bitmap(name, dest.name, raw=not colour)
+
+
+__all__ = ["FORMAT", "IOR_TABLE", "MODELS", "PLUGINS", "read", "write"]

@@ -1,0 +1,149 @@
+"""What the format modules share: picking a material of a file, and writing a document's maps beside it.
+
+Writers of documents that reference their maps (Mitsuba 3 XML, MaterialX) take a result apart with
+:func:`result_parts`, refuse existing map files up front with :func:`check_map_destinations`, and
+put every map beside the document with :func:`place_map`, inside the document's
+:class:`~matremap.core.atomic.AtomicFiles` group, so the document and its maps appear together.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from matremap.core.atomic import FORCE_HINT, AtomicFiles
+from matremap.core.material import Material
+from matremap.dialects import get_model
+from matremap.errors import MatremapError
+
+#: the suffixes :func:`place_map` may give a map
+MAP_SUFFIXES = (".png", ".exr")
+
+
+def pick_material(path: Path, names: list[str], material: str | int | None, noun: str = "material") -> int:
+    """The index of the material a reader was asked for: the first for None, an index (negative
+    counts from the end) or a name from ``names``. ``noun`` is what the format calls them (in errors)."""
+    if material is None:
+        return 0
+    if isinstance(material, int) and not isinstance(material, bool):
+        if not -len(names) <= material < len(names):
+            raise MatremapError(f"{path} has {len(names)} {noun}(s); material index {material} is out of range")
+        return material % len(names)
+    if isinstance(material, str) and material in names:
+        return names.index(material)
+    raise MatremapError(f"{path} has no {noun} named {material!r}; its {noun}s are {', '.join(map(repr, names))}")
+
+
+class ResultParts(NamedTuple):
+    """A result to write, taken apart: the uniform material (its values stand for untextured
+    parameters), the map files by parameter, their colour spaces ("srgb"/"linear"), the normal map."""
+
+    material: Material
+    maps: dict[str, Path]
+    colorspace: dict[str, str]
+    normal: Path | None
+
+
+def result_parts(result: Any, writer: str, models: tuple[str, ...]) -> ResultParts:
+    """Take a Material or MapSet apart for ``writer`` (named in errors), which writes ``models``;
+    map files must exist. A map's colour space is the map set's, else what its file suggests."""
+    from matremap.svbrdf.textures import MapSet
+
+    if isinstance(result, Material):
+        if result.model not in models:
+            raise MatremapError(
+                f"{writer} writes {', '.join(models)} materials, not {result.model}; remap to one of these first"
+            )
+        return ResultParts(result, {}, {}, None)
+    if not isinstance(result, MapSet):
+        raise MatremapError(f"{writer} writes a Material or a MapSet, not {type(result).__name__}")
+    spec = get_model(result.model)
+    if spec.id not in models:
+        raise MatremapError(
+            f"{writer} writes {', '.join(models)} materials, not {spec.id}; remap to one of these first"
+        )
+    m = Material.create(spec.id, {k: v for k, v in result.constants.items() if k not in result.maps})
+    for name, f in result.maps.items():
+        spec.param(name)
+        if not Path(f).is_file():
+            raise MatremapError(f"map {f} for {name} not found")
+    if result.normal is not None and not Path(result.normal).is_file():
+        raise MatremapError(f"normal map {result.normal} not found")
+    colorspace = {
+        name: result.colorspace.get(name) or default_colorspace(Path(f), spec.param(name).channels == 3)
+        for name, f in result.maps.items()
+    }
+    maps = {k: Path(v) for k, v in result.maps.items()}
+    return ResultParts(m, maps, colorspace, Path(result.normal) if result.normal else None)
+
+
+def default_colorspace(path: Path, colour: bool) -> str:
+    """The colour space matremap assumes for a map file that does not say (sRGB for 8/16-bit colour)."""
+    from matremap.svbrdf.textures import image_info
+
+    return image_info(path, colour=colour).colorspace
+
+
+def map_destination(out: Path, name: str) -> Path:
+    """Where the map of parameter ``name`` goes beside document ``out``, without its suffix:
+    ``<stem>_<name>`` (characters other than letters, digits, ``_.-`` replaced by ``_``)."""
+    return out.parent / f"{out.stem}_{re.sub(r'[^A-Za-z0-9_.-]', '_', name)}"
+
+
+def check_map_destinations(out: Path, names: list[str], force: bool) -> None:
+    """Refuse, before any work, to write maps ``names`` beside ``out`` over existing files (either
+    suffix a map may get) unless ``force``."""
+    if force:
+        return
+    for name in names:
+        stem = map_destination(out, name)
+        for suffix in MAP_SUFFIXES:
+            if stem.with_suffix(suffix).exists():
+                raise MatremapError(f"{stem.with_suffix(suffix)} already exists; {FORCE_HINT}")
+
+
+def place_map(
+    src: Path, dest_stem: Path, keep: bool, colorspace: str, channels: int | None, files: AtomicFiles
+) -> Path:
+    """Stage map ``src`` in ``files`` as ``dest_stem`` + suffix: copied as it is when ``keep`` (and it
+    is a PNG or EXR with the right channel count; a file already at its destination stays), else
+    converted to a linear float EXR (decoded with ``colorspace``; ``channels`` 1 keeps the first
+    channel, 3 makes grey RGB). Returns the destination."""
+    from matremap.svbrdf.textures import image_info, read_image, write_image_like
+
+    info = image_info(src, colorspace)
+    if keep and info.format in ("png", "exr") and (channels is None or info.channels == channels):
+        dest = dest_stem.with_suffix("." + info.format)
+        if dest.resolve() != src.resolve():
+            files.copy(src, dest)
+        return dest
+    image, info = read_image(src, colorspace)
+    image = np.atleast_3d(image)
+    if channels == 1:
+        image = image[..., :1]
+    elif channels == 3 and image.shape[-1] == 1:
+        image = np.repeat(image, 3, axis=-1)
+    elif channels == 3:
+        image = image[..., :3]
+    dest = dest_stem.with_suffix(".exr")
+    write_image_like(
+        files.stage(dest),
+        image,
+        info.like(format="exr", pixel_type="float", colorspace="linear", compression=None),
+        force=True,
+    )
+    return dest
+
+
+__all__ = [
+    "MAP_SUFFIXES",
+    "ResultParts",
+    "check_map_destinations",
+    "default_colorspace",
+    "map_destination",
+    "pick_material",
+    "place_map",
+]
