@@ -17,7 +17,7 @@ import OpenImageIO as oiio
 import pytest
 
 from matremap.core.imageio import linear_to_srgb, srgb_to_linear
-from matremap.core.models import Material
+from matremap.core.material import Material
 from matremap.errors import MatremapError
 from matremap.formats import read_asset, write_asset
 from matremap.formats.gltf import read, write
@@ -648,3 +648,20 @@ def test_writer_refuses_other_models_existing_files_and_inputs(tmp_path):
         write(tmp_path / "src" / "x.gltf", m, force=False)
     assert src.read_bytes() == before
     assert not list(tmp_path.rglob(".*"))  # no temporary files left behind
+
+
+def test_a_failure_after_the_textures_are_encoded_leaves_nothing(tmp_path, monkeypatch):
+    from matremap.formats import gltf
+
+    ms = load_map_set(mr_map_set(tmp_path / "maps"))
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "o_baseColor.png").write_bytes(b"old")
+
+    def broken(doc):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(gltf, "_update_extension_lists", broken)  # after the textures and .bin are staged
+    with pytest.raises(RuntimeError, match="disk full"):
+        write(tmp_path / "out" / "o.gltf", ms, force=True)
+    assert listing(tmp_path / "out") == {"o_baseColor.png"}  # no o.gltf, o.bin, textures or staging folder
+    assert (tmp_path / "out" / "o_baseColor.png").read_bytes() == b"old"

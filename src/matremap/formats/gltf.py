@@ -45,8 +45,10 @@ from urllib.parse import quote, unquote, unquote_to_bytes
 
 import numpy as np
 
+from matremap.core.atomic import AtomicFiles
 from matremap.core.imageio import atomic_output, check_output, linear_to_srgb
-from matremap.core.models import Material, get_model
+from matremap.core.material import Material
+from matremap.dialects import get_model
 from matremap.errors import MatremapError
 from matremap.formats.asset import MaterialAsset, TextureRef
 
@@ -80,34 +82,7 @@ def _parse(path: Path, data: bytes) -> tuple[dict[str, Any], bytes | None]:
     """The JSON object and the BIN chunk of a .glb or .gltf file's bytes (§4.4, §3.1)."""
     suffix = path.suffix.lower()
     if suffix == ".glb":
-        if data[:4] != b"glTF":
-            if data.lstrip()[:1] == b"{":
-                raise MatremapError(f"{path} holds JSON text, not a binary glTF; rename it to .gltf")
-            raise MatremapError(
-                f"{path} is not a binary glTF: it does not start with the 'glTF' magic; "
-                f"re-export it as .glb (or give the file its real extension)"
-            )
-        if len(data) < 20:
-            raise MatremapError(f"{path} is truncated ({len(data)} bytes, shorter than a GLB header); re-export it")
-        _, version, length = struct.unpack_from("<III", data, 0)
-        if version != 2:
-            raise MatremapError(f"{path} is a GLB version {version} file; matremap reads glTF 2.0 (GLB version 2)")
-        if length > len(data):
-            raise MatremapError(
-                f"{path} is truncated: its header says {length} bytes, the file has {len(data)}; re-export it"
-            )
-        chunks: list[tuple[int, bytes]] = []
-        pos = 12
-        while pos + 8 <= length:
-            clen, ctype = struct.unpack_from("<II", data, pos)
-            if pos + 8 + clen > length:
-                raise MatremapError(f"{path} is truncated: a chunk runs past the end of the file; re-export it")
-            chunks.append((ctype, data[pos + 8 : pos + 8 + clen]))
-            pos += 8 + clen
-        if not chunks or chunks[0][0] != CHUNK_JSON:
-            raise MatremapError(f"{path}: the first GLB chunk is not JSON; the file is corrupt, re-export it")
-        text = chunks[0][1]
-        bin_chunk = chunks[1][1] if len(chunks) > 1 and chunks[1][0] == CHUNK_BIN else None
+        text, bin_chunk = _glb_chunks(path, data)
     elif suffix == ".gltf":
         if data[:4] == b"glTF":
             raise MatremapError(f"{path} is a binary glTF (GLB), not JSON; rename it to .glb")
@@ -137,6 +112,37 @@ def _parse(path: Path, data: bytes) -> tuple[dict[str, Any], bytes | None]:
             f"glTF 1.0 to 2.0 converter)"
         )
     return obj, bin_chunk
+
+
+def _glb_chunks(path: Path, data: bytes) -> tuple[bytes, bytes | None]:
+    """The JSON chunk and the BIN chunk (None if there is none) of a GLB file's bytes (§4.4)."""
+    if data[:4] != b"glTF":
+        if data.lstrip()[:1] == b"{":
+            raise MatremapError(f"{path} holds JSON text, not a binary glTF; rename it to .gltf")
+        raise MatremapError(
+            f"{path} is not a binary glTF: it does not start with the 'glTF' magic; "
+            f"re-export it as .glb (or give the file its real extension)"
+        )
+    if len(data) < 20:
+        raise MatremapError(f"{path} is truncated ({len(data)} bytes, shorter than a GLB header); re-export it")
+    _, version, length = struct.unpack_from("<III", data, 0)
+    if version != 2:
+        raise MatremapError(f"{path} is a GLB version {version} file; matremap reads glTF 2.0 (GLB version 2)")
+    if length > len(data):
+        raise MatremapError(
+            f"{path} is truncated: its header says {length} bytes, the file has {len(data)}; re-export it"
+        )
+    chunks: list[tuple[int, bytes]] = []
+    pos = 12
+    while pos + 8 <= length:
+        clen, ctype = struct.unpack_from("<II", data, pos)
+        if pos + 8 + clen > length:
+            raise MatremapError(f"{path} is truncated: a chunk runs past the end of the file; re-export it")
+        chunks.append((ctype, data[pos + 8 : pos + 8 + clen]))
+        pos += 8 + clen
+    if not chunks or chunks[0][0] != CHUNK_JSON:
+        raise MatremapError(f"{path}: the first GLB chunk is not JSON; the file is corrupt, re-export it")
+    return chunks[0][1], (chunks[1][1] if len(chunks) > 1 and chunks[1][0] == CHUNK_BIN else None)
 
 
 def _cache_dir(data: bytes) -> Path:
@@ -172,8 +178,9 @@ class _Reader:
         self._images: dict[int, Path] = {}
 
     def item(self, key: str, index: Any, where: str) -> dict[str, Any]:
-        items = self.doc.json.get(key)
-        n = len(items) if isinstance(items, list) else 0
+        found = self.doc.json.get(key)
+        items: list[Any] = found if isinstance(found, list) else []
+        n = len(items)
         if not isinstance(index, int) or isinstance(index, bool) or not 0 <= index < n:
             raise MatremapError(
                 f"{self.path}: {where} refers to {key}[{index}], but the file has {n}; the file is broken, re-export it"
@@ -183,7 +190,7 @@ class _Reader:
             raise MatremapError(f"{self.path}: {key}[{index}] is not an object; the file is broken, re-export it")
         return obj
 
-    def buffer(self, index: int, where: str) -> bytes:
+    def buffer(self, index: Any, where: str) -> bytes:
         if index not in self._buffers:
             buf = self.item("buffers", index, where)
             uri = buf.get("uri")
@@ -342,7 +349,6 @@ def read(path: str | os.PathLike, material: str | int | None = None) -> Material
     if not isinstance(m, dict):
         raise MatremapError(f"{p}: materials[{idx}] is not an object; the file is broken, re-export it")
     name = m.get("name") or f"material {idx}"
-    r = _Reader(p, doc, data)
     notes: list[str] = []
     if material is None and len(mats) > 1:
         notes.append(f"{p.name} has {len(mats)} materials; using the first, {name!r} (choose another by name or index)")
@@ -351,34 +357,80 @@ def read(path: str | os.PathLike, material: str | int | None = None) -> Material
     ext = m.get("extensions", {}) or {}
     if not isinstance(pbr, dict) or not isinstance(ext, dict):
         raise MatremapError(f"{p}: {where} has a malformed pbrMetallicRoughness or extensions; re-export the file")
+    constants = _read_factors(p, where, pbr, ext, notes)
+    textures = _MaterialTextures(_Reader(p, doc, data), where, notes)
+    maps = textures.read_maps(pbr, ext.get(SPECULAR) or {}, constants)
+    normal = textures.read_normal(m)
+    _note_unremapped(m, ext, obj, notes)
+    return MaterialAsset(
+        path=p,
+        format="gltf",
+        name=name,
+        model=MODEL,
+        constants=constants,
+        textures=maps,
+        normal=normal,
+        notes=notes,
+        document=doc,
+        index=idx,
+    )
 
-    base = _number(p, f"{where} baseColorFactor", pbr.get("baseColorFactor"), [1.0] * 4, 4)
+
+def _read_factors(path: Path, where: str, pbr: dict[str, Any], ext: dict[str, Any], notes: list[str]) -> dict[str, Any]:
+    """The material's uniform values: the pbrMetallicRoughness factors, KHR_materials_ior's ior and
+    KHR_materials_specular's factors (each at its default when absent), checked against the model."""
+    base = _number(path, f"{where} baseColorFactor", pbr.get("baseColorFactor"), [1.0] * 4, 4)
     constants: dict[str, Any] = {
         "baseColor": base[:3],
-        "metallic": _number(p, f"{where} metallicFactor", pbr.get("metallicFactor"), 1.0),
-        "roughness": _number(p, f"{where} roughnessFactor", pbr.get("roughnessFactor"), 1.0),
+        "metallic": _number(path, f"{where} metallicFactor", pbr.get("metallicFactor"), 1.0),
+        "roughness": _number(path, f"{where} roughnessFactor", pbr.get("roughnessFactor"), 1.0),
     }
     if base[3] < 1.0:
         notes.append(f"baseColorFactor alpha {base[3]:g} ignored (matremap remaps opaque reflectance)")
     ior_ext = ext.get(IOR) or {}
     spec_ext = ext.get(SPECULAR) or {}
-    constants["ior"] = _number(p, f"{where} {IOR}.ior", ior_ext.get("ior"), DEFAULT_IOR)
+    constants["ior"] = _number(path, f"{where} {IOR}.ior", ior_ext.get("ior"), DEFAULT_IOR)
     if constants["ior"] == 0.0:
         raise MatremapError(
-            f"{p}: {where} has {IOR} ior 0 (full specular), which gltf:metal-rough cannot express; "
+            f"{path}: {where} has {IOR} ior 0 (full specular), which gltf:metal-rough cannot express; "
             f"give it an ior in [1, 5]"
         )
-    constants["specular"] = _number(p, f"{where} {SPECULAR}.specularFactor", spec_ext.get("specularFactor"), 1.0)
+    constants["specular"] = _number(path, f"{where} {SPECULAR}.specularFactor", spec_ext.get("specularFactor"), 1.0)
     constants["specularColor"] = _number(
-        p, f"{where} {SPECULAR}.specularColorFactor", spec_ext.get("specularColorFactor"), [1.0] * 3, 3
+        path, f"{where} {SPECULAR}.specularColorFactor", spec_ext.get("specularColorFactor"), [1.0] * 3, 3
     )
     try:
         Material.create(MODEL, constants)
     except MatremapError as e:
-        raise MatremapError(f"{p}: {where}: {e}; fix the value in the file") from None
+        raise MatremapError(f"{path}: {where}: {e}; fix the value in the file") from None
+    return constants
 
-    def texture(info: Any, slot: str) -> tuple[Path, int]:
+
+def _channel(c: int, nch: int) -> int:
+    """File channel of glTF colour channel c (0 R, 1 G, 2 B) in a file of ``nch`` channels: grey files replicate."""
+    return c if nch >= 3 else 0
+
+
+def _alpha_channel(nch: int) -> int | None:
+    """File channel of glTF's alpha in a file of ``nch`` channels; None when it has no alpha."""
+    return {4: 3, 2: 1}.get(nch)
+
+
+def _colour_file(f: Path, n: int) -> tuple[Path, int]:
+    """The file to take colour channels from (and its channel count): an alpha-free copy when the
+    image has alpha."""
+    return (_without_alpha(f), n - 1) if n in (2, 4) else (f, n)
+
+
+class _MaterialTextures:
+    """Reads the textures of one material (``where`` names it in messages), noting what it does not honour."""
+
+    def __init__(self, reader: _Reader, where: str, notes: list[str]) -> None:
+        self.reader, self.where, self.notes = reader, where, notes
+
+    def file(self, info: Any, slot: str) -> tuple[Path, int]:
         """The image file of a textureInfo and its channel count; notes what is not honoured."""
+        r, p, where = self.reader, self.reader.path, self.where
         if not isinstance(info, dict) or "index" not in info:
             raise MatremapError(f"{p}: {where} {slot} is not a textureInfo with an index; re-export the file")
         tex = r.item("textures", info["index"], f"{where} {slot}")
@@ -394,56 +446,58 @@ def read(path: str | os.PathLike, material: str | int | None = None) -> Material
             )
         f = r.image(src, f"{where} {slot}")
         if info.get("texCoord", 0) != 0:
-            notes.append(f"{slot} uses texCoord {info['texCoord']}; the map is taken as it is (UV set ignored)")
+            self.notes.append(f"{slot} uses texCoord {info['texCoord']}; the map is taken as it is (UV set ignored)")
         if "KHR_texture_transform" in (info.get("extensions") or {}):
-            notes.append(f"{slot}: KHR_texture_transform ignored; the map is taken untransformed")
+            self.notes.append(f"{slot}: KHR_texture_transform ignored; the map is taken untransformed")
         from matremap.svbrdf.textures import image_info
 
         return f, image_info(f, "linear", colour=False).channels
 
-    def channel(c: int, nch: int) -> int | None:
-        """File channel of glTF channel c (0 R, 1 G, 2 B, 3 A): grey files replicate, no alpha -> None."""
-        if c < 3:
-            return c if nch >= 3 else 0
-        return {4: 3, 2: 1}.get(nch)
+    def read_maps(
+        self, pbr: dict[str, Any], spec_ext: dict[str, Any], constants: dict[str, Any]
+    ) -> dict[str, TextureRef]:
+        """The parameters' textures, each scaled by its factor in ``constants``: base colour,
+        roughness and metallic (one packed texture), specular and specularColor."""
+        textures: dict[str, TextureRef] = {}
+        if "baseColorTexture" in pbr:
+            raw = self.file(pbr["baseColorTexture"], "baseColorTexture")
+            f, n = _colour_file(*raw)
+            rgb = tuple(_channel(c, n) for c in range(3))
+            textures["baseColor"] = TextureRef(f, rgb, "srgb", tuple(constants["baseColor"]))
+            if raw[1] in (2, 4):
+                self.notes.append("baseColorTexture alpha ignored (matremap remaps opaque reflectance)")
+        if "metallicRoughnessTexture" in pbr:
+            f, n = _colour_file(*self.file(pbr["metallicRoughnessTexture"], "metallicRoughnessTexture"))
+            textures["roughness"] = TextureRef(f, (_channel(1, n),), "linear", constants["roughness"])
+            textures["metallic"] = TextureRef(f, (_channel(2, n),), "linear", constants["metallic"])
+        if "specularTexture" in spec_ext:
+            f, n = self.file(spec_ext["specularTexture"], "specularTexture")
+            a = _alpha_channel(n)
+            if a is None:
+                self.notes.append(
+                    "specularTexture has no alpha channel, so it is 1 everywhere; using specularFactor alone"
+                )
+            else:
+                textures["specular"] = TextureRef(f, (a,), "linear", constants["specular"])
+        if "specularColorTexture" in spec_ext:
+            f, n = _colour_file(*self.file(spec_ext["specularColorTexture"], "specularColorTexture"))
+            rgb = tuple(_channel(c, n) for c in range(3))
+            textures["specularColor"] = TextureRef(f, rgb, "srgb", tuple(constants["specularColor"]))
+        return textures
 
-    def colour(f: Path, n: int) -> tuple[Path, int]:
-        """The file to take colour channels from: an alpha-free copy when the image has alpha."""
-        return (_without_alpha(f), n - 1) if n in (2, 4) else (f, n)
-
-    textures: dict[str, TextureRef] = {}
-    if "baseColorTexture" in pbr:
-        raw = texture(pbr["baseColorTexture"], "baseColorTexture")
-        f, n = colour(*raw)
-        textures["baseColor"] = TextureRef(
-            f, tuple(channel(c, n) for c in range(3)), "srgb", tuple(constants["baseColor"])
-        )
-        if raw[1] in (2, 4):
-            notes.append("baseColorTexture alpha ignored (matremap remaps opaque reflectance)")
-    if "metallicRoughnessTexture" in pbr:
-        f, n = colour(*texture(pbr["metallicRoughnessTexture"], "metallicRoughnessTexture"))
-        textures["roughness"] = TextureRef(f, (channel(1, n),), "linear", constants["roughness"])
-        textures["metallic"] = TextureRef(f, (channel(2, n),), "linear", constants["metallic"])
-    if "specularTexture" in spec_ext:
-        f, n = texture(spec_ext["specularTexture"], "specularTexture")
-        a = channel(3, n)
-        if a is None:
-            notes.append("specularTexture has no alpha channel, so it is 1 everywhere; using specularFactor alone")
-        else:
-            textures["specular"] = TextureRef(f, (a,), "linear", constants["specular"])
-    if "specularColorTexture" in spec_ext:
-        f, n = colour(*texture(spec_ext["specularColorTexture"], "specularColorTexture"))
-        textures["specularColor"] = TextureRef(
-            f, tuple(channel(c, n) for c in range(3)), "srgb", tuple(constants["specularColor"])
-        )
-    normal = None
-    if "normalTexture" in m:
-        f, _ = texture(m["normalTexture"], "normalTexture")
-        normal = TextureRef(f, None, "linear", 1.0)
+    def read_normal(self, m: dict[str, Any]) -> TextureRef | None:
+        """The normal map (used as stored: its scale is noted, not applied)."""
+        if "normalTexture" not in m:
+            return None
+        f, _ = self.file(m["normalTexture"], "normalTexture")
         scale = m["normalTexture"].get("scale", 1.0)
         if scale != 1:
-            notes.append(f"normalTexture scale {scale:g} ignored; the normal map is used as stored (scale 1)")
+            self.notes.append(f"normalTexture scale {scale:g} ignored; the normal map is used as stored (scale 1)")
+        return TextureRef(f, None, "linear", 1.0)
 
+
+def _note_unremapped(m: dict[str, Any], ext: dict[str, Any], obj: dict[str, Any], notes: list[str]) -> None:
+    """Note the material's inputs matremap leaves alone (a written copy keeps them)."""
     emissive = m.get("emissiveFactor", [0, 0, 0])
     if "emissiveTexture" in m or (isinstance(emissive, list) and any(v != 0 for v in emissive)):
         notes.append("emission (emissiveFactor/emissiveTexture) is not remapped; a written copy keeps it")
@@ -452,26 +506,13 @@ def read(path: str | os.PathLike, material: str | int | None = None) -> Material
     mode = m.get("alphaMode", "OPAQUE")
     if mode != "OPAQUE":
         notes.append(f"alphaMode {mode} ignored: matremap remaps the material as opaque")
-    for name_ in sorted(set(ext) - {IOR, SPECULAR}):
+    for name in sorted(set(ext) - {IOR, SPECULAR}):
         notes.append(
-            f"{name_} is not remapped (matremap fits the base metallic-roughness layer); a written copy keeps it"
+            f"{name} is not remapped (matremap fits the base metallic-roughness layer); a written copy keeps it"
         )
     required = set(obj.get("extensionsRequired") or []) - {IOR, SPECULAR}
     if required:
         notes.append(f"the file requires {', '.join(sorted(required))}; matremap ignores them")
-
-    return MaterialAsset(
-        path=p,
-        format="gltf",
-        name=name,
-        model=MODEL,
-        constants=constants,
-        textures=textures,
-        normal=normal,
-        notes=notes,
-        document=doc,
-        index=idx,
-    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -542,10 +583,17 @@ def _split_factor(a: np.ndarray) -> tuple[np.ndarray, list[float]]:
 
 @dataclass
 class _NewImage:
+    """An encoded texture for one slot of the material, and the source's textureInfo it replaces
+    (its sampler, texCoord and transform are kept)."""
+
     slot: str
     data: bytes
     mime: str
-    copy_from: dict[str, Any] | None  # the source textureInfo this replaces (sampler, texCoord, transform)
+    copy_from: dict[str, Any] | None
+
+    def file_name(self, out: Path) -> str:
+        """Its file name beside a .gltf ``out``."""
+        return f"{out.stem}_{self.slot}{'.jpg' if self.mime == 'image/jpeg' else '.png'}"
 
 
 def _uv_sphere(n_lat: int = 16, n_lon: int = 32) -> tuple[dict[str, Any], bytes]:
@@ -609,6 +657,14 @@ def _rebase(uri: str, src: Path, out_dir: Path) -> str:
     return quote(rel.replace(os.sep, "/"))
 
 
+def _rebase_uris(doc: dict[str, Any], src: Path, out_dir: Path) -> None:
+    """Rewrite the relative URIs of buffers and images (files beside the source) as seen from ``out_dir``."""
+    for key in ("buffers", "images"):
+        for item in doc.get(key, []):
+            if isinstance(item, dict) and isinstance(item.get("uri"), str):
+                item["uri"] = _rebase(item["uri"], src, out_dir)
+
+
 def _glb(doc: dict[str, Any], bin_data: bytes | None) -> bytes:
     """GLB bytes (§4.4): header, JSON chunk padded with spaces, BIN chunk padded with zeros."""
     text = json.dumps(doc, separators=(",", ":")).encode("utf-8")
@@ -624,82 +680,86 @@ def _uses_extension(doc: dict[str, Any], name: str) -> bool:
     return any(isinstance(m, dict) and name in (m.get("extensions") or {}) for m in doc.get("materials", []))
 
 
-def write(out: str | os.PathLike, result: Any, source: MaterialAsset | None = None, force: bool = False) -> Path:
-    """Write ``result`` (a ``gltf:metal-rough`` Material or MapSet) as ``out`` (.gltf or .glb).
+@dataclass
+class _Target:
+    """The glTF being written, before the new material goes in: its JSON, the bytes of buffer 0
+    when it is binary (a GLB's BIN chunk or the buffer a new file writes; None otherwise), the folder
+    the source's relative URIs resolve against (None for a new file), the material's index, and the
+    source's files (never to be overwritten)."""
 
-    With a glTF ``source``: a copy of the source file (as ``out``'s kind) with its material replaced.
-    Factors carry the uniform values; maps become new textures (PNG files beside a .gltf, buffer views
-    in the BIN chunk of a .glb): baseColor (sRGB), roughness and metallic packed into one
-    metallicRoughnessTexture (G and B, §3.9.2), specular (alpha) and specularColor (sRGB RGB) of
-    KHR_materials_specular. KHR_materials_ior / KHR_materials_specular are written only where they
-    differ from their defaults. The source's normal, occlusion and emissive textures are kept unless
-    the result brings a normal map. Without a glTF source, the material is written on a UV sphere.
+    json: dict[str, Any]
+    bin: bytes | None
+    base: Path | None
+    index: int
+    inputs: list[Path]
 
-    Every file is written under a temporary name and renamed; existing files are replaced only with
-    ``force``, and input files never.
-    """
-    out = Path(out)
-    kind = out.suffix.lower()
-    if kind not in (".gltf", ".glb"):
-        raise MatremapError(f"cannot write {out} as glTF: name it .gltf or .glb")
-    consts, maps, normal, inputs = _result_values(result)
-    check_output(out, force)
-    out_dir = out.parent
-
-    gdoc = source.document if source is not None and isinstance(source.document, GltfDocument) else None
-    if gdoc is not None:
+    @classmethod
+    def of(cls, source: MaterialAsset | None) -> _Target:
+        """A copy of the glTF ``source``'s document, or a UV sphere (material named after any other source)."""
+        gdoc = source.document if source is not None and isinstance(source.document, GltfDocument) else None
+        if source is None or gdoc is None:
+            doc, bin_data = _uv_sphere()
+            if source is not None:
+                doc["materials"][0]["name"] = source.name
+            return cls(doc, bin_data, None, 0, [])
         doc = copy.deepcopy(gdoc.json)
-        bin_data: bytes | None = gdoc.bin
-        src_base: Path | None = gdoc.base
-        index = source.index  # type: ignore[union-attr]
         inputs = [
-            *inputs,
             source.path,
-            *(t.path for t in source.textures.values()),  # type: ignore[union-attr]
+            *(t.path for t in source.textures.values()),
             *([source.normal.path] if source.normal else []),
-        ]  # type: ignore[union-attr]
+        ]
         for key in ("buffers", "images"):
             for item in doc.get(key, []):
                 uri = item.get("uri") if isinstance(item, dict) else None
                 if isinstance(uri, str) and not uri.startswith("data:") and "://" not in uri:
                     inputs.append(gdoc.base / unquote(uri))
-    else:
-        doc, bin_data = _uv_sphere()
-        src_base, index = None, 0
-        if source is not None:
-            doc["materials"][0]["name"] = source.name
-    mat = doc["materials"][index]
-    pbr = mat.setdefault("pbrMetallicRoughness", {})
-    exts = mat.setdefault("extensions", {})
-    old_spec = dict(exts.get(SPECULAR) or {})
+        return cls(doc, gdoc.bin, gdoc.base, source.index, inputs)
 
-    # --- the new textures, encoded in memory before anything is written
-    new: list[_NewImage] = []
-    old_base = pbr.pop("baseColorTexture", None)
+
+def _base_colour_image(pbr: dict[str, Any], consts: dict[str, Any], maps: dict[str, np.ndarray]) -> _NewImage | None:
+    """Set baseColorFactor (keeping its alpha); the sRGB texture of a base colour map, if any."""
+    old = pbr.pop("baseColorTexture", None)
     alpha = float((pbr.get("baseColorFactor") or [1, 1, 1, 1])[3])
-    if "baseColor" in maps:
-        tex, factor = _split_factor(maps["baseColor"])
-        new.append(_NewImage("baseColor", _png(_code(tex, True)), "image/png", old_base))
-        pbr["baseColorFactor"] = [*factor, alpha]
-    else:
+    if "baseColor" not in maps:
         pbr["baseColorFactor"] = [*(float(x) for x in np.broadcast_to(consts["baseColor"], (3,))), alpha]
-    old_mr = pbr.pop("metallicRoughnessTexture", None)
+        return None
+    tex, factor = _split_factor(maps["baseColor"])
+    pbr["baseColorFactor"] = [*factor, alpha]
+    return _NewImage("baseColor", _png(_code(tex, True)), "image/png", old)
+
+
+def _metallic_roughness_image(
+    pbr: dict[str, Any], consts: dict[str, Any], maps: dict[str, np.ndarray]
+) -> _NewImage | None:
+    """Set roughnessFactor and metallicFactor (1 where a map carries the values); roughness and
+    metallic maps packed into the G and B channels of one linear texture (§3.9.2), if any."""
+    old = pbr.pop("metallicRoughnessTexture", None)
+    image = None
     if "roughness" in maps or "metallic" in maps:
         shape = next(a.shape[:2] for k, a in maps.items() if k in ("roughness", "metallic"))
         packed = np.ones((*shape, 3))
         for k, c in (("roughness", 1), ("metallic", 2)):
             if k in maps:
                 packed[..., c] = maps[k]
-        new.append(_NewImage("metallicRoughness", _png(_code(packed, False)), "image/png", old_mr))
+        image = _NewImage("metallicRoughness", _png(_code(packed, False)), "image/png", old)
     for k in ("roughness", "metallic"):
         pbr[f"{k}Factor"] = 1.0 if k in maps else float(np.asarray(consts[k]).reshape(-1)[0])
+    return image
 
+
+def _specular_image(
+    consts: dict[str, Any], maps: dict[str, np.ndarray], old: dict[str, Any]
+) -> tuple[dict[str, Any], _NewImage | None]:
+    """KHR_materials_specular's factors ({} when they and the maps are at the defaults) and one
+    texture holding specularColor (sRGB RGB) and specular (alpha), if either is a map. ``old``: the
+    source's extension object."""
     spec_f = 1.0 if "specular" in maps else float(np.asarray(consts["specular"]).reshape(-1)[0])
+    tint_tex: np.ndarray | None = None
     if "specularColor" in maps:
         tint_tex, tint_f = _split_factor(maps["specularColor"])
     else:
-        tint_tex, tint_f = None, [float(x) for x in np.broadcast_to(consts["specularColor"], (3,))]
-    spec_ext: dict[str, Any] = {}
+        tint_f = [float(x) for x in np.broadcast_to(consts["specularColor"], (3,))]
+    image = None
     if "specular" in maps or tint_tex is not None:
         shape = next(a.shape[:2] for k, a in maps.items() if k in ("specular", "specularColor"))
         rgba = np.full((*shape, 4), 255, dtype=np.uint8)
@@ -709,39 +769,33 @@ def write(out: str | os.PathLike, result: Any, source: MaterialAsset | None = No
             rgba[..., 3] = _code(maps["specular"], False)
         else:
             rgba = rgba[..., :3]
-        new.append(
-            _NewImage(
-                "specular",
-                _png(rgba),
-                "image/png",
-                old_spec.get("specularColorTexture") or old_spec.get("specularTexture"),
-            )
-        )
+        copy_from = old.get("specularColorTexture") or old.get("specularTexture")
+        image = _NewImage("specular", _png(rgba), "image/png", copy_from)
     if spec_f != 1.0 or any(v != 1.0 for v in tint_f) or "specular" in maps or tint_tex is not None:
-        spec_ext = {"specularFactor": spec_f, "specularColorFactor": tint_f}
-    if normal is not None and not (
-        source is not None and source.normal is not None and Path(normal).resolve() == source.normal.path.resolve()
-    ):
-        old_normal = mat.pop("normalTexture", None)
-        nsuffix = Path(normal).suffix.lower()
-        if nsuffix in (".png", ".jpg", ".jpeg"):
-            ndata, nmime = Path(normal).read_bytes(), "image/png" if nsuffix == ".png" else "image/jpeg"
-        else:
-            from matremap.svbrdf.textures import read_image
+        return {"specularFactor": spec_f, "specularColorFactor": tint_f}, image
+    return {}, image
 
-            nimg, _ = read_image(normal, "linear", colour=False)
-            ndata, nmime = _png(_code(nimg[..., :3], False)), "image/png"
-        new.append(_NewImage("normal", ndata, nmime, old_normal))
 
-    # --- output files: refuse to clobber inputs, or existing files without force
-    files: dict[Path, bytes] = {}
-    image_names = {im.slot: f"{out.stem}_{im.slot}{'.jpg' if im.mime == 'image/jpeg' else '.png'}" for im in new}
-    bin_name = f"{out.stem}.bin"
-    planned = [out]
-    if kind == ".gltf":
-        planned += [out_dir / n for n in image_names.values()]
-        if bin_data is not None:
-            planned.append(out_dir / bin_name)
+def _normal_image(mat: dict[str, Any], normal: Path | None, source: MaterialAsset | None) -> _NewImage | None:
+    """The result's normal map as a texture (a PNG or JPEG file as it is, anything else encoded as
+    PNG), unless it is the source's own (which the copy keeps)."""
+    if normal is None:
+        return None
+    if source is not None and source.normal is not None and Path(normal).resolve() == source.normal.path.resolve():
+        return None
+    old = mat.pop("normalTexture", None)
+    suffix = Path(normal).suffix.lower()
+    if suffix in (".png", ".jpg", ".jpeg"):
+        return _NewImage("normal", Path(normal).read_bytes(), "image/png" if suffix == ".png" else "image/jpeg", old)
+    from matremap.svbrdf.textures import read_image
+
+    image, _ = read_image(normal, "linear", colour=False)
+    return _NewImage("normal", _png(_code(image[..., :3], False)), "image/png", old)
+
+
+def _refuse_overwrites(out: Path, planned: list[Path], inputs: list[Path], force: bool) -> None:
+    """Refuse to write any ``planned`` file over an input (even with ``force``) or, without
+    ``force``, over an existing file."""
     inputs_resolved = {Path(f).resolve() for f in inputs}
     for f in planned:
         if f.resolve() in inputs_resolved:
@@ -749,38 +803,41 @@ def write(out: str | os.PathLike, result: Any, source: MaterialAsset | None = No
         if f != out:
             check_output(f, force)
 
-    # --- buffers and URIs
-    if src_base is not None and src_base.resolve() != out_dir.resolve():
-        for key in ("buffers", "images"):
-            for item in doc.get(key, []):
-                if isinstance(item, dict) and isinstance(item.get("uri"), str):
-                    item["uri"] = _rebase(item["uri"], src_base, out_dir)
-    if kind == ".glb" and new and bin_data is None:
-        doc.setdefault("buffers", []).insert(0, {"byteLength": 0})
-        bin_data = b""
-        for bv in doc.get("bufferViews", []):
-            bv["buffer"] += 1
-            meshopt = (bv.get("extensions") or {}).get("EXT_meshopt_compression")
-            if isinstance(meshopt, dict) and "buffer" in meshopt:
-                meshopt["buffer"] += 1
-    blob = bytearray(bin_data or b"")
+
+def _add_bin_buffer(doc: dict[str, Any]) -> bytes:
+    """Insert an empty buffer 0 (a GLB's BIN chunk) and shift every buffer view's buffer index."""
+    doc.setdefault("buffers", []).insert(0, {"byteLength": 0})
+    for bv in doc.get("bufferViews", []):
+        bv["buffer"] += 1
+        meshopt = (bv.get("extensions") or {}).get("EXT_meshopt_compression")
+        if isinstance(meshopt, dict) and "buffer" in meshopt:
+            meshopt["buffer"] += 1
+    return b""
+
+
+def _add_images(
+    doc: dict[str, Any], new: list[_NewImage], out: Path, blob: bytearray | None, files: AtomicFiles
+) -> dict[str, dict[str, Any]]:
+    """Add the new images (appended to ``blob`` as buffer views of buffer 0 for a .glb, staged as
+    files beside a .gltf, where ``blob`` is None) and their textures; returns the textureInfo of each
+    slot, which keeps the sampler, UV set and transform of the texture it replaces."""
     images = doc.setdefault("images", [])
     textures = doc.setdefault("textures", [])
     infos: dict[str, dict[str, Any]] = {}
     for im in new:
         image: dict[str, Any] = {"name": f"{out.stem}_{im.slot}"}
-        if kind == ".glb":
+        if blob is not None:
             blob += b"\0" * (-len(blob) % 4)
             doc.setdefault("bufferViews", []).append({"buffer": 0, "byteOffset": len(blob), "byteLength": len(im.data)})
             blob += im.data
             image.update(bufferView=len(doc["bufferViews"]) - 1, mimeType=im.mime)
         else:
-            image["uri"] = quote(image_names[im.slot])
-            files[out_dir / image_names[im.slot]] = im.data
+            image["uri"] = quote(im.file_name(out))
+            files.write_bytes(out.parent / im.file_name(out), im.data)
         images.append(image)
         texture: dict[str, Any] = {"source": len(images) - 1}
         info: dict[str, Any] = {"index": len(textures)}
-        if isinstance(im.copy_from, dict):  # keep the replaced texture's sampler, UV set and transform
+        if isinstance(im.copy_from, dict):
             old = im.copy_from.get("index")
             old_tex = textures[old] if isinstance(old, int) and 0 <= old < len(textures) else {}
             if isinstance(old_tex, dict) and "sampler" in old_tex:
@@ -792,15 +849,18 @@ def write(out: str | os.PathLike, result: Any, source: MaterialAsset | None = No
         doc.pop("images")
     if not textures:
         doc.pop("textures")
-    if bin_data is not None:
-        doc["buffers"][0]["byteLength"] = len(blob)
-        if kind == ".gltf":
-            doc["buffers"][0]["uri"] = quote(bin_name)
-            files[out_dir / bin_name] = bytes(blob)
-        else:
-            doc["buffers"][0].pop("uri", None)
+    return infos
 
-    # --- the material
+
+def _set_material(
+    mat: dict[str, Any],
+    consts: dict[str, Any],
+    maps: dict[str, np.ndarray],
+    spec_ext: dict[str, Any],
+    infos: dict[str, dict[str, Any]],
+) -> None:
+    """Point the material at its new textures and set (or drop, at their defaults) its extensions."""
+    pbr, exts = mat["pbrMetallicRoughness"], mat["extensions"]
     if "baseColor" in infos:
         pbr["baseColorTexture"] = infos["baseColor"]
     if "metallicRoughness" in infos:
@@ -817,13 +877,17 @@ def write(out: str | os.PathLike, result: Any, source: MaterialAsset | None = No
             slot = {k: v for k, v in infos["specular"].items() if k != "scale"}
             if "specular" in maps:
                 spec_ext["specularTexture"] = dict(slot)
-            if tint_tex is not None:
+            if "specularColor" in maps:
                 spec_ext["specularColorTexture"] = dict(slot)
         exts[SPECULAR] = spec_ext
     else:
         exts.pop(SPECULAR, None)
     if not exts:
         mat.pop("extensions")
+
+
+def _update_extension_lists(doc: dict[str, Any]) -> None:
+    """extensionsUsed / extensionsRequired as the materials now use IOR and SPECULAR."""
     used = [e for e in doc.get("extensionsUsed", []) if e not in (IOR, SPECULAR)]
     used += [e for e in (IOR, SPECULAR) if _uses_extension(doc, e)]
     if used:
@@ -835,24 +899,65 @@ def write(out: str | os.PathLike, result: Any, source: MaterialAsset | None = No
         if not doc["extensionsRequired"]:
             doc.pop("extensionsRequired")
 
-    if kind == ".glb":
-        files[out] = _glb(doc, bytes(blob) if bin_data is not None else None)
-    else:
-        files[out] = (json.dumps(doc, indent=1) + "\n").encode("utf-8")
-    done: list[Path] = []
-    try:
-        for f, data in files.items():  # the main file last: dict order puts it after its textures
-            if f == out:
-                continue
-            with atomic_output(f) as tmp, open(tmp, "wb") as fh:
-                fh.write(data)
-            done.append(f)
-        with atomic_output(out) as tmp, open(tmp, "wb") as fh:
-            fh.write(files[out])
-    except BaseException:
-        for f in done:
-            f.unlink(missing_ok=True)
-        raise
+
+def write(out: str | os.PathLike, result: Any, source: MaterialAsset | None = None, force: bool = False) -> Path:
+    """Write ``result`` (a ``gltf:metal-rough`` Material or MapSet) as ``out`` (.gltf or .glb).
+
+    With a glTF ``source``: a copy of the source file (as ``out``'s kind) with its material replaced.
+    Factors carry the uniform values; maps become new textures (PNG files beside a .gltf, buffer views
+    in the BIN chunk of a .glb): baseColor (sRGB), roughness and metallic packed into one
+    metallicRoughnessTexture (G and B, §3.9.2), specular (alpha) and specularColor (sRGB RGB) of
+    KHR_materials_specular. KHR_materials_ior / KHR_materials_specular are written only where they
+    differ from their defaults. The source's normal, occlusion and emissive textures are kept unless
+    the result brings a normal map. Without a glTF source, the material is written on a UV sphere.
+
+    The file and the files beside it (textures, ``.bin``) are written together or not at all;
+    existing files are replaced only with ``force``, and input files never.
+    """
+    out = Path(out)
+    kind = out.suffix.lower()
+    if kind not in (".gltf", ".glb"):
+        raise MatremapError(f"cannot write {out} as glTF: name it .gltf or .glb")
+    consts, maps, normal, inputs = _result_values(result)
+    check_output(out, force)
+    target = _Target.of(source)
+    doc = target.json
+    mat = doc["materials"][target.index]
+    pbr = mat.setdefault("pbrMetallicRoughness", {})
+    old_spec = dict(mat.setdefault("extensions", {}).get(SPECULAR) or {})
+    # the new textures, encoded in memory before anything is written
+    base_image = _base_colour_image(pbr, consts, maps)
+    mr_image = _metallic_roughness_image(pbr, consts, maps)
+    spec_ext, spec_image = _specular_image(consts, maps, old_spec)
+    normal_image = _normal_image(mat, normal, source)
+    images = [im for im in (base_image, mr_image, spec_image, normal_image) if im is not None]
+    bin_file = out.parent / f"{out.stem}.bin"
+    planned = [out]
+    if kind == ".gltf":
+        planned += [out.parent / im.file_name(out) for im in images]
+        planned += [bin_file] if target.bin is not None else []
+    _refuse_overwrites(out, planned, [*inputs, *target.inputs], force)
+
+    if target.base is not None and target.base.resolve() != out.parent.resolve():
+        _rebase_uris(doc, target.base, out.parent)
+    if kind == ".glb" and images and target.bin is None:
+        target.bin = _add_bin_buffer(doc)
+    blob = bytearray(target.bin or b"")
+    with AtomicFiles(force) as files:
+        infos = _add_images(doc, images, out, blob if kind == ".glb" else None, files)
+        if target.bin is not None:
+            doc["buffers"][0]["byteLength"] = len(blob)
+            if kind == ".gltf":
+                doc["buffers"][0]["uri"] = quote(bin_file.name)
+                files.write_bytes(bin_file, bytes(blob))
+            else:
+                doc["buffers"][0].pop("uri", None)
+        _set_material(mat, consts, maps, spec_ext, infos)
+        _update_extension_lists(doc)
+        if kind == ".glb":
+            files.write_bytes(out, _glb(doc, bytes(blob) if target.bin is not None else None))
+        else:
+            files.write_bytes(out, (json.dumps(doc, indent=1) + "\n").encode("utf-8"))
     return out
 
 
