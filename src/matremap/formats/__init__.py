@@ -3,7 +3,7 @@
 Every reader has the signature ``read(path, material=None) -> MaterialAsset`` (``material`` picks
 one material of the file by name or index; the first by default) and every writer
 ``write(out, result, source=None, force=False) -> Path`` where ``result`` is a uniform
-:class:`~matremap.core.models.Material` or a :class:`~matremap.svbrdf.textures.MapSet` of converted maps, and
+:class:`~matremap.core.material.Material` or a :class:`~matremap.svbrdf.textures.MapSet` of converted maps, and
 ``source`` the asset it was remapped from (the glTF writer copies the source file with the new
 material). Modules are imported when a format is used.
 """

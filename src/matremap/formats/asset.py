@@ -5,7 +5,7 @@ speaks, its uniform parameter values in that model's units, and the textures tha
 (a file, the channels to take from it, its colour space, the factor the format multiplies it by).
 :meth:`MaterialAsset.to_map_set` turns the textured parameters into a plain map set (one file per
 parameter, a ``material.json``) that the rest of matremap converts and evaluates; a uniform asset
-is a :class:`~matremap.core.models.Material`.
+is a :class:`~matremap.core.material.Material`.
 """
 
 from __future__ import annotations
@@ -15,12 +15,16 @@ import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from matremap.core.models import Material, get_model
+from matremap.core.material import Material
+from matremap.dialects import get_model
 from matremap.errors import MatremapError
+
+if TYPE_CHECKING:
+    from matremap.core.models import ParamSpec
 
 
 @dataclass(frozen=True)
@@ -85,8 +89,6 @@ class MaterialAsset:
 
         A texture used as it is (all channels, factor 1) is referenced where it lies, not copied.
         """
-        from matremap.svbrdf.textures import image_info, read_image, write_image_like
-
         if not self.textures:
             raise MatremapError(f"{self.path}: material {self.name!r} has no textures; use it as a uniform material")
         spec = get_model(self.model)
@@ -96,53 +98,7 @@ class MaterialAsset:
         colorspace: dict[str, str] = {}
         sizes: dict[str, tuple[int, int]] = {}
         for name, ref in self.textures.items():
-            p = spec.param(name)
-            if not ref.path.is_file():
-                raise MatremapError(
-                    f"{self.path}: texture {ref.path} for {name} not found; put it beside the file or fix its uri"
-                )
-            header = image_info(ref.path, ref.colorspace, colour=False)
-            whole = ref.channels is None or tuple(ref.channels) == tuple(range(header.channels))
-            if ref.plain_factor and whole and (p.channels == 3 or header.channels == 1):
-                maps[name] = str(ref.path.resolve())
-                colorspace[name] = ref.colorspace
-                sizes[name] = (header.height, header.width)
-                continue
-            image, info = read_image(ref.path, ref.colorspace, colour=True)
-            image = np.atleast_3d(image)
-            if ref.channels is not None:
-                if max(ref.channels) >= image.shape[-1]:
-                    raise MatremapError(
-                        f"{ref.path}: has {image.shape[-1]} channel(s); {name} needs channel {max(ref.channels)}"
-                    )
-                image = image[..., list(ref.channels)]
-            elif p.channels == 1:
-                image = image[..., :1]
-            elif image.shape[-1] == 1:
-                image = np.repeat(image, 3, axis=-1)
-            elif image.shape[-1] > 3:
-                image = image[..., :3]
-            scale = np.asarray(ref.scale, dtype=np.float32).reshape(-1)
-            if scale.size not in (1, image.shape[-1]):  # an RGB factor on picked channels: their factors
-                if ref.channels is None or max(ref.channels) >= scale.size:
-                    raise MatremapError(
-                        f"{self.path}: {name}: a factor of {scale.size} values does not fit a "
-                        f"texture of {image.shape[-1]} channel(s)"
-                    )
-                scale = scale[list(ref.channels)]
-            image = (image * scale).astype(np.float32)
-            lo, hi = p.bounds
-            image = np.clip(image, lo, hi)
-            fname = f"{name.replace(' ', '_')}.exr"
-            write_image_like(
-                out / fname,
-                image,
-                info.like(format="exr", pixel_type="float", channels=image.shape[-1], colorspace="linear"),
-                force=True,
-            )
-            maps[name] = fname
-            colorspace[name] = "linear"
-            sizes[name] = image.shape[:2]
+            maps[name], colorspace[name], sizes[name] = self._map_file(spec.param(name), ref, out)
         if len(set(sizes.values())) > 1:
             detail = ", ".join(f"{k} {w}x{h}" for k, (h, w) in sizes.items())
             raise MatremapError(
@@ -160,6 +116,58 @@ class MaterialAsset:
             manifest["normal"] = str(self.normal.path.resolve())
         (out / "material.json").write_text(json.dumps(manifest, indent=1))
         return out
+
+    def _map_file(self, p: ParamSpec, ref: TextureRef, out: Path) -> tuple[str, str, tuple[int, int]]:
+        """(the manifest's file, its colour space, (height, width)) of the map of parameter ``p``:
+        the texture's own file when it can be used as it is, else its values (channels picked, the
+        factor multiplied in, clipped to the parameter's bounds) written to ``out`` as linear EXR."""
+        from matremap.svbrdf.textures import image_info, read_image, write_image_like
+
+        name = p.name
+        if not ref.path.is_file():
+            raise MatremapError(
+                f"{self.path}: texture {ref.path} for {name} not found; put it beside the file or fix its uri"
+            )
+        header = image_info(ref.path, ref.colorspace, colour=False)
+        whole = ref.channels is None or tuple(ref.channels) == tuple(range(header.channels))
+        if ref.plain_factor and whole and (p.channels == 3 or header.channels == 1):
+            return str(ref.path.resolve()), ref.colorspace, (header.height, header.width)
+        image, info = read_image(ref.path, ref.colorspace, colour=True)
+        image = self._picked_channels(p, ref, np.atleast_3d(image))
+        scale = np.asarray(ref.scale, dtype=np.float32).reshape(-1)
+        if scale.size not in (1, image.shape[-1]):  # an RGB factor on picked channels: their factors
+            if ref.channels is None or max(ref.channels) >= scale.size:
+                raise MatremapError(
+                    f"{self.path}: {name}: a factor of {scale.size} values does not fit a "
+                    f"texture of {image.shape[-1]} channel(s)"
+                )
+            scale = scale[list(ref.channels)]
+        image = np.clip((image * scale).astype(np.float32), *p.bounds)
+        fname = f"{name.replace(' ', '_')}.exr"
+        write_image_like(
+            out / fname,
+            image,
+            info.like(format="exr", pixel_type="float", channels=image.shape[-1], colorspace="linear"),
+            force=True,
+        )
+        return fname, "linear", image.shape[:2]
+
+    @staticmethod
+    def _picked_channels(p: ParamSpec, ref: TextureRef, image: np.ndarray) -> np.ndarray:
+        """The channels of ``image`` that drive ``p``: those ``ref`` names, else as many as ``p`` has."""
+        if ref.channels is not None:
+            if max(ref.channels) >= image.shape[-1]:
+                raise MatremapError(
+                    f"{ref.path}: has {image.shape[-1]} channel(s); {p.name} needs channel {max(ref.channels)}"
+                )
+            return image[..., list(ref.channels)]
+        if p.channels == 1:
+            return image[..., :1]
+        if image.shape[-1] == 1:
+            return np.repeat(image, 3, axis=-1)
+        if image.shape[-1] > 3:
+            return image[..., :3]
+        return image
 
 
 def _jsonable(v: Any) -> Any:
