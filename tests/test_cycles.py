@@ -18,7 +18,8 @@ from matremap.core.scene import Scene
 from matremap.dialects import get_model
 from matremap.errors import MatremapError
 from matremap.renderers import register_renderer
-from matremap.renderers.cycles.probe import ENV_PYTHON, CyclesRenderer, bpy_available, find_python
+from matremap.renderers.cycles.client import ENV_PYTHON, bpy_available, find_python
+from matremap.renderers.cycles.probe import CyclesRenderer
 from matremap.uniform import fit
 
 needs_bpy = pytest.mark.skipif(
@@ -55,7 +56,7 @@ def test_missing_bpy_venv_says_how_to_set_it_up(monkeypatch, tmp_path):
     with pytest.raises(MatremapError, match=r"pip install bpy==5\.0\.1"):
         CyclesRenderer()
     monkeypatch.delenv(ENV_PYTHON)
-    monkeypatch.setattr("matremap.renderers.cycles.probe.DEFAULT_PYTHON", tmp_path / "python")
+    monkeypatch.setattr("matremap.renderers.cycles.client.DEFAULT_PYTHON", tmp_path / "python")
     with pytest.raises(MatremapError, match=r"\.venv-bpy"):
         find_python()
 

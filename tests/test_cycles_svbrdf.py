@@ -9,8 +9,9 @@ import pytest
 
 from matremap.core import envmap
 from matremap.errors import MatremapError
+from matremap.renderers.cycles.client import ENV_PYTHON, bpy_available
 from matremap.renderers.cycles.environment import render_svbrdf_cycles
-from matremap.renderers.cycles.probe import ENV_PYTHON, CyclesRenderer, bpy_available
+from matremap.renderers.cycles.probe import CyclesRenderer
 from matremap.renderers.embedded.environment import render_svbrdf
 from matremap.renderers.textured import object_mask
 

@@ -227,7 +227,7 @@ def test_two_stage_fit_beckmann_round_trip_is_close(mitsuba3):
 
 @needs_mitsuba
 def test_auto_variant_falls_back_to_scalar(monkeypatch):
-    from matremap.renderers.mitsuba3 import probe as m3
+    from matremap.renderers.mitsuba3 import plugins as m3
 
     mi = import_mitsuba()
     monkeypatch.setattr(m3, "llvm_renders", lambda: False)

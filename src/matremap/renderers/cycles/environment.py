@@ -34,26 +34,18 @@ from matremap.core.envmap import EnvMap
 from matremap.core.material import SVMaterial
 from matremap.core.models import ModelSpec
 from matremap.core.scene import Scene
+from matremap.dialects import cycles as cycles_dialect
 from matremap.dialects import get_model
 from matremap.errors import MatremapError
 from matremap.renderers.base import PARTS
-from matremap.renderers.cycles.probe import MODELS, CyclesRenderer
+from matremap.renderers.cycles.client import WorkerClient, shared_client
 from matremap.renderers.textured import check_normal_map, check_options, split_texture_params
+
+#: the models Cycles draws
+MODELS = tuple(spec.id for spec in cycles_dialect.MODELS)
 
 #: default samples per pixel
 DEFAULT_SPP = 64
-
-_shared: CyclesRenderer | None = None  # the renderer environment renders share by default
-
-
-def shared_renderer(renderer: CyclesRenderer | None = None) -> CyclesRenderer:
-    """``renderer``, or the one Cycles renderer (its worker, 600 s timeout) this process shares."""
-    global _shared
-    if renderer is not None:
-        return renderer
-    if _shared is None:
-        _shared = CyclesRenderer(timeout=600.0)
-    return _shared
 
 
 def _split_params(
@@ -79,7 +71,7 @@ def render_svbrdf_cycles(
     normal_map: np.ndarray | None = None,
     spp: int = DEFAULT_SPP,
     seed: int = 0,
-    renderer: CyclesRenderer | None = None,
+    renderer: WorkerClient | None = None,
     geometry: str = "512x256",
 ) -> np.ndarray:
     """Render a textured ``cycles:glossy`` / ``cycles:diffuse`` material on the sphere under ``env``
@@ -109,7 +101,7 @@ def render_svbrdf_cycles(
 
     nm = None if normal_map is None else check_normal_map(normal_map)
     scene = Scene(resolution=res)
-    r = shared_renderer(renderer)
+    r = shared_client(renderer)
     with tempfile.TemporaryDirectory(prefix="matremap-cycles-svbrdf-") as d:
         names = {}
         for i, (name, tex) in enumerate(textures.items()):
@@ -153,7 +145,10 @@ class CyclesEnvironmentRender:
 
     label = f"Blender Cycles (bpy worker, {DEFAULT_SPP} spp)"
 
-    def __init__(self, material: SVMaterial, env: EnvMap, resolution: int, part: str) -> None:
+    def __init__(
+        self, material: SVMaterial, env: EnvMap, resolution: int, part: str, renderer: WorkerClient | None = None
+    ) -> None:
+        self.renderer = renderer
         options = check_options(get_model(material.model), material.params, material.options)
         self.material = SVMaterial(material.model, material.params, options, material.normal)
         self.normal = None if material.normal is None else check_normal_map(material.normal)
@@ -170,4 +165,5 @@ class CyclesEnvironmentRender:
             resolution=self.resolution,
             part=self.part,
             normal_map=self.normal,
+            renderer=self.renderer,
         )

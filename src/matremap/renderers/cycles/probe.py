@@ -31,16 +31,7 @@ cycles:principled  Principled BSDF (multiscatter GGX by default): Base Color, Me
 
 from __future__ import annotations
 
-import io
-import json
-import os
-import select
-import struct
-import subprocess
-import tempfile
-import time
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -51,84 +42,20 @@ from matremap.dialects import cycles as cycles_dialect
 from matremap.dialects.cycles import PRINCIPLED
 from matremap.errors import MatremapError
 from matremap.renderers.base import EnvironmentLight, EnvironmentRender, check_can_render, check_environment_args
+from matremap.renderers.cycles.client import INSTALL_HINT, WorkerClient, bpy_available
+from matremap.renderers.cycles.environment import CyclesEnvironmentRender
 
-ENV_PYTHON = "MATREMAP_BPY_PYTHON"
-
-REPO = Path(__file__).resolve().parents[4]
-
-DEFAULT_PYTHON = REPO / ".venv-bpy" / "bin" / "python"
-
-WORKER = Path(__file__).with_name("worker.py")
-
-INSTALL_HINT = (
-    "Blender's bpy is not set up: create its own venv with `python3.11 -m venv .venv-bpy && "
-    ".venv-bpy/bin/pip install bpy==5.0.1` in the repository, or point the environment variable "
-    f"{ENV_PYTHON} at a Python that can `import bpy` (bpy 5.0.1 pins numpy<2, so not the main venv)"
-)
-
-#: the models Cycles draws: those of its dialect
 MODELS = tuple(spec.id for spec in cycles_dialect.MODELS)
 
 
-def find_python(python: str | os.PathLike | None = None) -> str:
-    """The Python that runs the worker: the argument, ``$MATREMAP_BPY_PYTHON``, or ``<repo>/.venv-bpy``."""
-    for candidate, where in ((python, "the python argument"), (os.environ.get(ENV_PYTHON), ENV_PYTHON)):
-        if candidate:
-            if not os.access(candidate, os.X_OK):
-                raise MatremapError(f"{where} names {candidate!r}, which is not an executable; {INSTALL_HINT}")
-            return str(candidate)
-    if os.access(DEFAULT_PYTHON, os.X_OK):
-        return str(DEFAULT_PYTHON)
-    raise MatremapError(INSTALL_HINT)
+class CyclesRenderer(WorkerClient):
+    """The probe scene rendered by Blender Cycles in the bpy worker (``cycles:*`` models).
 
-
-def bpy_available() -> bool:
-    """Whether a bpy venv is found (does not start it)."""
-    try:
-        find_python()
-    except MatremapError:
-        return False
-    return True
-
-
-class _WorkerDied(Exception):
-    pass
-
-
-class CyclesRenderer:
-    """The probe scene rendered by Blender Cycles in a worker process (``cycles:*`` models).
-
-    ``timeout`` (seconds) bounds one request; a worker that dies or hangs is restarted and the
-    request retried once, then a :class:`MatremapError` says what happened (with the tail of the
-    worker's stderr). ``geometry`` is ``"points"`` (true sphere) or ``"SxR"`` (smooth UV sphere).
+    ``timeout`` (seconds) bounds one request (see :class:`~matremap.renderers.cycles.client.WorkerClient`);
+    ``geometry`` is ``"points"`` (true sphere) or ``"SxR"`` (smooth UV sphere).
     """
 
     name = "cycles"
-
-    def __init__(self, python: str | None = None, timeout: float = 120.0, geometry: str = "points") -> None:
-        self.python = find_python(python)
-        self.timeout = float(timeout)
-        self.geometry = geometry
-        self._proc: subprocess.Popen | None = None
-        self._log: Any = None
-        self.renders = 0  # Cycles images (one per material and light)
-        self.restarts = 0
-        self.blender_version: str | None = None
-
-    def __repr__(self) -> str:
-        return f"CyclesRenderer(python={self.python!r})"
-
-    def __getstate__(self) -> dict[str, Any]:  # for process pools: each copy starts its own worker
-        return {"python": self.python, "timeout": self.timeout, "geometry": self.geometry}
-
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        self.__init__(**state)
-
-    def __del__(self) -> None:
-        try:
-            self.close()
-        except Exception:
-            pass
 
     # -- protocol ----------------------------------------------------------------------------
     @classmethod
@@ -151,13 +78,11 @@ class CyclesRenderer:
     def prepare_environment(
         self, material: SVMaterial, light: EnvironmentLight, geometry: str, resolution: int, part: str
     ) -> EnvironmentRender:
-        from matremap.renderers.cycles.environment import CyclesEnvironmentRender
-
         check_environment_args(geometry, resolution, part)
         why = self.environment_support(material.model, geometry)
         if why is not None:
             raise MatremapError(why)
-        return CyclesEnvironmentRender(material, light.env, resolution, part)
+        return CyclesEnvironmentRender(material, light.env, resolution, part, self)
 
     def render(self, materials: Sequence[Material], scene: Scene) -> np.ndarray:
         """float32 [N, H, W, 3], linear radiance."""
@@ -204,112 +129,11 @@ class CyclesRenderer:
             ],
         }
 
-    # -- the worker ----------------------------------------------------------------------------
-    @property
-    def pid(self) -> int | None:
-        return self._proc.pid if self._proc is not None and self._proc.poll() is None else None
 
-    def start(self) -> None:
-        """Start the worker (done on the first render) and wait until bpy is imported."""
-        if self.pid is not None:
-            return
-        if self._proc is not None:  # it died since the last request
-            self.restarts += 1
-        self.close()
-        self._log = tempfile.TemporaryFile()
-        try:
-            self._proc = subprocess.Popen(
-                [self.python, str(WORKER)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._log
-            )
-        except OSError as e:
-            raise MatremapError(f"cannot start the Cycles worker with {self.python}: {e}; {INSTALL_HINT}") from e
-        try:
-            header, _ = self._reply(time.monotonic() + max(self.timeout, 60.0))
-        except _WorkerDied as e:
-            self.close()
-            raise MatremapError(f"the Cycles worker did not start ({e}): {INSTALL_HINT}") from None
-        self.blender_version = header.get("blender")
-
-    def close(self) -> None:
-        """Stop the worker (a later render starts a new one)."""
-        proc, self._proc = self._proc, None
-        if proc is not None:
-            if proc.poll() is None:
-                proc.kill()
-            proc.wait()
-            for f in (proc.stdin, proc.stdout):
-                if f is not None:
-                    f.close()
-        if self._log is not None:
-            self._log.close()
-            self._log = None
-
-    def request(self, request: dict[str, Any]) -> np.ndarray:
-        """Send a request whose reply carries images; returns them."""
-        header, payload = self._exchange(request)
-        if not header.get("nbytes"):
-            raise MatremapError(f"the Cycles worker sent no images for {request.get('op')!r}")
-        return np.load(io.BytesIO(payload))
-
-    def call(self, request: dict[str, Any]) -> dict[str, Any]:
-        """Send a request whose reply is data (``write_blend``, ``inspect_blend``); returns its ``info``."""
-        header, _ = self._exchange(request)
-        return header.get("info", {})
-
-    def _exchange(self, request: dict[str, Any]) -> tuple[dict[str, Any], bytes]:
-        body = json.dumps(request).encode()
-        for attempt in (1, 2):
-            try:
-                self.start()
-                self._proc.stdin.write(struct.pack(">I", len(body)) + body)
-                self._proc.stdin.flush()
-                header, payload = self._reply(time.monotonic() + self.timeout)
-            except (_WorkerDied, BrokenPipeError, OSError) as e:
-                why = f"{e}; its stderr ends with: {self._stderr_tail()}"
-                self.close()
-                self.restarts += 1
-                if attempt == 2:
-                    raise MatremapError(f"the Cycles worker failed twice: {why}") from None
-                continue
-            if not header.get("ok"):
-                raise MatremapError(f"Cycles failed to render: {header.get('error')}")
-            return header, payload
-        raise AssertionError("unreachable")
-
-    def _read(self, n: int, deadline: float) -> bytes:
-        out = self._proc.stdout
-        fd = out.fileno()
-        buf = bytearray()
-        while len(buf) < n:
-            left = deadline - time.monotonic()
-            if left <= 0:
-                raise _WorkerDied(f"no reply within {self.timeout:g} s")
-            ready, _, _ = select.select([fd], [], [], left)
-            if not ready:
-                continue
-            chunk = os.read(fd, n - len(buf))
-            if not chunk:
-                code = self._proc.wait()
-                raise _WorkerDied(f"the worker exited with status {code}")
-            buf += chunk
-        return bytes(buf)
-
-    def _reply(self, deadline: float) -> tuple[dict[str, Any], bytes]:
-        (n,) = struct.unpack(">I", self._read(4, deadline))
-        header = json.loads(self._read(n, deadline))
-        payload = self._read(int(header["nbytes"]), deadline) if header.get("nbytes") else b""
-        return header, payload
-
-    def _stderr_tail(self, chars: int = 800) -> str:
-        if self._log is None:
-            return "(nothing)"
-        try:
-            self._log.seek(0, os.SEEK_END)
-            size = self._log.tell()
-            self._log.seek(max(0, size - chars))
-            return self._log.read().decode(errors="replace").strip() or "(nothing)"
-        except (OSError, ValueError):
-            return "(unreadable)"
-
-
-__all__ = ["CyclesRenderer", "ENV_PYTHON", "INSTALL_HINT", "MODELS", "PRINCIPLED", "bpy_available", "find_python"]
+__all__ = [
+    "CyclesRenderer",
+    "INSTALL_HINT",
+    "MODELS",
+    "PRINCIPLED",
+    "bpy_available",
+]

@@ -46,7 +46,7 @@ from matremap.core.scene import Scene
 from matremap.dialects import get_model
 from matremap.errors import MatremapError
 from matremap.renderers.base import PARTS
-from matremap.renderers.mitsuba3.probe import (
+from matremap.renderers.mitsuba3.plugins import (
     MODELS,
     bsdf_dict,
     choose_variant,

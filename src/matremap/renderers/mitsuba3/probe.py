@@ -48,178 +48,45 @@ mitsuba3:principled        base_color (0.5); roughness, metallic, specular (0.5)
 
 from __future__ import annotations
 
-import glob
-import os
-import subprocess
-import sys
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
-from functools import lru_cache
 from typing import Any
 
 import numpy as np
 
 from matremap.core.material import Material, SVMaterial
 from matremap.core.scene import Scene
-from matremap.dialects import mitsuba3 as mitsuba3_dialect
 from matremap.dialects.mitsuba3 import (
     CONDUCTORS,
     DIFFUSE,
     DISTRIBUTIONS,
     PRINCIPLED,
-    PRINCIPLED_HELD,
     ROUGHCONDUCTOR,
     ROUGHPLASTIC,
 )
 from matremap.errors import MatremapError
 from matremap.renderers.base import EnvironmentLight, EnvironmentRender, check_can_render, check_environment_args
-
-INSTALL_HINT = (
-    "Mitsuba 3 is not installed; install it with `pip install 'matremap[mitsuba]'` "
-    "(or `pip install mitsuba`, which brings drjit)"
+from matremap.renderers.mitsuba3.environment import NOT_TEXTURABLE, Mitsuba3EnvironmentRender
+from matremap.renderers.mitsuba3.plugins import (
+    INSTALL_HINT,
+    MODELS,
+    Binding,
+    bsdf_dict,
+    choose_variant,
+    import_mitsuba,
+    llvm_renders,
+    llvm_usable,
+    mitsuba_call,
+    mitsuba_installed,
+    probe_sensor,
 )
-
-
-@dataclass(frozen=True)
-class _Binding:
-    """A model parameter and the key of ``mi.traverse(scene)`` it writes (prefixed by ``sphere.bsdf.``)."""
-
-    param: str
-    key: str
-    rgb: bool
-
-
-def bsdf_dict(model: str, options: dict[str, str], m: Material) -> tuple[dict[str, Any], list[_Binding]]:
-    """The BSDF's plugin dictionary for material ``m`` and the parameters to update per material."""
-
-    def rgb(name: str) -> dict[str, Any]:
-        return {"type": "rgb", "value": [float(x) for x in m.values[name]]}
-
-    def scalar(name: str) -> float:
-        return float(m.values[name][0])
-
-    if model == "mitsuba3:diffuse":
-        return {"type": "diffuse", "reflectance": rgb("reflectance")}, [
-            _Binding("reflectance", "reflectance.value", True)
-        ]
-    if model == "mitsuba3:roughconductor":
-        d: dict[str, Any] = {
-            "type": "roughconductor",
-            "distribution": options["distribution"],
-            "alpha": scalar("alpha"),
-            "specular_reflectance": rgb("specular_reflectance"),
-        }
-        b = [
-            _Binding("alpha", "alpha.value", False),
-            _Binding("specular_reflectance", "specular_reflectance.value", True),
-        ]
-        if options["material"] == "custom":
-            d.update(eta=rgb("eta"), k=rgb("k"))
-            b += [_Binding("eta", "eta.value", True), _Binding("k", "k.value", True)]
-        else:
-            d["material"] = options["material"]
-        return d, b
-    if model == "mitsuba3:roughplastic":
-        d = {
-            "type": "roughplastic",
-            "distribution": options["distribution"],
-            "alpha": scalar("alpha"),
-            "int_ior": scalar("int_ior"),
-            "ext_ior": scalar("ext_ior"),
-            "nonlinear": options["nonlinear"] == "true",
-            "specular_reflectance": rgb("specular_reflectance"),
-            "diffuse_reflectance": rgb("diffuse_reflectance"),
-        }
-        # eta (= int_ior / ext_ior) is handled separately in _Loaded.set
-        b = [
-            _Binding("alpha", "alpha", False),
-            _Binding("specular_reflectance", "specular_reflectance.value", True),
-            _Binding("diffuse_reflectance", "diffuse_reflectance.value", True),
-        ]
-        return d, b
-    if model == "mitsuba3:principled":
-        d = {"type": "principled", "base_color": rgb("base_color")}
-        b = [_Binding("base_color", "base_color.value", True), _Binding("specular", "specular", False)]
-        d["specular"] = scalar("specular")
-        for name in ("roughness", "metallic", *PRINCIPLED_HELD):
-            d[name] = scalar(name)
-            b.append(_Binding(name, f"{name}.value", False))
-        return d, b
-    raise MatremapError(f"renderer 'mitsuba3' cannot render model {model}")  # pragma: no cover
-
-
-#: the models Mitsuba 3 draws: those of its dialect
-MODELS = tuple(spec.id for spec in mitsuba3_dialect.MODELS)
-
-
-def mitsuba_installed() -> bool:
-    """Whether the ``mitsuba`` package can be found (without importing it)."""
-    import importlib.util
-
-    return importlib.util.find_spec("mitsuba") is not None
-
-
-def import_mitsuba():
-    """``import mitsuba``, or a MatremapError saying how to install it."""
-    try:
-        import mitsuba
-    except ImportError as e:  # also covers a broken drjit
-        raise MatremapError(f"{INSTALL_HINT} ({e})") from None
-    return mitsuba
-
-
-def llvm_usable() -> bool:
-    """Whether a libLLVM that Mitsuba's llvm variants work with (>= 17) is on the system."""
-    for path in glob.glob("/usr/lib/*/libLLVM*.so*") + glob.glob("/usr/lib/llvm-*/lib/libLLVM*.so*"):
-        digits = "".join(c if c.isdigit() else " " for c in os.path.basename(path)).split()
-        if digits and 17 <= int(digits[0]) < 100:
-            return True
-    return False
-
-
-_LLVM_CHECK = """
-import mitsuba as mi
-mi.set_variant("llvm_ad_rgb")
-scene = mi.load_dict({"type": "scene", "integrator": {"type": "direct"},
-                      "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 4, "height": 4}},
-                      "s": {"type": "sphere", "center": [0, 0, -3]}, "e": {"type": "constant"}})
-img = mi.render(scene, spp=1, seed=0)
-print("ok", float(img.numpy().mean()))
-"""
-
-
-@lru_cache(maxsize=1)
-def llvm_renders() -> bool:
-    """Whether ``llvm_ad_rgb`` renders here: a libLLVM >= 17 is found (:func:`llvm_usable`) and a tiny
-    render in a child process succeeds (LLVM 15/16 abort the process, so this is never tried in
-    this one). Cached per process; costs about 2 s the first time."""
-    if not llvm_usable():
-        return False
-    try:
-        done = subprocess.run([sys.executable, "-c", _LLVM_CHECK], capture_output=True, text=True, timeout=120)
-    except (OSError, subprocess.SubprocessError):
-        return False
-    return done.returncode == 0 and done.stdout.startswith("ok")
-
-
-def choose_variant(mi, variant: str | None) -> str:
-    """``variant``, else ``$MATREMAP_MITSUBA_VARIANT``, else ``scalar_rgb``; ``auto`` is
-    ``llvm_ad_rgb`` when this build has it and it renders (:func:`llvm_renders`), else ``scalar_rgb``."""
-    variant = variant or os.environ.get("MATREMAP_MITSUBA_VARIANT") or "scalar_rgb"
-    if variant == "auto":
-        variant = "llvm_ad_rgb" if "llvm_ad_rgb" in mi.variants() and llvm_renders() else "scalar_rgb"
-    if not variant.endswith("_rgb"):
-        raise MatremapError(f"Mitsuba variant {variant!r}: matremap needs an RGB variant (scalar_rgb, llvm_ad_rgb)")
-    if variant not in mi.variants():
-        raise MatremapError(f"Mitsuba variant {variant!r} is not available; this build has {', '.join(mi.variants())}")
-    return variant
 
 
 class _Loaded:
     """One loaded Mitsuba scene (one light) and its traversed parameters."""
 
-    def __init__(self, mi, scene_dict: dict[str, Any], bindings: list[_Binding], model: str) -> None:
+    def __init__(self, mi, scene_dict: dict[str, Any], bindings: list[Binding], model: str) -> None:
         self.mi = mi
         self.model = model
         self.scene = mitsuba_call(mi, "load the probe scene", mi.load_dict, scene_dict)
@@ -247,14 +114,6 @@ class _Loaded:
                 changed = True
         if changed:
             mitsuba_call(mi, "update the material", self.params.update)
-
-
-def mitsuba_call(mi, what: str, fn, *args, **kwargs):
-    """``fn(*args, **kwargs)``, with Mitsuba's own errors turned into one MatremapError naming ``what``."""
-    try:
-        return fn(*args, **kwargs)
-    except (RuntimeError, ValueError, TypeError) as e:
-        raise MatremapError(f"Mitsuba 3 failed to {what}: {e}") from e
 
 
 class Mitsuba3Renderer:
@@ -309,15 +168,11 @@ class Mitsuba3Renderer:
 
     @classmethod
     def supports_textures(cls, model_id: str, param: str) -> bool:
-        from matremap.renderers.mitsuba3.environment import NOT_TEXTURABLE
-
         return param not in NOT_TEXTURABLE.get(model_id, ())
 
     def prepare_environment(
         self, material: SVMaterial, light: EnvironmentLight, geometry: str, resolution: int, part: str
     ) -> EnvironmentRender:
-        from matremap.renderers.mitsuba3.environment import Mitsuba3EnvironmentRender
-
         check_environment_args(geometry, resolution, part)
         why = self.environment_support(material.model, geometry)
         if why is not None:
@@ -384,24 +239,6 @@ class Mitsuba3Renderer:
                 "intensity": {"type": "rgb", "value": float(scene.light_intensity(lt))},
             },
         }
-
-
-def probe_sensor(mi, scene: Scene, sampler: dict[str, Any]) -> dict[str, Any]:  # noqa: ANN001
-    """The probe scene's camera as a Mitsuba sensor: at (0, 0, camera_distance) looking at the
-    origin, +y up, the scene's field of view along x, a square box-filtered HDR film."""
-    res = scene.resolution
-    return {
-        "type": "perspective",
-        "fov": float(scene.effective_fov),
-        "fov_axis": "x",
-        "near_clip": 1e-3,
-        "far_clip": 10.0 * (scene.camera_distance + scene.sphere_radius),
-        "to_world": mi.ScalarTransform4f().look_at(
-            origin=[0.0, 0.0, float(scene.camera_distance)], target=[0.0, 0.0, 0.0], up=[0.0, 1.0, 0.0]
-        ),
-        "sampler": sampler,
-        "film": {"type": "hdrfilm", "width": res, "height": res, "pixel_format": "rgb", "rfilter": {"type": "box"}},
-    }
 
 
 @dataclass(frozen=True)
