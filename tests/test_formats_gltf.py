@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import base64
 import json
+import os
 import struct
 from pathlib import Path
 
@@ -650,18 +651,19 @@ def test_writer_refuses_other_models_existing_files_and_inputs(tmp_path):
     assert not list(tmp_path.rglob(".*"))  # no temporary files left behind
 
 
-def test_a_failure_after_the_textures_are_encoded_leaves_nothing(tmp_path, monkeypatch):
-    from matremap.formats import gltf
-
+def test_a_failure_at_the_last_file_takes_back_the_textures_and_bin(tmp_path, monkeypatch):
     ms = load_map_set(mr_map_set(tmp_path / "maps"))
     (tmp_path / "out").mkdir()
     (tmp_path / "out" / "o_baseColor.png").write_bytes(b"old")
+    real = os.replace
 
-    def broken(doc):
-        raise RuntimeError("disk full")
+    def replace(src, dst):  # the .gltf is moved into place last, after its textures and .bin
+        if Path(dst).name == "o.gltf":
+            raise OSError("disk full")
+        real(src, dst)
 
-    monkeypatch.setattr(gltf, "_update_extension_lists", broken)  # after the textures and .bin are staged
-    with pytest.raises(RuntimeError, match="disk full"):
+    monkeypatch.setattr(os, "replace", replace)
+    with pytest.raises(OSError, match="disk full"):
         write(tmp_path / "out" / "o.gltf", ms, force=True)
-    assert listing(tmp_path / "out") == {"o_baseColor.png"}  # no o.gltf, o.bin, textures or staging folder
+    assert listing(tmp_path / "out") == {"o_baseColor.png"}  # no o.bin, no new textures, no staging folder
     assert (tmp_path / "out" / "o_baseColor.png").read_bytes() == b"old"

@@ -297,22 +297,17 @@ def test_a_colour_just_above_one_is_clamped_with_a_note(tmp_path):
     assert any("clamped" in n for n in asset.notes)
 
 
-def test_a_failure_after_the_maps_are_placed_leaves_nothing(tmp_path, monkeypatch):
-    from matremap.formats import materialx
-
+def test_a_map_that_fails_after_another_was_placed_leaves_nothing(tmp_path):
     d = tmp_path / "maps"
     d.mkdir()
     png(d / "base.png", np.full((8, 8, 3), 0.5, np.float32), "srgb")
-    png(d / "normal.png", np.tile(np.array([0.5, 0.5, 1.0], np.float32), (8, 8, 1)), "linear")
+    png(d / "rough.png", np.full((8, 8, 1), 0.5, np.float32), "linear")
     (d / "material.json").write_text(
-        '{"model": "gltf:metal-rough", "maps": {"baseColor": "base.png"}, "normal": "normal.png"}'
+        '{"model": "gltf:metal-rough", "maps": {"baseColor": "base.png", "roughness": "rough.png"}}'
     )
-
-    def broken(*args, **kwargs):
-        raise RuntimeError("disk full")
-
-    monkeypatch.setattr(materialx, "build_document", broken)  # after the maps are copied
+    ms = load_map_set(d)
+    (d / "rough.png").write_bytes(b"not a PNG any more")  # read after the base colour is placed
     (tmp_path / "out").mkdir()
-    with pytest.raises(RuntimeError, match="disk full"):
-        write(tmp_path / "out" / "mat.mtlx", load_map_set(d))
+    with pytest.raises(MatremapError):
+        write(tmp_path / "out" / "mat.mtlx", ms)
     assert list((tmp_path / "out").iterdir()) == []

@@ -77,7 +77,7 @@ class AtomicFiles:
         """The destinations staged so far, in the order they will be moved into place."""
         return list(self._staged)
 
-    def check(self, path: str | os.PathLike) -> Path:
+    def check(self, path: str | os.PathLike[str]) -> Path:
         """Refuse ``path`` as a destination now, before any work: it exists (without ``force``), or its
         folder is missing (without ``make_folders``). Returns it as a Path."""
         p = Path(path)
@@ -91,7 +91,7 @@ class AtomicFiles:
             raise MatremapError(f"cannot write {p}: it is a folder")
         return p
 
-    def stage(self, path: str | os.PathLike) -> Path:
+    def stage(self, path: str | os.PathLike[str]) -> Path:
         """The file to write ``path``'s content to (same name, in the staging folder); nothing is
         created there. The caller (or a worker process it passes the name to) writes it before the
         group ends."""
@@ -101,17 +101,17 @@ class AtomicFiles:
         self._staged[p] = self._staging_folder(p.parent) / "new" / p.name
         return self._staged[p]
 
-    def write_bytes(self, path: str | os.PathLike, data: bytes) -> Path:
+    def write_bytes(self, path: str | os.PathLike[str], data: bytes) -> Path:
         """Stage ``path`` with ``data``; returns the destination."""
         self.stage(path).write_bytes(data)
         return Path(path)
 
-    def write_text(self, path: str | os.PathLike, text: str) -> Path:
+    def write_text(self, path: str | os.PathLike[str], text: str) -> Path:
         """Stage ``path`` with ``text`` (UTF-8); returns the destination."""
         self.stage(path).write_text(text, encoding="utf-8")
         return Path(path)
 
-    def copy(self, src: str | os.PathLike, path: str | os.PathLike) -> Path:
+    def copy(self, src: str | os.PathLike[str], path: str | os.PathLike[str]) -> Path:
         """Stage ``path`` as a byte copy of ``src``; returns the destination."""
         shutil.copyfile(src, self.stage(path))
         return Path(path)
