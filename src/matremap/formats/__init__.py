@@ -6,6 +6,10 @@ one material of the file by name or index; the first by default) and every write
 :class:`~matremap.core.material.Material` or a :class:`~matremap.svbrdf.textures.MapSet` of converted maps, and
 ``source`` the asset it was remapped from (the glTF writer copies the source file with the new
 material). Modules are imported when a format is used.
+
+A writer writes its file and the files beside it (textures, maps, a ``.bin``) together or not at all,
+through :class:`~matremap.core.atomic.AtomicFiles`; :mod:`matremap.formats.common` holds what the
+format modules share (picking a material, taking a result apart, placing maps beside a document).
 """
 
 from __future__ import annotations
