@@ -122,7 +122,10 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     buf = oiio.ImageBuf(str(p))
     if buf.has_error:
         raise MatremapError(f"cannot read {p}: {buf.geterror()}")
-    return buf.get_pixels(oiio.FLOAT)
+    pixels = buf.get_pixels(oiio.FLOAT)
+    if pixels is None:
+        raise MatremapError(f"cannot read the pixels of {p}: {buf.geterror()}")
+    return pixels
 
 
 def png_bytes(array: np.ndarray) -> bytes:

@@ -76,7 +76,7 @@ def make_executor(
         yield InlineExecutor(), "1 worker (in process)"
         return
     pool = ProcessPoolExecutor(max_workers=n, initializer=_ignore_sigint)
-    pool.slots = n  # type: ignore[attr-defined]  (how many tasks run at once)
+    pool.slots = n  # type: ignore[attr-defined]  # how many tasks run at once
     try:
         yield pool, f"{n} local worker processes"
     finally:
@@ -119,6 +119,7 @@ def _dask_executor(scheduler: str | None, dask_local: int | None) -> Iterator[tu
             client = Client(cluster)
             desc = f"Dask LocalCluster with {dask_local} workers ({cluster.scheduler_address})"
         else:
+            assert scheduler is not None  # make_executor passes one of the two
             _check_reachable(scheduler)
             try:
                 client = Client(scheduler, timeout=10)

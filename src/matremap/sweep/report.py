@@ -310,6 +310,8 @@ def _numeric_axes(grid: Grid | None) -> list[int]:
 
 def _role_axis(grid: Grid | None, spec: ModelSpec, roles: Sequence[str]) -> int | None:
     """The first numeric grid axis sweeping a source parameter with one of these roles."""
+    if grid is None:
+        return None
     for i in _numeric_axes(grid):
         name = grid.axes[i].name
         if name in spec.param_names and spec.param(name).role in roles:
@@ -397,6 +399,7 @@ def _curves(
     from matplotlib.colors import Normalize
 
     a, grid = data.analysis, data.grid
+    assert grid is not None  # _plan draws curves only along a grid axis
     axis = grid.axes[x_axis]
     ch, suffix = _channel_for(a, param, axis.channel)
     values = np.moveaxis(a.target_array(param, ch), x_axis, -1)
@@ -423,7 +426,7 @@ def _curves(
         fy += list(y[sel])
     if fx:
         ax.plot(fx, fy, label=f"flagged ({len(fx)})", **FLAG_STYLE)
-    if norm is not None:
+    if colour_axis is not None:
         fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, label=f"source {grid.axes[colour_axis].label}")
     if param == axis.name:
         lo, hi = float(np.nanmin(x)), float(np.nanmax(x))
@@ -472,6 +475,7 @@ def _loss_plot(fig, data: SweepData, spec_axis: int | None, rough_axis: int | No
         ax.set_ylabel("loss (relative RMSE)")
         ax.set_title("loss per point", fontsize="medium")
         return
+    assert grid is not None  # numeric axes come from a grid
     loss = a.loss_array()
     loss = np.where(loss > 0, loss, np.nan)
     flagged = a.flagged_array()
@@ -559,18 +563,33 @@ def _round_trip_plot(fig, data: SweepData, trips: Mapping[str, RoundTrip]) -> No
 # Export
 
 
-def _spec_columns(prefix: str, spec: ModelSpec) -> list[tuple[str, str, Callable[[Mapping[str, Any]], Any]]]:
+Getter = Callable[[Mapping[str, Any]], Any]
+
+
+def _getter(name: str, channel: int | None = None) -> Getter:
+    """Reads ``name`` from a dict of values: as stored, or one channel of it as a float."""
+    if channel is None:
+        return lambda d: d.get(name)
+    return lambda d: _pick(d.get(name), channel)
+
+
+def _spec_columns(prefix: str, spec: ModelSpec) -> list[tuple[str, str, Getter]]:
     """(column, kind, getter) for every option and parameter channel of a model."""
-    cols: list[tuple[str, str, Callable[[Mapping[str, Any]], Any]]] = []
+    cols: list[tuple[str, str, Getter]] = []
     for o in spec.options:
-        cols.append((f"{prefix}.{o.name}", "str", lambda d, n=o.name: d.get(n)))
+        cols.append((f"{prefix}.{o.name}", "str", _getter(o.name)))
     for p in spec.params:
         if p.channels == 3:
             for i, c in enumerate("rgb"):
-                cols.append((f"{prefix}.{p.name}.{c}", "float", lambda d, n=p.name, i=i: _pick(d.get(n), i)))
+                cols.append((f"{prefix}.{p.name}.{c}", "float", _getter(p.name, i)))
         else:
-            cols.append((f"{prefix}.{p.name}", "float", lambda d, n=p.name: _pick(d.get(n), 0)))
+            cols.append((f"{prefix}.{p.name}", "float", _getter(p.name, 0)))
     return cols
+
+
+def _in_field(get: Getter, field: str) -> Getter:
+    """Applies ``get`` to a row's ``field`` (a dict of values), or None when the row has none."""
+    return lambda r: get(r[field]) if isinstance(r.get(field), Mapping) else None
 
 
 def _pick(value: Any, i: int) -> float | None:
@@ -588,10 +607,10 @@ def table(data: SweepData) -> tuple[list[str], list[str], list[list[Any]]]:
     groups = [("source", a.source, "source"), ("target", a.target, "target")]
     if has_back:
         groups.append(("back", a.source, "back"))
-    cols: list[tuple[str, str, Callable[[Mapping[str, Any]], Any]]] = []
+    cols: list[tuple[str, str, Getter]] = []
     for prefix, spec, field in groups:
         for name, kind, get in _spec_columns(prefix, spec):
-            cols.append((name, kind, lambda r, g=get, f=field: g(r[f]) if isinstance(r.get(f), Mapping) else None))
+            cols.append((name, kind, _in_field(get, field)))
     cols.append(("loss", "float", lambda r: r.get("loss")))
     if has_back:
         cols.append(("back_loss", "float", lambda r: r.get("back_loss")))
