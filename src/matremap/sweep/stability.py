@@ -88,6 +88,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from matremap.core.models import ModelSpec, ParamSpec, get_model
 from matremap.sweep.grid import Grid
@@ -210,14 +211,14 @@ def analyse(rows: Sequence[Mapping[str, Any]], grid: Grid | Mapping[str, Any] | 
     source_id, target_id, fix, free = _config_parts(config)
     source, target = get_model(source_id), get_model(target_id)
     tested = tuple(p.name for p in target.params if (p.fit or p.name in free) and p.name not in fix)
-    rows = [dict(r) for r in rows]
-    flags: dict[str, list[str]] = {r["key"]: [] for r in rows}
-    details: dict[str, list[str]] = {r["key"]: [] for r in rows}
+    points = [dict(r) for r in rows]
+    flags: dict[str, list[str]] = {r["key"]: [] for r in points}
+    details: dict[str, list[str]] = {r["key"]: [] for r in points}
     notes: list[str] = []
 
-    index, off_grid = _place(rows, grid)
-    ok = [r for r in rows if r["status"] == "ok" and isinstance(r.get("target"), Mapping)]
-    for r in rows:
+    index, off_grid = _place(points, grid)
+    ok = [r for r in points if r["status"] == "ok" and isinstance(r.get("target"), Mapping)]
+    for r in points:
         if r["status"] != "ok" or not isinstance(r.get("target"), Mapping):
             flags[r["key"]].append("failed")
 
@@ -239,7 +240,7 @@ def analyse(rows: Sequence[Mapping[str, Any]], grid: Grid | Mapping[str, Any] | 
         for reason in reasons:
             counts[reason] = counts.get(reason, 0) + 1
     counts = dict(sorted(counts.items(), key=lambda kv: (order.get(kv[0].split(":")[0], 9), kv[0])))
-    return Analysis(rows, grid, source, target, tested, flags, details, counts, index, off_grid, notes)
+    return Analysis(points, grid, source, target, tested, flags, details, counts, index, off_grid, notes)
 
 
 def _config_parts(config: Any) -> tuple[str, str, set[str], set[str]]:
@@ -283,11 +284,11 @@ def _hashable(v: Any) -> Any:
     return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else str(v)
 
 
-def _channel(value: Any, channel: int) -> float | None:
+def _channel(value: Any, channel: int | None) -> float | None:
     if value is None:
         return None
     if isinstance(value, (list, tuple)):
-        return float(value[channel if channel < len(value) else 0])
+        return float(value[channel if channel is not None and channel < len(value) else 0])
     return float(value)
 
 
@@ -508,7 +509,7 @@ def _outlier_deviations(xs: np.ndarray, vs: np.ndarray) -> tuple[np.ndarray, np.
     return dev, nearest
 
 
-def line_jumps(x: Sequence[float], values: Sequence[float], log: bool = False) -> list[tuple[int, str, float]]:
+def line_jumps(x: npt.ArrayLike, values: npt.ArrayLike, log: bool = False) -> list[tuple[int, str, float]]:
     """Jumps along one grid line: ``(position, "outlier" | "step", size)`` for each flagged point,
     the size relative to the local magnitude (absolute when ``log``: the values are logarithms).
     ``values`` may hold NaN (missing points: the line closes over them). The rules are in the
