@@ -150,7 +150,7 @@ def test_round_trip_fits_back_onto_the_source_model(tmp_path):
 def test_a_failing_point_is_recorded_and_the_sweep_goes_on(tmp_path):
     # Blender's specular_color cannot exceed 1: fitting a bright Ward lobe hits the bound but does not
     # fail; a failure comes from a renderer error, simulated with a model the target renderer lacks
-    from matremap.sweep.run import run as sweep_mod
+    import matremap.sweep.run as sweep_mod
 
     grid = parse_grid("alpha=0.1:0.2:2", SOURCE.spec)
     real_fit = sweep_mod.fit

@@ -68,7 +68,7 @@ def load_arrays(map_set: MapSet, only: Collection[str] | None = None) -> tuple[d
         params[name] = map_values(spec, name, image, path, 0)
     normal = None
     if map_set.normal is not None and only is None:
-        from matremap.renderers.embedded.environment import decode_normal_map
+        from matremap.renderers.textured import decode_normal_map
 
         normal = decode_normal_map(read_image(map_set.normal, "linear", colour=False)[0])
     return params, normal

@@ -25,7 +25,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from matremap.core.calibrate import irradiance_scale
 from matremap.core.material import Material
@@ -276,6 +275,8 @@ class _Problem:
             r0 = self.residual(x0)
             if float(np.sqrt(r0 @ r0)) < EXACT:
                 return self.decode(x0), _Solved(x0, 0.5 * float(r0 @ r0), "the start matches the source exactly")
+        from scipy.optimize import least_squares  # on first use: ~0.8 s the command line need not pay
+
         sol = least_squares(
             self.residual,
             x0,
@@ -369,57 +370,17 @@ def fit(
     for r, model in ((src_r, source.model), (tgt_r, spec.id)):
         if not r.can_render(model):
             raise MatremapError(f"renderer {r.name!r} cannot render model {model}")
-    template, free_params = target_template(spec, fix)
-    spec = spec.specialise(template.values)
-    for name in free:
-        p = spec.param(name)
-        if p.name in (fix or {}):
-            raise MatremapError(f"{name} is both fixed and freed; drop one of --fix {name}=... / --free {name}")
-        if p not in free_params:
-            free_params.append(p)
-    if start:
-        template = template.with_params({k: v for k, v in start.items() if k not in (fix or {})})
+    spec, template, free_params = _fit_setup(spec, fix, free, start)
     if coarse is None:
         coarse = not start
-    if not free_params:
-        raise MatremapError(f"nothing to fit: every parameter of {spec.id} is fixed")
 
     counter = _Counter(scene)
     scale = irradiance_scale(source, src_r, spec.id, tgt_r, scene, render=lambda r, ms: counter.images_of(r, ms))
 
-    which = [FULL] if strategy == "simple" else [DIFFUSE, SPECULAR, FULL]
-    src_parts = [part(source, w) for w in which]
-    rendered = counter.pixels(src_r, [m for m in src_parts if m is not None])
-    goals: dict[str, np.ndarray] = {}
-    it = iter(rendered)
-    for w, m in zip(which, src_parts, strict=True):
-        goals[w] = scale * next(it) if m is not None else np.zeros((counter.indices.size, 3))
-
+    goals = _source_goals(source, strategy, scale, src_r, counter)
     warnings = _check_resolution(goals[SPECULAR if strategy != "simple" else FULL], scene)
     stages: list[StageReport] = []
-    current = template
-    if strategy in ("two-stage", "three-stage"):
-        total = float(np.sum(goals[FULL] ** 2)) or 1.0
-        diffuse_free = [p for p in free_params if p.role == "diffuse"]
-        specular_free = [p for p in free_params if p.role in SPECULAR_ROLES]
-        for which_part, params in ((DIFFUSE, diffuse_free), (SPECULAR, specular_free)):
-            current = _run_stage(
-                which_part, params, current, goals[which_part], total, tgt_r, counter, stages, coarse=coarse
-            )
-    if strategy in ("simple", "three-stage"):
-        name = "joint" if strategy == "three-stage" else FULL
-        current = _run_stage(
-            FULL,
-            free_params,
-            current,
-            goals[FULL],
-            1.0,
-            tgt_r,
-            counter,
-            stages,
-            name=name,
-            coarse=coarse and strategy == "simple",
-        )
+    current = _descend(strategy, template, free_params, goals, tgt_r, counter, stages, coarse)
 
     final = counter.pixels(tgt_r, [current])[0]
     goal = goals[FULL]
@@ -439,6 +400,80 @@ def fit(
         stages=stages,
         warnings=warnings,
     )
+
+
+def _fit_setup(
+    spec: ModelSpec, fix: Mapping[str, Any] | None, free: Sequence[str], start: Mapping[str, Any] | None
+) -> tuple[ModelSpec, Material, list[ParamSpec]]:
+    """The target spec as the fit sees it, the material to start from and the parameters to fit."""
+    template, free_params = target_template(spec, fix)
+    spec = spec.specialise(template.values)
+    for name in free:
+        p = spec.param(name)
+        if p.name in (fix or {}):
+            raise MatremapError(f"{name} is both fixed and freed; drop one of --fix {name}=... / --free {name}")
+        if p not in free_params:
+            free_params.append(p)
+    if start:
+        template = template.with_params({k: v for k, v in start.items() if k not in (fix or {})})
+    if not free_params:
+        raise MatremapError(f"nothing to fit: every parameter of {spec.id} is fixed")
+    return spec, template, free_params
+
+
+def _source_goals(
+    source: Material, strategy: str, scale: float, renderer: Renderer, counter: _Counter
+) -> dict[str, np.ndarray]:
+    """The irradiance-matched source pixels each stage fits: full, and for the staged strategies the
+    diffuse-only and specular-only parts (zero where the source has no such part)."""
+    which = [FULL] if strategy == "simple" else [DIFFUSE, SPECULAR, FULL]
+    src_parts = [part(source, w) for w in which]
+    rendered = counter.pixels(renderer, [m for m in src_parts if m is not None])
+    goals: dict[str, np.ndarray] = {}
+    it = iter(rendered)
+    for w, m in zip(which, src_parts, strict=True):
+        goals[w] = scale * next(it) if m is not None else np.zeros((counter.indices.size, 3))
+
+    return goals
+
+
+def _descend(
+    strategy: str,
+    template: Material,
+    free_params: list[ParamSpec],
+    goals: Mapping[str, np.ndarray],
+    renderer: Renderer,
+    counter: _Counter,
+    stages: list[StageReport],
+    coarse: bool,
+) -> Material:
+    """Run the strategy's stages from ``template``: diffuse then specular (two-stage), everything at
+    once (simple), or both and then everything (three-stage); each stage appends its report."""
+    current = template
+    if strategy in ("two-stage", "three-stage"):
+        total = float(np.sum(goals[FULL] ** 2)) or 1.0
+        diffuse_free = [p for p in free_params if p.role == "diffuse"]
+        specular_free = [p for p in free_params if p.role in SPECULAR_ROLES]
+        for which_part, params in ((DIFFUSE, diffuse_free), (SPECULAR, specular_free)):
+            current = _run_stage(
+                which_part, params, current, goals[which_part], total, renderer, counter, stages, coarse=coarse
+            )
+    if strategy in ("simple", "three-stage"):
+        name = "joint" if strategy == "three-stage" else FULL
+        current = _run_stage(
+            FULL,
+            free_params,
+            current,
+            goals[FULL],
+            1.0,
+            renderer,
+            counter,
+            stages,
+            name=name,
+            coarse=coarse and strategy == "simple",
+        )
+
+    return current
 
 
 #: a highlight must cover at least this many pixels (above half its peak, a 3x3 block) to be fitted

@@ -346,18 +346,16 @@ def _add_camera(bpy, scene, s: dict) -> None:  # noqa: ANN001
     scene.camera = cam
 
 
-def render_svbrdf(request: dict, tmp: str) -> np.ndarray:
-    """One textured sphere under an environment map -> float32 [1, res, res, 3]."""
-    s = request["scene"]
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
+def _svbrdf_settings(scene, spp: int, seed: int, res: int) -> None:
+    """Cycles settings of the environment renders: CPU, ``spp`` samples, fixed seed, one ray through each
+    pixel centre, direct light only, transparent (black) background."""
     scene.render.engine = "CYCLES"
     cy = scene.cycles
     cy.device = "CPU"
-    cy.samples = int(request["spp"])
+    cy.samples = int(spp)
     cy.use_adaptive_sampling = False
     cy.use_denoising = False
-    cy.seed = int(request["seed"])
+    cy.seed = int(seed)
     cy.use_animated_seed = False
     cy.filter_width = 0.01  # one ray through each pixel centre, as the embedded renderer
     cy.film_exposure = 1.0
@@ -365,23 +363,17 @@ def render_svbrdf(request: dict, tmp: str) -> np.ndarray:
     cy.sample_clamp_direct = 0.0
     cy.sample_clamp_indirect = 0.0
     scene.render.use_persistent_data = False
-    res = int(s["resolution"])
     scene.render.resolution_x = res
     scene.render.resolution_y = res
     scene.render.resolution_percentage = 100
     scene.render.film_transparent = True  # black background (RGB 0 where alpha is 0)
     scene.render.use_compositing = False
     scene.render.use_sequencer = False
-    _exr_output(scene)
-    _add_camera(bpy, scene, s)
 
-    segments, rings = (int(x) for x in request.get("geometry", "512x256").split("x"))
-    sphere, uv_name = _uv_sphere(float(s["sphere_radius"]), segments, rings)
 
-    def load(name):
-        return np.load(os.path.join(request["dir"], name + ".npy"))
-
-    # -- the material
+def _svbrdf_material(request: dict, uv_name: str, load):
+    """The textured material: the model's nodes, an Image Texture per map (Linear, Extend; scalars
+    through the red channel), constants on the other sockets, and the tangent-space normal map."""
     mat = bpy.data.materials.new("svbrdf")
     mat.use_nodes = True
     nt = mat.node_tree
@@ -422,12 +414,12 @@ def render_svbrdf(request: dict, tmp: str) -> np.ndarray:
         nt.links.new(node.outputs["Color"], nmap.inputs["Color"])
         for b in bsdfs:
             nt.links.new(nmap.outputs["Normal"], b.inputs["Normal"])
-    sphere.data.materials.append(mat)
-    if sphere.name not in scene.collection.objects:
-        scene.collection.objects.link(sphere)
+    return mat
 
-    # -- the world: Blender's equirectangular lookup of e = M R_y(-rotation) d, with
-    # M = (-z, -x, y), puts Blender's u on matremap's u and Blender's up (z) on matremap's +y
+
+def _environment_world(radiance: np.ndarray, rotation_deg: float):
+    """The world: Blender's equirectangular lookup of e = M R_y(-rotation) d, with M = (-z, -x, y), puts
+    Blender's u on matremap's u and Blender's up (z) on matremap's +y."""
     world = bpy.data.worlds.new("env")
     world.use_nodes = True
     wt = world.node_tree
@@ -437,11 +429,11 @@ def render_svbrdf(request: dict, tmp: str) -> np.ndarray:
     bg = wt.nodes.new("ShaderNodeBackground")
     bg.inputs["Strength"].default_value = 1.0
     env = wt.nodes.new("ShaderNodeTexEnvironment")
-    env.image = _float_image("env", load("env"))
+    env.image = _float_image("env", radiance)
     env.interpolation = "Linear"
     env.projection = "EQUIRECTANGULAR"
     coords = wt.nodes.new("ShaderNodeTexCoord")
-    a = math.radians(-float(request["rotation_deg"]))
+    a = math.radians(-float(rotation_deg))
     c, si = math.cos(a), math.sin(a)
     # d' = R_y(a) d: x' = c x + s z, y' = y, z' = -s x + c z
     rows = ((si, 0.0, -c), (-c, 0.0, -si), (0.0, 1.0, 0.0))  # (-z', -x', y')
@@ -455,8 +447,28 @@ def render_svbrdf(request: dict, tmp: str) -> np.ndarray:
     wt.links.new(comb.outputs["Vector"], env.inputs["Vector"])
     wt.links.new(env.outputs["Color"], bg.inputs["Color"])
     wt.links.new(bg.outputs["Background"], wout.inputs["Surface"])
-    scene.world = world
+    return world
 
+
+def render_svbrdf(request: dict, tmp: str) -> np.ndarray:
+    """One textured sphere under an environment map -> float32 [1, res, res, 3]."""
+    s = request["scene"]
+    res = int(s["resolution"])
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    _svbrdf_settings(scene, request["spp"], request["seed"], res)
+    _exr_output(scene)
+    _add_camera(bpy, scene, s)
+
+    def load(name):
+        return np.load(os.path.join(request["dir"], name + ".npy"))
+
+    segments, rings = (int(x) for x in request.get("geometry", "512x256").split("x"))
+    sphere, uv_name = _uv_sphere(float(s["sphere_radius"]), segments, rings)
+    sphere.data.materials.append(_svbrdf_material(request, uv_name, load))
+    if sphere.name not in scene.collection.objects:
+        scene.collection.objects.link(sphere)
+    scene.world = _environment_world(load("env"), request["rotation_deg"])
     return _render_still(scene, os.path.join(tmp, "svbrdf.exr"), res)[None].copy()
 
 

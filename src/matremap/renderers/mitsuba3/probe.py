@@ -251,6 +251,24 @@ class AutodiffFit:
     seconds: float
 
 
+def _autodiff_inputs(
+    target: np.ndarray, scene: Scene, distribution: str, start: Material | None
+) -> tuple[np.ndarray, Material]:
+    """The target image and the starting rough conductor of :func:`fit_roughconductor_autodiff`, checked."""
+    res = scene.resolution
+    target = np.asarray(target, dtype=np.float32)
+    if target.shape != (res, res, 3):
+        raise MatremapError(f"the target image must be [{res}, {res}, 3], got shape {target.shape}")
+    if distribution not in DISTRIBUTIONS:
+        raise MatremapError(f"distribution must be one of {', '.join(DISTRIBUTIONS)}, got {distribution!r}")
+    m0 = start or Material.create(
+        "mitsuba3:roughconductor", {"distribution": distribution, "alpha": 0.2, "eta": 1.0, "k": 2.0}
+    )
+    if m0.model != "mitsuba3:roughconductor" or m0.options.get("material", "custom") != "custom":
+        raise MatremapError("the start must be a mitsuba3:roughconductor with material=custom")
+    return target, m0.with_params({"distribution": distribution})
+
+
 def fit_roughconductor_autodiff(
     target: np.ndarray,
     scene: Scene,
@@ -280,18 +298,7 @@ def fit_roughconductor_autodiff(
         mi.set_variant("llvm_ad_rgb")
     import drjit as dr
 
-    res = scene.resolution
-    target = np.asarray(target, dtype=np.float32)
-    if target.shape != (res, res, 3):
-        raise MatremapError(f"the target image must be [{res}, {res}, 3], got shape {target.shape}")
-    if distribution not in DISTRIBUTIONS:
-        raise MatremapError(f"distribution must be one of {', '.join(DISTRIBUTIONS)}, got {distribution!r}")
-    m0 = start or Material.create(
-        "mitsuba3:roughconductor", {"distribution": distribution, "alpha": 0.2, "eta": 1.0, "k": 2.0}
-    )
-    if m0.model != "mitsuba3:roughconductor" or m0.options.get("material", "custom") != "custom":
-        raise MatremapError("the start must be a mitsuba3:roughconductor with material=custom")
-    m0 = m0.with_params({"distribution": distribution})
+    target, m0 = _autodiff_inputs(target, scene, distribution, start)
     renderer = Mitsuba3Renderer(variant="llvm_ad_rgb")  # for its scene_dict: centre rays, 1 spp
     bsdf, _ = bsdf_dict(m0.model, dict(m0.options), m0)
     scenes = [
