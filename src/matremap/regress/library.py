@@ -3,7 +3,7 @@
 Each library entry is a parametric transform (JSON, :mod:`matremap.regress.transform`) learned
 from a sweep between two models; :data:`PAIRS` says which sweeps (source template, target fixes,
 grid, renderer), and ``tools/make_transform_library.py`` runs them and writes the files into
-``matremap/transforms/``. Each sweep gives two entries: the forward transform and the reverse one
+``matremap/regress/transforms/``. Each sweep gives two entries: the forward transform and the reverse one
 learned from the same database (paper §5: a renderer that can only be a source still gets
 remappings out of it).
 
