@@ -26,6 +26,9 @@ import numpy as np
 
 from matremap.errors import MatremapError
 
+#: a direction or an RGB colour, as the built-in map's lights are written
+Vec3 = tuple[float, float, float]
+
 #: Rec. 709 / sRGB luminance weights
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
@@ -144,7 +147,7 @@ def builtin(height: int = 128, width: int = 256) -> EnvMap:
     t = (0.5 + 0.5 * np.tanh(y / 0.04))[..., None]
     rad = t * sky + (1.0 - t) * ground
 
-    def softbox(axis, half_angle_deg: float, colour, power: float, sharpness: float = 6.0):
+    def softbox(axis: Vec3, half_angle_deg: float, colour: Vec3, power: float, sharpness: float = 6.0) -> np.ndarray:
         a = np.asarray(axis, dtype=float)
         a /= np.linalg.norm(a)
         cosang = np.clip(d @ a, -1.0, 1.0)
@@ -152,7 +155,7 @@ def builtin(height: int = 128, width: int = 256) -> EnvMap:
         # super-Gaussian: a flat-topped disc with a soft edge
         return power * np.exp(-np.power(ang, sharpness))[..., None] * np.asarray(colour)
 
-    def strip(axis, half_width_deg: float, half_length_deg: float, colour, power: float):
+    def strip(axis: Vec3, half_width_deg: float, half_length_deg: float, colour: Vec3, power: float) -> np.ndarray:
         """A strip along the horizontal direction perpendicular to ``axis``."""
         a = np.asarray(axis, dtype=float)
         a /= np.linalg.norm(a)

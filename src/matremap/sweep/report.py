@@ -23,7 +23,7 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -34,8 +34,19 @@ from matremap.sweep.grid import Grid
 from matremap.sweep.stability import Analysis, analyse, is_grey
 from matremap.sweep.store import SweepStore
 
+if TYPE_CHECKING:  # matplotlib is imported when a plot is drawn
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
 SPECULAR_ROLES = ("specular", "fresnel")
-FLAG_STYLE = {"marker": "x", "color": "red", "markersize": 8, "markeredgewidth": 1.8, "linestyle": "none", "zorder": 6}
+FLAG_STYLE: dict[str, Any] = {
+    "marker": "x",
+    "color": "red",
+    "markersize": 8,
+    "markeredgewidth": 1.8,
+    "linestyle": "none",
+    "zorder": 6,
+}
 REASONS = {
     "failed": "the fit raised",
     "jump": "fitted value jumps against its grid neighbours",
@@ -289,7 +300,7 @@ def _matplotlib() -> None:
         raise MatremapError("plots need matplotlib: pip install matplotlib") from None
 
 
-def _figure(width: float = 7.0, height: float = 5.0):  # noqa: ANN202 - matplotlib is imported lazily
+def _figure(width: float = 7.0, height: float = 5.0) -> Figure:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -378,18 +389,18 @@ def _channel_for(a: Analysis, param: str, axis_channel: int | None) -> tuple[int
     return ch, "" if grey else f" ({'rgb'[ch]})"
 
 
-def _flag_legend(ax, n: int) -> None:  # noqa: ANN001
+def _flag_legend(ax: Axes, n: int) -> None:
     if n:
         ax.legend(loc="best", fontsize="small")
 
 
 def _curves(
-    fig,
+    fig: Figure,
     data: SweepData,
     x_axis: int,
     colour_axis: int | None,
     param: str,
-    cmap_name: str,  # noqa: ANN001
+    cmap_name: str,
     thin: bool = False,
 ) -> None:
     """Target ``param`` against the source values of ``x_axis``: one curve per other grid line,
@@ -455,7 +466,7 @@ def _edges(v: np.ndarray) -> np.ndarray:
     return np.exp(e) if logs else e
 
 
-def _loss_plot(fig, data: SweepData, spec_axis: int | None, rough_axis: int | None) -> None:  # noqa: ANN001
+def _loss_plot(fig: Figure, data: SweepData, spec_axis: int | None, rough_axis: int | None) -> None:
     from matplotlib import colormaps
     from matplotlib.colors import LogNorm
 
@@ -526,7 +537,7 @@ def _loss_plot(fig, data: SweepData, spec_axis: int | None, rough_axis: int | No
     ax.set_title(f"{a.source.id} \u2192 {a.target.id}: loss{reduced_note}", fontsize="medium")
 
 
-def _round_trip_plot(fig, data: SweepData, trips: Mapping[str, RoundTrip]) -> None:  # noqa: ANN001
+def _round_trip_plot(fig: Figure, data: SweepData, trips: Mapping[str, RoundTrip]) -> None:
     a = data.analysis
     n = len(trips)
     cols = min(n, 3)
