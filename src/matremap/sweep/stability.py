@@ -83,7 +83,7 @@ frees, minus those it fixes. Rows whose swept values are not on the current grid
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -183,7 +183,7 @@ class Analysis:
     def _grid_index(self, key: str) -> tuple[int, ...] | None:
         return self.index.get(key)
 
-    def _array(self, get) -> np.ndarray:  # noqa: ANN001 - a small private helper
+    def _array(self, get: Callable[[dict[str, Any]], Any]) -> np.ndarray:
         if self.grid is None:
             return np.full((0,), np.nan)
         out = np.full(self.grid.shape, np.nan)
