@@ -10,11 +10,12 @@ import json
 import numpy as np
 import pytest
 
-from matremap.core.models import Material
+from matremap.core.material import Material
 from matremap.core.scene import Scene
 from matremap.errors import MatremapError
 from matremap.formats import format_for, write_asset
-from matremap.renderers.cycles.probe import ENV_PYTHON, CyclesRenderer, bpy_available
+from matremap.renderers.cycles.client import ENV_PYTHON, bpy_available
+from matremap.renderers.cycles.probe import CyclesRenderer
 
 needs_bpy = pytest.mark.skipif(
     not bpy_available(),
@@ -38,7 +39,7 @@ def inspect(cycles, path) -> dict:
 
 
 def render_file(cycles, path, scene: Scene) -> np.ndarray:
-    return cycles._request({"op": "render_blend", "path": str(path), "scene": cycles.scene_dict(scene)})[0]
+    return cycles.request({"op": "render_blend", "path": str(path), "scene": cycles.scene_dict(scene)})[0]
 
 
 def linked(material: dict, to_node: str, to_socket: str) -> tuple[str, str] | None:
@@ -59,7 +60,7 @@ def test_refuses_other_models_and_existing_files(tmp_path):
     from matremap.formats import blend
 
     with pytest.raises(MatremapError, match="cycles:principled"):
-        blend._request(str(tmp_path / "t.blend"), Material.create("mitsuba06:ward"), None, tmp_path / "x.blend")
+        blend.write_request(str(tmp_path / "t.blend"), Material.create("mitsuba06:ward"), None, tmp_path / "x.blend")
     (tmp_path / "x.blend").write_bytes(b"old")
     with pytest.raises(MatremapError, match="already exists"):
         write_asset(tmp_path / "x.blend", Material.create("cycles:glossy"))
@@ -67,7 +68,7 @@ def test_refuses_other_models_and_existing_files(tmp_path):
 
 
 def test_without_bpy_says_how_to_set_it_up(tmp_path, monkeypatch):
-    import matremap.renderers.cycles.environment as cs
+    import matremap.renderers.cycles.client as cs
 
     monkeypatch.setattr(cs, "_shared", None)
     monkeypatch.setenv(ENV_PYTHON, str(tmp_path / "no-python"))

@@ -215,7 +215,7 @@ def test_a_gltf_dielectric_becomes_a_blend_file_fitted_with_real_cycles(tmp_path
 
 
 def test_a_glb_written_by_matremap_is_remapped_and_written_back_as_glb(tmp_path):
-    from matremap.core.models import Material
+    from matremap.core.material import Material
     from matremap.formats import write_asset
 
     (tmp_path / "in").mkdir()

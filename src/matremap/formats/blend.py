@@ -1,6 +1,6 @@
 """Blender .blend output: a converted material as Cycles nodes on a sphere, written by Blender itself.
 
-``write(out, result, source=None, force=False)`` takes a uniform :class:`~matremap.core.models.Material`
+``write(out, result, source=None, force=False)`` takes a uniform :class:`~matremap.core.material.Material`
 or a :class:`~matremap.svbrdf.textures.MapSet` of converted maps of ``cycles:principled``,
 ``cycles:glossy`` or ``cycles:diffuse`` and asks the bpy worker of
 :class:`~matremap.renderers.cycles.probe.CyclesRenderer` (request ``{"op": "write_blend"}``, see
@@ -39,8 +39,9 @@ from typing import Any
 import numpy as np
 
 from matremap.core.imageio import atomic_output, check_output
-from matremap.core.models import Material, get_model
+from matremap.core.material import Material
 from matremap.core.scene import Scene
+from matremap.dialects import get_model
 from matremap.errors import MatremapError
 
 #: models this writer knows the Blender nodes of
@@ -63,12 +64,17 @@ def _colorspace(spec, name: str, colorspace: str) -> str:
     return "Linear Rec.709" if spec.param(name).channels == 3 else "Non-Color"
 
 
-def _request(out_tmp: str, result: Any, source: Any, out: Path) -> dict[str, Any]:
+def write_request(out_tmp: str, result: Any, source: Any, out: Path) -> dict[str, Any]:
+    """The ``write_blend`` request that has the bpy worker save ``result`` at ``out_tmp`` (which
+    becomes ``out``): the model's nodes, their values and textures, the material's name, the probe
+    scene. Raises for results the worker cannot write."""
     from matremap.svbrdf.textures import MapSet
 
+    textures: dict[str, dict[str, str]] = {}
+    normal: dict[str, str] | None = None
     if isinstance(result, Material):
         spec = get_model(result.model)
-        consts, textures, normal = _constants(spec, dict(result.values)), {}, None
+        consts = _constants(spec, dict(result.values))
         options = dict(result.options)
         default_name = out.stem
     elif isinstance(result, MapSet):
@@ -77,7 +83,6 @@ def _request(out_tmp: str, result: Any, source: Any, out: Path) -> dict[str, Any
         consts = {k: v for k, v in _constants(spec, values).items() if k not in result.maps}
         options = {o.name: o.default for o in spec.options}
         options.update(result.options)
-        textures = {}
         for name, path in result.maps.items():
             p = Path(path)
             if not p.is_file():
@@ -86,7 +91,6 @@ def _request(out_tmp: str, result: Any, source: Any, out: Path) -> dict[str, Any
                 "path": str(p.resolve()),
                 "colorspace": _colorspace(spec, name, result.colorspace.get(name, "linear")),
             }
-        normal = None
         if result.normal is not None:
             normal = {"path": str(Path(result.normal).resolve()), "colorspace": "Non-Color"}
         default_name = Path(result.root).name or out.stem
@@ -122,18 +126,19 @@ def _request(out_tmp: str, result: Any, source: Any, out: Path) -> dict[str, Any
 
 def write(out: str | os.PathLike, result: Any, source: Any = None, force: bool = False, renderer: Any = None) -> Path:
     """Write ``result`` (a ``cycles:*`` Material or MapSet) as a .blend at ``out``; returns its path.
-    ``renderer``: the :class:`~matremap.renderers.cycles.probe.CyclesRenderer` whose worker writes (default:
-    the one shared with :mod:`matremap.renderers.cycles.environment`)."""
-    from matremap.renderers.cycles.environment import _renderer
+    ``renderer``: the :class:`~matremap.renderers.cycles.client.WorkerClient` (e.g. a
+    :class:`~matremap.renderers.cycles.probe.CyclesRenderer`) whose worker writes (default: the one this
+    process shares, :func:`~matremap.renderers.cycles.client.shared_client`)."""
+    from matremap.renderers.cycles.client import shared_client
 
     p = check_output(out, force, (".blend",))
-    r = _renderer(renderer)  # raises with the set-up instructions when there is no bpy venv
+    r = shared_client(renderer)  # raises with the set-up instructions when there is no bpy venv
     with atomic_output(p) as tmp:
-        request = _request(tmp, result, source, p)
+        request = write_request(tmp, result, source, p)
         r.call(request)
         if not os.path.getsize(tmp):
             raise MatremapError(f"Blender wrote nothing to {tmp}")
     return p
 
 
-__all__ = ["GEOMETRY", "MODELS", "write"]
+__all__ = ["GEOMETRY", "MODELS", "write", "write_request"]
