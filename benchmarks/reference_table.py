@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from matremap.core.fit import fit
-from matremap.core.models import Material
+from matremap.core.material import Material
 from matremap.core.scene import Scene
+from matremap.uniform import fit
 
 # the authors' published table, kept with its provenance in tests/data/README.md
 TABLE = Path(__file__).resolve().parents[1] / "tests" / "data" / "reference" / "mitsuba-ward2mitsuba-as.csv"

@@ -37,7 +37,7 @@ from matremap.sweep.grid import parse_grid
 from matremap.sweep.run import SweepConfig, run_sweep
 
 ROOT = Path(__file__).resolve().parents[1]
-TABLE = ROOT.parent / "shared" / "reference" / "mitsuba-ward2mitsuba-as.csv"
+TABLE = ROOT / "tests" / "data" / "reference" / "mitsuba-ward2mitsuba-as.csv"
 SOURCE = Material.create("mitsuba06:ward", {"variant": "ward", "diffuseReflectance": 0.0})
 GRID_BOX = "alpha=0.02:0.99:30,specularReflectance=0.02:0.3:15"
 GRID_AUTHORS = "alpha=0.005:0.99:35,specularReflectance=0.02:0.232413793103:23"

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from matremap.core.models import Material
+from matremap.core.material import Material
 from matremap.core.scene import Scene
 from matremap.sweep.executors import make_executor
 from matremap.sweep.grid import parse_grid

@@ -22,7 +22,7 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -192,7 +192,8 @@ class _Problem:
         return Material(self.template.model, values, self.template.options)
 
     def _pixels(self, xs: Sequence[np.ndarray]) -> np.ndarray:
-        mats = [part(self.decode(x), self.which) for x in xs]
+        # a stage only fits a part the target has, so no part is None here
+        mats = cast("list[Material]", [part(self.decode(x), self.which) for x in xs])
         pix = self.counter.pixels(self.renderer, mats)
         return pix[:, :, :1] if self.grey else pix
 

@@ -31,7 +31,8 @@ from typing import Any
 import numpy as np
 
 from matremap.core.documents import read_document
-from matremap.core.models import Material, ModelSpec
+from matremap.core.material import Material
+from matremap.core.models import ModelSpec
 from matremap.errors import MatremapError
 
 CHANNELS = {"r": 0, "g": 1, "b": 2}

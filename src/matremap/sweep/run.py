@@ -180,7 +180,8 @@ def plan(config: SweepConfig, grid: Grid, finished: set[str]) -> tuple[list[list
         key = point_key(swept)
         material = grid.material(config.source, index)
         lines.setdefault(index[:-1], []).append((key, swept, material.to_dict()["params"], key in finished))
-    todo, warms = [], []
+    todo: list[Any] = []
+    warms: list[Any] = []
     for line in lines.values():
         pending = [(k, s, p) for k, s, p, done in line if not done]
         if pending:

@@ -90,7 +90,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from matremap.core.models import ModelSpec, ParamSpec, get_model
+from matremap.core.models import ModelSpec, ParamSpec
+from matremap.dialects import get_model
 from matremap.sweep.grid import Grid
 
 JUMP_RELATIVE = 0.05
