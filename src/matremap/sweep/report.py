@@ -194,9 +194,19 @@ def write_report(db: str | Path, out: Path, force: bool = False) -> str:
 
 
 def summary(data: SweepData, skipped: Sequence[str] = (), written: Sequence[Path] = ()) -> str:
-    """The report's text."""
-    a, cfg, grid = data.analysis, data.config, data.grid
-    lines = [f"sweep {data.path}"]
+    """The report's text: what was swept, how many points, the flags, losses and costs, and the round trip."""
+    lines = [f"sweep {data.path}", _summary_setup(data), *_summary_points(data), *_summary_fits(data)]
+    lines += _summary_round_trip(data)
+    for note in list(data.analysis.notes) + list(skipped):
+        lines.append(f"  note: {note}")
+    if written:
+        lines.append("  wrote: " + ", ".join(str(p) for p in written))
+    return "\n".join(lines)
+
+
+def _summary_setup(data: SweepData) -> str:
+    """Source model and options -> target model, fixes, strategy and modes."""
+    cfg, grid = data.config, data.grid
     src = cfg["source"]
     swept = {ax.name for ax in grid.axes} if grid is not None else set()
     opts = {k: v for k, v in src["params"].items() if isinstance(v, str) and k not in swept}
@@ -206,35 +216,45 @@ def summary(data: SweepData, skipped: Sequence[str] = (), written: Sequence[Path
         f"free {', '.join(tgt['free'])}" if tgt.get("free") else "",
     ]
     modes = [m for m, on in (("continuation", cfg.get("continuation")), ("round trip", cfg.get("round_trip"))) if on]
-    lines.append(
+    return (
         f"  {src['model']}{_opts(opts)} -> {tgt['model']}"
         + (f" ({'; '.join(e for e in extras if e)})" if any(extras) else "")
         + f", strategy {cfg.get('strategy')}"
         + (f", {', '.join(modes)}" if modes else "")
     )
-    ok, failed = a.ok_rows, a.failed_rows
+
+
+def _summary_points(data: SweepData) -> list[str]:
+    """The grid, the points done and failed, and the stability flags."""
+    a, grid = data.analysis, data.grid
+    lines = []
     if grid is not None:
         missing = len(grid) - len(a.index)
         lines.append(f"  grid: {' x '.join(f'{ax.label} {len(ax.values)}' for ax in grid.axes)} = {len(grid)} points")
     else:
         missing = 0
         lines.append("  grid: not stored in the database")
-    counts = f"  points: {len(ok)} ok, {len(failed)} failed"
+    counts = f"  points: {len(a.ok_rows)} ok, {len(a.failed_rows)} failed"
     if a.off_grid:
         counts += f", {len(a.off_grid)} not on the current grid (exported, not plotted)"
     if missing > 0:
         counts += f"; {missing} grid points without a result yet"
     lines.append(counts)
-
-    flagged = a.flagged_keys
-    if flagged:
-        lines.append(f"  flagged: {len(flagged)} point(s)")
+    if a.flagged_keys:
+        lines.append(f"  flagged: {len(a.flagged_keys)} point(s)")
         width = max(len(r) for r in a.counts)
         for reason, n in a.counts.items():
             lines.append(f"    {reason:<{width}}  {n:>5}   {REASONS.get(reason.split(':')[0], '')}")
     else:
         lines.append("  flagged: none")
+    return lines
 
+
+def _summary_fits(data: SweepData) -> list[str]:
+    """Losses, renders and seconds per fit, warm starts."""
+    a = data.analysis
+    ok = a.ok_rows
+    lines = []
     losses = np.array([r["loss"] for r in ok if r.get("loss") is not None], dtype=float)
     if losses.size:
         lines.append(
@@ -249,40 +269,35 @@ def summary(data: SweepData, skipped: Sequence[str] = (), written: Sequence[Path
             f"median {np.median(seconds) if seconds else float('nan'):.3g} s"
         )
     lines.append(f"  warm-started: {sum(1 for r in ok if r.get('warm'))} of {len(ok)}")
+    return lines
 
+
+def _summary_round_trip(data: SweepData) -> list[str]:
+    """Round-trip regression lines, with and without the flagged points, and the back-fit losses."""
+    a, grid = data.analysis, data.grid
     trips = round_trip_stats(data.rows, grid)
-    if trips:
+    if not trips:
+        return ["  round trip: no finished round trip on a numeric grid axis"] if data.config.get("round_trip") else []
+    lines = ["  round trip, recovered vs original (least-squares line with intercept; R² of that line, and of y = x):"]
+    lines += [_trip_line(t) for t in trips.values()]
+    unflagged = [r for r in data.rows if not a.flags.get(r["key"])]
+    if len(unflagged) < len(data.rows):
+        clean = round_trip_stats(unflagged, grid)
         lines.append(
-            "  round trip, recovered vs original (least-squares line with intercept; R² of that line, and of y = x):"
+            f"    without the {len(data.rows) - len(unflagged)} flagged points (as the paper filters unstable cases):"
         )
-        for t in trips.values():
-            lines.append(
-                f"    {t.param}: slope {t.slope:.4f}, intercept {t.intercept:+.4g}, R² {t.r2:.4f} "
-                f"(y = x: {t.r2_identity:.4f}), n = {t.n}"
-            )
-        unflagged = [r for r in data.rows if not a.flags.get(r["key"])]
-        if len(unflagged) < len(data.rows):
-            clean = round_trip_stats(unflagged, grid)
-            lines.append(
-                f"    without the {len(data.rows) - len(unflagged)} flagged points (as the paper filters "
-                "unstable cases):"
-            )
-            for t in clean.values():
-                lines.append(
-                    f"    {t.param}: slope {t.slope:.4f}, intercept {t.intercept:+.4g}, R² {t.r2:.4f} "
-                    f"(y = x: {t.r2_identity:.4f}), n = {t.n}"
-                )
-        back = [r["back_loss"] for r in ok if r.get("back_loss") is not None]
-        if back:
-            lines.append(f"    back-fit loss: median {np.median(back):.4g}, max {max(back):.4g}")
-    elif cfg.get("round_trip"):
-        lines.append("  round trip: no finished round trip on a numeric grid axis")
+        lines += [_trip_line(t) for t in clean.values()]
+    back = [r["back_loss"] for r in a.ok_rows if r.get("back_loss") is not None]
+    if back:
+        lines.append(f"    back-fit loss: median {np.median(back):.4g}, max {max(back):.4g}")
+    return lines
 
-    for note in list(a.notes) + list(skipped):
-        lines.append(f"  note: {note}")
-    if written:
-        lines.append("  wrote: " + ", ".join(str(p) for p in written))
-    return "\n".join(lines)
+
+def _trip_line(t: Any) -> str:
+    return (
+        f"    {t.param}: slope {t.slope:.4f}, intercept {t.intercept:+.4g}, R² {t.r2:.4f} "
+        f"(y = x: {t.r2_identity:.4f}), n = {t.n}"
+    )
 
 
 def _opts(opts: Mapping[str, str]) -> str:
