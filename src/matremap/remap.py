@@ -84,16 +84,10 @@ def sweep_grid(map_set: MapSet, params: Mapping[str, Any]) -> str:
         lo, hi = _range(params[rp.name], rp.bounds)
         axes.append(f"{rp.name}={lo!r}:{hi!r}:{ROUGHNESS_POINTS}")
     metal = spec.specialise({**map_set.constants, **params}).diffuse_only is None  # e.g. glTF with metallic 1
-    if spec.reflectance:
-        kind, *names = spec.reflectance
+    if spec.reflectance is not None:
         # the parameter a map of F0 drives: k for conductors, a glTF metal's base colour or a glTF
         # dielectric's specular colour
-        if kind == "conductor":
-            name = names[1]
-        elif kind == "metal-rough":
-            name = names[0] if metal else names[4]
-        else:
-            name = names[0]
+        name = spec.reflectance.driven_param(metal)
         if name in map_set.maps:
             lo, hi = _range(params[name], spec.param(name).bounds)
             axes.append(f"{name}={lo!r}:{hi!r}:{SPECULAR_POINTS}")

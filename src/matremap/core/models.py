@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from matremap.core.reflectance import Reflectance
 from matremap.errors import MatremapError
 
 ROLES = ("diffuse", "specular", "roughness", "fresnel", "other")
@@ -107,7 +108,8 @@ class ModelSpec:
     summary: str = ""
     doc: str = ""
     channel_separable: bool = True
-    reflectance: tuple[str, ...] = ()
+    #: how the parameters give F0 (:mod:`matremap.core.reflectance`); None: no specular reflectance
+    reflectance: Reflectance | None = None
     #: how the renderer shades normals bent by a normal map: "plain" (the bent normal, nothing else) or
     #: "cycles" (Cycles' bump shadowing term on diffuse closures, raised normals on glossy ones)
     normal_mapping: str = "plain"

@@ -28,6 +28,7 @@ sphere shadows itself), so those points are black as with ray-traced shadows.
 from __future__ import annotations
 
 from matremap.core.models import ModelSpec, ParamSpec
+from matremap.core.reflectance import SpecularParam
 
 WARD = ModelSpec(
     id="blender27:ward",
@@ -41,7 +42,7 @@ WARD = ModelSpec(
     ),
     diffuse_only={"specular_intensity": 0.0},
     specular_only={"diffuse_intensity": 0.0},
-    reflectance=("param", "specular_color"),
+    reflectance=SpecularParam("specular_color"),
 )
 
 #: the models of this dialect, in the order they are listed

@@ -45,6 +45,7 @@ cycles:diffuse -- the Diffuse BSDF node with Roughness 0 (Lambert): Color/pi.
 from __future__ import annotations
 
 from matremap.core.models import ModelSpec, OptionSpec, ParamSpec
+from matremap.core.reflectance import Dielectric, SpecularParam
 
 GLOSSY = ModelSpec(
     id="cycles:glossy",
@@ -57,7 +58,7 @@ GLOSSY = ModelSpec(
     options=(OptionSpec("distribution", ("ggx", "beckmann", "ashikhmin_shirley", "multi_ggx"), "ggx"),),
     diffuse_only={"Color": 0.0},
     specular_only={"Diffuse Color": 0.0},
-    reflectance=("param", "Color"),
+    reflectance=SpecularParam("Color"),
     normal_mapping="cycles",
 )
 
@@ -110,7 +111,7 @@ PRINCIPLED = ModelSpec(
     # a metal's lobe takes Base Color's colour, so this isolates nothing when Metallic > 0
     specular_only={"Base Color": 0.0},
     # F0 of the IOR, with Specular IOR Level held at 0.5 (where Cycles leaves F0 as the IOR gives it)
-    reflectance=("dielectric", "IOR"),
+    reflectance=Dielectric("IOR"),
     channel_separable=False,
     normal_mapping="cycles",
 )

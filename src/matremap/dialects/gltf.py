@@ -25,6 +25,7 @@ The parameter names are the glTF JSON property names without ``Factor``.
 from __future__ import annotations
 
 from matremap.core.models import ModelSpec, OptionSpec, ParamSpec
+from matremap.core.reflectance import MetalRough
 
 METAL_ROUGH = ModelSpec(
     id="gltf:metal-rough",
@@ -85,7 +86,7 @@ METAL_ROUGH = ModelSpec(
             {"roles": {"baseColor": "specular", "ior": "other"}, "diffuse_only": None, "specular_only": {}},
         ),
     ),
-    reflectance=("metal-rough", "baseColor", "metallic", "ior", "specular", "specularColor"),
+    reflectance=MetalRough("baseColor", "metallic", "ior", "specular", "specularColor"),
 )
 
 #: the models of this dialect, in the order they are listed

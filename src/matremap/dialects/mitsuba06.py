@@ -44,6 +44,7 @@ Formulas, with H = i + o unnormalised, h = H/|H|, tan^2 = tan^2 of the half-vect
 from __future__ import annotations
 
 from matremap.core.models import ModelSpec, OptionSpec, ParamSpec
+from matremap.core.reflectance import Conductor, Dielectric, SpecularParam
 
 #: the microfacet distributions of Mitsuba 0.6 (``microfacet.h``): Beckmann, GGX, Phong, Ashikhmin-Shirley
 DISTRIBUTIONS = ("beckmann", "ggx", "phong", "as")
@@ -89,7 +90,7 @@ WARD = ModelSpec(
     diffuse_only={"specularReflectance": 0.0},
     specular_only={"diffuseReflectance": 0.0},
     channel_separable=False,  # the energy clamp looks at all channels at once
-    reflectance=("param", "specularReflectance"),
+    reflectance=SpecularParam("specularReflectance"),
 )
 
 PHONG = ModelSpec(
@@ -103,7 +104,7 @@ PHONG = ModelSpec(
     diffuse_only={"specularReflectance": 0.0},
     specular_only={"diffuseReflectance": 0.0},
     channel_separable=False,  # the energy clamp looks at all channels at once
-    reflectance=("param", "specularReflectance"),
+    reflectance=SpecularParam("specularReflectance"),
 )
 
 ROUGHCONDUCTOR = ModelSpec(
@@ -128,7 +129,7 @@ ROUGHCONDUCTOR = ModelSpec(
     options=(_distribution(DISTRIBUTIONS, "beckmann"),),
     diffuse_only=None,
     specular_only={},
-    reflectance=("conductor", "eta", "k", "extEta"),
+    reflectance=Conductor("eta", "k", "extEta"),
 )
 
 ROUGHPLASTIC = ModelSpec(
@@ -147,7 +148,7 @@ ROUGHPLASTIC = ModelSpec(
     ),
     diffuse_only={"specularReflectance": 0.0},
     specular_only={"diffuseReflectance": 0.0},
-    reflectance=("dielectric", "intIOR", "extIOR"),
+    reflectance=Dielectric("intIOR", "extIOR"),
 )
 
 PBR = ModelSpec(
@@ -164,7 +165,7 @@ PBR = ModelSpec(
     options=(_distribution(DISTRIBUTIONS, "as"),),
     diffuse_only={"specularReflectance": 0.0},
     specular_only={"diffuseReflectance": 0.0},
-    reflectance=("param", "F0"),
+    reflectance=SpecularParam("F0"),
 )
 
 #: the models of this dialect, in the order they are listed

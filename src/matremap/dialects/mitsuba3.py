@@ -49,6 +49,7 @@ mitsuba3:principled        base_color (0.5); roughness, metallic, specular (0.5)
 from __future__ import annotations
 
 from matremap.core.models import ModelSpec, OptionSpec, ParamSpec
+from matremap.core.reflectance import Conductor, Dielectric
 
 CONDUCTORS = (
     "none",
@@ -189,7 +190,7 @@ ROUGHCONDUCTOR = ModelSpec(
     diffuse_only=None,
     specular_only={},
     # F0 of eta + i k (no exterior IOR in Mitsuba 3); with a named `material` eta/k are unused
-    reflectance=("conductor", "eta", "k"),
+    reflectance=Conductor("eta", "k"),
 )
 
 ROUGHPLASTIC = ModelSpec(
@@ -208,7 +209,7 @@ ROUGHPLASTIC = ModelSpec(
     ),
     diffuse_only={"specular_reflectance": 0.0},
     specular_only={"diffuse_reflectance": 0.0},
-    reflectance=("dielectric", "int_ior", "ext_ior"),
+    reflectance=Dielectric("int_ior", "ext_ior"),
 )
 
 PRINCIPLED = ModelSpec(

@@ -21,7 +21,7 @@ import numpy as np
 
 from matremap.core.material import Material
 from matremap.core.models import ModelSpec, ParamSpec
-from matremap.core.optics import dielectric_f0, f0_from_ior, ior_from_f0
+from matremap.core.reflectance import as_floats
 from matremap.errors import MatremapError
 
 QUANTITIES = ("roughness", "reflectance", "diffuse")
@@ -40,16 +40,11 @@ def available(spec: ModelSpec) -> tuple[str, ...]:
     out = []
     if roughness_param(spec) is not None:
         out.append("roughness")
-    if spec.reflectance:
+    if spec.reflectance is not None:
         out.append("reflectance")
     if diffuse_param(spec) is not None:
         out.append("diffuse")
     return tuple(out)
-
-
-def _rgb(v: np.ndarray, channels: int) -> np.ndarray:
-    v = as_floats(v)
-    return np.repeat(v[..., None], 3, axis=-1) if channels == 1 else v
 
 
 def read(spec: ModelSpec, values: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -58,40 +53,18 @@ def read(spec: ModelSpec, values: Mapping[str, np.ndarray]) -> dict[str, np.ndar
     rp = roughness_param(spec)
     if rp is not None:
         out["roughness"] = as_floats(values[rp.name])
-    if spec.reflectance:
-        kind, *names = spec.reflectance
-        ch = {p.name: p.channels for p in spec.params}
-        if kind == "param":
-            out["reflectance"] = _rgb(values[names[0]], ch[names[0]])
-        elif kind == "dielectric":  # (interior IOR[, exterior IOR])
-            eta = as_floats(values[names[0]]) / (as_floats(values[names[1]]) if len(names) > 1 else 1.0)
-            out["reflectance"] = _rgb(f0_from_ior(eta), 1)
-        elif kind == "conductor":  # (eta, k) or (eta, k, exterior IOR)
-            ext = as_floats(values[names[2]])[..., None] if len(names) > 2 else 1.0
-            eta = _rgb(values[names[0]], ch[names[0]]) / ext
-            k = _rgb(values[names[1]], ch[names[1]]) / ext
-            out["reflectance"] = f0_from_ior(eta, k)
-        elif kind == "metal-rough":  # glTF: F0 = mix(dielectric f0, baseColor, metallic)
-            base, metallic, ior, specular, tint = names
-            m = as_floats(values[metallic])[..., None]
-            f0_d = dielectric_f0(
-                as_floats(values[ior])[..., None], as_floats(values[specular])[..., None], _rgb(values[tint], 3)
-            )
-            out["reflectance"] = f0_d * (1.0 - m) + _rgb(values[base], 3) * m
-        else:  # pragma: no cover - specs are checked by tests
-            raise ValueError(kind)
+    if spec.reflectance is not None:
+        out["reflectance"] = spec.reflectance.f0(values, _channels(spec))
     dp = diffuse_param(spec)
     if dp is not None:
         out["diffuse"] = as_floats(values[dp.name])
-        if spec.reflectance and spec.reflectance[0] == "metal-rough":  # a metal's base colour is no albedo
-            out["diffuse"] = out["diffuse"] * (1.0 - as_floats(values[spec.reflectance[2]])[..., None])
+        if spec.reflectance is not None:
+            out["diffuse"] = spec.reflectance.albedo(out["diffuse"], values)
     return out
 
 
-def as_floats(v: Any) -> np.ndarray:
-    """An array of floats, keeping float32 (texture maps) as float32."""
-    a = np.asarray(v)
-    return a if a.dtype in (np.float32, np.float64) else a.astype(float)
+def _channels(spec: ModelSpec) -> dict[str, int]:
+    return {p.name: p.channels for p in spec.params}
 
 
 def write(spec: ModelSpec, quantities: Mapping[str, np.ndarray], template: Mapping[str, Any]) -> dict[str, np.ndarray]:
@@ -112,26 +85,12 @@ def write(spec: ModelSpec, quantities: Mapping[str, np.ndarray], template: Mappi
     if rp is not None and "roughness" in quantities:
         out[rp.name] = as_floats(quantities["roughness"])
         driven.append(rp.name)
-    if spec.reflectance and "reflectance" in quantities:
+    if spec.reflectance is not None and "reflectance" in quantities:
         f0 = clip(as_floats(quantities["reflectance"]), 0.0, 1.0 - 1e-7)
-        kind, *names = spec.reflectance
-        ch = {p.name: p.channels for p in spec.params}
-        if kind == "param":
-            out[names[0]] = f0 if ch[names[0]] == 3 else f0.mean(axis=-1)
-            driven.append(names[0])
-        elif kind == "dielectric":
-            out[names[0]] = ior_from_f0(f0.mean(axis=-1)) * (out[names[1]] if len(names) > 1 else 1.0)
-            driven.append(names[0])
-        elif kind == "conductor":
-            ext = out[names[2]][..., None] if len(names) > 2 else 1.0
-            eta = _rgb(out[names[0]], ch[names[0]]) / ext
-            k2 = (f0 * (eta + 1) ** 2 - (eta - 1) ** 2) / (1.0 - f0)
-            out[names[1]] = np.sqrt(np.maximum(k2, 0.0)) * ext
-            driven.append(names[1])
-        elif kind == "metal-rough":
-            driven += _write_metal_rough(names, f0, quantities.get("diffuse"), out)
+        driven += spec.reflectance.write_f0(f0, out, _channels(spec), quantities.get("diffuse"))
     dp = diffuse_param(spec)
-    if dp is not None and "diffuse" in quantities and spec.reflectance[:1] != ("metal-rough",):
+    writes_albedo = spec.reflectance is not None and spec.reflectance.writes_albedo
+    if dp is not None and "diffuse" in quantities and not writes_albedo:
         out[dp.name] = as_floats(quantities["diffuse"])
         driven.append(dp.name)
     bounds = {p.name: p.bounds for p in spec.params}
@@ -144,30 +103,6 @@ def write(spec: ModelSpec, quantities: Mapping[str, np.ndarray], template: Mappi
             a = np.array(a)
         out[name] = np.clip(a, *bounds[name], out=a)
     return out
-
-
-def _write_metal_rough(
-    names: list[str], f0: np.ndarray, diffuse: np.ndarray | None, out: dict[str, np.ndarray]
-) -> list[str]:
-    """glTF metallic-roughness from F0 and albedo, the template's metallic deciding per texel:
-    a metal (metallic >= 0.5) takes F0 as base colour; a dielectric takes the albedo as base colour
-    and F0 through specularColor = F0 / f0(ior) / specular (KHR_materials_specular), written only
-    where it differs from the template's."""
-    base, metallic, ior, specular, tint = names
-    metal = (np.asarray(out[metallic]) >= 0.5)[..., None]
-    albedo = np.asarray(out[base]) if diffuse is None else as_floats(diffuse)
-    out[base] = np.where(metal, f0, albedo)
-    driven = [base]
-    if not np.all(metal):
-        f0_ior = dielectric_f0(np.asarray(out[ior])[..., None], 1.0, 1.0)
-        scale = np.maximum(np.asarray(out[specular])[..., None] * f0_ior, 1e-12)
-        current = dielectric_f0(
-            np.asarray(out[ior])[..., None], np.asarray(out[specular])[..., None], np.asarray(out[tint])
-        )
-        if np.max(np.abs(np.where(metal, current, f0) - current)) > 1e-4 * max(float(np.max(current)), 1e-12):
-            out[tint] = np.where(metal, np.asarray(out[tint]), f0 / scale)
-            driven.append(tint)
-    return driven
 
 
 def uniform(a: np.ndarray) -> bool:

@@ -81,9 +81,8 @@ def source_params(spec: ModelSpec, quantity: str) -> list[str]:
     if quantity == "diffuse":
         p = qty.diffuse_param(spec)
         return [p.name] if p else []
-    if quantity == "reflectance" and spec.reflectance:
-        kind, *names = spec.reflectance
-        return names[:1] if kind in ("param", "dielectric") else names[:2]
+    if quantity == "reflectance" and spec.reflectance is not None:
+        return list(spec.reflectance.map_params)
     return []
 
 
@@ -95,9 +94,8 @@ def target_param(spec: ModelSpec, quantity: str) -> str | None:
     if quantity == "diffuse":
         p = qty.diffuse_param(spec)
         return p.name if p else None
-    if quantity == "reflectance" and spec.reflectance:
-        kind, *names = spec.reflectance
-        return names[1] if kind == "conductor" else names[0]
+    if quantity == "reflectance" and spec.reflectance is not None:
+        return spec.reflectance.driven_param()
     return None
 
 

@@ -407,7 +407,7 @@ def convention_params(spec: ModelSpec) -> dict[str, str | None]:
     from matremap.regress.quantities import diffuse_param, roughness_param
 
     dp, rp = diffuse_param(spec), roughness_param(spec)
-    sp = spec.reflectance[1] if spec.reflectance and spec.reflectance[0] == "param" else None
+    sp = spec.reflectance.specular_map_param if spec.reflectance is not None else None
     return {"diffuse": dp.name if dp else None, "specular": sp, "roughness": rp.name if rp else None}
 
 
