@@ -21,7 +21,7 @@ from typing import NoReturn
 from matremap import __version__
 from matremap.cli import fit, inspect, learn, maps, sweep
 from matremap.cli.common import Subparsers
-from matremap.errors import MatremapError
+from matremap.errors import EXIT_QUALITY, MatremapError
 
 #: every command, as ``matremap --help`` lists them: what is there, then the workflow's order
 COMMANDS = (
@@ -66,7 +66,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run one command; the exit status: 0, 2 on an error (one line on stderr), 130 when interrupted."""
+    """Run one command; the exit status (see :mod:`matremap.errors`): 0, 2 on bad input, 3 when a result
+    failed the quality gate, 4 when a renderer or the environment failed (one line on stderr), 130 when
+    interrupted."""
     parser = build_parser()
     args = parser.parse_args(argv)
     from matremap.sweep.executors import limit_blas_threads
@@ -75,8 +77,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return args.func(args)
     except MatremapError as e:
-        print(f"matremap: error: {e}", file=sys.stderr)
-        return 2
+        kind = "FAILED" if e.exit_code == EXIT_QUALITY else "error"
+        print(f"matremap: {kind}: {e}", file=sys.stderr)
+        return e.exit_code
     except KeyboardInterrupt:
         print("matremap: interrupted", file=sys.stderr)
         return 130

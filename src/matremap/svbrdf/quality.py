@@ -1,0 +1,284 @@
+"""The quality gate: measures of a remap that a black, grey or hue-shifted result cannot pass.
+
+SSIM on tone-mapped images is blind to a result that is uniformly too dark, grey or of another hue, so
+every remap is also measured on what SSIM ignores:
+
+* **Images** -- the source and target renders (linear, irradiance-matched, object pixels):
+
+  - ``luminance_error``: |mean Y_target - mean Y_source| / mean Y_source, Y the Rec. 709 luminance;
+  - ``delta_e``: mean CIEDE2000 colour difference (CIE 142-2001; Sharma, Wu and Dalal 2005, as
+    implemented by colour-science) after both images are exposed alike (the source's 99th percentile
+    luminance at 0.8), clipped to [0, 1] and taken from linear sRGB to CIELAB (D65);
+  - ``delta_e_fraction``: the fraction of object pixels whose difference exceeds
+    :data:`DELTA_E_TOLERANCE`;
+  - ``dssim``: mean 1 - SSIM (paper §6), kept as the structural measure.
+
+* **Maps** -- the parameter maps read in the common vocabulary of :mod:`matremap.regress.quantities`
+  (diffuse albedo, specular reflectance F0):
+
+  - ``hue_shift``: mean circular difference of hue, in degrees, over the texels whose source colour is
+    saturated (HSV saturation above :data:`SATURATED`);
+  - ``flat``: a target colour that is constant (or zero) where the source's varies;
+  - ``outside``: the fraction of texels outside the transform's training domain.
+
+Each measure has a threshold (:class:`Thresholds`, set on the command line with ``--max-error
+NAME=VALUE``); a remap whose worst measure exceeds its threshold exits with status 3 (see
+:mod:`matremap.errors`), its files written and its report marked FAILED with the reason.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, field, fields, replace
+from typing import Any
+
+import numpy as np
+
+from matremap.errors import MatremapError
+
+#: Rec. 709 / sRGB luminance weights
+LUMA = np.array([0.2126, 0.7152, 0.0722])
+#: a pixel "differs" beyond this CIEDE2000 difference (about where a difference reads as another colour)
+DELTA_E_TOLERANCE = 10.0
+#: HSV saturation above which a texel's hue is compared
+SATURATED = 0.2
+#: a target colour is "flat" when its spread is below this fraction of the source's
+FLAT_RATIO = 0.02
+
+
+@dataclass(frozen=True)
+class Thresholds:
+    """The largest value each measure may take for a remap to pass (see the module docstring)."""
+
+    luminance_error: float = 0.25
+    delta_e: float = 12.0
+    delta_e_fraction: float = 0.5
+    dssim: float = 0.4
+    hue_shift: float = 25.0
+    flat: float = 0.0
+    outside: float = 0.05
+
+    @classmethod
+    def parse(cls, items: Sequence[str]) -> Thresholds:
+        """``NAME=VALUE`` items (``--max-error luminance_error=0.1``) over the defaults."""
+        names = [f.name for f in fields(cls)]
+        out = cls()
+        for item in items:
+            name, sep, value = item.partition("=")
+            name = name.strip().replace("-", "_")
+            if not sep or name not in names:
+                raise MatremapError(f"--max-error {item!r}: expected NAME=VALUE with NAME one of {', '.join(names)}")
+            try:
+                v = float(value)
+            except ValueError:
+                raise MatremapError(f"--max-error {item!r}: {value!r} is not a number") from None
+            if not np.isfinite(v) or v < 0:
+                raise MatremapError(f"--max-error {item!r}: the threshold must be a finite number >= 0")
+            out = replace(out, **{name: v})
+        return out
+
+
+@dataclass(frozen=True)
+class Check:
+    """One measure against its threshold, and where it was worst."""
+
+    name: str
+    value: float
+    threshold: float
+    where: str = ""
+
+    @property
+    def passed(self) -> bool:
+        return bool(self.value <= self.threshold)
+
+    def describe(self) -> str:
+        rel = "<=" if self.passed else ">"
+        return f"{self.name} {self.value:.4g} {rel} {self.threshold:.4g}" + (f" ({self.where})" if self.where else "")
+
+
+@dataclass
+class Verdict:
+    """Every check of a remap; it passes when each does."""
+
+    checks: list[Check] = field(default_factory=list)
+
+    @property
+    def passed(self) -> bool:
+        return all(c.passed for c in self.checks)
+
+    @property
+    def failed(self) -> list[Check]:
+        return [c for c in self.checks if not c.passed]
+
+    def worst(self) -> Check | None:
+        """The check furthest over (or nearest to) its threshold."""
+        if not self.checks:
+            return None
+
+        def ratio(c: Check) -> float:
+            return c.value / c.threshold if c.threshold > 0 else (np.inf if c.value > 0 else 0.0)
+
+        return max(self.failed or self.checks, key=ratio)
+
+    def line(self) -> str:
+        """One line: PASSED or FAILED with the worst measure and where."""
+        worst = self.worst()
+        if worst is None:
+            return "PASSED (no measures)"
+        if self.passed:
+            return f"PASSED: worst {worst.describe()}"
+        others = len(self.failed) - 1
+        return f"FAILED: {worst.describe()}" + (f"; {others} more check(s) failed" if others else "")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "passed": self.passed,
+            "line": self.line(),
+            "checks": [{**asdict(c), "passed": c.passed} for c in self.checks],
+        }
+
+
+# ---------------------------------------------------------------------------------------------
+# images
+
+
+def luminance(rgb: np.ndarray) -> np.ndarray:
+    """Rec. 709 relative luminance of linear RGB [..., 3]."""
+    return np.asarray(rgb, dtype=np.float64) @ LUMA
+
+
+def luminance_error(source: np.ndarray, target: np.ndarray, mask: np.ndarray) -> float:
+    """|mean Y_t - mean Y_s| / mean Y_s over the masked pixels (inf when the source is black and the
+    target is not, 0 when both are)."""
+    ys, yt = float(luminance(source[mask]).mean()), float(luminance(target[mask]).mean())
+    if ys <= 0.0:
+        return 0.0 if yt <= 0.0 else float("inf")
+    return abs(yt - ys) / ys
+
+
+def delta_e_2000(source: np.ndarray, target: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """CIEDE2000 per masked pixel between two linear RGB images exposed alike (the source's 99th
+    percentile luminance at 0.8, clipped to [0, 1]), through linear sRGB -> XYZ -> CIELAB (D65)."""
+    import colour
+
+    s = np.asarray(source, dtype=np.float64)[mask]
+    t = np.asarray(target, dtype=np.float64)[mask]
+    peak = float(np.percentile(luminance(s), 99.0)) if s.size else 0.0
+    if not peak > 0.0:
+        peak = float(np.percentile(luminance(t), 99.0)) if t.size else 0.0
+    exposure = 0.8 / peak if peak > 0.0 else 1.0
+    space = colour.RGB_COLOURSPACES["sRGB"]
+    labs = [
+        colour.XYZ_to_Lab(colour.RGB_to_XYZ(np.clip(a * exposure, 0.0, 1.0), space), space.whitepoint) for a in (s, t)
+    ]
+    return np.asarray(colour.delta_E(labs[0], labs[1], method="CIE 2000"), dtype=np.float64)
+
+
+def image_checks(
+    pairs: Sequence[tuple[str, np.ndarray, np.ndarray]], mask: np.ndarray, thresholds: Thresholds
+) -> list[Check]:
+    """Luminance error and CIEDE2000 over ``(where, source, target)`` render pairs (irradiance-matched,
+    linear); each measure's worst pair is reported."""
+    if not pairs:
+        return []
+    lum, de, frac = [], [], []
+    for where, s, t in pairs:
+        d = delta_e_2000(s, t, mask)
+        lum.append((luminance_error(s, t, mask), where))
+        de.append((float(d.mean()) if d.size else 0.0, where))
+        frac.append((float(np.mean(d > DELTA_E_TOLERANCE)) if d.size else 0.0, where))
+    out = []
+    for name, values in (("luminance_error", lum), ("delta_e", de), ("delta_e_fraction", frac)):
+        value, where = max(values, key=lambda v: v[0])
+        out.append(Check(name, value, getattr(thresholds, name), where))
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# maps
+
+
+def _hue_saturation(rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """HSV hue (degrees) and saturation of RGB [..., 3] (any positive scale)."""
+    rgb = np.asarray(rgb, dtype=np.float64)
+    mx, mn = rgb.max(axis=-1), rgb.min(axis=-1)
+    chroma = mx - mn
+    sat = np.where(mx > 0, chroma / np.where(mx > 0, mx, 1.0), 0.0)
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    safe = np.where(chroma > 0, chroma, 1.0)
+    hue = np.select(
+        [mx == r, mx == g],
+        [((g - b) / safe) % 6.0, (b - r) / safe + 2.0],
+        (r - g) / safe + 4.0,
+    )
+    return 60.0 * hue, sat
+
+
+def hue_shift(source: np.ndarray, target: np.ndarray) -> float:
+    """Mean circular hue difference (degrees) over the texels whose source colour is saturated; 0 when
+    none is. A target texel without chroma (grey) counts as 180 degrees off: its hue is lost."""
+    hs, ss = _hue_saturation(source)
+    ht, st = _hue_saturation(target)
+    sel = ss > SATURATED
+    if not np.any(sel):
+        return 0.0
+    d = np.abs(hs[sel] - ht[sel]) % 360.0
+    d = np.minimum(d, 360.0 - d)
+    d = np.where(st[sel] > 1e-3, d, 180.0)
+    return float(d.mean())
+
+
+def _spread(a: np.ndarray) -> float:
+    return float(np.percentile(a, 95) - np.percentile(a, 5)) if a.size else 0.0
+
+
+def map_checks(
+    source: Mapping[str, np.ndarray], target: Mapping[str, np.ndarray], thresholds: Thresholds
+) -> list[Check]:
+    """Hue and flatness of the colour quantities (``diffuse``, ``reflectance``: [..., 3] arrays in the
+    common vocabulary, sampled alike) that both sides have."""
+    out = []
+    worst_hue, hue_where = 0.0, ""
+    flat: list[str] = []
+    for q in ("diffuse", "reflectance"):
+        if q not in source or q not in target:
+            continue
+        s = np.asarray(source[q], dtype=np.float64).reshape(-1, 3)
+        t = np.broadcast_to(np.asarray(target[q], dtype=np.float64), np.shape(source[q])).reshape(-1, 3)
+        h = hue_shift(s, t)
+        if h > worst_hue:
+            worst_hue, hue_where = h, f"{q} map"
+        ys, yt = luminance(s), luminance(t)
+        if _spread(ys) > 1e-3 and (_spread(yt) <= FLAT_RATIO * _spread(ys) or not np.any(yt > 0)):
+            flat.append(q)
+    out.append(Check("hue_shift", worst_hue, thresholds.hue_shift, hue_where))
+    out.append(
+        Check("flat", float(len(flat)), thresholds.flat, f"{', '.join(flat)} map constant where the source varies")
+        if flat
+        else Check("flat", 0.0, thresholds.flat)
+    )
+    return out
+
+
+def sample(a: Any, limit: int = 512) -> Any:
+    """A strided view of a map (at most ``limit`` texels a side) for the map checks; constants pass."""
+    arr = np.asarray(a)
+    if arr.ndim < 2:
+        return arr
+    step = max(1, int(np.ceil(max(arr.shape[:2]) / limit)))
+    return arr[::step, ::step]
+
+
+__all__ = [
+    "DELTA_E_TOLERANCE",
+    "Check",
+    "Thresholds",
+    "Verdict",
+    "delta_e_2000",
+    "hue_shift",
+    "image_checks",
+    "luminance",
+    "luminance_error",
+    "map_checks",
+    "sample",
+]
