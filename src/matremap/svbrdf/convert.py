@@ -20,11 +20,9 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
-import tempfile
 import time
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from matremap.core.atomic import AtomicFiles
 from matremap.core.models import ModelSpec
 from matremap.dialects import get_model
 from matremap.errors import MatremapError
@@ -246,7 +245,8 @@ def convert(
     out_format: str | None = None,
 ) -> ConvertReport:
     """Apply a transform (or a chain of them) to every texel of ``map_set``; write the target maps,
-    ``outside_domain.png``, a copy of the normal map and ``material.json`` into ``out_dir``.
+    ``outside_domain.png``, a copy of the normal map and ``material.json`` into ``out_dir``, all or
+    nothing (:class:`~matremap.core.atomic.AtomicFiles`).
 
     ``tile_rows``: rows per band (default: about a million texels per band); ``workers``: processes
     (1 works in this process); ``progress(rows_done, rows)`` is called in this process;
@@ -258,15 +258,65 @@ def convert(
         raise MatremapError("no transform given; pass --transform T.json")
     t = ts[0] if len(ts) == 1 else Transform.chain(ts)
     notes = list(map_set.notes) + _check_transform(map_set, t)
+    height, width = map_set.size
+    rows = tile_rows or max(8, min(512, (1 << 20) // max(width, 1)))
+    out = Path(out_dir)
+    _check_out_dir(map_set, out)
+    planned = _plan_outputs(map_set, t, out, out_format, notes)
+    final_normal = out / map_set.normal.name if map_set.normal else None
+    finals = [p for _, p, _ in planned] + ([final_normal] if final_normal else []) + [out / MANIFEST_NAME]
+    if len({f.name for f in finals}) != len(finals):
+        raise MatremapError(f"two outputs would share a name in {out}; rename the normal map")
+    inputs = {f.resolve() for f in map_set.files}
+    for f in finals:
+        if f.resolve() in inputs:
+            raise MatremapError(f"writing {f} would overwrite an input; choose another output folder")
+    files = AtomicFiles(force, make_folders=True, exists_hint="choose an empty output folder or pass --force")
+    for f in finals:
+        files.check(f)
+    with files:
+        outputs = [
+            _Output(name, path, str(files.stage(path)), info, cost=_cost(name, info)) for name, path, info in planned
+        ]
+        plan = _Plan(
+            t.to_dict(),
+            map_set.model,
+            {k: str(v) for k, v in map_set.maps.items()},
+            dict(map_set.info),
+            _constants(map_set, t),
+            (height, width),
+            rows,
+        )
+        results = _execute(plan, outputs, workers, progress)
+        outside = results[0]["outside"]
+        notes += _clipping_notes(results, outputs)
+        doc = _manifest(map_set, t, outputs, results[0]["first"], final_normal, outside)
+        files.write_text(out / MANIFEST_NAME, json.dumps(doc, indent=1) + "\n")
+        if map_set.normal and final_normal is not None:
+            files.copy(map_set.normal, final_normal)
+    texels = height * width
+    if outside:
+        warnings.warn(
+            f"{outside} of {texels} texels ({100 * outside / texels:.1f}%) lie outside the transform's "
+            f"training domain; {out / MASK_NAME} marks them",
+            stacklevel=2,
+        )
+    return ConvertReport(texels, outside, files.destinations, time.perf_counter() - start, t.target, notes)
+
+
+def _cost(name: str | None, info: ImageInfo) -> float:
+    """The relative cost of writing one output (PNG encoding is the slow part)."""
+    return info.channels * (4.0 if info.format == "png" else 1.0) if name else 0.3
+
+
+def _plan_outputs(
+    map_set: MapSet, t: Transform, out: Path, out_format: str | None, notes: list[str]
+) -> list[tuple[str | None, Path, ImageInfo]]:
+    """(target parameter or None for the domain mask, file, image format) of every map the transform
+    drives; an IOR or absorption coefficient goes to float EXR (it does not fit an 8/16-bit file)."""
     src, tgt = get_model(t.source), get_model(t.target)
     last = t.steps[-1] if t.method == "chain" else t
     height, width = map_set.size
-    rows = tile_rows or max(8, min(512, (1 << 20) // max(width, 1)))
-
-    out = Path(out_dir)
-    _check_out_dir(map_set, out)
-
-    # what is written, and how
     prefix = _prefix(map_set)
     planned: list[tuple[str | None, Path, ImageInfo]] = []
     any_info = next(iter(map_set.info.values()))
@@ -283,118 +333,59 @@ def convert(
         p = tgt.param(name)
         info = output_info(base.like(channels=p.channels, width=width, height=height, path=""), out_format)
         if out_format is None and info.integer and p.role == "fresnel" and p.bounds[1] > 1.0:
-            # an IOR or absorption coefficient does not fit an 8/16-bit file: write floats
             info = output_info(info.like(colorspace="linear"), "exr")
             notes.append(f"{name} takes values above 1: written as float EXR")
         fname = f"{prefix}_{_CONVENTION[q] if name == target_param(tgt, q) and q in _CONVENTION else name}"
         planned.append((name, out / (fname + info.suffix), info))
     planned.append((None, out / MASK_NAME, ImageInfo("png", "uint8", 1, width, height, "linear")))
-    final_normal = out / map_set.normal.name if map_set.normal else None
-    finals = [p for _, p, _ in planned] + ([final_normal] if final_normal else []) + [out / MANIFEST_NAME]
-    if len({f.name for f in finals}) != len(finals):
-        raise MatremapError(f"two outputs would share a name in {out}; rename the normal map")
-    inputs = {f.resolve() for f in map_set.files}
-    for f in finals:
-        if f.resolve() in inputs:
-            raise MatremapError(f"writing {f} would overwrite an input; choose another output folder")
-    existing = [f for f in finals if f.exists()]
-    if existing and not force:
-        raise MatremapError(f"{existing[0]} already exists; choose an empty output folder or pass --force")
+    return planned
 
-    created = not out.exists()
-    out.mkdir(parents=True, exist_ok=True)
-    temps: list[str] = []
 
-    def tmp_for(path: Path) -> str:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=out)
-        os.close(fd)
-        temps.append(tmp)
-        return tmp
-
-    try:
-        outputs = [
-            _Output(
-                name,
-                path,
-                tmp_for(path),
-                info,
-                cost=info.channels * (4.0 if info.format == "png" else 1.0) if name else 0.3,
+def _clipping_notes(results: Sequence[Mapping[str, Any]], outputs: Sequence[_Output]) -> list[str]:
+    """A note for each map whose values were clipped to fit its file format."""
+    clipped: dict[str, int] = {}
+    for r in results:
+        clipped.update(r["clipped"])
+    notes = []
+    for name, n in clipped.items():
+        if n:
+            o = next(o for o in outputs if o.param == name)
+            notes.append(
+                f"{n} values of {name} lay outside [0, 1] and were clipped in {o.path.name} "
+                f"({o.info.pixel_type}); write a float format (out_format='exr') to keep them"
             )
-            for name, path, info in planned
-        ]
-        plan = _Plan(
-            t.to_dict(),
-            map_set.model,
-            {k: str(v) for k, v in map_set.maps.items()},
-            dict(map_set.info),
-            _constants(map_set, t),
-            (height, width),
-            rows,
-        )
-        results = _execute(plan, outputs, workers, progress)
-        outside = results[0]["outside"]
-        clipped: dict[str, int] = {}
-        for r in results:
-            clipped.update(r["clipped"])
-        for name, n in clipped.items():
-            if n:
-                o = next(o for o in outputs if o.param == name)
-                notes.append(
-                    f"{n} values of {name} lay outside [0, 1] and were clipped in {o.path.name} "
-                    f"({o.info.pixel_type}); write a float format (out_format='exr') to keep them"
-                )
-        # the manifest: driven maps, and every other target parameter as a constant
-        first = results[0]["first"]
-        constants: dict[str, Any] = dict(last.target_options)
-        maps = {o.param: o.path for o in outputs if o.param}
-        for p in tgt.params:
-            if p.name not in maps:
-                v = first.get(p.name, last.template.get(p.name))
-                constants[p.name] = v if np.ndim(v) == 0 or p.channels == 3 else float(np.ravel(v)[0])
-        doc: dict[str, Any] = {"model": tgt.id, "maps": {k: v.name for k, v in maps.items()}}
-        if final_normal:
-            doc["normal"] = final_normal.name
-        doc["params"] = constants
-        doc["colorspace"] = {o.path.name: o.info.colorspace for o in outputs if o.param}
-        doc["provenance"] = {
-            "source": str(map_set.root),
-            "source_model": map_set.model,
-            "transform": t.describe(),
-            "outside_domain": {"file": MASK_NAME, "texels": outside},
-        }
-        manifest_tmp = tmp_for(out / MANIFEST_NAME)
-        Path(manifest_tmp).write_text(json.dumps(doc, indent=1) + "\n")
-        normal_tmp = None
-        if map_set.normal:
-            normal_tmp = tmp_for(final_normal)  # type: ignore[arg-type]
-            shutil.copyfile(map_set.normal, normal_tmp)
-        umask = os.umask(0)
-        os.umask(umask)
-        moves = [(o.tmp, o.path) for o in outputs] + [(manifest_tmp, out / MANIFEST_NAME)]
-        if normal_tmp:
-            moves.append((normal_tmp, final_normal))
-        for tmp, final in moves:
-            os.chmod(tmp, 0o666 & ~umask)
-            os.replace(tmp, final)
-    except BaseException:
-        for tmp in temps:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-        if created:
-            try:
-                out.rmdir()
-            except OSError:
-                pass
-        raise
-    texels = height * width
-    if outside:
-        warnings.warn(
-            f"{outside} of {texels} texels ({100 * outside / texels:.1f}%) lie outside the transform's "
-            f"training domain; {out / MASK_NAME} marks them",
-            stacklevel=2,
-        )
-    files = [path for _, path in moves]
-    return ConvertReport(texels, outside, files, time.perf_counter() - start, tgt.id, notes)
+    return notes
+
+
+def _manifest(
+    map_set: MapSet,
+    t: Transform,
+    outputs: Sequence[_Output],
+    first: Mapping[str, Any],
+    final_normal: Path | None,
+    outside: int,
+) -> dict[str, Any]:
+    """``material.json``: the driven maps, every other target parameter as a constant, provenance."""
+    tgt = get_model(t.target)
+    last = t.steps[-1] if t.method == "chain" else t
+    constants: dict[str, Any] = dict(last.target_options)
+    maps = {o.param: o.path for o in outputs if o.param}
+    for p in tgt.params:
+        if p.name not in maps:
+            v = first.get(p.name, last.template.get(p.name))
+            constants[p.name] = v if np.ndim(v) == 0 or p.channels == 3 else float(np.ravel(v)[0])
+    doc: dict[str, Any] = {"model": tgt.id, "maps": {k: v.name for k, v in maps.items()}}
+    if final_normal:
+        doc["normal"] = final_normal.name
+    doc["params"] = constants
+    doc["colorspace"] = {o.path.name: o.info.colorspace for o in outputs if o.param}
+    doc["provenance"] = {
+        "source": str(map_set.root),
+        "source_model": map_set.model,
+        "transform": t.describe(),
+        "outside_domain": {"file": MASK_NAME, "texels": outside},
+    }
+    return doc
 
 
 def _constants(map_set: MapSet, t: Transform) -> dict[str, Any]:

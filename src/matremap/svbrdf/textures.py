@@ -447,116 +447,141 @@ def load_map_set(path: str | os.PathLike, model: str | None = None, params: Mapp
         raise MatremapError(f"map set {p} not found; give a folder of maps or a material.json")
     manifest = p if p.is_file() else next((p / m for m in MANIFESTS if (p / m).is_file()), None)
     root = p.parent if p.is_file() else p
-    constants: dict[str, Any] = dict(params or {})
-    cs_given: dict[str, str] = {}
-    normal: Path | None = None
-    if manifest is not None:
-        if manifest.suffix.lower() not in (".json", ".toml"):
-            raise MatremapError(f"{manifest} is not a manifest; give a folder or a material.json/.toml")
-        obj = _read_manifest(manifest)
-        unknown = set(obj) - {"model", "maps", "normal", "params", "colorspace", "size", "notes", "provenance"}
-        if unknown:
-            raise MatremapError(
-                f"{manifest}: unknown keys {', '.join(sorted(unknown))}; use model, maps, normal, params, colorspace"
-            )
-        mmodel = obj.get("model")
-        if not isinstance(mmodel, str):
-            raise MatremapError(f"{manifest}: 'model' must name a model, e.g. \"mitsuba06:ward\"")
-        if model is not None and get_model(model).id != get_model(mmodel).id:
-            raise MatremapError(
-                f"{manifest} says the maps are for {mmodel}, not {model}; drop the model argument or fix the manifest"
-            )
-        model = mmodel
-        maps_obj = obj.get("maps", {})
-        if not isinstance(maps_obj, dict) or not all(isinstance(v, str) for v in maps_obj.values()):
-            raise MatremapError(f"{manifest}: 'maps' must map parameter names to file names")
-        files = {k: root / v for k, v in maps_obj.items()}
-        if obj.get("normal") is not None:
-            normal = root / str(obj["normal"])
-        constants.update(obj.get("params", {}) or {})
-        cs_obj = obj.get("colorspace", {}) or {}
-        if not isinstance(cs_obj, dict):
-            raise MatremapError(f"{manifest}: 'colorspace' must map file or parameter names to srgb/linear")
-        for k, v in cs_obj.items():
-            cs_given[k] = normalise_colorspace(v, f"{manifest}: {k}: ")
-        where = str(manifest)
-    else:
-        if model is None:
-            raise MatremapError(
-                f"{p} has no material.json or material.toml; name the maps' model "
-                f"(e.g. --model mitsuba06:ward) to use the *_diffuse/*_specular/*_roughness/"
-                f"*_normal file-name conventions"
-            )
-        spec = get_model(model)
-        found = _find_by_convention(root)
-        if not found:
-            raise MatremapError(
-                f"{root} holds no maps named *_diffuse, *_specular, *_roughness or *_normal "
-                f"(png, jpg, tif, exr); rename them or write a material.json"
-            )
-        bind = convention_params(spec)
-        files = {}
-        for role, f in found.items():
-            if role == "normal":
-                normal = f
-                continue
-            if bind[role] is None:
-                raise MatremapError(
-                    f"{f.name}: model {spec.id} has no {role} parameter to bind it to; bind the maps in a material.json"
-                )
-            files[bind[role]] = f
-        where = str(root)
+    found = _bind_manifest(manifest, root, model) if manifest is not None else _bind_conventions(root, model)
+    spec = get_model(found.model)
+    constants = _check_bindings(spec, found.files, {**dict(params or {}), **found.constants}, found.where)
+    ms = MapSet(spec.id, found.files, root, normal=found.normal, constants=constants)
+    for name, f in found.files.items():
+        cs = found.colorspace.get(f.name, found.colorspace.get(name))
+        ms.info[name] = image_info(f, cs, colour=_is_colour(spec, name))
+        ms.colorspace[name] = ms.info[name].colorspace
+        _check_channels(spec, name, ms.info[name], ms.notes)
+    ms.size = _common_size(ms, found.colorspace)
+    return ms
+
+
+@dataclass
+class _Bindings:
+    """What a manifest or the file-name conventions bind: parameter -> file, normal map, constants."""
+
+    model: str
+    files: dict[str, Path]
+    normal: Path | None
+    constants: dict[str, Any]
+    colorspace: dict[str, str]
+    where: str
+
+
+def _bind_manifest(manifest: Path, root: Path, model: str | None) -> _Bindings:
+    """The bindings a ``material.json``/``.toml`` declares, checked."""
+    if manifest.suffix.lower() not in (".json", ".toml"):
+        raise MatremapError(f"{manifest} is not a manifest; give a folder or a material.json/.toml")
+    obj = _read_manifest(manifest)
+    unknown = set(obj) - {"model", "maps", "normal", "params", "colorspace", "size", "notes", "provenance"}
+    if unknown:
+        raise MatremapError(
+            f"{manifest}: unknown keys {', '.join(sorted(unknown))}; use model, maps, normal, params, colorspace"
+        )
+    mmodel = obj.get("model")
+    if not isinstance(mmodel, str):
+        raise MatremapError(f"{manifest}: 'model' must name a model, e.g. \"mitsuba06:ward\"")
+    if model is not None and get_model(model).id != get_model(mmodel).id:
+        raise MatremapError(
+            f"{manifest} says the maps are for {mmodel}, not {model}; drop the model argument or fix the manifest"
+        )
+    maps_obj = obj.get("maps", {})
+    if not isinstance(maps_obj, dict) or not all(isinstance(v, str) for v in maps_obj.values()):
+        raise MatremapError(f"{manifest}: 'maps' must map parameter names to file names")
+    normal = root / str(obj["normal"]) if obj.get("normal") is not None else None
+    cs_obj = obj.get("colorspace", {}) or {}
+    if not isinstance(cs_obj, dict):
+        raise MatremapError(f"{manifest}: 'colorspace' must map file or parameter names to srgb/linear")
+    colorspace = {k: normalise_colorspace(v, f"{manifest}: {k}: ") for k, v in cs_obj.items()}
+    files = {k: root / v for k, v in maps_obj.items()}
+    return _Bindings(mmodel, files, normal, dict(obj.get("params", {}) or {}), colorspace, str(manifest))
+
+
+def _bind_conventions(root: Path, model: str | None) -> _Bindings:
+    """The bindings of maps named ``*_diffuse``, ``*_specular``, ``*_roughness``, ``*_normal``."""
+    if model is None:
+        raise MatremapError(
+            f"{root} has no material.json or material.toml; name the maps' model "
+            f"(e.g. --model mitsuba06:ward) to use the *_diffuse/*_specular/*_roughness/"
+            f"*_normal file-name conventions"
+        )
     spec = get_model(model)
-    model = spec.id
+    found = _find_by_convention(root)
+    if not found:
+        raise MatremapError(
+            f"{root} holds no maps named *_diffuse, *_specular, *_roughness or *_normal "
+            f"(png, jpg, tif, exr); rename them or write a material.json"
+        )
+    bind = convention_params(spec)
+    files, normal = {}, None
+    for role, f in found.items():
+        if role == "normal":
+            normal = f
+            continue
+        name = bind[role]
+        if name is None:
+            raise MatremapError(
+                f"{f.name}: model {spec.id} has no {role} parameter to bind it to; bind the maps in a material.json"
+            )
+        files[name] = f
+    return _Bindings(spec.id, files, normal, {}, {}, str(root))
+
+
+def _check_bindings(
+    spec: ModelSpec, files: Mapping[str, Path], constants: dict[str, Any], where: str
+) -> dict[str, Any]:
+    """Maps bind parameters (not options) of the model, none twice; constants are validated and
+    returned as plain numbers (options as strings)."""
     for name in files:
         if name in spec.option_names:
-            raise MatremapError(f"{where}: {name} is an option of {model}, not a parameter a map can drive")
+            raise MatremapError(f"{where}: {name} is an option of {spec.id}, not a parameter a map can drive")
         spec.param(name)  # unknown names raise, listing the valid ones
     clash = set(files) & set(constants)
     if clash:
         raise MatremapError(f"{where}: {sorted(clash)[0]} is given both as a map and as a value; keep one")
-    if constants:
-        from matremap.core.material import Material
-
-        Material.create(model, constants)  # validates names, ranges and options
-        constants = {
-            k: (
-                v
-                if k in spec.option_names
-                else (
-                    float(np.asarray(v, dtype=float).reshape(-1)[0])
-                    if np.size(v) == 1
-                    else [float(x) for x in np.asarray(v, dtype=float).reshape(-1)]
-                )
-            )
-            for k, v in constants.items()
-        }
     if not files:
         raise MatremapError(
-            f"{where} binds no map to a parameter of {model}; add maps or use the file-name conventions"
+            f"{where} binds no map to a parameter of {spec.id}; add maps or use the file-name conventions"
         )
-    ms = MapSet(model, files, root, normal=normal, constants=constants)
-    for name, f in files.items():
-        cs = cs_given.get(f.name, cs_given.get(name))
-        ms.info[name] = image_info(f, cs, colour=_is_colour(spec, name))
-        ms.colorspace[name] = ms.info[name].colorspace
-        _check_channels(spec, name, ms.info[name], ms.notes)
+    if not constants:
+        return constants
+    from matremap.core.material import Material
+
+    Material.create(spec.id, constants)  # validates names, ranges and options
+    return {
+        k: (
+            v
+            if k in spec.option_names
+            else (
+                float(np.asarray(v, dtype=float).reshape(-1)[0])
+                if np.size(v) == 1
+                else [float(x) for x in np.asarray(v, dtype=float).reshape(-1)]
+            )
+        )
+        for k, v in constants.items()
+    }
+
+
+def _common_size(ms: MapSet, colorspace: Mapping[str, str]) -> tuple[int, int]:
+    """The maps' one size (height, width); the normal map must have 3 channels and the same size."""
     sizes = {name: (i.height, i.width) for name, i in ms.info.items()}
-    if normal is not None:
-        ninfo = image_info(normal, cs_given.get(normal.name, "linear"), colour=False)
+    names = {name: ms.maps[name].name for name in ms.info}
+    if ms.normal is not None:
+        ninfo = image_info(ms.normal, colorspace.get(ms.normal.name, "linear"), colour=False)
         if ninfo.channels not in (3, 4):
             raise MatremapError(
-                f"normal map {normal.name} has {ninfo.channels} channel(s); a tangent-space normal map needs 3 (RGB)"
+                f"normal map {ms.normal.name} has {ninfo.channels} channel(s); a tangent-space normal map needs 3 (RGB)"
             )
         sizes["normal map"] = (ninfo.height, ninfo.width)
+        names["normal map"] = ms.normal.name
     if len(set(sizes.values())) > 1:
-        listing = ", ".join(
-            f"{files[k].name if k in files else normal.name} {h}x{w}"  # type: ignore[union-attr]
-            for k, (h, w) in sizes.items()
-        )
+        listing = ", ".join(f"{names[k]} {h}x{w}" for k, (h, w) in sizes.items())
         raise MatremapError(f"the maps differ in size ({listing}); resample them to one size")
-    ms.size = next(iter(sizes.values()))
-    return ms
+    return next(iter(sizes.values()))
 
 
 def _check_channels(spec: ModelSpec, name: str, info: ImageInfo, notes: list[str]) -> None:
