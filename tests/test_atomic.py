@@ -177,3 +177,26 @@ def test_staging_is_only_inside_the_block(tmp_path):
         pass
     with pytest.raises(RuntimeError, match="used once"), files:
         pass
+
+
+def test_staged_folder_appears_whole_or_not_at_all(tmp_path):
+    from matremap.core.atomic import staged_folder
+
+    out = tmp_path / "out"
+    with pytest.raises(RuntimeError):
+        with staged_folder(out) as stage:
+            (stage / "maps").mkdir()
+            (stage / "maps" / "a.png").write_bytes(b"x")
+            raise RuntimeError("the renderer died")
+    assert not out.exists() and list(tmp_path.iterdir()) == []  # nothing left, not even the staging folder
+    with staged_folder(out) as stage:  # the retry needs no force
+        (stage / "a.txt").write_text("1")
+        assert not out.exists()  # nothing visible until the block ends
+    assert (out / "a.txt").read_text() == "1"
+    with pytest.raises(MatremapError, match="not empty; pass --force"):
+        with staged_folder(out):
+            pass
+    with staged_folder(out, force=True) as stage:
+        (stage / "b.txt").write_text("2")
+    assert sorted(p.name for p in out.iterdir()) == ["b.txt"]  # replaced whole
+    assert [p.name for p in tmp_path.iterdir()] == ["out"]

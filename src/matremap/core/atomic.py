@@ -25,6 +25,8 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from types import TracebackType
 
@@ -180,4 +182,46 @@ class AtomicFiles:
         self._created.clear()
 
 
-__all__ = ["FORCE_HINT", "STAGING_PREFIX", "AtomicFiles"]
+@contextmanager
+def staged_folder(out: str | os.PathLike[str], force: bool = False) -> Iterator[Path]:
+    """A whole output folder written all or nothing: the block writes into a hidden folder beside
+    ``out`` (``.<name>.partial-*``), which replaces ``out`` when the block ends without an error and is
+    removed when it fails, so a failed run leaves nothing behind and a retry needs no ``--force``. An
+    existing ``out`` that is not empty is refused unless ``force``; with ``force`` it is replaced whole.
+    Only ``out``'s parent folders may be created (they are left in place)."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise MatremapError(f"{out} exists and is not a folder; choose an output folder")
+    if out.is_dir() and any(out.iterdir()) and not force:
+        raise MatremapError(f"{out} exists and is not empty; pass --force to replace it")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
+    try:
+        yield stage
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        raise
+    os.chmod(stage, 0o777 & ~_umask())
+    old = None
+    if out.exists():
+        old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
+        os.replace(out, old / out.name)
+    try:
+        os.replace(stage, out)
+    except OSError:
+        if old is not None:
+            os.replace(old / out.name, out)
+        shutil.rmtree(stage, ignore_errors=True)
+        raise
+    finally:
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+__all__ = ["FORCE_HINT", "STAGING_PREFIX", "AtomicFiles", "staged_folder"]

@@ -379,14 +379,30 @@ def fit(
     scale = irradiance_scale(source, src_r, spec.id, tgt_r, scene, render=lambda r, ms: counter.images_of(r, ms))
 
     goals = _source_goals(source, strategy, scale, src_r, counter)
-    warnings = _check_resolution(goals[SPECULAR if strategy != "simple" else FULL], scene)
+    which = SPECULAR if strategy != "simple" else FULL
+    warnings: list[str] = []
+    sharpened = _below_resolution(source, goals[which], which, src_r, counter)
+    if sharpened is not None:
+        warnings.append(_sharpened_note(source, sharpened, scene))
+        goals = _source_goals(sharpened[0], strategy, scale, src_r, counter)
+    else:
+        warnings += _check_resolution(goals[which], scene)
+    if not np.any(goals[FULL] > 0):
+        raise MatremapError(
+            f"{source.model} renders black on the probe ({len(scene.lights)} light(s)): there is nothing to fit; "
+            "check its parameters (is every reflectance 0?)"
+        )
     stages: list[StageReport] = []
     current = _descend(strategy, template, free_params, goals, tgt_r, counter, stages, coarse)
 
+    # the loss is measured where the fit was made (at the resolvable width for a too-narrow highlight)
     final = counter.pixels(tgt_r, [current])[0]
     goal = goals[FULL]
-    norm = float(np.linalg.norm(goal))
-    loss = float(np.linalg.norm(final - goal) / norm) if norm > 0 else float(np.linalg.norm(final))
+    loss = float(np.linalg.norm(final - goal) / np.linalg.norm(goal))
+    if sharpened is not None:
+        current = _towards_mirror(
+            source, sharpened, current, strategy, scale, src_r, tgt_r, free_params, counter, stages
+        )
     return FitResult(
         source=source,
         target=current,
@@ -479,6 +495,114 @@ def _descend(
 
 #: a highlight must cover at least this many pixels (above half its peak, a 3x3 block) to be fitted
 MIN_HIGHLIGHT_PIXELS = 9
+
+
+#: how far a source's roughness is raised per step when its highlight is narrower than the probe resolves
+SHARPEN_STEP = 1.5
+SHARPEN_STEPS = 16
+
+
+def roughness_of(spec: ModelSpec) -> ParamSpec | None:
+    """The parameter that sets the width of the model's specular lobe (role ``roughness``)."""
+    return next((p for p in spec.params if p.role == "roughness"), None)
+
+
+def highlight_pixels(image: np.ndarray) -> int:
+    """Pixels of a (specular) image at or above half its peak luminance; 0 for a black image."""
+    luminance = image.sum(axis=-1)
+    peak = float(luminance.max()) if luminance.size else 0.0
+    return int(np.count_nonzero(luminance >= 0.5 * peak)) if peak > 0 else 0
+
+
+def _below_resolution(
+    source: Material, goal: np.ndarray, which: str, renderer: Renderer, counter: _Counter
+) -> tuple[Material, float] | None:
+    """When the source's highlight covers fewer than :data:`MIN_HIGHLIGHT_PIXELS` (a mirror under point
+    lights shows none), the source with its lobe widened until the probe resolves it, and the factor by
+    which its roughness was raised; None when it is resolved, or when no widening shows a lobe (the
+    source has no specular part). The widths tried are rendered in one batch.
+
+    Below the probe's resolution a lobe's width cannot be measured, only its energy: the fit is made at
+    the narrowest resolvable width and the target's roughness then scaled back by the same factor towards
+    its mirror limit (:func:`_towards_mirror`), so roughness 0 maps to roughness 0 and a mirror's
+    reflectance is fitted where the probe can see it."""
+    rp = roughness_of(source.spec)
+    if rp is None or highlight_pixels(goal) >= MIN_HIGHLIGHT_PIXELS:
+        return None
+    value = float(source.values[rp.name][0])
+    lo, hi = rp.bounds
+    if rp.log:  # an exponent (Phong): the lobe narrows as it grows, so widen by lowering it
+        start = min(max(value, lo), hi)
+        widths = [start / SHARPEN_STEP ** (2 * k) for k in range(1, SHARPEN_STEPS + 1)]
+        widths = [w for w in widths if w >= lo]
+    else:
+        start = max(value, lo, 1e-3)
+        widths = [start * SHARPEN_STEP**k for k in range(1, SHARPEN_STEPS + 1)]
+        widths = [w for w in widths if w <= hi]
+    if not widths:
+        return None
+    candidates = [source.with_params({rp.name: w}) for w in widths]
+    parts = [part(m, which) for m in candidates]
+    images = counter.pixels(renderer, [m for m in parts if m is not None])
+    for m, w, image in zip(candidates, widths, images, strict=False):
+        if highlight_pixels(image) >= MIN_HIGHLIGHT_PIXELS:
+            ratio = (value / w) if not rp.log else (w / value) ** 0.5 if value > 0 else 0.0
+            return m, float(np.clip(ratio, 0.0, 1.0))
+    return None
+
+
+def _towards_mirror(
+    source: Material,
+    sharpened: tuple[Material, float],
+    fitted: Material,
+    strategy: str,
+    scale: float,
+    src_r: Renderer,
+    tgt_r: Renderer,
+    free_params: list[ParamSpec],
+    counter: _Counter,
+    stages: list[StageReport],
+) -> Material:
+    """The target fitted at the widened source lobe, extrapolated to the source's own (narrower) lobe.
+
+    A second fit, one widening step further, gives the local power law target roughness ~ source
+    roughness^k between the two resolvable widths (k = 1/2 from Mitsuba's alpha to glTF's roughness,
+    whose alpha is its square; k = 1 between alphas); the target roughness is carried along it to the
+    source's width, so roughness 0 maps to the target's mirror limit. Exponents (Phong) work the same on
+    their inverse square root."""
+    rp_s, rp_t = roughness_of(source.spec), roughness_of(fitted.spec)
+    if rp_s is None or rp_t is None:
+        return fitted
+    widened, ratio = sharpened
+    w1 = float(widened.values[rp_s.name][0])
+    w2 = w1 / SHARPEN_STEP**2 if rp_s.log else min(w1 * SHARPEN_STEP, rp_s.bounds[1])
+    further = widened.with_params({rp_s.name: w2})
+    goals = _source_goals(further, strategy, scale, src_r, counter)
+    second = _descend(strategy, fitted, free_params, goals, tgt_r, counter, stages, coarse=False)
+
+    def width(v: float, log: bool) -> float:  # a roughness-like measure of a lobe's width
+        return v**-0.5 if log else v
+
+    t1, t2 = (width(float(m.values[rp_t.name][0]), rp_t.log) for m in (fitted, second))
+    s1, s2 = width(w1, rp_s.log), width(w2, rp_s.log)
+    k = np.log(t2 / t1) / np.log(s2 / s1) if t1 > 0 and t2 > 0 and t2 != t1 and s2 != s1 else 1.0
+    k = float(np.clip(k, 0.25, 4.0))
+    target_width = t1 * ratio**k
+    lo, hi = rp_t.bounds
+    value = target_width**-2 if rp_t.log and target_width > 0 else (hi if rp_t.log else target_width)
+    value = float(np.clip(value, lo, hi))
+    return fitted.with_params({rp_t.name: [value] * 3 if rp_t.channels == 3 else value})
+
+
+def _sharpened_note(source: Material, sharpened: tuple[Material, float], scene: Scene) -> str:
+    """The warning of a fit made at a widened lobe (:func:`_below_resolution`)."""
+    rp = roughness_of(source.spec)
+    name = rp.name if rp is not None else "roughness"
+    return (
+        f"the source highlight ({name} {float(source.values[name][0]):.4g}) is narrower than the probe resolves "
+        f"at {scene.resolution}x{scene.resolution}: fitted at {name} {float(sharpened[0].values[name][0]):.4g} "
+        f"and the target's roughness scaled towards the mirror limit by {sharpened[1]:.4g}"
+    )
 
 
 def _check_resolution(specular: np.ndarray, scene: Scene) -> list[str]:
