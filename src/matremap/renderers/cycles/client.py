@@ -74,10 +74,14 @@ class WorkerClient:
     """
 
     def __init__(self, python: str | None = None, timeout: float = 120.0, geometry: str = "points") -> None:
+        self._configure(python, timeout, geometry)
+
+    def _configure(self, python: str | None, timeout: float, geometry: str) -> None:
+        """Set up a client that has no worker yet (``__init__``, and ``__setstate__`` in a process pool)."""
         self.python = find_python(python)
         self.timeout = float(timeout)
         self.geometry = geometry
-        self._proc: subprocess.Popen | None = None
+        self._proc: subprocess.Popen[bytes] | None = None
         self._log: Any = None
         self.renders = 0  # Cycles images (one per material and light)
         self.restarts = 0
@@ -90,7 +94,7 @@ class WorkerClient:
         return {"python": self.python, "timeout": self.timeout, "geometry": self.geometry}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
-        self.__init__(**state)
+        self._configure(**state)
 
     def __del__(self) -> None:
         try:
@@ -155,8 +159,11 @@ class WorkerClient:
         for attempt in (1, 2):
             try:
                 self.start()
-                self._proc.stdin.write(struct.pack(">I", len(body)) + body)
-                self._proc.stdin.flush()
+                stdin = self._running().stdin
+                if stdin is None:
+                    raise _WorkerDied("the worker has no stdin pipe")
+                stdin.write(struct.pack(">I", len(body)) + body)
+                stdin.flush()
                 header, payload = self._reply(time.monotonic() + self.timeout)
             except (_WorkerDied, BrokenPipeError, OSError) as e:
                 why = f"{e}; its stderr ends with: {self._stderr_tail()}"
@@ -170,8 +177,17 @@ class WorkerClient:
             return header, payload
         raise AssertionError("unreachable")
 
+    def _running(self) -> subprocess.Popen[bytes]:
+        """The worker process, once :meth:`start` has launched it."""
+        if self._proc is None:
+            raise _WorkerDied("the worker is not running")
+        return self._proc
+
     def _read(self, n: int, deadline: float) -> bytes:
-        out = self._proc.stdout
+        proc = self._running()
+        out = proc.stdout
+        if out is None:
+            raise _WorkerDied("the worker has no stdout pipe")
         fd = out.fileno()
         buf = bytearray()
         while len(buf) < n:
@@ -183,7 +199,7 @@ class WorkerClient:
                 continue
             chunk = os.read(fd, n - len(buf))
             if not chunk:
-                code = self._proc.wait()
+                code = proc.wait()
                 raise _WorkerDied(f"the worker exited with status {code}")
             buf += chunk
         return bytes(buf)

@@ -118,7 +118,7 @@ class SVBRDFRender:
         overrides = spec.part_overrides(part, params)
         # a model without that part renders black
         self.black = overrides is None
-        self.params = {} if self.black else _per_pixel_params(spec, params, self.surface, overrides)
+        self.params = {} if overrides is None else _per_pixel_params(spec, params, self.surface, overrides)
         self.normals = _shading_normals(self.surface, normal_map)
         self.resolution = int(resolution)
         # models drawn as Cycles draws them (ModelSpec.normal_mapping == "cycles"): Cycles softens diffuse
@@ -171,12 +171,13 @@ class SVBRDFRender:
                 # shadowing term; a glossy closure shades with its raised normal
                 lit_d = (cos_i > 0.0) & (cos_g > 0.0)
                 geo = LocalGeometry(np.where(lit_d, cos_i, 1.0), np.where(lit, cos_o, 1.0), np.where(lit, i_dot_o, 1.0))
-                diffuse = 0.0  # the diffuse closures: the model less its glossy part, at the same geometry
+                # the diffuse closures: the model less its glossy part, at the same geometry
+                diffuse: float | np.ndarray = 0.0
                 if self.has_diffuse:
                     diffuse = self._evaluate(self.params, sl, geo, cos_i.shape)
                     if self.specular_params is not None:
                         diffuse = diffuse - self._evaluate(self.specular_params, sl, geo, cos_i.shape)
-                fcos = 0.0
+                glossy: float | np.ndarray = 0.0
                 if self.specular_params is not None:
                     ng = self.glossy_normals[sl]
                     gi = wi @ ng.T
@@ -185,9 +186,9 @@ class SVBRDFRender:
                     ggeo = LocalGeometry(
                         np.where(lit_g, gi, 1.0), np.where(lit_g, go, 1.0), np.where(lit_g, i_dot_o, 1.0)
                     )
-                    fcos = np.where(lit_g, self._evaluate(self.specular_params, sl, ggeo, gi.shape), 0.0)
+                    glossy = np.where(lit_g, self._evaluate(self.specular_params, sl, ggeo, gi.shape), 0.0)
                 term = bump_shadowing(self.bump_alpha2[sl], cos_g)
-                fcos = fcos + np.where(lit_d, diffuse, 0.0) * term
+                fcos = glossy + np.where(lit_d, diffuse, 0.0) * term
             for c in range(3):
                 f = fcos[min(c, fcos.shape[0] - 1)]  # [L, p]
                 radiance[sl, c] = np.sum(f * inten[:, c, None], axis=0)

@@ -36,16 +36,19 @@ def scene_geometry(scene: Scene) -> SceneGeometry:
     cam = np.array([0.0, 0.0, scene.camera_distance])
     wo = cam - p
     wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
-    cos_i, cos_o, i_dot_o, irr = [], [], [], []
+    cos_i_rows: list[np.ndarray] = []
+    cos_o_rows: list[np.ndarray] = []
+    i_dot_o_rows: list[np.ndarray] = []
+    irr_rows: list[np.ndarray] = []
     for light in scene.lights:
         to_light = scene.light_position(light) - p
         d2 = np.sum(to_light * to_light, axis=-1)
         wi = to_light / np.sqrt(d2)[:, None]
-        cos_i.append(np.sum(n * wi, axis=-1))
-        cos_o.append(np.sum(n * wo, axis=-1))
-        i_dot_o.append(np.sum(wi * wo, axis=-1))
-        irr.append(scene.light_intensity(light) / d2)
-    cos_i, cos_o, i_dot_o, irr = (np.stack(a) for a in (cos_i, cos_o, i_dot_o, irr))
+        cos_i_rows.append(np.sum(n * wi, axis=-1))
+        cos_o_rows.append(np.sum(n * wo, axis=-1))
+        i_dot_o_rows.append(np.sum(wi * wo, axis=-1))
+        irr_rows.append(scene.light_intensity(light) / d2)
+    cos_i, cos_o, i_dot_o, irr = (np.stack(a) for a in (cos_i_rows, cos_o_rows, i_dot_o_rows, irr_rows))
     lit = (cos_i > 0.0) & (cos_o > 0.0)
     # keep every formula finite where the point is unlit; the result is masked there anyway
     cos_i = np.where(lit, cos_i, 1.0)

@@ -108,7 +108,8 @@ class _Loaded:
             changed = True
         if self.model == "mitsuba3:roughplastic":
             eta = m.values["int_ior"] / m.values["ext_ior"]
-            if not np.array_equal(self.current.get("eta"), eta):
+            old_eta = self.current.get("eta")
+            if old_eta is None or not np.array_equal(old_eta, eta):
                 self.params["sphere.bsdf.eta"] = mi.Float(float(eta[0]))
                 self.current["eta"] = eta
                 changed = True
@@ -127,6 +128,10 @@ class Mitsuba3Renderer:
     name = "mitsuba3"
 
     def __init__(self, variant: str | None = None, spp: int = 1, seed: int = 0, cache_size: int = 64) -> None:
+        self._configure(variant, spp, seed, cache_size)
+
+    def _configure(self, variant: str | None, spp: int, seed: int, cache_size: int) -> None:
+        """Set up a renderer with an empty scene cache (``__init__``, and ``__setstate__`` in a process pool)."""
         self.mi = import_mitsuba()
         self.variant = choose_variant(self.mi, variant)
         if not (isinstance(spp, int) and spp >= 1):
@@ -145,7 +150,7 @@ class Mitsuba3Renderer:
         return {"variant": self.variant, "spp": self.spp, "seed": self.seed, "cache_size": self.cache_size}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
-        self.__init__(**state)
+        self._configure(**state)
 
     def _activate(self) -> None:
         if self.mi.variant() != self.variant:
