@@ -284,3 +284,48 @@ def test_ctrl_c_stops_cleanly_and_keeps_finished_points(tmp_path):
     with sqlite3.connect(db) as c:
         assert c.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
         assert c.execute("SELECT COUNT(*) FROM points").fetchone()[0] >= 10
+
+
+def test_a_renderer_that_cannot_draw_the_model_is_refused_before_any_fit(tmp_path):
+    """It used to fit every point, fail each, print "100 points fitted (100 failed)" and exit 0."""
+    grid = parse_grid("alpha=0.1:0.2:2", SOURCE.spec)
+    bad = SweepConfig(source=SOURCE, target="mitsuba06:pbr", fix={"distribution": "as"}, target_renderer="cycles")
+    with pytest.raises(MatremapError, match="cannot draw mitsuba06:pbr; 'embedded' does"):
+        run_sweep(bad, grid, str(tmp_path / "x.sqlite"), InlineExecutor())
+    assert not (tmp_path / "x.sqlite").exists()
+
+
+def test_failed_points_are_retried_and_environment_failures_never_stored(tmp_path):
+    """A point that failed is not a result: the next run fits it again and replaces the failed row; a
+    renderer that is unavailable stops the sweep without storing anything for its points."""
+    import matremap.sweep.run as sweep_mod
+    from matremap.errors import RendererUnavailable
+
+    grid = parse_grid("alpha=0.1:0.2:2", SOURCE.spec)
+    db = str(tmp_path / "f.sqlite")
+    real_fit = sweep_mod.fit
+    sweep_mod.fit = lambda *a, **kw: (_ for _ in ()).throw(RendererUnavailable("Mitsuba 3 is not installed"))
+    try:
+        with pytest.raises(RendererUnavailable, match="not installed"):
+            run_sweep(config(), grid, db, InlineExecutor())
+    finally:
+        sweep_mod.fit = real_fit
+    assert SweepStore.open(db).rows() == []  # nothing cached for the points it could not fit
+    calls = []
+
+    def flaky(*a, **kw):
+        calls.append(1)
+        if len(calls) == 1:
+            raise RuntimeError("a numerical failure")
+        return real_fit(*a, **kw)
+
+    sweep_mod.fit = flaky
+    try:
+        first = run_sweep(config(), grid, db, InlineExecutor())
+    finally:
+        sweep_mod.fit = real_fit
+    assert (first.done, first.failed) == (2, 1)
+    again = run_sweep(config(), grid, db, InlineExecutor())  # the retry fits the failed point only
+    assert (again.done, again.failed) == (1, 0)
+    store = SweepStore.open(db)
+    assert len(store.rows("ok")) == 2 and store.rows("failed") == []

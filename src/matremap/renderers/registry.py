@@ -10,6 +10,7 @@ renderer of a model and falling back to the embedded emulation, with a warning, 
 from __future__ import annotations
 
 import difflib
+import inspect
 import warnings
 from collections.abc import Callable
 
@@ -68,7 +69,19 @@ def _capabilities(name: str) -> Renderer:
     """What answers a renderer's capability queries: its class when the factory is a class that
     answers them (so asking needs neither Mitsuba nor Blender installed), else the renderer itself."""
     factory = _FACTORIES[name]
-    return factory if isinstance(factory, type) and hasattr(factory, "can_render") else get_renderer(name)  # type: ignore[return-value]
+    on_class = isinstance(factory, type) and isinstance(
+        inspect.getattr_static(factory, "can_render", None), (classmethod, staticmethod)
+    )
+    return factory if on_class else get_renderer(name)  # type: ignore[return-value]
+
+
+def can_draw(name: str, model_id: str) -> bool:
+    """Whether the renderer registered as ``name`` draws the model, asked without starting it (so
+    without Mitsuba or Blender installed)."""
+    _load_builtin()
+    if name not in _FACTORIES:
+        get_renderer(name)  # raises with the known names
+    return bool(_capabilities(name).can_render(model_id))
 
 
 def _real_renderers(model_id: str) -> list[str]:
@@ -123,6 +136,7 @@ def environment_renderer_for(model_id: str, geometry: str, real: bool = True) ->
 
 
 __all__ = [
+    "can_draw",
     "environment_renderer_for",
     "get_renderer",
     "register_renderer",

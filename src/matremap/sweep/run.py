@@ -26,8 +26,8 @@ from matremap.core.fit import STRATEGIES
 from matremap.core.material import Material
 from matremap.core.scene import Scene
 from matremap.dialects import get_model
-from matremap.errors import MatremapError
-from matremap.renderers.registry import renderer_for
+from matremap.errors import MatremapError, RendererUnavailable
+from matremap.renderers.registry import can_draw, get_renderer, renderer_for
 from matremap.sweep.executors import limit_blas_threads
 from matremap.sweep.grid import Grid
 from matremap.sweep.store import SweepStore, point_key
@@ -144,6 +144,8 @@ def fit_line(
                 )
                 row.update(back=back.params, back_loss=back.loss, renders=result.renders + back.renders)
             warm = {k: v for k, v in result.params.items() if k not in cfg.fix}
+        except RendererUnavailable:
+            raise  # the environment, not the point: nothing is stored, the sweep stops and says why
         except Exception as e:  # noqa: BLE001 - a failed point is recorded, the sweep goes on
             row.update(status="failed", message=f"{type(e).__name__}: {e}")
             warm = None
@@ -190,6 +192,20 @@ def plan(config: SweepConfig, grid: Grid, finished: set[str]) -> tuple[list[list
     return todo, warms
 
 
+def check_renderers(config: SweepConfig) -> None:
+    """Before any fit: each renderer exists, is installed and draws its model (else one error naming the
+    fix; a renderer that is not installed raises :class:`~matremap.errors.RendererUnavailable`)."""
+    for flag, name, model in (
+        ("--source-renderer", config.source_renderer, config.source.model),
+        ("--target-renderer", config.target_renderer, config.target),
+    ):
+        if not can_draw(name, model):
+            raise MatremapError(
+                f"renderer {name!r} cannot draw {model}; {renderer_for(model)!r} does (drop {flag} or name it)"
+            )
+        get_renderer(name)  # starts it: one that is not installed says so now, not at every point
+
+
 def run_sweep(
     config: SweepConfig,
     grid: Grid,
@@ -203,6 +219,7 @@ def run_sweep(
     """Run (or resume) a sweep; rows are committed as lines finish. Ctrl-C stops it cleanly:
     lines in flight are finished and saved, the rest is left for the next run."""
     t0 = time.perf_counter()
+    check_renderers(config)
     cfg = config.to_dict()
     with SweepStore.create_or_open(db, cfg) as store:
         store.set_meta("grid", grid.to_dict())

@@ -175,10 +175,12 @@ class SweepStore:
 
     # -- rows --------------------------------------------------------------------------------
     def finished_keys(self) -> set[str]:
-        return {k for (k,) in self.conn.execute("SELECT key FROM points")}
+        """The points fitted successfully; a failed point is not finished: a resumed sweep retries it."""
+        return {k for (k,) in self.conn.execute("SELECT key FROM points WHERE status = 'ok'")}
 
     def add(self, rows: Iterable[Mapping[str, Any]]) -> int:
-        """Insert finished points in one transaction; a point already present is left as it is."""
+        """Insert finished points in one transaction; a point already fitted is left as it is, a point
+        that had failed is replaced by its retry."""
         values = []
         for r in rows:
             values.append(
@@ -186,7 +188,9 @@ class SweepStore:
             )
         with self.conn:
             cur = self.conn.executemany(
-                f"INSERT OR IGNORE INTO points ({', '.join(COLUMNS)}) VALUES ({', '.join('?' * len(COLUMNS))})",
+                f"INSERT INTO points ({', '.join(COLUMNS)}) VALUES ({', '.join('?' * len(COLUMNS))}) "
+                f"ON CONFLICT(key) DO UPDATE SET {', '.join(f'{c} = excluded.{c}' for c in COLUMNS if c != 'key')} "
+                "WHERE points.status != 'ok'",
                 values,
             )
         return cur.rowcount
