@@ -45,19 +45,19 @@ from typing import Any
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from matremap.core.envmap import directional_lights, resolve  # noqa: E402
-from matremap.core.imageio import linear_to_srgb  # noqa: E402
-from matremap.core.material import Material  # noqa: E402
-from matremap.core.scene import Scene  # noqa: E402
-from matremap.dialects import get_model  # noqa: E402
-from matremap.errors import MatremapError  # noqa: E402
-from matremap.renderers import get_renderer  # noqa: E402
-from matremap.renderers.embedded.environment import SVBRDFRender  # noqa: E402
-from matremap.renderers.textured import object_mask  # noqa: E402
-from matremap.svbrdf.evaluate import ssim_map  # noqa: E402
-from matremap.uniform import fit  # noqa: E402
+from matremap.core.envmap import directional_lights, resolve
+from matremap.core.imageio import linear_to_srgb
+from matremap.core.material import Material
+from matremap.core.scene import Scene
+from matremap.dialects import get_model
+from matremap.errors import MatremapError
+from matremap.renderers import get_renderer
+from matremap.renderers.embedded.environment import SVBRDFRender
+from matremap.renderers.textured import object_mask
+from matremap.svbrdf.evaluate import ssim_map
+from matremap.uniform import fit
 
 TARGET = "gltf:metal-rough"
 FIT_LIGHTS = (0.0,)

@@ -14,16 +14,16 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-from matremap.core.material import parse_material  # noqa: E402
-from matremap.core.scene import Scene  # noqa: E402
-from matremap.sweep.executors import make_executor  # noqa: E402
-from matremap.sweep.grid import parse_grid  # noqa: E402
-from matremap.sweep.report import write_report  # noqa: E402
-from matremap.sweep.run import SweepConfig, run_sweep  # noqa: E402
-from matremap.sweep.store import SweepStore  # noqa: E402
+from matremap.core.material import parse_material
+from matremap.core.scene import Scene
+from matremap.sweep.executors import make_executor
+from matremap.sweep.grid import parse_grid
+from matremap.sweep.report import write_report
+from matremap.sweep.run import SweepConfig, run_sweep
+from matremap.sweep.store import SweepStore
 
 IMG = Path(__file__).resolve().parent / "img"
 

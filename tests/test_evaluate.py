@@ -14,11 +14,11 @@ import pytest
 
 pytest.importorskip("skimage", reason="scikit-image is needed by matremap evaluate: pip install scikit-image")
 
-from matremap.core import envmap  # noqa: E402
-from matremap.core.material import SVMaterial  # noqa: E402
-from matremap.errors import MatremapError  # noqa: E402
-from matremap.renderers.base import EnvironmentLight  # noqa: E402
-from matremap.svbrdf.evaluate import evaluate, irradiance_scale_under, parse_rotations, ssim_map  # noqa: E402
+from matremap.core import envmap
+from matremap.core.material import SVMaterial
+from matremap.errors import MatremapError
+from matremap.renderers.base import EnvironmentLight
+from matremap.svbrdf.evaluate import evaluate, irradiance_scale_under, parse_rotations, ssim_map
 
 CHROMIUM = Path("/usr/bin/chromium")
 KW = dict(resolution=32, lights=48)

@@ -6,13 +6,13 @@ material appearance", JCGT 8(4), 2019.
 
 __version__ = "0.1.0"
 
-from matremap.core.material import Material  # noqa: E402
-from matremap.core.scene import PointLight, Scene  # noqa: E402
-from matremap.dialects import get_model, list_models  # noqa: E402
-from matremap.errors import MatremapError  # noqa: E402
+from matremap.core.material import Material
+from matremap.core.scene import PointLight, Scene
+from matremap.dialects import get_model, list_models
+from matremap.errors import MatremapError
 
 
-def fit(*args, **kwargs):  # noqa: D103 - thin lazy wrapper
+def fit(*args, **kwargs):  # thin lazy wrapper
     from matremap.uniform import fit as _fit
 
     return _fit(*args, **kwargs)

@@ -40,7 +40,7 @@ class InlineExecutor(Executor):
         f: Future = Future()
         try:
             f.set_result(fn(*args, **kwargs))
-        except BaseException as e:  # noqa: BLE001 - delivered through the future, as a pool would
+        except BaseException as e:  # delivered through the future, as a pool would
             if isinstance(e, KeyboardInterrupt):
                 raise
             f.set_exception(e)

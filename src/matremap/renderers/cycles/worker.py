@@ -169,7 +169,7 @@ class Probe:
         return out
 
 
-def _probe_settings(scene, s: dict) -> int:  # noqa: ANN001
+def _probe_settings(scene, s: dict) -> int:
     """Cycles set up for the probe scene (CPU, 1 spp through pixel centres, direct light only, no
     world, EXR output) and its camera; returns the resolution."""
     scene.render.engine = "CYCLES"
@@ -202,7 +202,7 @@ def _probe_settings(scene, s: dict) -> int:  # noqa: ANN001
     return res
 
 
-def _probe_light(scene, s: dict):  # noqa: ANN001
+def _probe_light(scene, s: dict):
     """One point light, moved and re-powered per scene light (renders are summed): Cycles samples one
     light per sample, which would make multi-light renders noisy. Returns (object, [(position, power)])."""
     light_data = bpy.data.lights.new("light", type="POINT")
@@ -216,7 +216,7 @@ def _probe_light(scene, s: dict):  # noqa: ANN001
     return light, lights
 
 
-def _render_lights(scene, light, lights, res: int, path: str) -> np.ndarray:  # noqa: ANN001
+def _render_lights(scene, light, lights, res: int, path: str) -> np.ndarray:
     """The sum of one render per (position, power) of the light -> float32 [res, res, 3]."""
     out = np.zeros((res, res, 3), dtype=np.float32)
     for pos, power in lights:
@@ -226,7 +226,7 @@ def _render_lights(scene, light, lights, res: int, path: str) -> np.ndarray:  # 
     return out
 
 
-def _render_still(scene, path: str, res: int) -> np.ndarray:  # noqa: ANN001
+def _render_still(scene, path: str, res: int) -> np.ndarray:
     """Render ``scene`` to the EXR ``path`` and read it back: linear RGB float32 [res, res, 3], top row first."""
     scene.render.filepath = path
     bpy.ops.render.render(write_still=True)
@@ -317,7 +317,7 @@ def _uv_sphere(radius: float, segments: int, rings: int):
     return obj, uv.name
 
 
-def _exr_output(scene) -> None:  # noqa: ANN001
+def _exr_output(scene) -> None:
     """Linear float pixels: 32-bit uncompressed EXR, no view transform, no exposure."""
     im = scene.render.image_settings
     im.file_format = "OPEN_EXR"
@@ -330,7 +330,7 @@ def _exr_output(scene) -> None:  # noqa: ANN001
     scene.view_settings.look = "None"
 
 
-def _add_camera(bpy, scene, s: dict) -> None:  # noqa: ANN001
+def _add_camera(bpy, scene, s: dict) -> None:
     """The probe camera: at (0, 0, d) looking down -z, +y up (Blender's default camera orientation),
     the scene's field of view across the image width."""
     cam_data = bpy.data.cameras.new("camera")
@@ -475,7 +475,7 @@ def render_svbrdf(request: dict, tmp: str) -> np.ndarray:
 # -- .blend files (ops "write_blend", "inspect_blend", "render_blend"; see matremap.formats.blend) ------
 
 
-def _material_nodes(nt, model: str, options: dict) -> tuple[dict, list]:  # noqa: ANN001
+def _material_nodes(nt, model: str, options: dict) -> tuple[dict, list]:
     """Build a model's BSDF nodes into an emptied node tree, wired to a Material Output; returns
     (parameter name -> input socket, the BSDF nodes that take a normal)."""
     out = nt.nodes.new("ShaderNodeOutputMaterial")
@@ -517,7 +517,7 @@ def _material_nodes(nt, model: str, options: dict) -> tuple[dict, list]:  # noqa
     raise ValueError(f"the Cycles worker cannot build model {model}")
 
 
-def _set_socket(socket, v) -> None:  # noqa: ANN001
+def _set_socket(socket, v) -> None:
     if socket.type == "RGBA":
         socket.default_value = (*([float(x) for x in v] * (3 if len(v) == 1 else 1)), 1.0)
     else:
@@ -586,7 +586,7 @@ def write_blend(request: dict) -> dict:
     return {"material": mat.name, "object": sphere.name, "vertices": len(sphere.data.vertices)}
 
 
-def _value(v):  # noqa: ANN001
+def _value(v):
     try:
         return [float(x) for x in v]
     except TypeError:

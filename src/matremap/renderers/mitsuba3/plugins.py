@@ -169,7 +169,7 @@ def mitsuba_call(mi, what: str, fn, *args, **kwargs):
         raise MatremapError(f"Mitsuba 3 failed to {what}: {e}") from e
 
 
-def probe_sensor(mi, scene: Scene, sampler: dict[str, Any]) -> dict[str, Any]:  # noqa: ANN001
+def probe_sensor(mi, scene: Scene, sampler: dict[str, Any]) -> dict[str, Any]:
     """The probe scene's camera as a Mitsuba sensor: at (0, 0, camera_distance) looking at the
     origin, +y up, the scene's field of view along x, a square box-filtered HDR film."""
     res = scene.resolution
