@@ -18,12 +18,12 @@ import time
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from matremap.core.fit import STRATEGIES  # noqa: E402
-from matremap.core.material import Material  # noqa: E402
-from matremap.core.scene import Scene  # noqa: E402
-from matremap.uniform import fit  # noqa: E402
+from matremap.core.fit import STRATEGIES
+from matremap.core.material import Material
+from matremap.core.scene import Scene
+from matremap.uniform import fit
 
 
 def sources(model: str, n: int, rng: np.random.Generator) -> list[Material]:

@@ -146,7 +146,7 @@ def fit_line(
             warm = {k: v for k, v in result.params.items() if k not in cfg.fix}
         except RendererUnavailable:
             raise  # the environment, not the point: nothing is stored, the sweep stops and says why
-        except Exception as e:  # noqa: BLE001 - a failed point is recorded, the sweep goes on
+        except Exception as e:  # a failed point is recorded, the sweep goes on
             row.update(status="failed", message=f"{type(e).__name__}: {e}")
             warm = None
         row["seconds"] = time.perf_counter() - t0
