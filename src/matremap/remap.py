@@ -1,36 +1,55 @@
-"""The main job: remap an SVBRDF map set from one model to another, end to end.
+"""The main job: remap an SVBRDF map set (or a material file) from one model to another, end to end.
 
-sweep -> learn -> convert -> evaluate (paper §4-6):
+library route or sweep -> learn -> convert -> evaluate -> quality gate (paper §4-6):
 
-1. a sweep over the source parameters the maps actually use (the roughness and specular maps'
-   value ranges, and two diffuse levels), fitted onto the target model on the probe scene;
+1. a route through the shipped transform library when one covers the maps, else a sweep over the
+   source parameters the maps actually hold (their ranges, roughness down to its mirror limit, the
+   diffuse levels up to the brightest texel), fitted onto the target model on the probe scene;
 2. a parametric transform learned from it, cached by everything that decides it, so a second run
    with the same maps and models reuses it;
-3. the transform applied to every texel (:func:`matremap.svbrdf.convert.convert`);
-4. source and result rendered under an environment map at several rotations and compared with SSIM
-   (:func:`matremap.svbrdf.evaluate.evaluate`), into a self-contained HTML report.
+3. the transform applied to every texel (:func:`matremap.svbrdf.convert.convert`); the same model in
+   and out is the identity: the maps are copied, nothing is fitted;
+4. source and result rendered under an environment map at several rotations and compared
+   (:func:`matremap.svbrdf.evaluate.evaluate`), into a self-contained HTML report;
+5. the quality gate (:mod:`matremap.svbrdf.quality`): colour, energy and structure of the renders, hue
+   and flatness of the maps, texels outside the training domain. The result carries its verdict; the
+   command line exits 3 when it failed (the files are written, the report says FAILED and why).
+
+Everything that can be known before rendering is checked first (the target's renderer is installed and
+draws the maps' parameters as textures, the output file can be written, the maps do not mix metal and
+dielectric for a target that expresses only one). The output folder is written all or nothing
+(:func:`matremap.core.atomic.staged_folder`): a failed run leaves nothing behind.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import shutil
 import time
 import warnings
 from collections.abc import Callable, Collection, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from matremap import __version__
-from matremap.core.material import Material
+from matremap.core.atomic import staged_folder
+from matremap.core.envmap import resolve as resolve_envmap
+from matremap.core.imageio import write_image, write_text
+from matremap.core.material import Material, SVMaterial
 from matremap.core.scene import Scene
 from matremap.dialects import get_model
 from matremap.errors import MatremapError
 from matremap.regress import quantities as qty
 from matremap.regress.transform import Transform
+from matremap.renderers import renderer_for
+from matremap.svbrdf.convert import MASK_NAME, convert
+from matremap.svbrdf.evaluate import evaluate as evaluate_pair
+from matremap.svbrdf.evaluate import parse_rotations
+from matremap.svbrdf.quality import Check, Thresholds, Verdict, image_checks, map_checks, sample
 from matremap.svbrdf.textures import MapSet, load_map_set, map_values, read_image
 
 #: grid points along the roughness and the specular axes of the sweep, and the diffuse levels
@@ -47,6 +66,20 @@ class RemapResult:
     texels: int
     mean_dssim: float | None
     seconds: dict[str, float] = field(default_factory=dict)
+    #: the quality gate's verdict (its measures and thresholds)
+    verdict: Verdict = field(default_factory=Verdict)
+    #: the same model in and out: the maps were copied
+    identity: bool = False
+
+    def moved(self, stage: Path, out: Path) -> RemapResult:
+        """The result with its paths moved from the staging folder to the output folder."""
+
+        def move(path: Path | None) -> Path | None:
+            if path is None or stage not in path.parents:
+                return path
+            return out / path.relative_to(stage)
+
+        return replace(self, maps=move(self.maps) or self.maps, report=move(self.report))
 
 
 def default_cache() -> Path:
@@ -74,16 +107,17 @@ def load_arrays(map_set: MapSet, only: Collection[str] | None = None) -> tuple[d
     return params, normal
 
 
-def sweep_grid(map_set: MapSet, params: Mapping[str, Any]) -> str:
-    """A grid over the values the maps hold: roughness and specular ranges (grey), and two diffuse
-    levels so that the diffuse mapping is learned too."""
+def sweep_grid(map_set: MapSet, params: Mapping[str, Any], held: Mapping[str, float] | None = None) -> str:
+    """A grid over the values the maps hold: the roughness and specular maps' ranges (grey; roughness
+    down to its mirror limit when the maps reach it) and the diffuse level from 0 to the brightest texel,
+    so that every texel lies inside the learned domain. ``held``: mapped parameters that are uniform."""
     spec = map_set.spec
     axes = []
     rp = qty.roughness_param(spec)
     if rp is not None and rp.name in map_set.maps:
         lo, hi = _range(params[rp.name], rp.bounds)
         axes.append(f"{rp.name}={lo!r}:{hi!r}:{ROUGHNESS_POINTS}")
-    metal = spec.specialise({**map_set.constants, **params}).diffuse_only is None  # e.g. glTF with metallic 1
+    metal = spec.specialise({**map_set.constants, **params, **(held or {})}).diffuse_only is None
     if spec.reflectance is not None:
         # the parameter a map of F0 drives: k for conductors, a glTF metal's base colour or a glTF
         # dielectric's specular colour
@@ -93,18 +127,47 @@ def sweep_grid(map_set: MapSet, params: Mapping[str, Any]) -> str:
             axes.append(f"{name}={lo!r}:{hi!r}:{SPECULAR_POINTS}")
     dp = qty.diffuse_param(spec)
     if dp is not None and dp.name in map_set.maps and not metal:
-        axes.append(f"{dp.name}={';'.join(repr(v) for v in DIFFUSE_LEVELS)}")
+        _, hi = _range(params[dp.name], dp.bounds)
+        axes.append(f"{dp.name}=0.0;{hi!r}")
     if not axes:
         raise MatremapError(f"the map set gives no roughness, specular or diffuse map of {spec.id} to remap")
     return ",".join(axes)
 
 
 def _range(values: Any, bounds: tuple[float, float]) -> tuple[float, float]:
+    """The values' range, padded by 2 % (at least a little), inside the parameter's bounds."""
     v = np.asarray(values, dtype=float)
     lo, hi = float(np.min(v)), float(np.max(v))
     pad = 0.02 * (hi - lo) if hi > lo else 0.05 * max(abs(hi), 1e-3)
-    lo, hi = max(bounds[0], lo - pad, 1e-4), min(bounds[1], hi + pad)
+    lo, hi = max(bounds[0], lo - pad), min(bounds[1], hi + pad)
     return round(lo, 6), round(hi, 6)
+
+
+#: a map counts as uniform when all its texels are within this of one value (an 8-bit step is 1/255)
+UNIFORM_TOLERANCE = 0.5 / 255
+
+
+def held_values(map_set: MapSet, params: Mapping[str, Any], target: str) -> dict[str, float]:
+    """The mapped parameters that change what the model's other parameters mean (a glTF ``metallic``),
+    each held at its one value. Maps that mix values (metal and dielectric texels) cannot be remapped
+    through one transform: refused, before any rendering, with the share of each."""
+    spec = map_set.spec
+    held: dict[str, float] = {}
+    for name, value, _ in spec.specialisations:
+        if name not in map_set.maps:
+            continue
+        a = np.asarray(params[name], dtype=float)
+        lo, hi = float(a.min()), float(a.max())
+        if hi - lo <= 2 * UNIFORM_TOLERANCE:
+            held[name] = round(0.5 * (lo + hi), 6)
+            continue
+        share = float(np.mean(np.abs(a - value) <= UNIFORM_TOLERANCE))
+        raise MatremapError(
+            f"the {name} map of {map_set.root.name} mixes values ({name} {value:g} on {100 * share:.0f}% of the "
+            f"texels, other values on the rest): {target} is remapped from one kind of material at a time; split "
+            f"the material by its {name} map, or convert it to {spec.id} itself"
+        )
+    return held
 
 
 def complete_fix(source_model: str, values: Mapping[str, Any], target: str, fix: Mapping[str, Any]) -> dict[str, Any]:
@@ -179,8 +242,9 @@ def cached_transform(
     from matremap.sweep.run import SweepConfig, describe, run_sweep
 
     spec = map_set.spec
-    base = Material.create(spec.id, {k: v for k, v in map_set.constants.items() if k not in map_set.maps})
-    grid_text = sweep_grid(map_set, params)
+    held = held_values(map_set, params, target)
+    base = Material.create(spec.id, {**{k: v for k, v in map_set.constants.items() if k not in map_set.maps}, **held})
+    grid_text = sweep_grid(map_set, params, held)
     from matremap.renderers import renderer_for
 
     config = SweepConfig(
@@ -228,112 +292,241 @@ def cached_transform(
     return transform, path, False
 
 
+@dataclass
+class RemapJob:
+    """What a remap is asked to do, beside its input and output (see :func:`remap`)."""
+
+    target: str
+    fix: dict[str, Any] = field(default_factory=dict)
+    strategy: str = "two-stage"
+    envmap: str = "builtin"
+    rotations: str = "0:360:6"
+    resolution: int = 160
+    lights: int = 128
+    workers: int | None = None
+    cache: Path | None = None
+    evaluate: bool = True
+    scene: Scene | None = None
+    target_renderer: str | None = None
+    library: bool = True
+    thresholds: Thresholds = field(default_factory=Thresholds)
+
+
 def remap(
     maps: str | Path,
     source_model: str | None,
     target_model: str,
     out: str | Path,
     *,
-    fix: Mapping[str, Any] | None = None,
-    strategy: str = "two-stage",
-    envmap: str = "builtin",
-    rotations: str = "0:360:6",
-    resolution: int = 160,
-    lights: int = 128,
-    workers: int | None = None,
-    cache: Path | None = None,
-    evaluate: bool = True,
     force: bool = False,
-    scene: Scene | None = None,
-    target_renderer: str | None = None,
-    library: bool = True,
     log: Callable[[str], None] = print,
+    **options: Any,
 ) -> RemapResult:
-    """Remap the map set ``maps`` onto ``target_model``; write ``OUT/maps`` and ``OUT/report``.
-    ``scene`` is the probe scene of the sweep (default: the paper's, with a headlight);
-    ``target_renderer`` draws the target model in the sweep (e.g. "mitsuba3", "cycles").
-    ``library``: first look for a route through the shipped transform library (used when the
-    default probe, two-stage fits and the embedded renderer are asked for, and when it covers the
-    maps' values); otherwise, or when it finds none, sweep and learn (cached)."""
-    from matremap.core.envmap import resolve
-    from matremap.svbrdf.convert import convert
-    from matremap.svbrdf.evaluate import evaluate as run_evaluation
-    from matremap.svbrdf.evaluate import parse_rotations
+    """Remap the map set ``maps`` onto ``target_model``; write ``OUT/maps``, ``OUT/report``,
+    ``OUT/transform.json`` and ``OUT/verdict.json``, all or nothing.
 
-    t0 = time.perf_counter()
-    seconds: dict[str, float] = {}
+    ``options`` are the fields of :class:`RemapJob`: ``fix``, ``strategy``, ``envmap``, ``rotations``,
+    ``resolution``, ``lights``, ``workers``, ``cache``, ``evaluate``, ``scene`` (the sweep's probe; default
+    the paper's headlight), ``target_renderer`` (e.g. "mitsuba3", "cycles"), ``library`` (first look for a
+    route through the shipped transform library, used with the default probe, two-stage fits and default
+    renderers when it covers the maps; otherwise sweep and learn, cached) and ``thresholds`` (the quality
+    gate's). The result carries the gate's verdict; it is not raised here."""
     map_set = load_map_set(maps, source_model)
-    target = get_model(target_model).id
-    from matremap.renderers import renderer_for
-
-    target_renderer = target_renderer or renderer_for(target)
     out = Path(out)
-    if out.exists() and any(out.iterdir()) and not force:
-        raise MatremapError(f"{out} exists and is not empty; pass --force to write into it")
     root = Path(map_set.root).resolve()
     if out.resolve() == root or root in out.resolve().parents:
         raise MatremapError(f"{out} is inside the input folder {root}; choose another output folder")
-    angles = parse_rotations(rotations) if evaluate else []
-    env = resolve(envmap) if evaluate else None
+    job = RemapJob(get_model(target_model).id, **{k: v for k, v in options.items() if v is not None or k == "scene"})
+    with staged_folder(out, force) as stage:
+        result = remap_into(stage, map_set, job, log, title=f"{map_set.model} -> {job.target}: {Path(maps).name}")
+    return result.moved(stage, out)
+
+
+def remap_into(
+    folder: Path, map_set: MapSet, job: RemapJob, log: Callable[[str], None], title: str = ""
+) -> RemapResult:
+    """The remap of :func:`remap`, written into ``folder`` (a staging folder)."""
+    t0 = time.perf_counter()
+    seconds: dict[str, float] = {}
+    target = job.target
+    target_renderer = job.target_renderer or renderer_for(target)
+    angles = parse_rotations(job.rotations) if job.evaluate else []
+    env = resolve_envmap(job.envmap) if job.evaluate else None
     params, normal = load_arrays(map_set)
     seconds["load"] = time.perf_counter() - t0
-
     t = time.perf_counter()
-    fix = complete_fix(map_set.model, {**map_set.constants, **params}, target, fix or {})
-    transform = None
-    if library and scene is None and target_renderer == renderer_for(target) and strategy == "two-stage":
+    identity = is_identity(map_set, target, job.fix)
+    if identity:
+        log(f"identity: {map_set.model} onto itself with the same options: the maps are copied, nothing is fitted")
+        texels, outside, tpath, cached = int(np.prod(map_set.size)), 0, None, True
+        copy_map_set(map_set, folder / "maps")
+    else:
+        held = held_values(map_set, params, target)
+        fix = complete_fix(map_set.model, {**map_set.constants, **params, **held}, target, job.fix)
+        check_before_rendering(map_set, target, target_renderer)
+        transform, tpath, cached = _transform_for(map_set, params, fix, target_renderer, job, log)
+        seconds["transform"] = time.perf_counter() - t
+        t = time.perf_counter()
+        with warnings.catch_warnings():  # the outside-domain count is logged below
+            warnings.simplefilter("ignore", UserWarning)
+            report = convert(map_set, [transform], folder / "maps", workers=job.workers or 2)
+        transform.save(folder / "transform.json", force=True)  # what was applied, with its provenance
+        texels, outside = int(report.texels), int(report.outside)
+        log(
+            f"convert: {texels} texels"
+            + (f"; {outside} outside the training domain (see maps/{MASK_NAME})" if outside else "")
+        )
+    seconds["convert"] = time.perf_counter() - t
+    result_set = load_map_set(folder / "maps")
+    target_params, target_normal = load_arrays(result_set)
+    checks = [Check("outside", outside / max(texels, 1), job.thresholds.outside, "texels outside the training domain")]
+    checks += map_quality(map_set, params, result_set, target_params, job.thresholds)
+    verdict, mean, html = Verdict(checks), None, None
+    if job.evaluate:
+        assert env is not None
+        t = time.perf_counter()
+        evaluation = evaluate_pair(
+            SVMaterial(map_set.model, params, map_set.options, normal),
+            SVMaterial(result_set.model, target_params, result_set.options, target_normal),
+            env,
+            angles,
+            folder / "report",
+            resolution=job.resolution,
+            lights=job.lights,
+            title=title,
+            thresholds=job.thresholds,
+            checks=checks,
+        )
+        seconds["evaluate"] = time.perf_counter() - t
+        verdict, mean, html = evaluation.verdict, float(evaluation.mean_full), folder / "report" / "report.html"
+        log(
+            f"evaluate: mean 1-SSIM {evaluation.mean_full:.4f} (specular only {evaluation.mean_specular:.4f}) "
+            f"over {len(angles)} rotations"
+        )
+    write_text(folder / "verdict.json", json.dumps(verdict.to_dict(), indent=1) + "\n")
+    seconds["total"] = time.perf_counter() - t0
+    return RemapResult(tpath, cached, folder / "maps", html, outside, texels, mean, seconds, verdict, identity)
+
+
+def _transform_for(
+    map_set: MapSet,
+    params: Mapping[str, Any],
+    fix: Mapping[str, Any],
+    target_renderer: str,
+    job: RemapJob,
+    log: Callable[[str], None],
+) -> tuple[Transform, Path | None, bool]:
+    """A library route that covers the maps, else the cached (or newly swept and learned) transform."""
+    target = job.target
+    if job.library and job.scene is None and target_renderer == renderer_for(target) and job.strategy == "two-stage":
         transform = library_transform(map_set, params, target, fix, log)
-    elif library:
+        if transform is not None:
+            return transform, None, True
+    elif job.library:
         log(
             "library: not used (its transforms are two-stage fits on the default probe, each model drawn by its "
             "default renderer)"
         )
-    if transform is not None:
-        tpath, cached = None, True
-    else:
-        transform, tpath, cached = cached_transform(
-            map_set, params, target, fix, strategy, cache or default_cache(), workers, log, scene, target_renderer
-        )
-    seconds["transform"] = time.perf_counter() - t
-
-    t = time.perf_counter()
-    out.mkdir(parents=True, exist_ok=True)
-    with warnings.catch_warnings():  # the outside-domain count is logged below
-        warnings.simplefilter("ignore", UserWarning)
-        report = convert(map_set, [transform], out / "maps", workers=workers or 2, force=force)
-    transform.save(out / "transform.json", force=True)  # what was applied, with its provenance
-    seconds["convert"] = time.perf_counter() - t
-    log(
-        f"convert: {report.texels} texels into {out / 'maps'}"
-        + (f"; {report.outside} outside the training domain (see outside_domain.png)" if report.outside else "")
+    return cached_transform(
+        map_set,
+        params,
+        target,
+        fix,
+        job.strategy,
+        job.cache or default_cache(),
+        job.workers,
+        log,
+        job.scene,
+        target_renderer,
     )
 
-    mean = None
-    html = None
-    if evaluate:
-        t = time.perf_counter()
-        result_set = load_map_set(out / "maps")
-        target_params, target_normal = load_arrays(result_set)
-        result = run_evaluation(
-            (map_set.model, params, map_set.options, normal),
-            (result_set.model, target_params, result_set.options, target_normal),
-            env,
-            angles,
-            out / "report",
-            resolution=resolution,
-            lights=lights,
-            force=force,
-            title=f"{map_set.model} -> {result_set.model}: {Path(maps).name}",
+
+def is_identity(map_set: MapSet, target: str, fix: Mapping[str, Any]) -> bool:
+    """Whether the remap is the identity: the same model, and every fixed option as the maps have it
+    (a fixed parameter value is a change, so it is not)."""
+    spec = map_set.spec
+    if spec.id != target:
+        return False
+    options = {o.name: map_set.options.get(o.name, o.default) for o in spec.options}
+    return all(k in options and str(v) == str(options[k]) for k, v in fix.items())
+
+
+def copy_map_set(map_set: MapSet, dest: Path) -> None:
+    """The map set copied byte for byte into ``dest``, with a manifest naming its maps."""
+    dest.mkdir(parents=True, exist_ok=False)
+    names: dict[Path, str] = {}
+    for f in [*map_set.maps.values(), *([map_set.normal] if map_set.normal else [])]:
+        if f not in names:
+            name = f.name if f.name not in names.values() else f"{len(names)}_{f.name}"
+            shutil.copyfile(f, dest / name)
+            names[f] = name
+    doc: dict[str, Any] = {
+        "model": map_set.model,
+        "maps": {k: names[f] for k, f in map_set.maps.items()},
+        "params": dict(map_set.constants),
+        "colorspace": {names[f]: map_set.colorspace[k] for k, f in map_set.maps.items() if k in map_set.colorspace},
+    }
+    if map_set.normal:
+        doc["normal"] = names[map_set.normal]
+    doc["provenance"] = {"source": str(map_set.root), "source_model": map_set.model, "transform": "identity"}
+    write_text(dest / "material.json", json.dumps(doc, indent=1) + "\n")
+
+
+def check_before_rendering(map_set: MapSet, target: str, target_renderer: str) -> None:
+    """What can be known before a sweep: the target's renderer draws it and is installed, and the
+    renderers that draw the target take as textures the parameters the maps will drive."""
+    from matremap.renderers.registry import can_draw, get_renderer, texture_refusal
+    from matremap.svbrdf.convert import source_params, target_param
+
+    if not can_draw(target_renderer, target):
+        raise MatremapError(f"renderer {target_renderer!r} cannot draw {target}; {renderer_for(target)!r} does")
+    get_renderer(target_renderer)  # one that is not installed says so now, not after the sweep
+    src, tgt = map_set.spec, get_model(target)
+    driven = [
+        name
+        for q in qty.QUANTITIES
+        if any(n in map_set.maps for n in source_params(src, q)) and (name := target_param(tgt, q)) is not None
+    ]
+    why = texture_refusal(target, driven)
+    if why is not None:
+        raise MatremapError(
+            f"{why}, and the maps of {map_set.root.name} vary it; choose a target that takes it as a map"
         )
-        seconds["evaluate"] = time.perf_counter() - t
-        mean = float(result.mean_full)
-        html = out / "report" / "report.html"
-        log(
-            f"evaluate: mean 1-SSIM {result.mean_full:.4f} (specular only {result.mean_specular:.4f}) over "
-            f"{len(angles)} rotations; {html}"
-        )
-    seconds["total"] = time.perf_counter() - t0
-    return RemapResult(tpath, cached, out / "maps", html, int(report.outside), int(report.texels), mean, seconds)
+
+
+def _quantity_sample(spec: Any, values: Mapping[str, Any], shape: tuple[int, ...]) -> dict[str, np.ndarray]:
+    """The common-vocabulary quantities of sampled maps and broadcast constants."""
+    arrays = {}
+    for p in spec.params:
+        v = np.asarray(values.get(p.name, p.default_array), dtype=float)
+        if v.ndim >= 2:
+            v = sample(v)
+            if p.channels == 3 and v.ndim == 2:
+                v = np.repeat(v[..., None], 3, axis=-1)
+            elif p.channels == 1 and v.ndim == 3:
+                v = v[..., 0]
+        else:
+            v = np.broadcast_to(v.reshape(-1)[: p.channels], (*shape, p.channels) if p.channels == 3 else shape)
+        arrays[p.name] = v
+    return qty.read(spec, arrays)
+
+
+def map_quality(
+    source: MapSet,
+    source_params: Mapping[str, Any],
+    target: MapSet,
+    target_params: Mapping[str, Any],
+    limits: Thresholds,
+) -> list[Check]:
+    """The map checks of the gate: hue and flatness of the diffuse albedo and F0, source against result."""
+    probe = next((np.asarray(v) for v in source_params.values() if np.ndim(v) >= 2), None)
+    shape = sample(probe).shape[:2] if probe is not None else (1, 1)
+    try:
+        s = _quantity_sample(source.spec, {**source.constants, **source_params}, shape)
+        t = _quantity_sample(target.spec, {**target.constants, **target_params}, shape)
+    except (MatremapError, ValueError) as e:  # a quantity a model cannot read: no map checks, said so
+        return [Check("map_checks", 0.0, 0.0, f"skipped: {e}")]
+    return map_checks(s, t, limits)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -350,6 +543,7 @@ class FileRemapResult:
     material: Material | None = None
     loss: float | None = None
     notes: list[str] = field(default_factory=list)
+    verdict: Verdict = field(default_factory=Verdict)
 
 
 def default_suffix(target: str, source_format: str) -> str | None:
@@ -374,13 +568,12 @@ def remap_file(
     **options: Any,
 ) -> FileRemapResult:
     """Remap one material of a glTF/.glb, MaterialX or Mitsuba XML file onto ``target_model`` and
-    write it in the target's own format into ``out`` (``write`` names the file; default: the
-    input's name with the target format's suffix). A textured material goes through :func:`remap`
-    (``out/source`` holds its maps as matremap reads them, ``out/maps`` the converted ones); a
-    uniform one is fitted directly. ``options`` go to :func:`remap`."""
+    write it in the target's own format into ``out``, all or nothing (``write`` names the file; default:
+    the input's name with the target format's suffix). A textured material goes through
+    :func:`remap_into` (``out/source`` holds its maps as matremap reads them, ``out/maps`` the converted
+    ones); a uniform one is fitted directly (copied when it is the identity). ``options`` are the fields
+    of :class:`RemapJob`. The result carries the quality gate's verdict."""
     from matremap.formats import format_for, read_asset, write_asset
-    from matremap.renderers import renderer_for
-    from matremap.uniform import fit
 
     p = Path(path)
     asset = read_asset(p, material)
@@ -388,12 +581,39 @@ def remap_file(
         log(f"note: {note}")
     target = get_model(target_model).id
     out = Path(out)
-    if out.exists() and any(out.iterdir()) and not force:
-        raise MatremapError(f"{out} exists and is not empty; pass --force to write into it")
     if out.resolve() == p.resolve().parent:
         raise MatremapError(f"{out} is the input file's folder; choose another output folder")
+    name = _output_name(p, target, asset.format, write, out, log)
+    job = RemapJob(target, dict(fix or {}), **{k: v for k, v in options.items() if v is not None or k == "scene"})
+    with staged_folder(out, force) as stage:
+        result = FileRemapResult(None, asset.model, target, asset.textured, notes=list(asset.notes))
+        if asset.textured:
+            source_dir = asset.to_map_set(stage / "source")
+            result.remap = remap_into(stage, load_map_set(source_dir), job, log, title=f"{asset.model} -> {target}")
+            result.verdict = result.remap.verdict
+            produced: Any = load_map_set(stage / "maps")
+        else:
+            produced = _remap_uniform(asset.material(), job, stage, result, log)
+        if name is not None:
+            same_format = format_for(name) in ("gltf", "mtlx") and asset.format == format_for(name)
+            result.file = write_asset(stage / name, produced, source=asset if same_format else None, force=True)
+        write_text(stage / "verdict.json", json.dumps(result.verdict.to_dict(), indent=1) + "\n")
+    if result.remap is not None:
+        result.remap = result.remap.moved(stage, out)
+    if result.file is not None:
+        result.file = out / result.file.relative_to(stage)
+        log(f"wrote {result.file}")
+    return result
+
+
+def _output_name(
+    p: Path, target: str, source_format: str, write: str | None, out: Path, log: Callable[[str], None]
+) -> str | None:
+    """The material file to write (checked now, before any work), or None when no format takes the target."""
+    from matremap.formats import format_for
+
     if write is None:
-        suffix = default_suffix(target, asset.format) or None
+        suffix = default_suffix(target, source_format) or None
         if suffix is None and target.split(":", 1)[0] == "gltf":
             suffix = p.suffix.lower()
         name = f"{p.stem}{suffix}" if suffix else None
@@ -405,39 +625,49 @@ def remap_file(
             raise MatremapError(f"{out / name} would overwrite the input; choose another name")
     else:
         log(f"note: no material file format for {target}; writing its parameters only")
-    result = FileRemapResult(None, asset.model, target, asset.textured, notes=list(asset.notes))
-    if asset.textured:
-        out.mkdir(parents=True, exist_ok=True)
-        source_dir = asset.to_map_set(out / "source")
-        result.remap = remap(source_dir, None, target, out, fix=fix, force=True, log=log, **options)
-        produced: Any = load_map_set(out / "maps")
-    else:
-        source = asset.material()
-        full_fix = complete_fix(source.model, qty.material_values(source), target, fix or {})
-        r = fit(
-            source,
-            target,
-            source_renderer=renderer_for(source.model),
-            target_renderer=options.get("target_renderer") or renderer_for(target),
-            fix=full_fix,
-            strategy=options.get("strategy", "two-stage"),
-        )
-        for w in r.warnings:
-            log(f"warning: {w}")
-        log(f"fit: {target} {json.dumps(r.target.to_dict()['params'])}; relative L2 error {r.loss:.4f}")
-        out.mkdir(parents=True, exist_ok=True)
-        from matremap.core.imageio import write_text
+    return name
 
-        write_text(out / "material.json", json.dumps(r.target.to_dict(), indent=1) + "\n")
-        from matremap.core.imageio import write_image
-        from matremap.uniform import comparison_strip
 
-        write_image(out / "compare.png", comparison_strip(r), force=True)  # source | target | difference x10
-        log(f"wrote {out / 'compare.png'} (source | target | difference x10 on the probe)")
-        result.material, result.loss = r.target, r.loss
-        produced = r.target
-    if name is not None:
-        source_for_writer = asset if format_for(name) in ("gltf", "mtlx") and asset.format == format_for(name) else None
-        result.file = write_asset(out / name, produced, source=source_for_writer, force=force)
-        log(f"wrote {result.file}")
-    return result
+def _remap_uniform(
+    source: Material, job: RemapJob, stage: Path, result: FileRemapResult, log: Callable[[str], None]
+) -> Material:
+    """A uniform material: copied when the remap is the identity, else fitted; the gate measures the fit
+    (its relative error, and colour and energy of the probe renders); ``material.json`` and
+    ``compare.png`` (source | target | difference x10 on the probe) are written into ``stage``."""
+    from matremap.core.fit import FULL, FitResult, part
+    from matremap.renderers import get_renderer
+    from matremap.uniform import comparison_strip, fit
+
+    target = job.target
+    options = {o.name: str(source.options.get(o.name, o.default)) for o in source.spec.options}
+    if source.model == target and all(k in options and str(v) == options[k] for k, v in job.fix.items()):
+        log(f"identity: {source.model} onto itself with the same options: copied, nothing is fitted")
+        result.material, result.loss, result.verdict = source, 0.0, Verdict([Check("fit_error", 0.0, 0.0, "identity")])
+        write_text(stage / "material.json", json.dumps(source.to_dict(), indent=1) + "\n")
+        drawn = renderer_for(source.model)
+        same = FitResult(source, source, "identity", 0.0, 0, 0.0, 1.0, job.scene or Scene(), drawn, drawn)
+        write_image(stage / "compare.png", comparison_strip(same), force=True)
+        return source
+    full_fix = complete_fix(source.model, qty.material_values(source), target, job.fix)
+    r = fit(
+        source,
+        target,
+        source_renderer=renderer_for(source.model),
+        target_renderer=job.target_renderer or renderer_for(target),
+        fix=full_fix,
+        strategy=job.strategy,
+        scene=job.scene,
+    )
+    for w in r.warnings:
+        log(f"warning: {w}")
+    log(f"fit: {target} {json.dumps(r.target.to_dict()['params'])}; relative L2 error {r.loss:.4f}")
+    scene = r.scene
+    src = get_renderer(r.source_renderer).render([part(source, FULL) or source], scene)[0] * r.irradiance_scale
+    tgt = get_renderer(r.target_renderer).render([r.target], scene)[0]
+    checks = [Check("fit_error", r.loss, job.thresholds.fit_error, "relative RMSE on the probe")]
+    checks += image_checks([("probe render", src, tgt)], scene.mask(), job.thresholds)
+    result.material, result.loss, result.verdict = r.target, r.loss, Verdict(checks)
+    write_text(stage / "material.json", json.dumps(r.target.to_dict(), indent=1) + "\n")
+    write_image(stage / "compare.png", comparison_strip(r), force=True)
+    log("wrote compare.png (source | target | difference x10 on the probe)")
+    return r.target

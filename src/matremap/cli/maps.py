@@ -19,7 +19,8 @@ from matremap.cli.common import (
 )
 from matremap.core.scene import Scene, parse_lights
 from matremap.dialects import get_model
-from matremap.errors import MatremapError
+from matremap.errors import MatremapError, QualityGateFailed
+from matremap.svbrdf.quality import Thresholds
 
 if TYPE_CHECKING:
     from matremap.regress.transform import Transform
@@ -151,7 +152,26 @@ def add_evaluate(subparsers: Subparsers) -> None:
     p.add_argument("--lights", type=int, default=256, help="directional lights sampled from the map (256)")
     p.add_argument("-o", "--output", required=True, metavar="DIR")
     add_force_option(p, "overwrite an existing report")
+    _max_error(p)
     p.set_defaults(func=cmd_evaluate)
+
+
+def _max_error(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--max-error",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a quality-gate threshold (repeatable): luminance_error, delta_e, delta_e_fraction, dssim, hue_shift, "
+        "flat, outside, fit_error; see docs/quality.md",
+    )
+
+
+def _verdict(verdict: Any) -> int:
+    """0 when the quality gate passed; else raise, so that the command exits 3 with the verdict's line."""
+    if not verdict.passed:
+        raise QualityGateFailed(verdict.line())
+    return 0
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
@@ -180,12 +200,13 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         resolution=args.size,
         lights=args.lights,
         force=args.force,
+        thresholds=Thresholds.parse(args.max_error),
     )
     print(
         f"mean 1-SSIM {result.mean_full:.4f} (specular only {result.mean_specular:.4f}) over "
-        f"{len(rotations)} rotations; report {Path(args.output) / 'report.html'}"
+        f"{len(rotations)} rotations; report {Path(args.output) / 'report.html'}; {result.verdict.line()}"
     )
-    return 0
+    return _verdict(result.verdict)
 
 
 def add_remap(subparsers: Subparsers) -> None:
@@ -205,10 +226,13 @@ def add_remap(subparsers: Subparsers) -> None:
     add_fix_option(p, "target options/held values")
     add_strategy_option(p)
     p.add_argument("-o", "--output", required=True, metavar="OUT", help="output folder (maps/ and report/)")
-    p.add_argument("--envmap", default="builtin")
-    p.add_argument("--rotations", default="0:360:6")
+    p.add_argument("--envmap", default="builtin", help="environment map of the evaluation: builtin, or an .exr/.hdr")
+    p.add_argument("--rotations", default="0:360:6", help="environment rotations START:STOP:COUNT or angles (0:360:6)")
     p.add_argument("--size", type=int, default=160, metavar="N", help="evaluation render resolution (160)")
-    p.add_argument("--lights", type=int, default=128)
+    p.add_argument(
+        "--lights", type=int, default=128, help="directional lights sampled from the environment (embedded, 128)"
+    )
+    _max_error(p)
     p.add_argument("--workers", type=int, metavar="N")
     p.add_argument("--cache", metavar="DIR", help="transform cache (default ~/.cache/matremap/transforms)")
     p.add_argument(
@@ -235,6 +259,7 @@ def cmd_remap(args: argparse.Namespace) -> int:
         raise MatremapError(f"{args.maps} names its own model; drop --from")
     if not material_file and (args.material is not None or args.write is not None):
         raise MatremapError("--material and --write apply to material files (.gltf, .glb, .mtlx, .xml)")
+    thresholds = Thresholds.parse(args.max_error)
     options: dict[str, Any] = {
         "fix": parse_assignments(args.fix, "--fix"),
         "strategy": args.strategy,
@@ -249,23 +274,26 @@ def cmd_remap(args: argparse.Namespace) -> int:
         "log": lambda m: print(m, file=sys.stderr),
         "target_renderer": args.target_renderer,
         "library": not args.sweep,
+        "thresholds": thresholds,
     }
     if material_file:
         fres = remap_file(args.maps, args.target, args.output, material=args.material, write=args.write, **options)
         print(
-            f"done: {fres.source_model} -> {fres.target_model}"
+            f"{'done' if fres.verdict.passed else 'written'}: {fres.source_model} -> {fres.target_model}"
             + (f", wrote {fres.file}" if fres.file else "")
             + (f", mean 1-SSIM {fres.remap.mean_dssim:.4f}" if fres.remap and fres.remap.mean_dssim is not None else "")
+            + f"; {fres.verdict.line()}"
         )
-        return 0
+        return _verdict(fres.verdict)
     scene = Scene.probe(lights=parse_lights(args.light)) if args.light else None
     result = remap(args.maps, args.source, args.target, args.output, scene=scene, **options)
     print(
-        f"done in {result.seconds['total']:.1f} s: maps {result.maps}"
+        f"{'done' if result.verdict.passed else 'written'} in {result.seconds['total']:.1f} s: maps {result.maps}"
         + (f", report {result.report}" if result.report else "")
         + (f", mean 1-SSIM {result.mean_dssim:.4f}" if result.mean_dssim is not None else "")
+        + f"; {result.verdict.line()}"
     )
-    return 0
+    return _verdict(result.verdict)
 
 
 #: command name -> the function adding its parser

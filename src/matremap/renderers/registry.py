@@ -12,7 +12,7 @@ from __future__ import annotations
 import difflib
 import inspect
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 
 from matremap.errors import MatremapError
 from matremap.renderers.base import Renderer
@@ -84,6 +84,18 @@ def can_draw(name: str, model_id: str) -> bool:
     return bool(_capabilities(name).can_render(model_id))
 
 
+def texture_refusal(model_id: str, params: Iterable[str]) -> str | None:
+    """None when every renderer that draws the model takes each of ``params`` as a texture map; else
+    the first refusal, naming the renderer and the parameter (asked without starting a renderer)."""
+    _load_builtin()
+    names = [n for n in sorted(_FACTORIES) if _capabilities(n).can_render(model_id)]
+    for name in names:
+        for param in params:
+            if not _capabilities(name).supports_textures(model_id, param):
+                return f"{name} takes {param} of {model_id} as a constant, not a texture map"
+    return None
+
+
 def _real_renderers(model_id: str) -> list[str]:
     """The names of the registered renderers other than the embedded one that draw the model."""
     _load_builtin()
@@ -143,4 +155,5 @@ __all__ = [
     "renderer_for",
     "renderer_names",
     "resolve_renderer",
+    "texture_refusal",
 ]

@@ -18,7 +18,7 @@ import json
 import math
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +33,7 @@ from matremap.errors import MatremapError
 from matremap.renderers.base import EnvironmentLight, EnvironmentRender, check_environment_args
 from matremap.renderers.registry import environment_renderer_for
 from matremap.renderers.textured import object_mask
+from matremap.svbrdf.quality import Check, Thresholds, Verdict, image_checks
 
 PARTS = ("full", "specular")
 
@@ -53,6 +54,8 @@ class EvaluationResult:
     out_dir: Path
     report: Path
     files: list[Path]
+    #: the quality gate: the image measures, 1 - SSIM and any checks the caller added
+    verdict: Verdict = field(default_factory=Verdict)
 
     @property
     def mean_full(self) -> float:
@@ -73,6 +76,7 @@ class EvaluationResult:
             "mean_dssim_specular": self.mean_specular,
             "irradiance_scale": self.irradiance_scale,
             "report": str(self.report),
+            "verdict": self.verdict.to_dict(),
         }
 
 
@@ -239,12 +243,18 @@ def evaluate(
     lights: int = 256,
     match_irradiance: bool = True,
     title: str | None = None,
+    thresholds: Thresholds | None = None,
+    checks: Sequence[Check] = (),
 ) -> EvaluationResult:
     """Render ``source`` and ``target`` (see :meth:`SVMaterial.of`) under ``env`` at each rotation,
     full and specular only, compare them with SSIM and write PNGs, ``results.json`` and a
     self-contained ``report.html`` into ``out_dir`` (created if missing; an existing report is
     only replaced with ``force``). When the materials come from different renderer families, the
-    source renders are scaled into the target's irradiance units first (``match_irradiance``)."""
+    source renders are scaled into the target's irradiance units first (``match_irradiance``).
+
+    The result carries a :class:`~matremap.svbrdf.quality.Verdict`: ``checks`` the caller measured (e.g.
+    on the maps), the full renders' luminance and CIEDE2000 measures and the mean 1 - SSIM, each against
+    ``thresholds`` (default :class:`~matremap.svbrdf.quality.Thresholds`); the report opens with it."""
     src, tgt = SVMaterial.of(source), SVMaterial.of(target)
     rotations = [float(r) for r in rotations]
     if not rotations:
@@ -273,6 +283,14 @@ def evaluate(
                 drawn[(who, part)] = drawn[key]
             comparison.add(k, part, drawn[("source", part)], drawn[("target", part)], images)
     images.emit("dssim_vs_rotation.png", _plot(rotations, comparison.dssim["full"], comparison.dssim["specular"]))
+    limits = thresholds or Thresholds()
+    verdict = Verdict(
+        [
+            *checks,
+            *image_checks(comparison.full_pairs, mask, limits),
+            Check("dssim", float(np.mean(comparison.dssim["full"])), limits.dssim, "mean over rotations"),
+        ]
+    )
     images.emit("colorbar.png", _colorbar())
 
     result = EvaluationResult(
@@ -285,6 +303,7 @@ def evaluate(
         out_dir=out,
         report=out / "report.html",
         files=images.files,
+        verdict=verdict,
     )
     info = {
         "source": _describe(src),
@@ -335,12 +354,16 @@ class _Comparison:
         self.dssim: dict[str, list[float]] = {p: [] for p in PARTS}
         self.dssim_image: dict[str, list[float]] = {p: [] for p in PARTS}
         self.exposure: dict[str, float] = {}
+        #: (where, source, target) of the full renders, for the colour and energy measures
+        self.full_pairs: list[tuple[str, np.ndarray, np.ndarray]] = []
 
     def add(self, k: int, part: str, s_img: np.ndarray, t_img: np.ndarray, images: _ReportImages) -> None:
         if self.scale != 1.0:
             s_img = (s_img.astype(np.float64) * self.scale).astype(np.float32)
         mssim, smap = ssim_map(s_img, t_img)
         dmap = 1.0 - smap
+        if part == "full":
+            self.full_pairs.append((f"full render, rotation {k}", s_img, t_img))
         mask = self.mask
         self.dssim[part].append(float(dmap[mask].mean()) if mask.any() else float(1.0 - mssim))
         self.dssim_image[part].append(float(1.0 - mssim))
@@ -373,6 +396,10 @@ def _describe(m: SVMaterial) -> str:
 
 
 _CSS = """
+.verdict { padding: 0.4em 1em; margin: 0.8em 0; border-left: 6px solid; }
+.verdict.passed { border-color: #2a7; background: #effaf3; }
+.verdict.failed { border-color: #c33; background: #fdeeee; }
+tr.bad td { color: #b00; font-weight: bold; }
 body { font-family: system-ui, sans-serif; margin: 1.5em; color: #222; background: #fff; }
 h1 { font-size: 1.4em; } h2 { font-size: 1.15em; margin-top: 1.6em; }
 table { border-collapse: collapse; margin: 0.5em 0; }
@@ -393,6 +420,21 @@ window.addEventListener('load', function () {
   document.body.setAttribute('data-images-loaded', ok + '/' + imgs.length);
 });
 """
+
+
+def _verdict_html(verdict: Verdict) -> str:
+    """The quality gate at the top of the report: PASSED or FAILED and every measure."""
+    e = html.escape
+    cls = "passed" if verdict.passed else "failed"
+    rows = "".join(
+        f'<tr class="{"ok" if c.passed else "bad"}"><td class="l">{e(c.name)}</td><td>{c.value:.4g}</td>'
+        f'<td>{c.threshold:.4g}</td><td class="l">{e(c.where)}</td></tr>'
+        for c in verdict.checks
+    )
+    return (
+        f'<div class="verdict {cls}"><p><b>{e(verdict.line())}</b></p>'
+        f"<table><tr><th>measure</th><th>value</th><th>threshold</th><th>where</th></tr>{rows}</table></div>"
+    )
 
 
 def _html(result: EvaluationResult, images: Mapping[str, str], info: Mapping[str, str], title: str) -> str:
@@ -440,6 +482,7 @@ def _html(result: EvaluationResult, images: Mapping[str, str], info: Mapping[str
 </head>
 <body>
 <h1>{e(title)}</h1>
+{_verdict_html(result.verdict)}
 <table>{settings}</table>
 <h2>Mean 1 &minus; SSIM</h2>
 <p>SSIM (scikit-image, 7&times;7 window, on linear HDR renders, data range of the source render) between

@@ -5,7 +5,8 @@ every remap is also measured on what SSIM ignores:
 
 * **Images** -- the source and target renders (linear, irradiance-matched, object pixels):
 
-  - ``luminance_error``: |mean Y_target - mean Y_source| / mean Y_source, Y the Rec. 709 luminance;
+  - ``luminance_error``: |mean Y_target - mean Y_source| / mean Y_source, Y the Rec. 709 luminance, over
+    every view together (the turn of the environment), the worst view named beside it;
   - ``delta_e``: mean CIEDE2000 colour difference (CIE 142-2001; Sharma, Wu and Dalal 2005, as
     implemented by colour-science) after both images are exposed alike (the source's 99th percentile
     luminance at 0.8), clipped to [0, 1] and taken from linear sRGB to CIELAB (D65);
@@ -20,6 +21,9 @@ every remap is also measured on what SSIM ignores:
     saturated (HSV saturation above :data:`SATURATED`);
   - ``flat``: a target colour that is constant (or zero) where the source's varies;
   - ``outside``: the fraction of texels outside the transform's training domain.
+
+* **Uniform materials** -- ``fit_error``: the fit's relative RMSE on the probe, beside the image
+  measures of the probe renders.
 
 Each measure has a threshold (:class:`Thresholds`, set on the command line with ``--max-error
 NAME=VALUE``); a remap whose worst measure exceeds its threshold exits with status 3 (see
@@ -50,13 +54,14 @@ FLAT_RATIO = 0.02
 class Thresholds:
     """The largest value each measure may take for a remap to pass (see the module docstring)."""
 
-    luminance_error: float = 0.25
+    luminance_error: float = 0.5
     delta_e: float = 12.0
     delta_e_fraction: float = 0.5
     dssim: float = 0.4
     hue_shift: float = 25.0
     flat: float = 0.0
     outside: float = 0.05
+    fit_error: float = 0.25
 
     @classmethod
     def parse(cls, items: Sequence[str]) -> Thresholds:
@@ -178,20 +183,36 @@ def image_checks(
     pairs: Sequence[tuple[str, np.ndarray, np.ndarray]], mask: np.ndarray, thresholds: Thresholds
 ) -> list[Check]:
     """Luminance error and CIEDE2000 over ``(where, source, target)`` render pairs (irradiance-matched,
-    linear); each measure's worst pair is reported."""
+    linear), taken over all the pairs together (a turn of the environment: the energy and colour of the
+    whole series, not of its darkest view); the pair where each is worst is named."""
     if not pairs:
         return []
-    lum, de, frac = [], [], []
+    ys = yt = 0.0
+    de: list[np.ndarray] = []
+    worst_lum, worst_de = (-1.0, ""), (-1.0, "")
     for where, s, t in pairs:
+        ys += float(luminance(s[mask]).mean())
+        yt += float(luminance(t[mask]).mean())
         d = delta_e_2000(s, t, mask)
-        lum.append((luminance_error(s, t, mask), where))
-        de.append((float(d.mean()) if d.size else 0.0, where))
-        frac.append((float(np.mean(d > DELTA_E_TOLERANCE)) if d.size else 0.0, where))
-    out = []
-    for name, values in (("luminance_error", lum), ("delta_e", de), ("delta_e_fraction", frac)):
-        value, where = max(values, key=lambda v: v[0])
-        out.append(Check(name, value, getattr(thresholds, name), where))
-    return out
+        de.append(d)
+        worst_lum = max(worst_lum, (luminance_error(s, t, mask), where))
+        worst_de = max(worst_de, (float(d.mean()) if d.size else 0.0, where))
+    lum = 0.0 if ys <= 0 and yt <= 0 else (abs(yt - ys) / ys if ys > 0 else float("inf"))
+    d_all = np.concatenate(de) if de else np.zeros(0)
+    n = len(pairs)
+    over = f"over {n} view(s)" if n > 1 else pairs[0][0]
+    return [
+        Check("luminance_error", lum, thresholds.luminance_error, f"{over}; worst {worst_lum[1]}: {worst_lum[0]:.3g}"),
+        Check(
+            "delta_e", float(d_all.mean()) if d_all.size else 0.0, thresholds.delta_e, f"{over}; worst {worst_de[1]}"
+        ),
+        Check(
+            "delta_e_fraction",
+            float(np.mean(d_all > DELTA_E_TOLERANCE)) if d_all.size else 0.0,
+            thresholds.delta_e_fraction,
+            over,
+        ),
+    ]
 
 
 # ---------------------------------------------------------------------------------------------
