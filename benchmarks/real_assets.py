@@ -17,6 +17,12 @@ identity cases (the file's own model) the max difference from the input. Verdict
     .venv/bin/python benchmarks/real_assets.py                       # all cases, OUT in a temp dir
     .venv/bin/python benchmarks/real_assets.py --only BoxTextured --out out/real --json out/real.json
     .venv/bin/python benchmarks/real_assets.py --list
+
+Against an older commit (the BEFORE table of issue 14 was taken at df0750d), with its own cache:
+
+    git archive df0750d src | tar -x -C /tmp/before
+    MATREMAP_BPY_PYTHON=$PWD/.venv-bpy/bin/python PYTHONPATH=/tmp/before/src .venv/bin/python \
+        benchmarks/real_assets.py --jobs 2 --matremap-arg=--cache --matremap-arg=/tmp/before-cache
 """
 
 from __future__ import annotations
@@ -55,7 +61,7 @@ class Asset:
 
     name: str
     file: str  # relative to CORPUS
-    own: str  # the model the file is read as (identity target)
+    own: str  # the file's own model: a target equal to it is an identity case (copy expected)
     targets: list[tuple[str, list[str]]]
     material: str | None = None
     note: str = ""
@@ -142,35 +148,35 @@ ASSETS: list[Asset] = [
     Asset(
         "ss-copper",
         "mtlx-standard_surface_copper/standard_surface_copper.mtlx",
-        "gltf:metal-rough",
+        "mtlx:standard_surface",  # read through a translation: no identity target
         [GLTF, CONDUCTOR, CYCLES],
         note="white metal under a copper coat_color",
     ),
     Asset(
         "ss-chrome",
         "mtlx-standard_surface_chrome/standard_surface_chrome.mtlx",
-        "gltf:metal-rough",
+        "mtlx:standard_surface",  # read through a translation: no identity target
         [GLTF, CONDUCTOR, CYCLES],
         note="metal, specular_roughness 0",
     ),
     Asset(
         "ss-gold",
         "mtlx-standard_surface_gold/standard_surface_gold.mtlx",
-        "gltf:metal-rough",
+        "mtlx:standard_surface",  # read through a translation: no identity target
         [GLTF, CONDUCTOR, CYCLES],
         note="metal, base_color 1.059 (> 1)",
     ),
     Asset(
         "ss-jade",
         "mtlx-standard_surface_jade/standard_surface_jade.mtlx",
-        "gltf:metal-rough",
+        "mtlx:standard_surface",  # read through a translation: no identity target
         [GLTF, PLASTIC, CYCLES],
         note="dielectric, subsurface, IOR 2.418",
     ),
     Asset(
         "ss-wood-tiled",
         "mtlx-standard_surface_wood_tiled/resources/Materials/Examples/StandardSurface/standard_surface_wood_tiled.mtlx",  # noqa: E501
-        "gltf:metal-rough",
+        "mtlx:standard_surface",  # read through a translation: no identity target
         [GLTF, PLASTIC, CYCLES],
         note="node graph, tiledimage colour + roughness",
     ),
@@ -191,21 +197,21 @@ ASSETS: list[Asset] = [
     Asset(
         "openpbr-aluminium",
         "mtlx-open_pbr_aluminum_brushed/open_pbr_aluminum_brushed.mtlx",
-        "gltf:metal-rough",
+        "mtlx:open_pbr_surface",  # read through a translation: no identity target
         [GLTF, CONDUCTOR, CYCLES],
         note="open_pbr metal, anisotropy",
     ),
     Asset(
         "openpbr-ketchup",
         "mtlx-open_pbr_ketchup/open_pbr_ketchup.mtlx",
-        "gltf:metal-rough",
+        "mtlx:open_pbr_surface",  # read through a translation: no identity target
         [GLTF, PLASTIC, CYCLES],
         note="open_pbr, subsurface/transmission",
     ),
     Asset(
         "usdps-plastic",
         "mtlx-usd_preview_surface_plastic/usd_preview_surface_plastic.mtlx",
-        "gltf:metal-rough",
+        "mtlx:UsdPreviewSurface",  # read through a translation: no identity target
         [GLTF, PLASTIC],
         note="UsdPreviewSurface (not a documented input)",
     ),
