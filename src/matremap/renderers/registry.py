@@ -144,7 +144,10 @@ def environment_renderer_for(model_id: str, geometry: str, real: bool = True) ->
                 stacklevel=3,
             )
         return embedded
-    raise MatremapError(reasons[0] if reasons else f"no renderer draws {model_id} on the {geometry}")
+    if reasons:  # its renderer cannot and nothing emulates it: not installed (raised here) or not that geometry
+        get_renderer(_real_renderers(model_id)[0])
+        raise MatremapError(reasons[0])
+    raise MatremapError(f"no renderer draws {model_id} on the {geometry}")
 
 
 __all__ = [

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from matremap.errors import MatremapError
+from matremap.errors import MatremapError, RendererUnavailable
 
 ENV_PYTHON = "MATREMAP_BPY_PYTHON"
 
@@ -45,11 +45,11 @@ def find_python(python: str | os.PathLike | None = None) -> str:
     for candidate, where in ((python, "the python argument"), (os.environ.get(ENV_PYTHON), ENV_PYTHON)):
         if candidate:
             if not os.access(candidate, os.X_OK):
-                raise MatremapError(f"{where} names {candidate!r}, which is not an executable; {INSTALL_HINT}")
+                raise RendererUnavailable(f"{where} names {candidate!r}, which is not an executable; {INSTALL_HINT}")
             return str(candidate)
     if os.access(DEFAULT_PYTHON, os.X_OK):
         return str(DEFAULT_PYTHON)
-    raise MatremapError(INSTALL_HINT)
+    raise RendererUnavailable(INSTALL_HINT)
 
 
 def bpy_available() -> bool:
@@ -120,12 +120,12 @@ class WorkerClient:
                 [self.python, str(WORKER)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._log
             )
         except OSError as e:
-            raise MatremapError(f"cannot start the Cycles worker with {self.python}: {e}; {INSTALL_HINT}") from e
+            raise RendererUnavailable(f"cannot start the Cycles worker with {self.python}: {e}; {INSTALL_HINT}") from e
         try:
             header, _ = self._reply(time.monotonic() + max(self.timeout, 60.0))
         except _WorkerDied as e:
             self.close()
-            raise MatremapError(f"the Cycles worker did not start ({e}): {INSTALL_HINT}") from None
+            raise RendererUnavailable(f"the Cycles worker did not start ({e}): {INSTALL_HINT}") from None
         self.blender_version = header.get("blender")
 
     def close(self) -> None:
@@ -170,7 +170,7 @@ class WorkerClient:
                 self.close()
                 self.restarts += 1
                 if attempt == 2:
-                    raise MatremapError(f"the Cycles worker failed twice: {why}") from None
+                    raise RendererUnavailable(f"the Cycles worker failed twice: {why}") from None
                 continue
             if not header.get("ok"):
                 raise MatremapError(f"Cycles failed to render: {header.get('error')}")

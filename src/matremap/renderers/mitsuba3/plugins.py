@@ -18,7 +18,7 @@ from matremap.dialects import mitsuba3 as mitsuba3_dialect
 from matremap.dialects.mitsuba3 import (
     PRINCIPLED_HELD,
 )
-from matremap.errors import MatremapError
+from matremap.errors import MatremapError, RendererUnavailable
 
 INSTALL_HINT = (
     "Mitsuba 3 is not installed; install it with `pip install 'matremap[mitsuba]'` "
@@ -110,7 +110,7 @@ def import_mitsuba():
     try:
         import mitsuba
     except ImportError as e:  # also covers a broken drjit
-        raise MatremapError(f"{INSTALL_HINT} ({e})") from None
+        raise RendererUnavailable(f"{INSTALL_HINT} ({e})") from None
     return mitsuba
 
 
@@ -166,7 +166,7 @@ def mitsuba_call(mi, what: str, fn, *args, **kwargs):
     try:
         return fn(*args, **kwargs)
     except (RuntimeError, ValueError, TypeError) as e:
-        raise MatremapError(f"Mitsuba 3 failed to {what}: {e}") from e
+        raise RendererUnavailable(f"Mitsuba 3 failed to {what}: {e}") from e
 
 
 def probe_sensor(mi, scene: Scene, sampler: dict[str, Any]) -> dict[str, Any]:

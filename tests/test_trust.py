@@ -1,0 +1,158 @@
+"""No wrong result leaves with exit status 0 (issue 14): each test pins a case that used to be written and
+reported done -- a dielectric glTF whose diffuse came out black, a black or grey result, an output folder
+left behind by a failed run, a parameter the target cannot take as a map found only after the sweep, mixed
+metal and dielectric maps, a renderer that is not installed -- and checks the result independently of
+matremap's own score (map values, hue, the exit status, what is on disk)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from matremap.cli import main
+from matremap.svbrdf.textures import load_map_set, read_image
+
+pytest.importorskip("colour", reason="the quality gate needs colour-science")
+pytest.importorskip("skimage", reason="the evaluation needs scikit-image")
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+FAST = ["--rotations", "0:360:2", "--size", "48", "--lights", "32"]
+
+
+def png(path: Path, rgb: np.ndarray) -> None:
+    import OpenImageIO as oiio
+
+    spec = oiio.ImageSpec(rgb.shape[1], rgb.shape[0], rgb.shape[2], "uint8")
+    out = oiio.ImageOutput.create(str(path))
+    out.open(str(path), spec)
+    out.write_image(np.round(np.clip(rgb, 0, 1) * 255).astype(np.uint8))
+    out.close()
+
+
+def red_dielectric(folder: Path, metallic: np.ndarray | float = 0.0) -> Path:
+    """A textured glTF dielectric: a saturated red base colour up to 1.0 (brighter than the old sweep's
+    0.9), roughness 0.2-0.7 in the green channel, metallic in the blue channel."""
+    folder.mkdir(parents=True, exist_ok=True)
+    y, x = np.mgrid[0:16, 0:16] / 15.0
+    png(folder / "base.png", np.stack([0.6 + 0.4 * x, 0.05 + 0.1 * y, 0.05 + 0 * x], -1))
+    metal = np.broadcast_to(np.asarray(metallic, dtype=float), x.shape)
+    png(folder / "mr.png", np.stack([0 * x, 0.2 + 0.5 * y, metal], -1))
+    pbr = {
+        "baseColorFactor": [1, 1, 1, 1],
+        "metallicFactor": 1.0,
+        "roughnessFactor": 1.0,
+        "baseColorTexture": {"index": 0},
+        "metallicRoughnessTexture": {"index": 1},
+    }
+    doc = {
+        "asset": {"version": "2.0"},
+        "images": [{"uri": "base.png"}, {"uri": "mr.png"}],
+        "textures": [{"source": 0}, {"source": 1}],
+        "materials": [{"name": "red", "pbrMetallicRoughness": pbr}],
+    }
+    path = folder / "red.gltf"
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def hue_and_mean(image: np.ndarray) -> tuple[float, float]:
+    """Mean HSV hue (degrees, red = 0) and mean value of an RGB image."""
+    rgb = image.reshape(-1, 3)
+    r, g, b = rgb.T
+    hue = np.degrees(np.arctan2(np.sqrt(3) * (g - b), 2 * r - g - b)) % 360
+    return float(np.median(hue)), float(rgb.mean())
+
+
+def test_a_textured_dielectric_keeps_its_colour_and_every_texel_in_the_domain(tmp_path, capsys):
+    """It used to sweep with metallic at its default 1 (every swept diffuse base x (1 - 1) = 0: black
+    diffuse maps) over base colours {0, 0.9} (texels above 0.9 outside), and say done."""
+    src = red_dielectric(tmp_path / "in")
+    out = tmp_path / "out"
+    code = main(["remap", str(src), "--to", "mitsuba06:ward", "--fix", "variant=ward", "-o", str(out), *FAST])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    verdict = json.loads((out / "verdict.json").read_text())
+    assert verdict["passed"] and next(c for c in verdict["checks"] if c["name"] == "outside")["value"] == 0.0
+    maps = load_map_set(out / "maps")
+    diffuse, _ = read_image(maps.maps["diffuseReflectance"], maps.colorspace["diffuseReflectance"])
+    hue, mean = hue_and_mean(diffuse[..., :3])
+    assert mean > 0.15 and (hue < 15 or hue > 345)  # red, not black, not grey
+    base, _ = read_image(src.parent / "base.png", "srgb")
+    assert np.corrcoef(base[..., 0].ravel(), diffuse[..., 0].ravel())[0, 1] > 0.95  # follows the texture
+
+
+def test_a_black_or_grey_result_fails_the_gate_with_exit_3(tmp_path, capsys):
+    """SSIM alone scored such results well; the colour and energy measures do not."""
+    shutil.copytree(EXAMPLES / "blue-plastic", tmp_path / "src")
+    for name, change in (
+        ("black", lambda a: 0.02 * a),
+        ("grey", lambda a: np.repeat(a.mean(-1, keepdims=True), 3, -1)),
+    ):
+        bad = tmp_path / name
+        shutil.copytree(EXAMPLES / "blue-plastic", bad)
+        maps = load_map_set(bad)
+        for param in ("diffuseReflectance", "specularReflectance"):
+            if param in maps.maps:
+                image, _ = read_image(maps.maps[param], maps.colorspace[param])
+                png(maps.maps[param], change(np.atleast_3d(image)[..., :3]) ** (1 / 2.2))  # an sRGB-ish file
+        code = main(["evaluate", str(tmp_path / "src"), str(bad), "-o", str(tmp_path / f"ev-{name}"), *FAST])
+        err = capsys.readouterr()
+        assert code == 3, (name, err)
+        assert "FAILED" in err.err and ("luminance_error" in err.err or "delta_e" in err.err or "hue" in err.err)
+        report = (tmp_path / f"ev-{name}" / "report.html").read_text()
+        assert 'class="verdict failed"' in report
+    same = main(["evaluate", str(tmp_path / "src"), str(tmp_path / "src"), "-o", str(tmp_path / "ev-same"), *FAST])
+    assert same == 0
+
+
+def test_the_same_model_in_and_out_copies_the_maps(tmp_path, capsys):
+    """glTF -> glTF used to run a sweep and once wrote an all-zero base colour."""
+    src = red_dielectric(tmp_path / "in")
+    out = tmp_path / "out"
+    assert main(["remap", str(src), "--to", "gltf:metal-rough", "-o", str(out), *FAST]) == 0
+    err = capsys.readouterr().err
+    assert "identity" in err and "sweep" not in err
+    a, _ = read_image(src.parent / "base.png", "linear")
+    b, _ = read_image(out / "red_baseColor.png", "linear")
+    np.testing.assert_array_equal(a[..., :3], b[..., :3])  # bit exact
+
+
+def test_mixed_metal_and_dielectric_is_refused_in_one_line_before_any_sweep(tmp_path, capsys):
+    half = np.zeros((16, 16))
+    half[:, 8:] = 1.0
+    src = red_dielectric(tmp_path / "in", metallic=half)
+    out = tmp_path / "out"
+    code = main(["remap", str(src), "--to", "mitsuba06:ward", "-o", str(out), *FAST])
+    err = capsys.readouterr().err
+    assert code == 2 and "mixes values" in err and "50%" in err and "no route" not in err
+    assert "sweep:" not in err and not out.exists()
+
+
+def test_a_parameter_the_target_cannot_take_as_a_map_is_refused_before_the_sweep(tmp_path, capsys):
+    """Mitsuba 3's roughplastic takes alpha as a constant: found only after the whole sweep before."""
+    out = tmp_path / "out"
+    code = main(["remap", str(EXAMPLES / "blue-plastic"), "--to", "mitsuba3:roughplastic", "-o", str(out), "--sweep"])
+    err = capsys.readouterr().err
+    assert code == 2 and "alpha" in err and "as a constant" in err
+    assert "sweep:" not in err and not out.exists()
+
+
+def test_a_failed_run_leaves_nothing_and_the_retry_needs_no_force(tmp_path, capsys):
+    out = tmp_path / "out"
+    bad = main(["remap", str(EXAMPLES / "bronze"), "--to", "mitsuba06:pbr", "-o", str(out), "--rotations", "x"])
+    assert bad == 2 and not out.exists() and list(tmp_path.iterdir()) == []
+    code = main(
+        ["remap", str(EXAMPLES / "bronze"), "--to", "mitsuba06:pbr", "--fix", "distribution=as", "-o", str(out), *FAST]
+    )
+    assert code == 0 and (out / "maps" / "material.json").is_file() and (out / "verdict.json").is_file()
+    assert [p.name for p in tmp_path.iterdir()] == ["out"]  # no staging folder left beside it
+
+
+def test_a_renderer_that_is_not_installed_exits_4(tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("MATREMAP_BPY_PYTHON", str(tmp_path / "no-python"))
+    code = main(["fit", "--source", "mitsuba06:ward", "--target", "cycles:principled"])
+    assert code == 4 and "bpy" in capsys.readouterr().err
