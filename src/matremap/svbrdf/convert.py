@@ -443,4 +443,4 @@ def convert_paths(
     from matremap.svbrdf.textures import load_map_set
 
     ms = load_map_set(maps, model)
-    return convert(ms, [Transform.load(p) for p in transforms], out_dir, **kwargs)
+    return convert(ms, [Transform.load(Path(p)) for p in transforms], out_dir, **kwargs)
