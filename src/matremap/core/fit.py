@@ -378,20 +378,7 @@ def fit(
     counter = _Counter(scene)
     scale = irradiance_scale(source, src_r, spec.id, tgt_r, scene, render=lambda r, ms: counter.images_of(r, ms))
 
-    goals = _source_goals(source, strategy, scale, src_r, counter)
-    which = SPECULAR if strategy != "simple" else FULL
-    warnings: list[str] = []
-    sharpened = _below_resolution(source, goals[which], which, src_r, counter)
-    if sharpened is not None:
-        warnings.append(_sharpened_note(source, sharpened, scene))
-        goals = _source_goals(sharpened[0], strategy, scale, src_r, counter)
-    else:
-        warnings += _check_resolution(goals[which], scene)
-    if not np.any(goals[FULL] > 0):
-        raise MatremapError(
-            f"{source.model} renders black on the probe ({len(scene.lights)} light(s)): there is nothing to fit; "
-            "check its parameters (is every reflectance 0?)"
-        )
+    goals, sharpened, warnings = _resolved_goals(source, strategy, scale, src_r, counter)
     stages: list[StageReport] = []
     current = _descend(strategy, template, free_params, goals, tgt_r, counter, stages, coarse)
 
@@ -417,6 +404,30 @@ def fit(
         stages=stages,
         warnings=warnings,
     )
+
+
+def _resolved_goals(
+    source: Material, strategy: str, scale: float, renderer: Renderer, counter: _Counter
+) -> tuple[dict[str, np.ndarray], tuple[Material, float] | None, list[str]]:
+    """The source goals the fit matches, where the probe resolves them: for a highlight narrower than
+    it resolves, those of the widened source (:func:`_below_resolution`, returned too); and the warnings.
+    A source that renders black everywhere is refused."""
+    scene = counter.scene
+    goals = _source_goals(source, strategy, scale, renderer, counter)
+    which = SPECULAR if strategy != "simple" else FULL
+    warnings: list[str] = []
+    sharpened = _below_resolution(source, goals[which], which, renderer, counter)
+    if sharpened is not None:
+        warnings.append(_sharpened_note(source, sharpened, scene))
+        goals = _source_goals(sharpened[0], strategy, scale, renderer, counter)
+    else:
+        warnings += _check_resolution(goals[which], scene)
+    if not np.any(goals[FULL] > 0):
+        raise MatremapError(
+            f"{source.model} renders black on the probe ({len(scene.lights)} light(s)): there is nothing to fit; "
+            "check its parameters (is every reflectance 0?)"
+        )
+    return goals, sharpened, warnings
 
 
 def _fit_setup(

@@ -283,14 +283,7 @@ def evaluate(
                 drawn[(who, part)] = drawn[key]
             comparison.add(k, part, drawn[("source", part)], drawn[("target", part)], images)
     images.emit("dssim_vs_rotation.png", _plot(rotations, comparison.dssim["full"], comparison.dssim["specular"]))
-    limits = thresholds or Thresholds()
-    verdict = Verdict(
-        [
-            *checks,
-            *image_checks(comparison.full_pairs, mask, limits),
-            Check("dssim", float(np.mean(comparison.dssim["full"])), limits.dssim, "mean over rotations"),
-        ]
-    )
+    verdict = comparison.verdict(checks, thresholds or Thresholds())
     images.emit("colorbar.png", _colorbar())
 
     result = EvaluationResult(
@@ -356,6 +349,11 @@ class _Comparison:
         self.exposure: dict[str, float] = {}
         #: (where, source, target) of the full renders, for the colour and energy measures
         self.full_pairs: list[tuple[str, np.ndarray, np.ndarray]] = []
+
+    def verdict(self, checks: Sequence[Check], limits: Thresholds) -> Verdict:
+        """The gate: the caller's checks, the full renders' colour and energy, and the mean 1 - SSIM."""
+        dssim = Check("dssim", float(np.mean(self.dssim["full"])), limits.dssim, "mean over rotations")
+        return Verdict([*checks, *image_checks(self.full_pairs, self.mask, limits), dssim])
 
     def add(self, k: int, part: str, s_img: np.ndarray, t_img: np.ndarray, images: _ReportImages) -> None:
         if self.scale != 1.0:

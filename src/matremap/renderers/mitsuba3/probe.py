@@ -256,6 +256,16 @@ class AutodiffFit:
     seconds: float
 
 
+def _autodiff_mitsuba() -> Any:
+    """Mitsuba switched to ``llvm_ad_rgb`` (process-wide), or an error saying what it needs."""
+    mi = import_mitsuba()
+    if "llvm_ad_rgb" not in mi.variants() or not llvm_renders():
+        raise MatremapError("gradient-based fitting needs Mitsuba's llvm_ad_rgb variant: install Debian libllvm19")
+    if mi.variant() != "llvm_ad_rgb":
+        mi.set_variant("llvm_ad_rgb")
+    return mi
+
+
 def _autodiff_inputs(
     target: np.ndarray, scene: Scene, distribution: str, start: Material | None
 ) -> tuple[np.ndarray, Material]:
@@ -296,11 +306,7 @@ def fit_roughconductor_autodiff(
     from scipy.optimize import minimize
 
     t0 = time.perf_counter()
-    mi = import_mitsuba()
-    if "llvm_ad_rgb" not in mi.variants() or not llvm_renders():
-        raise MatremapError("gradient-based fitting needs Mitsuba's llvm_ad_rgb variant: install Debian libllvm19")
-    if mi.variant() != "llvm_ad_rgb":
-        mi.set_variant("llvm_ad_rgb")
+    mi = _autodiff_mitsuba()
     import drjit as dr
 
     target, m0 = _autodiff_inputs(target, scene, distribution, start)
