@@ -199,6 +199,7 @@ def check_renderers(config: SweepConfig) -> None:
         ("--source-renderer", config.source_renderer, config.source.model),
         ("--target-renderer", config.target_renderer, config.target),
     ):
+        assert name is not None  # resolved in __post_init__
         if not can_draw(name, model):
             raise MatremapError(
                 f"renderer {name!r} cannot draw {model}; {renderer_for(model)!r} does (drop {flag} or name it)"
