@@ -153,6 +153,9 @@ def test_a_failed_run_leaves_nothing_and_the_retry_needs_no_force(tmp_path, caps
 
 
 def test_a_renderer_that_is_not_installed_exits_4(tmp_path, monkeypatch, capsys):
+    from matremap.renderers import registry
+
+    monkeypatch.setattr(registry, "_INSTANCES", {})  # no renderer started by an earlier test
     monkeypatch.setenv("MATREMAP_BPY_PYTHON", str(tmp_path / "no-python"))
     code = main(["fit", "--source", "mitsuba06:ward", "--target", "cycles:principled"])
     assert code == 4 and "bpy" in capsys.readouterr().err

@@ -183,6 +183,7 @@ class SweepStore:
         that had failed is replaced by its retry."""
         values = []
         for r in rows:
+            r = {"warm": 0, **r}  # the column's default when a row does not say
             values.append(
                 tuple(json.dumps(r.get(c)) if c in JSON_COLUMNS and r.get(c) is not None else r.get(c) for c in COLUMNS)
             )
