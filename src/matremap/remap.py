@@ -53,7 +53,7 @@ from matremap.svbrdf.quality import Check, Thresholds, Verdict, image_checks, ma
 from matremap.svbrdf.textures import MapSet, load_map_set, map_values, read_image
 
 #: grid points along the roughness and the specular axes of the sweep, and the diffuse levels
-ROUGHNESS_POINTS, SPECULAR_POINTS, DIFFUSE_LEVELS = 10, 6, (0.0, 0.9)
+ROUGHNESS_POINTS, SPECULAR_POINTS, DIFFUSE_ONLY_POINTS = 10, 6, 8
 
 
 @dataclass
@@ -128,7 +128,8 @@ def sweep_grid(map_set: MapSet, params: Mapping[str, Any], held: Mapping[str, fl
     dp = qty.diffuse_param(spec)
     if dp is not None and dp.name in map_set.maps and not metal:
         _, hi = _range(params[dp.name], dp.bounds)
-        axes.append(f"{dp.name}=0.0;{hi!r}")
+        # two levels learn the diffuse mapping beside other axes; alone it needs enough points to learn from
+        axes.append(f"{dp.name}=0.0;{hi!r}" if axes else f"{dp.name}=0.0:{hi!r}:{DIFFUSE_ONLY_POINTS}")
     if not axes:
         raise MatremapError(f"the map set gives no roughness, specular or diffuse map of {spec.id} to remap")
     return ",".join(axes)
@@ -363,7 +364,7 @@ def remap_into(
     else:
         held = held_values(map_set, params, target)
         fix = complete_fix(map_set.model, {**map_set.constants, **params, **held}, target, job.fix)
-        check_before_rendering(map_set, target, target_renderer)
+        check_before_rendering(map_set, params, held, target, target_renderer)
         transform, tpath, cached = _transform_for(map_set, params, fix, target_renderer, job, log)
         seconds["transform"] = time.perf_counter() - t
         t = time.perf_counter()
@@ -472,26 +473,30 @@ def copy_map_set(map_set: MapSet, dest: Path) -> None:
     write_text(dest / "material.json", json.dumps(doc, indent=1) + "\n")
 
 
-def check_before_rendering(map_set: MapSet, target: str, target_renderer: str) -> None:
+def check_before_rendering(
+    map_set: MapSet, params: Mapping[str, Any], held: Mapping[str, float], target: str, target_renderer: str
+) -> None:
     """What can be known before a sweep: the target's renderer draws it and is installed, and the
-    renderers that draw the target take as textures the parameters the maps will drive."""
+    renderers that draw the target take as textures the parameters that the maps' varying quantities
+    (roughness, F0, diffuse albedo, read from the maps themselves) will drive."""
     from matremap.renderers.registry import can_draw, get_renderer, texture_refusal
-    from matremap.svbrdf.convert import source_params, target_param
+    from matremap.svbrdf.convert import target_param
 
     if not can_draw(target_renderer, target):
         raise MatremapError(f"renderer {target_renderer!r} cannot draw {target}; {renderer_for(target)!r} does")
     get_renderer(target_renderer)  # one that is not installed says so now, not after the sweep
-    src, tgt = map_set.spec, get_model(target)
+    probe = next((np.asarray(v) for v in params.values() if np.ndim(v) >= 2), None)
+    shape = sample(probe).shape[:2] if probe is not None else (1, 1)
+    quantities = _quantity_sample(map_set.spec, {**map_set.constants, **params, **held}, shape)
+    tgt = get_model(target)
     driven = [
         name
-        for q in qty.QUANTITIES
-        if any(n in map_set.maps for n in source_params(src, q)) and (name := target_param(tgt, q)) is not None
+        for q, values in quantities.items()
+        if np.ptp(np.asarray(values, dtype=float)) > 1e-6 and (name := target_param(tgt, q)) is not None
     ]
     why = texture_refusal(target, driven)
     if why is not None:
-        raise MatremapError(
-            f"{why}, and the maps of {map_set.root.name} vary it; choose a target that takes it as a map"
-        )
+        raise MatremapError(f"{why}, and the maps vary it; choose a target that takes it as a map")
 
 
 def _quantity_sample(spec: Any, values: Mapping[str, Any], shape: tuple[int, ...]) -> dict[str, np.ndarray]:
