@@ -249,3 +249,16 @@ def test_learner_table_and_holdout_split():
     assert len(held) == 2 and sorted([*train, *held]) == list(range(10))
     np.testing.assert_array_equal(holdout_split(10, 0.2, seed=3)[1], held)
     assert len(holdout_split(3, 0.01, seed=0)[1]) == 1  # at least one point held out
+
+
+def test_a_constant_beside_a_map_takes_the_maps_shape():
+    """A uniform roughness next to a specular map used to crash apply (non-broadcastable output) on four
+    public glTF assets."""
+    from matremap.regress.library import LIBRARY_DIR
+
+    t = Transform.load(LIBRARY_DIR / "ward-as.json")
+    spec_map = np.random.default_rng(0).uniform(0.05, 0.15, (8, 6, 3))
+    out, outside = t.apply({"alpha": np.float64(0.2), "specularReflectance": spec_map, "diffuseReflectance": 0.0})
+    assert outside.shape == (8, 6) and out["alpha"].shape in ((8, 6), ())
+    one, _ = t.apply({"alpha": np.full((8, 6), 0.2), "specularReflectance": spec_map, "diffuseReflectance": 0.0})
+    np.testing.assert_allclose(np.broadcast_to(out["F0"], one["F0"].shape), one["F0"])

@@ -54,6 +54,8 @@ from matremap.svbrdf.textures import MapSet, load_map_set, map_values, read_imag
 
 #: grid points along the roughness and the specular axes of the sweep, and the diffuse levels
 ROUGHNESS_POINTS, SPECULAR_POINTS, DIFFUSE_ONLY_POINTS = 10, 6, 8
+#: points along a specular axis without a roughness axis beside it (a learner needs a few to spare)
+ALONE_POINTS = 12
 
 
 @dataclass
@@ -120,11 +122,13 @@ def sweep_grid(map_set: MapSet, params: Mapping[str, Any], held: Mapping[str, fl
     metal = spec.specialise({**map_set.constants, **params, **(held or {})}).diffuse_only is None
     if spec.reflectance is not None:
         # the parameter a map of F0 drives: k for conductors, a glTF metal's base colour or a glTF
-        # dielectric's specular colour
+        # dielectric's specular colour; its range is the one that covers the maps' F0 (which other maps,
+        # such as a glTF specular strength, may scale)
         name = spec.reflectance.driven_param(metal)
-        if name in map_set.maps:
-            lo, hi = _range(params[name], spec.param(name).bounds)
-            axes.append(f"{name}={lo!r}:{hi!r}:{SPECULAR_POINTS}")
+        f0_range = _f0_axis(map_set, params, held or {}, name)
+        if f0_range is not None:
+            lo, hi = f0_range
+            axes.append(f"{name}={lo!r}:{hi!r}:{SPECULAR_POINTS if axes else ALONE_POINTS}")
     dp = qty.diffuse_param(spec)
     if dp is not None and dp.name in map_set.maps and not metal:
         _, hi = _range(params[dp.name], dp.bounds)
@@ -133,6 +137,49 @@ def sweep_grid(map_set: MapSet, params: Mapping[str, Any], held: Mapping[str, fl
     if not axes:
         raise MatremapError(f"the map set gives no roughness, specular or diffuse map of {spec.id} to remap")
     return ",".join(axes)
+
+
+def base_values(map_set: MapSet, params: Mapping[str, Any], held: Mapping[str, float]) -> dict[str, Any]:
+    """The values a sweep's source starts from: the constants, the held values, and for each other map its
+    median (per channel), so that a map no axis sweeps is represented by its typical texel, not the
+    model's default."""
+    spec = map_set.spec
+    out: dict[str, Any] = {k: v for k, v in map_set.constants.items() if k not in map_set.maps}
+    for name in map_set.maps:
+        if name in held:
+            continue
+        a = np.asarray(params[name], dtype=float)
+        p = spec.param(name)
+        med = np.median(a.reshape(-1, a.shape[-1]) if a.ndim == 3 else a.reshape(-1), axis=0)
+        lo, hi = p.bounds
+        out[name] = (
+            np.clip(med, lo, hi).tolist() if p.channels == 3 and np.ndim(med) else float(np.clip(np.mean(med), lo, hi))
+        )
+    return {**out, **held}
+
+
+def _f0_axis(
+    map_set: MapSet, params: Mapping[str, Any], held: Mapping[str, float], name: str
+) -> tuple[float, float] | None:
+    """The range of the parameter ``name`` that, with the sweep's base values for the others, spans the
+    F0 the maps hold; None when F0 does not vary over the maps. Falls back to ``name``'s own map range."""
+    spec = map_set.spec
+    probe = next((np.asarray(v) for v in params.values() if np.ndim(v) >= 2), None)
+    if probe is None:
+        return None
+    f0 = _quantity_sample(spec, {**map_set.constants, **params, **held}, sample(probe).shape[:2]).get("reflectance")
+    bounds = spec.param(name).bounds
+    if f0 is None or np.ptp(f0) <= 1e-6:
+        return _range(params[name], bounds) if name in map_set.maps else None
+    grey = np.asarray(f0, dtype=float).mean(axis=-1).reshape(-1)
+    ends = np.array([[grey.min()] * 3, [grey.max()] * 3])
+    try:
+        base = Material.create(spec.id, base_values(map_set, params, held))
+        written = qty.write(spec, {"reflectance": ends}, {k: v for k, v in base.values.items()})
+    except (MatremapError, ValueError):
+        return _range(params[name], bounds) if name in map_set.maps else None
+    values = np.asarray(written[name], dtype=float).reshape(2, -1).mean(axis=-1)
+    return _range(values, bounds)
 
 
 def _range(values: Any, bounds: tuple[float, float]) -> tuple[float, float]:
@@ -244,7 +291,7 @@ def cached_transform(
 
     spec = map_set.spec
     held = held_values(map_set, params, target)
-    base = Material.create(spec.id, {**{k: v for k, v in map_set.constants.items() if k not in map_set.maps}, **held})
+    base = Material.create(spec.id, base_values(map_set, params, held))
     grid_text = sweep_grid(map_set, params, held)
     from matremap.renderers import renderer_for
 

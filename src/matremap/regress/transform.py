@@ -299,16 +299,16 @@ def _complete(spec: ModelSpec, values: Mapping[str, Any], defaults: Mapping[str,
 
 
 def _shape(spec: ModelSpec, arrays: Mapping[str, np.ndarray]) -> tuple[int, ...]:
-    """The leading (per-element) shape: that of the scalar parameters if any is given, else that
-    of the RGB ones without their channel axis."""
+    """The leading (per-element) shape: the broadcast of the scalar parameters' shapes and the RGB ones'
+    without their channel axis (a constant next to a map takes the map's shape)."""
     channels = {p.name: p.channels for p in spec.params}
+    shapes = []
     for k, a in arrays.items():
         if channels.get(k) == 1:
-            return a.shape
-    for k, a in arrays.items():
-        if channels.get(k) == 3:
-            return a.shape[:-1] if a.ndim and a.shape[-1] == 3 else a.shape
-    return ()
+            shapes.append(a.shape)
+        elif channels.get(k) == 3:
+            shapes.append(a.shape[:-1] if a.ndim and a.shape[-1] == 3 else a.shape)
+    return tuple(np.broadcast_shapes(*shapes)) if shapes else ()
 
 
 # ---------------------------------------------------------------------------------------------
