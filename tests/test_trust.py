@@ -159,3 +159,22 @@ def test_a_renderer_that_is_not_installed_exits_4(tmp_path, monkeypatch, capsys)
     monkeypatch.setenv("MATREMAP_BPY_PYTHON", str(tmp_path / "no-python"))
     code = main(["fit", "--source", "mitsuba06:ward", "--target", "cycles:principled"])
     assert code == 4 and "bpy" in capsys.readouterr().err
+
+
+CORPUS = Path(__file__).resolve().parent / "data" / "corpus"
+
+
+def test_a_metal_onto_cycles_principled_is_a_metal_of_its_colour(tmp_path, capsys):
+    """MaterialX's gltf_pbr gold used to come back as a black dielectric with IOR ~4 (Metallic held at 0),
+    loss 0.47, exit 0."""
+    from matremap.renderers.cycles.client import bpy_available
+
+    if not bpy_available():
+        pytest.skip("no bpy venv: python3.11 -m venv .venv-bpy && .venv-bpy/bin/pip install bpy==5.0.1")
+    src = next((CORPUS / "mtlx-gltf_pbr_gold").glob("*.mtlx"))
+    code = main(["remap", str(src), "--to", "cycles:principled", "-o", str(tmp_path / "out")])
+    assert code == 0, capsys.readouterr().err
+    m = json.loads((tmp_path / "out" / "material.json").read_text())["params"]
+    assert m["Metallic"] == 1.0
+    r, g, b = m["Base Color"]
+    assert r > g > b and r > 0.8  # gold, not black

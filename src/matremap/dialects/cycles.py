@@ -110,6 +110,14 @@ PRINCIPLED = ModelSpec(
     # with Metallic = 0 (held in fits) a black base leaves the dielectric specular lobe alone;
     # a metal's lobe takes Base Color's colour, so this isolates nothing when Metallic > 0
     specular_only={"Base Color": 0.0},
+    # a metal (Metallic 1, chosen for a source without a diffuse part): Base Color is its F0, no diffuse part
+    specialisations=(
+        (
+            "Metallic",
+            1.0,
+            {"roles": {"Base Color": "specular", "IOR": "other"}, "diffuse_only": None, "specular_only": {}},
+        ),
+    ),
     # F0 of the IOR, with Specular IOR Level held at 0.5 (where Cycles leaves F0 as the IOR gives it)
     reflectance=Dielectric("IOR"),
     channel_separable=False,

@@ -233,6 +233,10 @@ PRINCIPLED = ModelSpec(
     # the metallic lobe takes base_color's colour: no parameter override isolates the specular part
     specular_only=None,
     channel_separable=False,  # tints use the luminance of base_color
+    # a metal (metallic 1, chosen for a source without a diffuse part): base_color is its F0
+    specialisations=(
+        ("metallic", 1.0, {"roles": {"base_color": "specular", "specular": "other"}, "diffuse_only": None}),
+    ),
 )
 
 #: the models of this dialect, in the order they are listed

@@ -202,9 +202,17 @@ def image_checks(
     n = len(pairs)
     over = f"over {n} view(s)" if n > 1 else pairs[0][0]
     return [
-        Check("luminance_error", lum, thresholds.luminance_error, f"{over}; worst {worst_lum[1]}: {worst_lum[0]:.3g}"),
         Check(
-            "delta_e", float(d_all.mean()) if d_all.size else 0.0, thresholds.delta_e, f"{over}; worst {worst_de[1]}"
+            "luminance_error",
+            lum,
+            thresholds.luminance_error,
+            over + (f"; worst {worst_lum[1]}: {worst_lum[0]:.3g}" if n > 1 else ""),
+        ),
+        Check(
+            "delta_e",
+            float(d_all.mean()) if d_all.size else 0.0,
+            thresholds.delta_e,
+            over + (f"; worst {worst_de[1]}" if n > 1 else ""),
         ),
         Check(
             "delta_e_fraction",
