@@ -178,3 +178,14 @@ def test_a_metal_onto_cycles_principled_is_a_metal_of_its_colour(tmp_path, capsy
     assert m["Metallic"] == 1.0
     r, g, b = m["Base Color"]
     assert r > g > b and r > 0.8  # gold, not black
+
+
+def test_a_look_carried_by_a_coat_colour_is_refused_not_written_white(tmp_path, capsys):
+    """Standard Surface's copper is a white metal under a copper coat: converting without the coat wrote a
+    white metal (luminance x2, hue lost) with exit 0."""
+    pytest.importorskip("MaterialX", reason="MaterialX files need the materialx package")
+    src = next((CORPUS / "mtlx-standard_surface_copper").glob("*.mtlx"))
+    out = tmp_path / "out"
+    code = main(["remap", str(src), "--to", "gltf:metal-rough", "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and "coat_color" in err and "not converted" in err and not out.exists()

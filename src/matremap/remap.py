@@ -171,7 +171,7 @@ def _f0_axis(
     bounds = spec.param(name).bounds
     if f0 is None or np.ptp(f0) <= 1e-6:
         return _range(params[name], bounds) if name in map_set.maps else None
-    grey = np.asarray(f0, dtype=float).mean(axis=-1).reshape(-1)
+    grey = np.asarray(f0, dtype=float).reshape(-1)  # every channel: the domain is checked per channel
     ends = np.array([[grey.min()] * 3, [grey.max()] * 3])
     try:
         base = Material.create(spec.id, base_values(map_set, params, held))
@@ -637,6 +637,13 @@ def remap_file(
         raise MatremapError(f"{out} is the input file's folder; choose another output folder")
     name = _output_name(p, target, asset.format, write, out, log)
     job = RemapJob(target, dict(fix or {}), **{k: v for k, v in options.items() if v is not None or k == "scene"})
+    kept = asset.format == "gltf" and target == asset.model and _same_options(asset.constants, target, job.fix)
+    if asset.lost and not kept:  # a glTF onto itself is copied with its extensions; anything else loses them
+        raise MatremapError(
+            f"{p}: material {asset.name!r} carries its look in {'; '.join(asset.lost)}, which matremap's models do "
+            f"not have (no coat, transmission or sheen yet): converting the rest to {target} would be wrong, so it "
+            "is not converted"
+        )
     with staged_folder(out, force) as stage:
         result = FileRemapResult(None, asset.model, target, asset.textured, notes=list(asset.notes))
         if asset.textured:
@@ -656,6 +663,13 @@ def remap_file(
         result.file = out / result.file.relative_to(stage)
         log(f"wrote {result.file}")
     return result
+
+
+def _same_options(values: Mapping[str, Any], model: str, fix: Mapping[str, Any]) -> bool:
+    """Whether ``fix`` changes none of the model's options from ``values`` (and holds no parameter)."""
+    spec = get_model(model)
+    options = {o.name: str(values.get(o.name, o.default)) for o in spec.options}
+    return all(k in options and str(v) == options[k] for k, v in fix.items())
 
 
 def _output_name(

@@ -59,7 +59,9 @@ class MaterialAsset:
     ``constants``: parameter values and options (model units); a parameter named in ``textures``
     is textured and its constant, if any, is ignored. ``document`` keeps whatever the reader parsed,
     for writers that copy the input with a new material. ``notes`` are the reader's decisions and
-    the inputs it skipped, for the user to see.
+    the inputs it skipped, for the user to see. ``lost``: inputs that carry the look and that no
+    matremap model has (a coloured coat, transmission, sheen): such a material is copied onto its own
+    model but not converted to another (see :func:`matremap.remap.remap_file`).
     """
 
     path: Path
@@ -72,6 +74,7 @@ class MaterialAsset:
     notes: list[str] = field(default_factory=list)
     document: Any = None
     index: int = 0
+    lost: list[str] = field(default_factory=list)
 
     @property
     def textured(self) -> bool:

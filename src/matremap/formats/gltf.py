@@ -373,6 +373,7 @@ def read(path: str | os.PathLike, material: str | int | None = None) -> Material
         notes=notes,
         document=doc,
         index=idx,
+        lost=lost_look(ext),
     )
 
 
@@ -494,6 +495,22 @@ class _MaterialTextures:
         if scale != 1:
             self.notes.append(f"normalTexture scale {scale:g} ignored; the normal map is used as stored (scale 1)")
         return TextureRef(f, None, "linear", 1.0)
+
+
+def lost_look(ext: dict[str, Any]) -> list[str]:
+    """The extensions that carry the material's look and that no matremap model has: mostly transmissive
+    (KHR_materials_transmission, factor above 0.5: glass) or a coloured sheen (KHR_materials_sheen:
+    velvet). A clear coat (colourless in glTF) only changes the gloss and is noted instead."""
+    lost = []
+    tr = ext.get("KHR_materials_transmission")
+    if isinstance(tr, dict) and (float(tr.get("transmissionFactor", 0.0)) > 0.5 or "transmissionTexture" in tr):
+        lost.append(f"KHR_materials_transmission (transmissionFactor {float(tr.get('transmissionFactor', 0.0)):g})")
+    sh = ext.get("KHR_materials_sheen")
+    if isinstance(sh, dict) and (
+        max(float(x) for x in sh.get("sheenColorFactor", [0, 0, 0])) > 0.5 or "sheenColorTexture" in sh
+    ):
+        lost.append("KHR_materials_sheen (a coloured sheen)")
+    return lost
 
 
 def _note_unremapped(m: dict[str, Any], ext: dict[str, Any], obj: dict[str, Any], notes: list[str]) -> None:

@@ -243,6 +243,7 @@ def _shader_asset(ctx: _Ctx, shader, name: str, index: int, doc) -> MaterialAsse
     constants, textures = inputs.read_all()
     inputs.apply_base_weight(constants, textures)
     normal = _normal_map(ctx, shader)
+    lost = lost_look(shader)
     _note_skipped(ctx, cat, inputs.skipped())
     _clamp_colours(constants, textures, ctx.notes)
     uniform = {k: v for k, v in constants.items() if k not in textures}
@@ -261,6 +262,7 @@ def _shader_asset(ctx: _Ctx, shader, name: str, index: int, doc) -> MaterialAsse
         notes=ctx.notes,
         document=doc,
         index=index,
+        lost=lost,
     )
 
 
@@ -367,6 +369,47 @@ def _normal_map(ctx: _Ctx, shader) -> TextureRef | None:
         raise MatremapError(f"{ctx.path}: normal map {rel} not found at {npath}; put it beside the document")
     ctx.notes.append(f"normal map {rel.name} (through {nnode.getCategory()}) is the asset's normal map")
     return TextureRef(npath.resolve())
+
+
+#: inputs that carry a material's look where gltf:metal-rough has nothing to put them: (weight input, what
+#: it weights, the value past which the look is lost). A coloured coat over a white metal is Standard
+#: Surface's copper; transmission is glass; sheen is velvet.
+_LOOK = {
+    "coat": ("coat_color", 0.05),
+    "transmission": (None, 0.5),
+    "transmission_weight": (None, 0.5),
+    "sheen": (None, 0.5),
+    "fuzz_weight": (None, 0.5),
+}
+
+
+def lost_look(shader: Any) -> list[str]:
+    """The inputs that carry the material's look and that gltf:metal-rough has nothing for: a coloured coat
+    over the base (Standard Surface's copper is a white metal under a copper coat), transmission (glass),
+    sheen (velvet)."""
+    lost = []
+    for weight, (colour, limit) in _LOOK.items():
+        w = _float_input(shader, weight)
+        if w is None or w <= 0.0:
+            continue
+        if colour is not None:
+            c = shader.getInput(colour)
+            rgb = [float(x) for x in c.getValueString().split(",")] if c is not None and c.getValueString() else []
+            if rgb and max(abs(x - 1.0) for x in rgb) > limit:
+                lost.append(f"{weight}={w:g} with {colour}={', '.join(f'{x:.3g}' for x in rgb)}")
+        elif w > limit:
+            lost.append(f"{weight}={w:g}")
+    return lost
+
+
+def _float_input(shader: Any, name: str) -> float | None:
+    inp = shader.getInput(name)
+    if inp is None or inp.getConnectedNode() is not None or not inp.getValueString():
+        return None
+    try:
+        return float(inp.getValueString())
+    except ValueError:
+        return None
 
 
 def _note_skipped(ctx: _Ctx, category: str, skipped: list[str]) -> None:
