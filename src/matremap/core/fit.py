@@ -111,6 +111,8 @@ class _Counter:
 
     def pixels(self, renderer: Renderer, materials: Sequence[Material]) -> np.ndarray:
         """Sphere pixels [N, P, 3] as float64."""
+        if not materials:
+            return np.zeros((0, self.indices.size, 3))
         self.images += len(materials)
         return render_pixels(renderer, list(materials), self.scene).astype(np.float64)
 
@@ -554,6 +556,8 @@ def _below_resolution(
         return None
     candidates = [source.with_params({rp.name: w}) for w in widths]
     parts = [part(m, which) for m in candidates]
+    if any(m is None for m in parts):  # no such part to widen (a model without a specular-only render)
+        return None
     images = counter.pixels(renderer, [m for m in parts if m is not None])
     for m, w, image in zip(candidates, widths, images, strict=False):
         if highlight_pixels(image) >= MIN_HIGHLIGHT_PIXELS:
