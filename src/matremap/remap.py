@@ -360,6 +360,17 @@ class RemapJob:
     thresholds: Thresholds = field(default_factory=Thresholds)
 
 
+def staged_strategy(job: RemapJob, log: Callable[[str], None]) -> RemapJob:
+    """The job with ``simple`` for a target whose specular part cannot be drawn alone (Mitsuba 3's
+    principled: its metallic lobe takes the base colour), where a two- or three-stage fit would fit its
+    specular stage to nothing."""
+    spec = get_model(job.target)
+    if job.strategy != "simple" and spec.specular_only is None and spec.diffuse_only is not None:
+        log(f"strategy: simple ({job.target} has no specular-only render to fit a stage to)")
+        return replace(job, strategy="simple")
+    return job
+
+
 def remap(
     maps: str | Path,
     source_model: str | None,
@@ -396,6 +407,7 @@ def remap_into(
     """The remap of :func:`remap`, written into ``folder`` (a staging folder)."""
     t0 = time.perf_counter()
     seconds: dict[str, float] = {}
+    job = staged_strategy(job, log)
     target = job.target
     target_renderer = job.target_renderer or renderer_for(target)
     angles = parse_rotations(job.rotations) if job.evaluate else []
@@ -715,6 +727,7 @@ def _remap_uniform(
         write_image(stage / "compare.png", comparison_strip(same), force=True)
         return source
     full_fix = complete_fix(source.model, qty.material_values(source), target, job.fix)
+    job = staged_strategy(job, log)
     r = fit(
         source,
         target,
