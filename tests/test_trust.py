@@ -189,3 +189,15 @@ def test_a_look_carried_by_a_coat_colour_is_refused_not_written_white(tmp_path, 
     code = main(["remap", str(src), "--to", "gltf:metal-rough", "-o", str(out)])
     err = capsys.readouterr().err
     assert code == 2 and "coat_color" in err and "not converted" in err and not out.exists()
+
+
+def test_a_dielectric_glTF_target_gets_its_specular_colour_as_a_map(tmp_path, capsys):
+    """Bronze (Ward with a varying specular map) onto glTF: the specular colour was written as one
+    constant, the first texel's [7.05, 4.35, 2.0], where the source varies."""
+    out = tmp_path / "out"
+    assert main(["remap", str(EXAMPLES / "bronze"), "--to", "gltf:metal-rough", "-o", str(out), *FAST]) == 0
+    manifest = json.loads((out / "maps" / "material.json").read_text())
+    assert "specularColor" in manifest["maps"] and "specularColor" not in manifest["params"]
+    maps = load_map_set(out / "maps")
+    f0, _ = read_image(maps.maps["specularColor"], maps.colorspace["specularColor"])
+    assert np.ptp(f0[..., 0]) > 0.1  # it varies as the bronze's specular map does

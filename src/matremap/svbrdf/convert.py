@@ -85,8 +85,9 @@ def source_params(spec: ModelSpec, quantity: str) -> list[str]:
     return []
 
 
-def target_param(spec: ModelSpec, quantity: str) -> str | None:
-    """The target parameter a quantity drives."""
+def target_param(spec: ModelSpec, quantity: str, metal: bool = True) -> str | None:
+    """The target parameter a quantity drives; ``metal``: whether the target is held metallic (a glTF
+    dielectric's F0 goes to its specular colour, a metal's to its base colour)."""
     if quantity == "roughness":
         p = qty.roughness_param(spec)
         return p.name if p else None
@@ -94,7 +95,7 @@ def target_param(spec: ModelSpec, quantity: str) -> str | None:
         p = qty.diffuse_param(spec)
         return p.name if p else None
     if quantity == "reflectance" and spec.reflectance is not None:
-        return spec.reflectance.driven_param()
+        return spec.reflectance.driven_param(metal)
     return None
 
 
@@ -320,8 +321,9 @@ def _plan_outputs(
     prefix = _prefix(map_set)
     planned: list[tuple[str | None, Path, ImageInfo]] = []
     any_info = next(iter(map_set.info.values()))
+    metal = tgt.specialise(last.template).diffuse_only is None
     for q, m in last.mappings.items():
-        name = target_param(tgt, q)
+        name = target_param(tgt, q, metal)
         if name is None or m.get("kind") == "constant":
             continue
         srcs = [n for n in source_params(src, q) if n in map_set.info]
@@ -335,7 +337,7 @@ def _plan_outputs(
         if out_format is None and info.integer and p.role == "fresnel" and p.bounds[1] > 1.0:
             info = output_info(info.like(colorspace="linear"), "exr")
             notes.append(f"{name} takes values above 1: written as float EXR")
-        fname = f"{prefix}_{_CONVENTION[q] if name == target_param(tgt, q) and q in _CONVENTION else name}"
+        fname = f"{prefix}_{_CONVENTION[q] if q in _CONVENTION and name == target_param(tgt, q, metal) else name}"
         planned.append((name, out / (fname + info.suffix), info))
     planned.append((None, out / MASK_NAME, ImageInfo("png", "uint8", 1, width, height, "linear")))
     return planned
