@@ -1,33 +1,6 @@
-"""The real Mitsuba 3 renderer (PyPI ``mitsuba``), behind the same protocol as the embedded one.
+"""Mitsuba 3's BSDF plugins, as matremap fits them (drawn by the real Mitsuba 3: :mod:`matremap.renderers.mitsuba3`).
 
-Install with ``pip install 'matremap[mitsuba]'`` (or ``pip install mitsuba``). Importing this module
-does not import Mitsuba: the models below are plain data and are listed without it; the renderer
-imports Mitsuba when it is created and says how to install it when that fails.
-
-The probe scene is built exactly as the embedded renderer sees it (see :mod:`matremap.core.scene`):
-
-* a ``sphere`` of the scene's radius at the origin carrying the material's BSDF;
-* a ``perspective`` sensor at (0, 0, d) looking at the origin, +y up, ``fov`` = the scene's full
-  field of view along x, an ``hdrfilm`` of the scene's resolution with a ``box`` reconstruction filter;
-* the ``direct`` integrator (one emitter sample, no BSDF samples: a point light cannot be hit by
-  BSDF sampling) with a ``stratified`` sampler, ``jitter=false`` and 1 sample per pixel: the one
-  camera ray of each pixel goes through the pixel centre, so a render is deterministic and
-  noise-free, and equal to the embedded renderer's geometry to float32 precision;
-* one scene per point light, summed: Mitsuba's emitter sampling picks *one* light per sample,
-  which would make multi-light renders noisy; with one light per scene the point light is
-  sampled deterministically. Each point light has ``intensity`` = the scene's radiant intensity.
-
-A loaded scene is cached per (scene, light, model, options); a batch of materials is a loop that
-changes the BSDF's parameters with ``mi.traverse`` and renders again (``spp`` and ``seed`` are
-always passed to ``mi.render``: Mitsuba otherwise keeps the last call's sample count).
-
-Variants: ``scalar_rgb`` by default (works from the wheel alone). Any ``*_rgb`` variant may be
-chosen with ``Mitsuba3Renderer(variant=...)`` or the environment variable
-``MATREMAP_MITSUBA_VARIANT``; ``llvm_ad_rgb`` needs a libLLVM >= 17 (Debian ``libllvm19``, which
-Mitsuba finds without any environment variable even next to LLVM 14/15; LLVM 15 and 16 crash
-inside Mitsuba on the first render, which cannot be caught), so ``variant="auto"`` picks it only
-when such a library is found and a tiny render in a child process succeeds (:func:`llvm_renders`).
-It agrees with ``scalar_rgb`` to 2e-6 and renders ~2x faster here (centre rays; 8x at 256 spp).
+Source: Mitsuba 3.9 ``src/bsdfs/{diffuse,roughconductor,roughplastic,principled}.cpp``.
 
 =========================  ====================================================================
 model                      parameters (Mitsuba 3's names; RGB unless noted)

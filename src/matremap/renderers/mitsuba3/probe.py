@@ -1,8 +1,7 @@
 """The real Mitsuba 3 renderer (PyPI ``mitsuba``), behind the same protocol as the embedded one.
 
 Install with ``pip install 'matremap[mitsuba]'`` (or ``pip install mitsuba``). Importing this module
-does not import Mitsuba: the models below are plain data and are listed without it; the renderer
-imports Mitsuba when it is created and says how to install it when that fails.
+does not import Mitsuba: the renderer imports it when it is created and says how to install it when that fails.
 
 The probe scene is built exactly as the embedded renderer sees it (see :mod:`matremap.core.scene`):
 
@@ -29,21 +28,7 @@ inside Mitsuba on the first render, which cannot be caught), so ``variant="auto"
 when such a library is found and a tiny render in a child process succeeds (:func:`llvm_renders`).
 It agrees with ``scalar_rgb`` to 2e-6 and renders ~2x faster here (centre rays; 8x at 256 spp).
 
-=========================  ====================================================================
-model                      parameters (Mitsuba 3's names; RGB unless noted)
-=========================  ====================================================================
-mitsuba3:diffuse           reflectance (0.5)
-mitsuba3:roughconductor    distribution {beckmann*, ggx}; material {custom*, none, Au, Cu, ...};
-                           alpha (scalar, 0.1); eta (0), k (1) (Mitsuba's default is a perfect
-                           mirror, ``none``); specular_reflectance (1). eta and k are used
-                           when material = custom, otherwise Mitsuba's named data are used.
-mitsuba3:roughplastic      distribution {beckmann*, ggx}; nonlinear {false*, true};
-                           alpha (scalar, 0.1); int_ior (scalar, 1.49); ext_ior (scalar, 1.000277);
-                           specular_reflectance (1); diffuse_reflectance (0.5)
-mitsuba3:principled        base_color (0.5); roughness, metallic, specular (0.5), spec_tint,
-                           anisotropic, sheen, sheen_tint, clearcoat, clearcoat_gloss,
-                           spec_trans (scalars; those after specular held at 0 in fits)
-=========================  ====================================================================
+The models and their parameters are in :mod:`matremap.dialects.mitsuba3`.
 """
 
 from __future__ import annotations

@@ -1,45 +1,6 @@
-"""Blender Cycles (Blender >= 2.80) BSDF nodes, emulated: Glossy BSDF (+ a Diffuse BSDF added).
-
-Source: Cycles ``intern/cycles/kernel/closure/bsdf_microfacet.h`` and
-``bsdf_ashikhmin_shirley.h``; ``kernel/svm/closure.h`` for alpha = Roughness^2; for Multiscatter
-GGX also ``intern/cycles/app/cycles_precompute.cpp`` (how the albedo tables are made) and
-``kernel/util/lookup_table.h`` (how they are read).
-
-cycles:glossy -- Blender's Glossy BSDF node plus a Diffuse BSDF node joined by an Add Shader:
-
-==============  ===============================================================================
-parameter       meaning (node socket names)
-==============  ===============================================================================
-distribution    ggx*, beckmann, ashikhmin_shirley, multi_ggx (Multiscatter GGX, see below)
-Color           RGB in [0, 1], default 0.8; no Fresnel: the lobe is multiplied by it
-Roughness       scalar in [0, 1], default 0.5; alpha = Roughness^2
-Diffuse Color   RGB in [0, 1], default 0 (no diffuse node); Lambertian Color/pi
-==============  ===============================================================================
-
-* GGX / Beckmann: f = Color D G / (4 cos_i cos_o) with the height-correlated Smith
-  G = 1/(1 + Lambda(i) + Lambda(o)) used since Blender 3.5; zero when alpha^2 <= 2e-10.
-* Ashikhmin-Shirley: alpha clamped to [1e-4, 1] (zero at or below 1e-4), n = 2/alpha^2 - 2,
-  f cos_i = cos_i (n+1)/(8 pi) (n.h)^n / max(1e-6, (h.o) max(cos_i, cos_o)), cosines floored at 1e-6.
-
-* Multiscatter GGX (Blender >= 4.0; 5.0 unchanged): not a random walk any more but the single-scatter
-  GGX lobe above scaled up by energy compensation (``microfacet_ggx_preserve_energy`` in
-  ``bsdf_microfacet.h``, reached from the Glossy node through ``bsdf_microfacet_setup_fresnel_constant``
-  with the node's Color as the single-scatter "Fresnel"):
-
-      f_ms = f_ss * (1 + F_ms (1 - E) / E),   F_ms = c E_avg / (1 - c (1 - E_avg)),   c = max(Color, 0)
-
-  where E(mu, r) is the directional albedo of the white single-scatter lobe seen from the viewer
-  (mu = cos theta_view, r = sqrt(alpha) = Roughness) and E_avg(r) = integral of E 2 mu dmu its
-  cosine-weighted average. With a white Color F_ms = 1 and the lobe is simply divided by E. Cycles
-  reads E from a 32 x 32 table on the nodes r = k/31, mu = j/31 (both clamped below at 1e-4;
-  r -> 0 is a mirror, E = 1) and E_avg from 32 nodes in r, interpolated linearly (bilinearly), with
-  inputs clamped to [0, 1]. The tables here hold the same quantities, computed by numerical
-  integration of this module's single-scatter GGX (:func:`ggx_directional_albedo`) instead of
-  Cycles' quasi-Monte Carlo, on the same nodes and read the same way, so the emulation inherits
-  Cycles' interpolation. They take about a second to build and are cached in memory and in
-  ``$MATREMAP_CACHE_DIR`` or ``~/.cache/matremap`` (skipped silently if not writable).
-
-cycles:diffuse -- the Diffuse BSDF node with Roughness 0 (Lambert): Color/pi.
+"""The embedded renderer's evaluators of the cycles dialect: f * cos(theta_i) of each model of
+:mod:`matremap.dialects.cycles` (its model table, the formulas and their sources are there), as numpy
+functions of [N, C, L, P] arrays, zero where either cosine is <= 0 (the renderer masks that).
 """
 
 from __future__ import annotations

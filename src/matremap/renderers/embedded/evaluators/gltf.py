@@ -1,25 +1,6 @@
-"""glTF 2.0 metallic-roughness material, emulated as its specification defines it.
-
-Source: the glTF 2.0 specification, Appendix B "BRDF Implementation" (Khronos, 2021), and the
-extensions KHR_materials_ior and KHR_materials_specular. In the spec's notation (V view, L light,
-H half vector, all dot products clamped to [0, 1]):
-
-* alpha = roughness^2;
-* D = alpha^2 / (pi ((N.H)^2 (alpha^2 - 1) + 1)^2)  (Trowbridge-Reitz / GGX);
-* the visibility term V = G / (4 |N.L| |N.V|) with Smith's GGX masking-shadowing, by default in
-  its height-correlated form, G = 1 / (1 + Lambda(L) + Lambda(V)) (what the Khronos sample viewer
-  and most engines evaluate; option ``visibility=separable`` gives the product G1(L) G1(V) the
-  appendix writes out);
-* Schlick's Fresnel F(f0, f90) = f0 + (f90 - f0) (1 - |V.H|)^5;
-* metal_brdf = F(baseColor, 1) D V;
-* dielectric_brdf = (1 - specular max_c(fr)) baseColor / pi + specular fr D V, where
-  fr = F(min(((ior - 1)/(ior + 1))^2 specularColor, 1), 1) per channel: KHR_materials_ior and
-  the ratified KHR_materials_specular (its ``fresnel_mix``: the diffuse base is weighted by one
-  number, the largest channel of fr). Without the extensions ior = 1.5 gives f0 = 0.04 and
-  specular = specularColor = 1, the core spec's mix(diffuse, specular, F(0.04, 1));
-* material = mix(dielectric_brdf, metal_brdf, metallic).
-
-The parameter names are the glTF JSON property names without ``Factor``.
+"""The embedded renderer's evaluators of the gltf dialect: f * cos(theta_i) of each model of
+:mod:`matremap.dialects.gltf` (its model table, the formulas and their sources are there), as numpy
+functions of [N, C, L, P] arrays, zero where either cosine is <= 0 (the renderer masks that).
 """
 
 from __future__ import annotations
