@@ -156,6 +156,7 @@ def test_a_renderer_that_is_not_installed_exits_4(tmp_path, monkeypatch, capsys)
     from matremap.renderers import registry
 
     monkeypatch.setattr(registry, "_INSTANCES", {})  # no renderer started by an earlier test
+    monkeypatch.setattr(registry, "_FACTORIES", {})  # nor one registered by a test
     monkeypatch.setenv("MATREMAP_BPY_PYTHON", str(tmp_path / "no-python"))
     code = main(["fit", "--source", "mitsuba06:ward", "--target", "cycles:principled"])
     assert code == 4 and "bpy" in capsys.readouterr().err
