@@ -112,22 +112,6 @@ def _oiio_write(path: str, data: np.ndarray) -> None:
         raise MatremapError(f"cannot write {path}: {oiio.geterror().strip()}")
 
 
-def read_image(path: str | os.PathLike) -> np.ndarray:
-    """Read an image as float32 [H, W, C] (values as stored: EXR linear, PNG 0..1 code values)."""
-    p = Path(path)
-    if p.suffix.lower() == ".npy":
-        return np.load(p)
-    import OpenImageIO as oiio
-
-    buf = oiio.ImageBuf(str(p))
-    if buf.has_error:
-        raise MatremapError(f"cannot read {p}: {buf.geterror()}")
-    pixels = buf.get_pixels(oiio.FLOAT)
-    if pixels is None:
-        raise MatremapError(f"cannot read the pixels of {p}: {buf.geterror()}")
-    return pixels
-
-
 def png_bytes(array: np.ndarray) -> bytes:
     """8-bit PNG bytes of a uint8 array [H, W, C] (C = 1..4), values stored as given (an alpha
     channel does not scale the colour)."""
