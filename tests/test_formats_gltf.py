@@ -296,6 +296,12 @@ def test_packed_metallic_roughness_texture_gives_green_roughness_and_blue_metall
     assert ms.constants["baseColor"] == [1.0, 1.0, 1.0]
 
 
+def read_image_bytes_ok(path: Path) -> bool:
+    import hashlib
+
+    return hashlib.sha256(path.read_bytes()).hexdigest()[:16] in path.stem
+
+
 def test_embedded_images_are_extracted_to_a_cache_folder_named_by_the_file(tmp_path):
     f = make_file(
         tmp_path,
@@ -304,9 +310,13 @@ def test_embedded_images_are_extracted_to_a_cache_folder_named_by_the_file(tmp_p
         {"base": ramp(seed=2)},
         store="bufferView",
     )
+    from matremap.core.diskcache import cache_dir
+
     p1 = read(f).textures["baseColor"].path
-    assert p1.suffix == ".png" and "matremap-gltf" in str(p1) and not p1.is_relative_to(tmp_path)
+    assert p1.suffix == ".png" and p1.is_relative_to(cache_dir() / "gltf-images")  # the documented cache
     assert read(f).textures["baseColor"].path == p1  # cached, same file
+    p1.write_bytes(p1.read_bytes()[:-10])  # a damaged cache file is not trusted: written again
+    assert read(f).textures["baseColor"].path == p1 and read_image_bytes_ok(p1)
     g = make_file(
         tmp_path / "b",
         "a.glb",

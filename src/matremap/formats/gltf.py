@@ -22,7 +22,8 @@ extension READMEs:
 A reader picks one material and returns a :class:`~matremap.formats.asset.MaterialAsset` whose
 ``document`` is a :class:`GltfDocument` (the parsed JSON and, for a ``.glb``, its BIN chunk).
 Images stored inside the file (buffer views, ``data:`` URIs) are extracted once to a cache folder,
-``<tempdir>/matremap-gltf-<user>/<hash of the file>``, so that every texture has a real path.
+``$MATREMAP_CACHE_DIR/gltf-images/<hash of the file>`` (default ``~/.cache/matremap``), named by their
+content's digest and checked against it when reused, so that every texture has a real path.
 
 The writer copies the source file with the chosen material replaced, or writes a small file of its
 own (the material on a UV sphere) when there is no glTF source.
@@ -37,7 +38,6 @@ import json
 import math
 import os
 import struct
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -146,8 +146,23 @@ def _glb_chunks(path: Path, data: bytes) -> tuple[bytes, bytes | None]:
 
 
 def _cache_dir(data: bytes) -> Path:
-    user = os.getuid() if hasattr(os, "getuid") else os.environ.get("USERNAME", "user")
-    return Path(tempfile.gettempdir()) / f"matremap-gltf-{user}" / hashlib.sha256(data).hexdigest()[:20]
+    """The folder of a file's extracted images, in matremap's documented cache (``$MATREMAP_CACHE_DIR``,
+    default ``~/.cache/matremap``), never in a shared temporary folder."""
+    from matremap.core.diskcache import cache_dir
+
+    return cache_dir() / "gltf-images" / hashlib.sha256(data).hexdigest()[:20]
+
+
+def _cached_copy(folder: Path, stem: str, suffix: str, data: bytes) -> Path:
+    """``data`` stored under a name that carries its digest; an existing file is reused only when its
+    content still has that digest (an edited or truncated cache file is written again)."""
+    digest = hashlib.sha256(data).hexdigest()[:16]
+    f = folder / f"{stem}-{digest}{suffix}"
+    if not (f.is_file() and hashlib.sha256(f.read_bytes()).hexdigest()[:16] == digest):
+        folder.mkdir(parents=True, exist_ok=True)
+        with atomic_output(f) as tmp, open(tmp, "wb") as out:
+            out.write(data)
+    return f
 
 
 def _data_uri(uri: str) -> tuple[str, bytes]:
@@ -251,12 +266,7 @@ class _Reader:
         else:
             raise MatremapError(f"{self.path}: images[{index}] has neither a uri nor a bufferView; re-export the file")
         suffix = _MIME_SUFFIX.get(mime) or _sniff(data)
-        folder = _cache_dir(self.data)
-        f = folder / f"image{index}{suffix}"
-        if not (f.is_file() and f.stat().st_size == len(data)):
-            folder.mkdir(parents=True, exist_ok=True)
-            with atomic_output(f) as tmp, open(tmp, "wb") as out:
-                out.write(data)
+        f = _cached_copy(_cache_dir(self.data), f"image{index}", suffix, data)
         self._images[index] = f
         return f
 
