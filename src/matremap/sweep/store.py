@@ -203,7 +203,8 @@ class SweepStore:
             q += " WHERE status = ?"
             args = (status,)
         out = []
-        for values in self.conn.execute(q + " ORDER BY rowid", args):
+        # by key, not by insertion: lines finish in any order, and what is learned must not depend on it
+        for values in self.conn.execute(q + " ORDER BY key", args):
             r = dict(zip(COLUMNS, values, strict=True))
             for c in JSON_COLUMNS:
                 if r[c] is not None:
