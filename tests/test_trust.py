@@ -121,15 +121,19 @@ def test_the_same_model_in_and_out_copies_the_maps(tmp_path, capsys):
     np.testing.assert_array_equal(a[..., :3], b[..., :3])  # bit exact
 
 
-def test_mixed_metal_and_dielectric_is_refused_in_one_line_before_any_sweep(tmp_path, capsys):
+def test_mixed_metal_and_dielectric_is_blended_per_texel_not_refused(tmp_path, capsys):
+    """It was refused ("mixes values"; before that, "no route"): each kind now goes through its own
+    transform and the results are blended by the metallic map (more in tests/test_mixed.py)."""
     half = np.zeros((16, 16))
     half[:, 8:] = 1.0
     src = red_dielectric(tmp_path / "in", metallic=half)
     out = tmp_path / "out"
     code = main(["remap", str(src), "--to", "mitsuba06:ward", "-o", str(out), *FAST])
     err = capsys.readouterr().err
-    assert code == 2 and "mixes values" in err and "50%" in err and "no route" not in err
-    assert "sweep:" not in err and not out.exists()
+    assert code != 2 and "mixes values" not in err and "mixed: metallic varies per texel" in err, err
+    maps = load_map_set(out / "maps")
+    diffuse, _ = read_image(maps.maps["diffuseReflectance"], maps.colorspace["diffuseReflectance"])
+    assert diffuse[:, :8, 0].mean() > 0.3 and diffuse[:, 8:, :3].max() < 0.01  # red dielectric, diffuse-free metal
 
 
 def test_a_parameter_the_target_cannot_take_as_a_map_is_refused_before_the_sweep(tmp_path, capsys):

@@ -49,6 +49,7 @@ from matremap.renderers import renderer_for
 from matremap.svbrdf.convert import MASK_NAME, convert
 from matremap.svbrdf.evaluate import evaluate as evaluate_pair
 from matremap.svbrdf.evaluate import parse_rotations
+from matremap.svbrdf.mixed import mixed_parameter, remap_mixed
 from matremap.svbrdf.quality import Check, Thresholds, Verdict, image_checks, map_checks, sample
 from matremap.svbrdf.textures import MapSet, load_map_set, map_values, read_image
 
@@ -198,7 +199,8 @@ UNIFORM_TOLERANCE = 0.5 / 255
 def held_values(map_set: MapSet, params: Mapping[str, Any], target: str) -> dict[str, float]:
     """The mapped parameters that change what the model's other parameters mean (a glTF ``metallic``),
     each held at its one value. Maps that mix values (metal and dielectric texels) cannot be remapped
-    through one transform: refused, before any rendering, with the share of each."""
+    through one transform: refused, with the share of each (:func:`remap_into` converts such maps per
+    texel instead, :mod:`matremap.svbrdf.mixed`)."""
     spec = map_set.spec
     held: dict[str, float] = {}
     for name, value, _ in spec.specialisations:
@@ -420,6 +422,19 @@ def remap_into(
         log(f"identity: {map_set.model} onto itself with the same options: the maps are copied, nothing is fitted")
         texels, outside, tpath, cached = int(np.prod(map_set.size)), 0, None, True
         copy_map_set(map_set, folder / "maps")
+    elif (mixed := mixed_parameter(map_set, params)) is not None:  # metal and dielectric texels: blended per texel
+        texels, outside = remap_mixed(
+            folder,
+            map_set,
+            params,
+            mixed,
+            target,
+            job.fix,
+            lambda kind, kind_params: check_before_rendering(kind, kind_params, {}, target, target_renderer),
+            lambda kind, out: remap_into(out, kind, replace(job, evaluate=False), log).maps,
+            log,
+        )
+        tpath, cached = None, False
     else:
         held = held_values(map_set, params, target)
         fix = complete_fix(map_set.model, {**map_set.constants, **params, **held}, target, job.fix)

@@ -1,0 +1,298 @@
+"""Map sets that mix metal and dielectric texels (a glTF metallic map holding both 0 and 1).
+
+One transform maps one kind of material: a glTF metal's base colour is its F0, a dielectric's is its
+albedo. :func:`remap_mixed` therefore converts the map set twice, each time with the mixed parameter
+held at one end of its range (metallic 1: the metal; metallic 0: the dielectric), through the
+transform of that kind, and blends the two results per texel by the source's own map:
+
+    out = w * metal + (1 - w) * dielectric,    w = (m - m_dielectric) / (m_metal - m_dielectric)
+
+as the glTF specification mixes its two BRDFs (``material = mix(dielectric_brdf, metal_brdf,
+metallic)``); intermediate texels are blended too. A target parameter that is a constant on both
+sides stays a constant when the two agree, else it becomes a map (a glTF target's own metallic
+becomes the source's map). The texels outside the training domain are those outside the domain of
+a transform that contributes to them (the union over the kinds with a non-zero weight).
+
+The target must express both kinds: one without a diffuse parameter (a conductor) cannot draw the
+dielectric texels and is refused before any sweep. The blend holds every map in memory at once.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from matremap.core.imageio import write_text
+from matremap.core.models import ModelSpec
+from matremap.dialects import get_model, list_models
+from matremap.errors import MatremapError
+from matremap.regress import quantities as qty
+from matremap.svbrdf.convert import MANIFEST_NAME, MASK_NAME
+from matremap.svbrdf.textures import ImageInfo, MapSet, load_map_set, map_values, read_image, write_image_like
+
+#: a map counts as uniform when all its texels are within this of one value (an 8-bit step is 1/255)
+TOLERANCE = 0.5 / 255
+#: the hidden folder inside the staging folder that holds the two kinds while they are converted
+KINDS = ".kinds"
+
+#: (map set held at one kind, output folder) -> the folder of the converted maps
+ConvertKind = Callable[[MapSet, Path], Path]
+#: (map set held at one kind, its parameter arrays) -> None, or raises what a sweep would fail on
+CheckKind = Callable[[MapSet, Mapping[str, Any]], None]
+
+
+@dataclass(frozen=True)
+class Mixed:
+    """A specialisation parameter whose map mixes values: ``metal`` is the value that specialises the
+    model (no diffuse part), ``dielectric`` the other end of its range; ``weight`` the metal's share
+    per texel, in [0, 1]."""
+
+    name: str
+    metal: float
+    dielectric: float
+    weight: np.ndarray
+
+    def share(self, kind: str) -> float:
+        """The fraction of texels that hold some of ``kind`` ("metal" or "dielectric")."""
+        w = self.weight if kind == "metal" else 1.0 - self.weight
+        return float(np.mean(w > TOLERANCE))
+
+    def pure(self, kind: str) -> bool:
+        """Whether every texel holding some of ``kind`` holds it whole (no intermediate values)."""
+        w = self.weight if kind == "metal" else 1.0 - self.weight
+        return bool(np.all((w <= TOLERANCE) | (w >= 1.0 - TOLERANCE)))
+
+
+def mixed_parameter(map_set: MapSet, params: Mapping[str, Any]) -> Mixed | None:
+    """The first specialisation parameter (a glTF ``metallic``) given as a map that is not uniform, or
+    None: such maps are remapped per texel (:func:`remap_mixed`)."""
+    spec = map_set.spec
+    for name, value, _ in spec.specialisations:
+        if name not in map_set.maps:
+            continue
+        a = np.asarray(params[name], dtype=float)
+        if float(a.max()) - float(a.min()) <= 2 * TOLERANCE:
+            continue
+        lo, hi = spec.param(name).bounds
+        other = lo if value == hi else hi
+        weight = np.clip((a - other) / (value - other), 0.0, 1.0)
+        return Mixed(name, float(value), float(other), weight)
+    return None
+
+
+def expressing_models(family: str) -> list[str]:
+    """Models with a diffuse and a specular part (the target's family first)."""
+    both = [s.id for s in list_models() if qty.diffuse_param(s) is not None and s.reflectance is not None]
+    return sorted(both, key=lambda m: (m.split(":", 1)[0] != family, m))
+
+
+def check_target(mixed: Mixed, target: str, fix: Mapping[str, Any]) -> None:
+    """Refuse, in one line, a target that cannot express both kinds, or that cannot take as a map the
+    parameter the blend will vary (a Cycles ``Metallic`` that becomes the source's map)."""
+    from matremap.renderers.registry import texture_refusal
+
+    spec = get_model(target)
+    if qty.diffuse_param(spec) is None:
+        how = f"{mixed.name} {mixed.dielectric:g}" if mixed.pure("dielectric") else f"{mixed.name} < {mixed.metal:g}"
+        raise MatremapError(
+            f"{target} has no diffuse part for the dielectric texels ({how} on "
+            f"{100 * mixed.share('dielectric'):.0f}% of the texels); choose a target with one, e.g. "
+            + ", ".join(expressing_models(spec.family)[:3])
+        )
+    varied = [name for name, _, _ in spec.specialisations if name not in fix]
+    why = texture_refusal(spec.id, varied)
+    if why is not None:
+        raise MatremapError(f"{why}, and the metal and dielectric texels need it as a map; fix it with --fix")
+
+
+def kind_map_set(map_set: MapSet, mixed: Mixed, kind: str, dest: Path) -> MapSet:
+    """The map set with the mixed parameter held at one ``kind``'s value, as a manifest in ``dest`` that
+    refers to the source's files (nothing is copied)."""
+    dest.mkdir(parents=True, exist_ok=False)
+
+    def rel(f: Path) -> str:
+        return os.path.relpath(Path(f).resolve(), dest.resolve())
+
+    maps = {k: f for k, f in map_set.maps.items() if k != mixed.name}
+    value = mixed.metal if kind == "metal" else mixed.dielectric
+    doc: dict[str, Any] = {
+        "model": map_set.model,
+        "maps": {k: rel(f) for k, f in maps.items()},
+        "params": {**map_set.constants, mixed.name: value},
+        "colorspace": {k: map_set.colorspace[k] for k in maps if k in map_set.colorspace},
+    }
+    if map_set.normal is not None:
+        doc["normal"] = rel(map_set.normal)
+    write_text(dest / MANIFEST_NAME, json.dumps(doc, indent=1) + "\n")
+    return load_map_set(dest)
+
+
+def remap_mixed(
+    folder: Path,
+    map_set: MapSet,
+    params: Mapping[str, Any],
+    mixed: Mixed,
+    target: str,
+    fix: Mapping[str, Any],
+    check: CheckKind,
+    convert_kind: ConvertKind,
+    log: Callable[[str], None],
+) -> tuple[int, int]:
+    """Convert ``map_set`` once as a metal and once as a dielectric (``convert_kind``: through each kind's
+    own transform; ``check`` runs for both before either is converted) and write the per-texel blend
+    into ``folder/"maps"``. Returns the texel count and the texels outside the training domain."""
+    check_target(mixed, target, fix)
+    kinds = folder / KINDS
+    sets = {kind: kind_map_set(map_set, mixed, kind, kinds / kind) for kind in ("metal", "dielectric")}
+    for kind, ms in sets.items():
+        value = mixed.metal if kind == "metal" else mixed.dielectric
+        check(ms, {**params, mixed.name: value})
+    log(
+        f"mixed: {mixed.name} varies per texel (metal on {100 * mixed.share('metal'):.0f}%, dielectric on "
+        f"{100 * mixed.share('dielectric'):.0f}% of the texels): converting each kind through its own transform "
+        "and blending them by the map"
+    )
+    converted = {}
+    for kind, ms in sets.items():
+        log(f"mixed: the {kind} ({mixed.name} {mixed.metal if kind == 'metal' else mixed.dielectric:g})")
+        converted[kind] = load_map_set(convert_kind(ms, kinds / f"{kind}-out"))
+    texels = int(np.prod(map_set.size))
+    outside = blend(converted["metal"], converted["dielectric"], mixed, folder / "maps", map_set)
+    for kind, ms in converted.items():  # what was applied, with its provenance
+        t = ms.root.parent / "transform.json"
+        if t.is_file():
+            shutil.copyfile(t, folder / f"transform-{kind}.json")
+    shutil.rmtree(kinds)
+    log(
+        f"blend: {texels} texels"
+        + (f"; {outside} outside the training domain (see maps/{MASK_NAME})" if outside else "")
+    )
+    return texels, outside
+
+
+def _arrays(ms: MapSet) -> dict[str, Any]:
+    """A converted map set's parameters: maps as arrays, constants as they are."""
+    spec = ms.spec
+    out: dict[str, Any] = {k: v for k, v in ms.constants.items() if k in spec.param_names}
+    for name, path in ms.maps.items():
+        out[name] = map_values(spec, name, read_image(path, ms.colorspace.get(name))[0], path, 0)
+    return out
+
+
+def _full(value: Any, channels: int, shape: tuple[int, int]) -> np.ndarray:
+    """A parameter value (map or constant) as an array ``[H, W]`` or ``[H, W, 3]``."""
+    a = np.asarray(value, dtype=np.float32)
+    if channels == 1:
+        return np.broadcast_to(a if a.ndim == 2 else a.reshape(-1)[0], shape)
+    if a.ndim == 2:
+        a = a[..., None]
+    return np.broadcast_to(a if a.ndim == 3 else a.reshape(-1)[:3], (*shape, 3))
+
+
+def _info(spec: ModelSpec, name: str, sides: list[MapSet], values: np.ndarray) -> ImageInfo:
+    """The file format of a blended map: the converted maps' own (a float one if either side's is), else
+    one like the other maps (sRGB for colours in 8/16-bit files; float EXR for values above 1)."""
+    infos = [ms.info[name] for ms in sides if name in ms.info]
+    if infos:
+        return next((i for i in infos if not i.integer), infos[0])
+    p = spec.param(name)
+    base = next(i for ms in sides for i in ms.info.values())
+    colour = p.channels == 3 and p.role in ("diffuse", "specular", "fresnel")
+    info = base.like(channels=p.channels, colorspace="srgb" if colour and base.integer else "linear", path="")
+    if info.integer and (float(values.min()) < 0.0 or float(values.max()) > 1.0):
+        info = info.like(format="exr", pixel_type="float", colorspace="linear", compression=None)
+    return info
+
+
+def _file_name(name: str, sides: list[MapSet], info: ImageInfo) -> str:
+    """A converted map's own file name, else ``<prefix>_<param>`` beside the other maps."""
+    own = next((ms.maps[name].name for ms in sides if name in ms.maps), None)
+    if own is not None:
+        return own
+    stem = next(f.stem for ms in sides for f in ms.maps.values())
+    return f"{stem.rsplit('_', 1)[0] if '_' in stem else 'material'}_{name}{info.suffix}"
+
+
+def blend(metal: MapSet, dielectric: MapSet, mixed: Mixed, dest: Path, source: MapSet) -> int:
+    """Write the per-texel blend of the two converted map sets into ``dest`` (maps, the union of their
+    outside-domain masks where they contribute, the normal map, ``material.json``); returns the number
+    of texels outside the training domain."""
+    spec = metal.spec
+    dest.mkdir(parents=True, exist_ok=False)
+    shape = source.size
+    w = mixed.weight.astype(np.float32)
+    sides = [metal, dielectric]
+    a, b = _arrays(metal), _arrays(dielectric)
+    for option in spec.option_names:
+        if str(metal.constants.get(option)) != str(dielectric.constants.get(option)):
+            raise MatremapError(
+                f"the metal and the dielectric texels were converted with different {option} ("
+                f"{metal.constants.get(option)} and {dielectric.constants.get(option)}); fix it: --fix {option}=..."
+            )
+    maps: dict[str, str] = {}
+    colorspace: dict[str, str] = {}
+    constants: dict[str, Any] = {k: v for k, v in metal.constants.items() if k in spec.option_names}
+    for p in spec.params:
+        if p.name not in a and p.name not in b:
+            continue
+        va = a[p.name] if p.name in a else b[p.name]
+        vb = b[p.name] if p.name in b else va
+        if np.ndim(va) < 2 and np.ndim(vb) < 2 and np.allclose(va, vb):
+            constants[p.name] = va
+            continue
+        fa, fb = _full(va, p.channels, shape), _full(vb, p.channels, shape)
+        ww = w if p.channels == 1 else w[..., None]
+        values = ww * fa + (1.0 - ww) * fb
+        info = _info(spec, p.name, sides, values)
+        fname = _file_name(p.name, sides, info)
+        write_image_like(dest / fname, values, info)
+        maps[p.name], colorspace[fname] = fname, info.colorspace
+    outside = _outside(metal, dielectric, mixed)
+    write_image_like(dest / MASK_NAME, outside.astype(np.float32), ImageInfo("png", "uint8", 1, 0, 0, "linear"))
+    doc: dict[str, Any] = {"model": spec.id, "maps": maps}
+    if metal.normal is not None:
+        shutil.copyfile(metal.normal, dest / metal.normal.name)
+        doc["normal"] = metal.normal.name
+    doc["params"] = constants
+    doc["colorspace"] = colorspace
+    doc["provenance"] = _provenance(metal, dielectric, mixed, source, int(outside.sum()))
+    write_text(dest / MANIFEST_NAME, json.dumps(doc, indent=1) + "\n")
+    return int(outside.sum())
+
+
+def _outside(metal: MapSet, dielectric: MapSet, mixed: Mixed) -> np.ndarray:
+    """Texels outside the domain of a transform that contributes to them."""
+    masks = []
+    for ms, w in ((metal, mixed.weight), (dielectric, 1.0 - mixed.weight)):
+        mask = ms.root / MASK_NAME
+        off = read_image(mask, "linear", colour=False)[0][..., 0] > 0.5 if mask.is_file() else np.zeros(w.shape, bool)
+        masks.append(off & (w > TOLERANCE))
+    return masks[0] | masks[1]
+
+
+def _provenance(metal: MapSet, dielectric: MapSet, mixed: Mixed, source: MapSet, outside: int) -> dict[str, Any]:
+    """The blended result's provenance: the source and both transforms."""
+
+    def described(ms: MapSet) -> str:
+        doc = json.loads((ms.root / MANIFEST_NAME).read_text())
+        return str(doc.get("provenance", {}).get("transform", "?"))
+
+    m, d = described(metal), described(dielectric)
+    return {
+        "source": str(source.root),
+        "source_model": source.model,
+        "transform": (
+            f"per texel by {mixed.name}: {m} where {mixed.name} is {mixed.metal:g}, {d} where it is "
+            f"{mixed.dielectric:g}, blended linearly in between"
+        ),
+        "transforms": {"metal": m, "dielectric": d},
+        "blend": {"parameter": mixed.name, "metal": mixed.metal, "dielectric": mixed.dielectric},
+        "outside_domain": {"file": MASK_NAME, "texels": outside},
+    }
