@@ -10,7 +10,8 @@ transform of that kind, and blends the two results per texel by the source's own
 as the glTF specification mixes its two BRDFs (``material = mix(dielectric_brdf, metal_brdf,
 metallic)``); intermediate texels are blended too. A target parameter that is a constant on both
 sides stays a constant when the two agree, else it becomes a map (a glTF target's own metallic
-becomes the source's map). The texels outside the training domain are those outside the domain of
+becomes the source's map); one that only one kind uses (a glTF target's ior, which a metal ignores)
+takes that kind's value everywhere. The texels outside the training domain are those outside the domain of
 a transform that contributes to them (the union over the kinds with a non-zero weight).
 
 The target must express both kinds: one without a diffuse parameter (a conductor) cannot draw the
@@ -239,11 +240,14 @@ def blend(metal: MapSet, dielectric: MapSet, mixed: Mixed, dest: Path, source: M
     maps: dict[str, str] = {}
     colorspace: dict[str, str] = {}
     constants: dict[str, Any] = {k: v for k, v in metal.constants.items() if k in spec.option_names}
+    roles = [spec.specialise(ms.constants) for ms in sides]  # a parameter one kind does not use takes the other's
     for p in spec.params:
         if p.name not in a and p.name not in b:
             continue
         va = a[p.name] if p.name in a else b[p.name]
         vb = b[p.name] if p.name in b else va
+        used = [r.param(p.name).role != "other" for r in roles]
+        va, vb = (vb, vb) if used == [False, True] else (va, va) if used == [True, False] else (va, vb)
         if np.ndim(va) < 2 and np.ndim(vb) < 2 and np.allclose(va, vb):
             constants[p.name] = va
             continue
