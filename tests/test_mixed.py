@@ -65,12 +65,9 @@ def test_half_metal_onto_ward_is_blended_per_texel(tmp_path, capsys):
     assert not mask[:, :8].any()  # the dielectric texels are inside their transform's domain
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the metal sweep's F0 = 0 point renders black and fails, so its domain starts at 0.2 and the red "
-    "metal's green and blue F0 (~0.005) lie outside it: the gate fails on 'outside' (a pure red metal too)",
-)
 def test_half_metal_onto_ward_exits_0(tmp_path, capsys):
+    """The metal sweep's F0 axis starts just above 0 (a point at exactly 0 renders black and cannot be
+    fitted; the red metal's green and blue F0, ~0.005, fell outside a domain starting at 0.2)."""
     src = red_dielectric(tmp_path / "in", metallic=half_metal())
     assert remap(src, tmp_path / "out", *WARD) == 0, capsys.readouterr().err
 

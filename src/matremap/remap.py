@@ -118,7 +118,7 @@ def sweep_grid(map_set: MapSet, params: Mapping[str, Any], held: Mapping[str, fl
     axes = []
     rp = qty.roughness_param(spec)
     if rp is not None and rp.name in map_set.maps:
-        lo, hi = _range(params[rp.name], rp.bounds)
+        lo, hi = _range(params[rp.name], rp.bounds, floor=rp.bounds[0])
         axes.append(f"{rp.name}={lo!r}:{hi!r}:{ROUGHNESS_POINTS}")
     metal = spec.specialise({**map_set.constants, **params, **(held or {})}).diffuse_only is None
     if spec.reflectance is not None:
@@ -183,12 +183,14 @@ def _f0_axis(
     return _range(values, bounds)
 
 
-def _range(values: Any, bounds: tuple[float, float]) -> tuple[float, float]:
-    """The values' range, padded by 2 % (at least a little), inside the parameter's bounds."""
+def _range(values: Any, bounds: tuple[float, float], floor: float = 1e-4) -> tuple[float, float]:
+    """The values' range, padded by 2 % (at least a little), inside the parameter's bounds and not below
+    ``floor``: a reflectance swept at exactly 0 renders black and cannot be fitted, while a small one can
+    (roughness passes its own lower bound: a mirror is fitted where the probe resolves it)."""
     v = np.asarray(values, dtype=float)
     lo, hi = float(np.min(v)), float(np.max(v))
     pad = 0.02 * (hi - lo) if hi > lo else 0.05 * max(abs(hi), 1e-3)
-    lo, hi = max(bounds[0], lo - pad), min(bounds[1], hi + pad)
+    lo, hi = max(bounds[0], lo - pad, floor), min(bounds[1], hi + pad)
     return round(lo, 6), round(hi, 6)
 
 
