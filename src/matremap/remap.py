@@ -420,43 +420,25 @@ def remap_into(
     seconds["load"] = time.perf_counter() - t0
     t = time.perf_counter()
     identity = is_identity(map_set, target, job.fix)
-    if identity:
-        log(f"identity: {map_set.model} onto itself with the same options: the maps are copied, nothing is fitted")
-        texels, outside, tpath, cached = int(np.prod(map_set.size)), 0, None, True
-        copy_map_set(map_set, folder / "maps")
-    elif (mixed := mixed_parameter(map_set, params)) is not None:  # metal and dielectric texels: blended per texel
-        texels, outside = remap_mixed(
-            folder,
-            map_set,
-            params,
-            mixed,
-            target,
-            job.fix,
-            lambda kind, kind_params: check_before_rendering(kind, kind_params, {}, target, target_renderer),
-            lambda kind, out: remap_into(out, kind, replace(job, evaluate=False), log).maps,
-            log,
-        )
-        tpath, cached = None, False
-    else:
-        held = held_values(map_set, params, target)
-        fix = complete_fix(map_set.model, {**map_set.constants, **params, **held}, target, job.fix)
-        check_before_rendering(map_set, params, held, target, target_renderer)
-        transform, tpath, cached = _transform_for(map_set, params, fix, target_renderer, job, log)
-        seconds["transform"] = time.perf_counter() - t
-        t = time.perf_counter()
-        with warnings.catch_warnings():  # the outside-domain count is logged below
-            warnings.simplefilter("ignore", UserWarning)
-            report = convert(map_set, [transform], folder / "maps", workers=job.workers or 2)
-        transform.save(folder / "transform.json", force=True)  # what was applied, with its provenance
-        texels, outside = int(report.texels), int(report.outside)
-        log(
-            f"convert: {texels} texels"
-            + (f"; {outside} outside the training domain (see maps/{MASK_NAME})" if outside else "")
-        )
+    conversion = _convert_maps(folder, map_set, params, job, target_renderer, identity, log, seconds)
+    texels, outside, clipped, tpath, cached = conversion
     seconds["convert"] = time.perf_counter() - t
     result_set = load_map_set(folder / "maps")
     target_params, target_normal = load_arrays(result_set)
-    checks = [Check("outside", outside / max(texels, 1), job.thresholds.outside, "texels outside the training domain")]
+    checks = [
+        Check(
+            "outside",
+            outside / max(texels, 1),
+            job.thresholds.outside,
+            f"texels outside the training domain: {outside}",
+        ),
+        Check(
+            "clamped",
+            clipped / max(texels, 1),
+            job.thresholds.clamped,
+            f"values clipped to the files' range: {clipped}",
+        ),
+    ]
     checks += map_quality(map_set, params, result_set, target_params, job.thresholds)
     verdict, mean, html = Verdict(checks), None, None
     if job.evaluate:
@@ -473,6 +455,7 @@ def remap_into(
             title=title,
             thresholds=job.thresholds,
             checks=checks,
+            domain_map=folder / "maps" / MASK_NAME,
         )
         seconds["evaluate"] = time.perf_counter() - t
         verdict, mean, html = evaluation.verdict, float(evaluation.mean_full), folder / "report" / "report.html"
@@ -483,6 +466,58 @@ def remap_into(
     write_text(folder / "verdict.json", json.dumps(verdict.to_dict(), indent=1) + "\n")
     seconds["total"] = time.perf_counter() - t0
     return RemapResult(tpath, cached, folder / "maps", html, outside, texels, mean, seconds, verdict, identity)
+
+
+def _convert_maps(
+    folder: Path,
+    map_set: MapSet,
+    params: Mapping[str, Any],
+    job: RemapJob,
+    target_renderer: str,
+    identity: bool,
+    log: Callable[[str], None],
+    seconds: dict[str, float],
+) -> tuple[int, int, int, Path | None, bool]:
+    """``folder/maps``: the maps copied (identity), blended per texel from each kind's conversion (maps
+    that mix metal and dielectric), or converted through one transform. Returns (texels, texels outside
+    the training domain, values clipped, the transform file or None, whether it came from a cache); the
+    time spent finding the transform goes to ``seconds["transform"]``."""
+    target = job.target
+    if identity:
+        log(f"identity: {map_set.model} onto itself with the same options: the maps are copied, nothing is fitted")
+        copy_map_set(map_set, folder / "maps")
+        return int(np.prod(map_set.size)), 0, 0, None, True
+    mixed = mixed_parameter(map_set, params)
+    if mixed is not None:  # metal and dielectric texels: blended per texel
+        texels, outside = remap_mixed(
+            folder,
+            map_set,
+            params,
+            mixed,
+            target,
+            job.fix,
+            lambda kind, kind_params: check_before_rendering(kind, kind_params, {}, target, target_renderer),
+            lambda kind, out: remap_into(out, kind, replace(job, evaluate=False), log).maps,
+            log,
+        )
+        return texels, outside, 0, None, False
+    held = held_values(map_set, params, target)
+    fix = complete_fix(map_set.model, {**map_set.constants, **params, **held}, target, job.fix)
+    check_before_rendering(map_set, params, held, target, target_renderer)
+    t0 = time.perf_counter()
+    transform, tpath, cached = _transform_for(map_set, params, fix, target_renderer, job, log)
+    seconds["transform"] = time.perf_counter() - t0
+    with warnings.catch_warnings():  # the outside-domain count is logged below
+        warnings.simplefilter("ignore", UserWarning)
+        report = convert(map_set, [transform], folder / "maps", workers=job.workers or 2)
+    transform.save(folder / "transform.json", force=True)  # what was applied, with its provenance
+    for note in report.notes:
+        log(f"note: {note}")
+    log(
+        f"convert: {report.texels} texels"
+        + (f"; {report.outside} outside the training domain (see maps/{MASK_NAME})" if report.outside else "")
+    )
+    return int(report.texels), int(report.outside), int(report.clipped), tpath, cached
 
 
 def _transform_for(

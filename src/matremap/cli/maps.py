@@ -163,7 +163,7 @@ def _max_error(p: argparse.ArgumentParser) -> None:
         default=[],
         metavar="NAME=VALUE",
         help="a quality-gate threshold (repeatable): luminance_error, delta_e, delta_e_fraction, dssim, hue_shift, "
-        "flat, outside, fit_error; see docs/quality.md",
+        "flat, outside, clamped, fit_error; see docs/quality.md",
     )
 
 

@@ -52,6 +52,8 @@ class ConvertReport:
     seconds: float
     model: str
     notes: list[str] = field(default_factory=list)
+    #: values clipped to fit an 8/16-bit file's [0, 1] (the notes say which maps)
+    clipped: int = 0
 
     @property
     def outside_fraction(self) -> float:
@@ -291,6 +293,7 @@ def convert(
         results = _execute(plan, outputs, workers, progress)
         outside = results[0]["outside"]
         notes += _clipping_notes(results, outputs)
+        clipped = sum(int(n) for r in results for n in r["clipped"].values())
         doc = _manifest(map_set, t, outputs, results[0]["first"], final_normal, outside)
         files.write_text(out / MANIFEST_NAME, json.dumps(doc, indent=1) + "\n")
         if map_set.normal and final_normal is not None:
@@ -302,7 +305,9 @@ def convert(
             f"training domain; {out / MASK_NAME} marks them",
             stacklevel=2,
         )
-    return ConvertReport(texels, outside, files.destinations, time.perf_counter() - start, t.target, notes)
+    return ConvertReport(
+        texels, outside, files.destinations, time.perf_counter() - start, t.target, notes, clipped=clipped
+    )
 
 
 def _cost(name: str | None, info: ImageInfo) -> float:

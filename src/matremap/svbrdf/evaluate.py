@@ -245,6 +245,7 @@ def evaluate(
     title: str | None = None,
     thresholds: Thresholds | None = None,
     checks: Sequence[Check] = (),
+    domain_map: Path | None = None,
 ) -> EvaluationResult:
     """Render ``source`` and ``target`` (see :meth:`SVMaterial.of`) under ``env`` at each rotation,
     full and specular only, compare them with SSIM and write PNGs, ``results.json`` and a
@@ -254,7 +255,8 @@ def evaluate(
 
     The result carries a :class:`~matremap.svbrdf.quality.Verdict`: ``checks`` the caller measured (e.g.
     on the maps), the full renders' luminance and CIEDE2000 measures and the mean 1 - SSIM, each against
-    ``thresholds`` (default :class:`~matremap.svbrdf.quality.Thresholds`); the report opens with it."""
+    ``thresholds`` (default :class:`~matremap.svbrdf.quality.Thresholds`); the report opens with it.
+    ``domain_map``: a PNG marking the texels outside the transform's training domain, shown in the report."""
     src, tgt = SVMaterial.of(source), SVMaterial.of(target)
     rotations = [float(r) for r in rotations]
     if not rotations:
@@ -285,6 +287,8 @@ def evaluate(
     images.emit("dssim_vs_rotation.png", _plot(rotations, comparison.dssim["full"], comparison.dssim["specular"]))
     verdict = comparison.verdict(checks, thresholds or Thresholds())
     images.emit("colorbar.png", _colorbar())
+    if domain_map is not None and domain_map.is_file():
+        images.emit("outside_domain.png", domain_map.read_bytes())
 
     result = EvaluationResult(
         rotations=rotations,
@@ -298,7 +302,24 @@ def evaluate(
         files=images.files,
         verdict=verdict,
     )
-    info = {
+    info = _settings(src, tgt, env, geometry, resolution, lights, prepared, scale, comparison.exposure)
+    _write_results(result, info, images, title or f"matremap evaluation: {src.model} \u2192 {tgt.model}")
+    return result
+
+
+def _settings(
+    src: SVMaterial,
+    tgt: SVMaterial,
+    env: EnvMap,
+    geometry: str,
+    resolution: int,
+    lights: int,
+    prepared: Mapping[tuple[str, str], EnvironmentRender],
+    scale: float,
+    exposure: Mapping[str, float],
+) -> dict[str, str]:
+    """The report's settings table (also in results.json)."""
+    return {
         "source": _describe(src),
         "target": _describe(tgt),
         "environment": f"{env.name} ({env.width} x {env.height})",
@@ -306,10 +327,8 @@ def evaluate(
         "lights": f"{lights} directional lights importance-sampled from the environment",
         "renderers": f"source: {prepared[('source', 'full')].label}, target: {prepared[('target', 'full')].label}",
         "irradiance": f"source scaled by {scale:.6g}" if scale != 1.0 else "same renderer family (no scaling)",
-        "exposure": ", ".join(f"{p} x{comparison.exposure[p]:.4g}" for p in PARTS),
+        "exposure": ", ".join(f"{p} x{exposure[p]:.4g}" for p in PARTS),
     }
-    _write_results(result, info, images, title or f"matremap evaluation: {src.model} \u2192 {tgt.model}")
-    return result
 
 
 def _check_out_dir(out: Path, force: bool) -> Path:
@@ -420,6 +439,16 @@ window.addEventListener('load', function () {
 """
 
 
+def _domain_html(images: Mapping[str, str], e: Any) -> str:
+    """The per-texel map of texels outside the training domain (white), when there is one."""
+    if "outside_domain.png" not in images:
+        return ""
+    return (
+        "<h2>Texels outside the training domain</h2><p>White texels lie outside what the transform was "
+        f'learned on.</p><img class="plot" src="{images["outside_domain.png"]}" alt="{e("texels outside the domain")}">'
+    )
+
+
 def _verdict_html(verdict: Verdict) -> str:
     """The quality gate at the top of the report: PASSED or FAILED and every measure."""
     e = html.escape
@@ -496,6 +525,7 @@ Lower is better; 0 means identical.</p>
 </table>
 <h2>1 &minus; SSIM against rotation</h2>
 {img("dssim_vs_rotation.png", "mean 1 - SSIM against environment rotation", "plot")}
+{_domain_html(images, e)}
 <h2>Renders and SSIM maps</h2>
 <p>Renders are tone-mapped to sRGB with one exposure per part (source and target alike); the
 1&nbsp;&minus;&nbsp;SSIM maps use this scale, from 0 to {SSIM_MAP_MAX:g}:<br>

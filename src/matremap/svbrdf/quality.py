@@ -20,7 +20,9 @@ every remap is also measured on what SSIM ignores:
   - ``hue_shift``: mean circular difference of hue, in degrees, over the texels whose source colour is
     saturated (HSV saturation above :data:`SATURATED`);
   - ``flat``: a target colour that is constant (or zero) where the source's varies;
-  - ``outside``: the fraction of texels outside the transform's training domain.
+  - ``outside``: the fraction of texels outside the transform's training domain;
+  - ``clamped``: the fraction of values clipped to fit the output files' range (an 8-bit map of a
+    value above 1).
 
 * **Uniform materials** -- ``fit_error``: the fit's relative RMSE on the probe, beside the image
   measures of the probe renders.
@@ -61,6 +63,7 @@ class Thresholds:
     hue_shift: float = 25.0
     flat: float = 0.0
     outside: float = 0.05
+    clamped: float = 0.01
     fit_error: float = 0.25
 
     @classmethod
