@@ -117,6 +117,15 @@ def check_environment_args(geometry: str, resolution: int, part: str) -> None:
         raise MatremapError(f"the resolution must be an integer in [16, 4096], got {resolution!r}")
 
 
+def check_environment(renderer: Renderer, material: SVMaterial, geometry: str, resolution: int, part: str) -> None:
+    """Raise, before anything renders, when the arguments are invalid or ``renderer`` cannot draw the
+    material on ``geometry`` (:meth:`Renderer.environment_support` gives the reason)."""
+    check_environment_args(geometry, resolution, part)
+    why = renderer.environment_support(material.model, geometry)
+    if why is not None:
+        raise MatremapError(why)
+
+
 def render_pixels(renderer: Renderer, materials: Sequence[Material], scene: Scene) -> np.ndarray:
     """The sphere pixels of a render, float32 [N, P, 3] in ``scene.pixel_indices()`` order.
 
@@ -137,6 +146,7 @@ __all__ = [
     "EnvironmentRender",
     "Renderer",
     "check_can_render",
+    "check_environment",
     "check_environment_args",
     "render_pixels",
 ]

@@ -41,7 +41,7 @@ from matremap.core.scene import Scene
 from matremap.dialects import cycles as cycles_dialect
 from matremap.dialects.cycles import PRINCIPLED
 from matremap.errors import MatremapError
-from matremap.renderers.base import EnvironmentLight, EnvironmentRender, check_can_render, check_environment_args
+from matremap.renderers.base import EnvironmentLight, EnvironmentRender, check_can_render, check_environment
 from matremap.renderers.cycles.client import INSTALL_HINT, WorkerClient, bpy_available
 from matremap.renderers.cycles.environment import CyclesEnvironmentRender
 
@@ -78,10 +78,7 @@ class CyclesRenderer(WorkerClient):
     def prepare_environment(
         self, material: SVMaterial, light: EnvironmentLight, geometry: str, resolution: int, part: str
     ) -> EnvironmentRender:
-        check_environment_args(geometry, resolution, part)
-        why = self.environment_support(material.model, geometry)
-        if why is not None:
-            raise MatremapError(why)
+        check_environment(self, material, geometry, resolution, part)
         return CyclesEnvironmentRender(material, light.env, resolution, part, self)
 
     def render(self, materials: Sequence[Material], scene: Scene) -> np.ndarray:

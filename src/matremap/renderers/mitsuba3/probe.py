@@ -51,7 +51,7 @@ from matremap.dialects.mitsuba3 import (
     ROUGHPLASTIC,
 )
 from matremap.errors import MatremapError
-from matremap.renderers.base import EnvironmentLight, EnvironmentRender, check_can_render, check_environment_args
+from matremap.renderers.base import EnvironmentLight, EnvironmentRender, check_can_render, check_environment
 from matremap.renderers.mitsuba3.environment import NOT_TEXTURABLE, Mitsuba3EnvironmentRender
 from matremap.renderers.mitsuba3.plugins import (
     INSTALL_HINT,
@@ -163,10 +163,7 @@ class Mitsuba3Renderer:
     def prepare_environment(
         self, material: SVMaterial, light: EnvironmentLight, geometry: str, resolution: int, part: str
     ) -> EnvironmentRender:
-        check_environment_args(geometry, resolution, part)
-        why = self.environment_support(material.model, geometry)
-        if why is not None:
-            raise MatremapError(why)
+        check_environment(self, material, geometry, resolution, part)
         return Mitsuba3EnvironmentRender(material, light.env, resolution, part)
 
     def render(self, materials: Sequence[Material], scene: Scene) -> np.ndarray:
