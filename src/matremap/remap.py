@@ -556,11 +556,7 @@ def _transform_for(
 def is_identity(map_set: MapSet, target: str, fix: Mapping[str, Any]) -> bool:
     """Whether the remap is the identity: the same model, and every fixed option as the maps have it
     (a fixed parameter value is a change, so it is not)."""
-    spec = map_set.spec
-    if spec.id != target:
-        return False
-    options = {o.name: map_set.options.get(o.name, o.default) for o in spec.options}
-    return all(k in options and str(v) == str(options[k]) for k, v in fix.items())
+    return map_set.spec.id == target and same_options(map_set.options, target, fix)
 
 
 def copy_map_set(map_set: MapSet, dest: Path) -> None:
@@ -701,7 +697,7 @@ def remap_file(
         raise MatremapError(f"{out} is the input file's folder; choose another output folder")
     name = _output_name(p, target, asset.format, write, out, log)
     job = RemapJob(target, dict(fix or {}), **{k: v for k, v in options.items() if v is not None or k == "scene"})
-    kept = asset.format == "gltf" and target == asset.model and _same_options(asset.constants, target, job.fix)
+    kept = asset.format == "gltf" and target == asset.model and same_options(asset.constants, target, job.fix)
     if asset.lost and not kept:  # a glTF onto itself is copied with its extensions; anything else loses them
         raise MatremapError(
             f"{p}: material {asset.name!r} carries its look in {'; '.join(asset.lost)}, which matremap's models do "
@@ -729,7 +725,7 @@ def remap_file(
     return result
 
 
-def _same_options(values: Mapping[str, Any], model: str, fix: Mapping[str, Any]) -> bool:
+def same_options(values: Mapping[str, Any], model: str, fix: Mapping[str, Any]) -> bool:
     """Whether ``fix`` changes none of the model's options from ``values`` (and holds no parameter)."""
     spec = get_model(model)
     options = {o.name: str(values.get(o.name, o.default)) for o in spec.options}
@@ -769,8 +765,7 @@ def _remap_uniform(
     from matremap.uniform import comparison_strip, fit
 
     target = job.target
-    options = {o.name: str(source.options.get(o.name, o.default)) for o in source.spec.options}
-    if source.model == target and all(k in options and str(v) == options[k] for k, v in job.fix.items()):
+    if source.model == target and same_options(source.options, target, job.fix):
         log(f"identity: {source.model} onto itself with the same options: copied, nothing is fitted")
         result.material, result.loss, result.verdict = source, 0.0, Verdict([Check("fit_error", 0.0, 0.0, "identity")])
         write_text(stage / "material.json", json.dumps(source.to_dict(), indent=1) + "\n")
