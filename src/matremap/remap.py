@@ -42,6 +42,7 @@ from matremap.core.imageio import write_image, write_text
 from matremap.core.material import Material, SVMaterial
 from matremap.core.scene import Scene
 from matremap.dialects import get_model
+from matremap.dialects.equivalence import Equivalence, equivalence
 from matremap.errors import MatremapError
 from matremap.regress import quantities as qty
 from matremap.regress.transform import Transform
@@ -419,7 +420,7 @@ def remap_into(
     params, normal = load_arrays(map_set)
     seconds["load"] = time.perf_counter() - t0
     t = time.perf_counter()
-    identity = is_identity(map_set, target, job.fix)
+    identity = identity_route(map_set, target, job.fix)
     conversion = _convert_maps(folder, map_set, params, job, target_renderer, identity, log, seconds)
     texels, outside, clipped, tpath, cached = conversion
     seconds["convert"] = time.perf_counter() - t
@@ -465,7 +466,9 @@ def remap_into(
         )
     write_text(folder / "verdict.json", json.dumps(verdict.to_dict(), indent=1) + "\n")
     seconds["total"] = time.perf_counter() - t0
-    return RemapResult(tpath, cached, folder / "maps", html, outside, texels, mean, seconds, verdict, identity)
+    return RemapResult(
+        tpath, cached, folder / "maps", html, outside, texels, mean, seconds, verdict, identity is not None
+    )
 
 
 def _convert_maps(
@@ -474,7 +477,7 @@ def _convert_maps(
     params: Mapping[str, Any],
     job: RemapJob,
     target_renderer: str,
-    identity: bool,
+    identity: Equivalence | None,
     log: Callable[[str], None],
     seconds: dict[str, float],
 ) -> tuple[int, int, int, Path | None, bool]:
@@ -483,9 +486,9 @@ def _convert_maps(
     the training domain, values clipped, the transform file or None, whether it came from a cache); the
     time spent finding the transform goes to ``seconds["transform"]``."""
     target = job.target
-    if identity:
-        log(f"identity: {map_set.model} onto itself with the same options: the maps are copied, nothing is fitted")
-        copy_map_set(map_set, folder / "maps")
+    if identity is not None:
+        log(f"identity: {_identity_words(identity)}: the maps are copied, nothing is fitted")
+        copy_map_set(map_set, folder / "maps", identity)
         return int(np.prod(map_set.size)), 0, 0, None, True
     mixed = mixed_parameter(map_set, params)
     if mixed is not None:  # metal and dielectric texels: blended per texel
@@ -553,14 +556,19 @@ def _transform_for(
     )
 
 
-def is_identity(map_set: MapSet, target: str, fix: Mapping[str, Any]) -> bool:
-    """Whether the remap is the identity: the same model, and every fixed option as the maps have it
-    (a fixed parameter value is a change, so it is not)."""
-    return map_set.spec.id == target and same_options(map_set.options, target, fix)
+def identity_route(map_set: MapSet, target: str, fix: Mapping[str, Any]) -> Equivalence | None:
+    """The renaming that makes the remap the identity, or None: the same model, or a model the dialects
+    show to be equal (:mod:`matremap.dialects.equivalence`) for these maps, and every fixed option as the
+    maps have it (a fixed parameter value is a change, so it is not)."""
+    eq = equivalence(map_set.model, target)
+    if eq is None or eq.refusal(map_set.constants, map_set.maps, map_set.normal is not None) is not None:
+        return None
+    return eq if same_options(eq.rename(map_set.options), eq.target, fix) else None
 
 
-def copy_map_set(map_set: MapSet, dest: Path) -> None:
-    """The map set copied byte for byte into ``dest``, with a manifest naming its maps."""
+def copy_map_set(map_set: MapSet, dest: Path, eq: Equivalence) -> None:
+    """The map set copied byte for byte into ``dest``, with a manifest naming its maps in the target's
+    terms (``eq``: the renaming onto an equal model)."""
     dest.mkdir(parents=True, exist_ok=False)
     names: dict[Path, str] = {}
     for f in [*map_set.maps.values(), *([map_set.normal] if map_set.normal else [])]:
@@ -569,9 +577,9 @@ def copy_map_set(map_set: MapSet, dest: Path) -> None:
             shutil.copyfile(f, dest / name)
             names[f] = name
     doc: dict[str, Any] = {
-        "model": map_set.model,
-        "maps": {k: names[f] for k, f in map_set.maps.items()},
-        "params": dict(map_set.constants),
+        "model": eq.target,
+        "maps": {eq.names[k]: names[f] for k, f in map_set.maps.items()},
+        "params": eq.rename(map_set.constants),
         "colorspace": {names[f]: map_set.colorspace[k] for k, f in map_set.maps.items() if k in map_set.colorspace},
     }
     if map_set.normal:
@@ -725,6 +733,20 @@ def remap_file(
     return result
 
 
+def uniform_identity(source: Material, target: str, fix: Mapping[str, Any]) -> Equivalence | None:
+    """The renaming that makes a uniform remap the identity (see :func:`identity_route`), or None."""
+    eq = equivalence(source.model, target)
+    if eq is None or eq.refusal({**source.values, **source.options}, (), False) is not None:
+        return None
+    return eq if same_options(eq.rename(source.options), eq.target, fix) else None
+
+
+def _identity_words(eq: Equivalence) -> str:
+    if eq.source == eq.target:
+        return f"{eq.source} onto itself with the same options"
+    return f"{eq.source} equals {eq.target} (renamed: the dialects draw the same BRDF)"
+
+
 def same_options(values: Mapping[str, Any], model: str, fix: Mapping[str, Any]) -> bool:
     """Whether ``fix`` changes none of the model's options from ``values`` (and holds no parameter)."""
     spec = get_model(model)
@@ -765,14 +787,18 @@ def _remap_uniform(
     from matremap.uniform import comparison_strip, fit
 
     target = job.target
-    if source.model == target and same_options(source.options, target, job.fix):
-        log(f"identity: {source.model} onto itself with the same options: copied, nothing is fitted")
-        result.material, result.loss, result.verdict = source, 0.0, Verdict([Check("fit_error", 0.0, 0.0, "identity")])
-        write_text(stage / "material.json", json.dumps(source.to_dict(), indent=1) + "\n")
-        drawn = renderer_for(source.model)
-        same = FitResult(source, source, "identity", 0.0, 0, 0.0, 1.0, job.scene or Scene(), drawn, drawn)
+    eq = uniform_identity(source, target, job.fix)
+    if eq is not None:
+        log(f"identity: {_identity_words(eq)}: copied, nothing is fitted")
+        copied = Material.create(eq.target, eq.rename({**source.values, **source.options}))
+        result.material, result.loss, result.verdict = copied, 0.0, Verdict([Check("fit_error", 0.0, 0.0, "identity")])
+        write_text(stage / "material.json", json.dumps(copied.to_dict(), indent=1) + "\n")
+        scene = job.scene or Scene()
+        same = FitResult(
+            source, copied, "identity", 0.0, 0, 0.0, 1.0, scene, renderer_for(source.model), renderer_for(eq.target)
+        )
         write_image(stage / "compare.png", comparison_strip(same), force=True)
-        return source
+        return copied
     full_fix = complete_fix(source.model, qty.material_values(source), target, job.fix)
     job = staged_strategy(job, log)
     r = fit(
