@@ -13,6 +13,10 @@ Strategies:
                  (roles specular, roughness, fresnel) against the specular-only render, merged
                  (the robust default);
 ``three-stage``  two-stage, then all parameters jointly from that start.
+``separable``    all free parameters against the full render, the ones the image is affine in
+                 (:attr:`~matremap.core.models.ModelSpec.affine`) solved in closed form for each trial
+                 of the others (variable projection, :mod:`matremap.core.varpro`): the joint optimum
+                 of ``simple`` at about the cost of a fit over the nonlinear parameters alone.
 
 The loss reported is the relative RMSE over sphere pixels, ||t - s|| / ||s||.
 """
@@ -26,6 +30,7 @@ from typing import Any, cast
 
 import numpy as np
 
+from matremap.core import varpro
 from matremap.core.calibrate import irradiance_scale
 from matremap.core.material import Material
 from matremap.core.models import SPECULAR_ROLES, ModelSpec, ParamSpec
@@ -34,8 +39,10 @@ from matremap.dialects import get_model
 from matremap.errors import MatremapError
 from matremap.renderers.base import Renderer, render_pixels
 
-STRATEGIES = ("simple", "two-stage", "three-stage")
+STRATEGIES = ("simple", "two-stage", "three-stage", "separable")
 DIFFUSE, SPECULAR, FULL = "diffuse", "specular", "full"
+#: strategies that fit the full render only (no diffuse and specular stages)
+JOINT = ("simple", "separable")
 
 #: relative forward-difference step (images are float32, so well above sqrt(eps64))
 FD_STEP = 1e-4
@@ -277,7 +284,7 @@ class _Problem:
             # nothing left to descend
             r0 = self.residual(x0)
             if float(np.sqrt(r0 @ r0)) < EXACT:
-                return self.decode(x0), _Solved(x0, 0.5 * float(r0 @ r0), "the start matches the source exactly")
+                return self.result(x0), _Solved(x0, 0.5 * float(r0 @ r0), "the start matches the source exactly")
         from scipy.optimize import least_squares  # on first use: ~0.8 s the command line need not pay
 
         sol = least_squares(
@@ -292,7 +299,119 @@ class _Problem:
             gtol=FIT_TOL,
             max_nfev=MAX_EVALUATIONS,
         )
-        return self.decode(sol.x), sol
+        return self.result(sol.x), sol
+
+    def result(self, x: np.ndarray) -> Material:
+        """The material of a solution ``x``."""
+        return self.decode(x)
+
+
+class _Projected(_Problem):
+    """A stage over the nonlinear parameters with the affine ones solved in closed form at every trial
+    (variable projection, :mod:`matremap.core.varpro`): each evaluation renders the basis (the affine
+    parameters at their lower bounds, and each one at 1), solves them in the box (and the model's sum
+    limit) and returns the residual of that optimum; the Jacobian is Kaufman's, one render per
+    nonlinear variable at the solved values."""
+
+    def __init__(
+        self,
+        template: Material,
+        nonlinear: Sequence[ParamSpec],
+        linear: Sequence[ParamSpec],
+        which: str,
+        goal: np.ndarray,
+        renderer: Renderer,
+        counter: _Counter,
+        grey: bool = False,
+    ) -> None:
+        super().__init__(template, nonlinear, which, goal, renderer, counter, grey)
+        self.linear = list(linear)
+        ch = self.goal.shape[1]
+        self.layout = varpro.unknowns([p.channels for p in self.linear], ch)
+        self.theta_lower = np.array([self.linear[u.param].bounds[0] for u in self.layout])
+        self.theta_upper = np.array([self.linear[u.param].bounds[1] for u in self.layout])
+        limit = template.spec.affine_sum_limit
+        self.sums = varpro.sum_rows(self.layout, ch) if limit is not None else None
+        self.limit = limit
+        self._solved: tuple[np.ndarray, np.ndarray, varpro.AffineSolution] | None = None
+
+    def with_theta(self, m: Material, theta: np.ndarray) -> Material:
+        """``m`` with the affine parameters at ``theta`` (in the layout of :mod:`varpro`)."""
+        values = dict(m.values)
+        for j, p in enumerate(self.linear):
+            parts = [theta[k] for k, u in enumerate(self.layout) if u.param == j]
+            values[p.name] = np.broadcast_to(np.array(parts, dtype=float), (p.channels,)).copy()
+        return Material(m.model, values, m.options)
+
+    def _at(self, m: Material, values: Sequence[float]) -> Material:
+        v = dict(m.values)
+        for p, x in zip(self.linear, values, strict=True):
+            v[p.name] = np.full(p.channels, x)
+        return Material(m.model, v, m.options)
+
+    def _render(self, materials: Sequence[Material]) -> np.ndarray:
+        mats = cast("list[Material]", [part(m, self.which) for m in materials])
+        pix = self.counter.pixels(self.renderer, mats)
+        return pix[:, :, :1] if self.grey else pix
+
+    def solve_theta(self, xs: Sequence[np.ndarray]) -> list[tuple[np.ndarray, varpro.AffineSolution]]:
+        """For each trial ``x``: the residual at the affine optimum, and that optimum (one batched render
+        of 1 + L images per trial)."""
+        lo = [p.bounds[0] for p in self.linear]
+        hi = [min(1.0, p.bounds[1]) for p in self.linear]
+        mats = []
+        for x in xs:
+            m = self.decode(x)
+            mats.append(self._at(m, lo))
+            mats += [self._at(m, [hi[j] if i == j else lo[i] for i in range(len(lo))]) for j in range(len(lo))]
+        pix = self._render(mats).reshape(len(xs), 1 + len(lo), *self.goal.shape)
+        out = []
+        for img in pix:
+            basis = np.stack([(img[1 + j] - img[0]) / (hi[j] - lo[j]) for j in range(len(lo))])
+            offset = img[0] - np.tensordot(np.array(lo), basis, axes=1)
+            a = varpro.design(basis, self.layout)
+            b = (self.goal - offset).ravel()
+            sol = varpro.solve(a, b, self.theta_lower, self.theta_upper, self.sums, self.limit)
+            out.append((((a @ sol.theta) - b) / self.norm, sol))
+        return out
+
+    def residual(self, x: np.ndarray) -> np.ndarray:
+        if self._solved is not None and np.array_equal(self._solved[0], x):
+            return self._solved[1]
+        self.evaluations += 1
+        r, sol = self.solve_theta([x])[0]
+        self._solved = (x.copy(), r, sol)
+        return r
+
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
+        self.residual(x)
+        assert self._solved is not None
+        _, r0, sol = self._solved
+        self.template = self.with_theta(self.template, sol.theta)  # perturb at the solved values
+        try:
+            jac = super().jacobian(x)
+        finally:
+            self._last = None
+        return varpro.project_out(jac, sol.free_basis)
+
+    def initial_guess(self, x0: np.ndarray) -> np.ndarray:
+        """The best of a few roughness values, each with its affine optimum (one batched render)."""
+        rough = next((i for i, p in enumerate(self.free) if p.role == "roughness"), None)
+        if rough is None:
+            return x0
+        p, sl = self.free[rough], self.slices[rough]
+        candidates = []
+        for v in roughness_candidates(p, count=4):
+            xc = x0.copy()
+            xc[sl] = np.log(v) if p.log else v
+            candidates.append(xc)
+        errors = [float(r @ r) for r, _ in self.solve_theta(candidates)]
+        return candidates[int(np.argmin(errors))]
+
+    def result(self, x: np.ndarray) -> Material:
+        self.residual(x)
+        assert self._solved is not None
+        return self.with_theta(self.decode(x), self._solved[2].theta)
 
 
 @dataclass
@@ -416,7 +535,7 @@ def _resolved_goals(
     A source that renders black everywhere is refused."""
     scene = counter.scene
     goals = _source_goals(source, strategy, scale, renderer, counter)
-    which = SPECULAR if strategy != "simple" else FULL
+    which = FULL if strategy in JOINT else SPECULAR
     warnings: list[str] = []
     sharpened = _below_resolution(source, goals[which], which, renderer, counter)
     if sharpened is not None:
@@ -456,7 +575,7 @@ def _source_goals(
 ) -> dict[str, np.ndarray]:
     """The irradiance-matched source pixels each stage fits: full, and for the staged strategies the
     diffuse-only and specular-only parts (zero where the source has no such part)."""
-    which = [FULL] if strategy == "simple" else [DIFFUSE, SPECULAR, FULL]
+    which = [FULL] if strategy in JOINT else [DIFFUSE, SPECULAR, FULL]
     src_parts = [part(source, w) for w in which]
     rendered = counter.pixels(renderer, [m for m in src_parts if m is not None])
     goals: dict[str, np.ndarray] = {}
@@ -488,6 +607,20 @@ def _descend(
             current = _run_stage(
                 which_part, params, current, goals[which_part], total, renderer, counter, stages, coarse=coarse
             )
+    if strategy == "separable":
+        return _run_stage(
+            FULL,
+            free_params,
+            current,
+            goals[FULL],
+            1.0,
+            renderer,
+            counter,
+            stages,
+            name="separable",
+            coarse=coarse,
+            project=True,
+        )
     if strategy in ("simple", "three-stage"):
         name = "joint" if strategy == "three-stage" else FULL
         current = _run_stage(
@@ -646,7 +779,12 @@ def _run_stage(
     stages: list[StageReport],
     name: str | None = None,
     coarse: bool = True,
+    project: bool = False,
 ) -> Material:
+    """Long: one stage's set-up, its two degenerate cases and its report are read best together.
+
+    Fit ``params`` of ``current`` to ``goal`` (the ``which`` part); ``project``: solve the parameters the
+    model is affine in by variable projection."""
     t0 = time.perf_counter()
     renders0 = counter.images
     names = [p.name for p in params]
@@ -681,7 +819,17 @@ def _run_stage(
         return current
     # grey goal and grey parameters (grey parameters render grey images in an RGB renderer)
     grey = is_grey(goal) and all(np.all(v == v[0]) for v in current.values.values())
-    problem = _Problem(current, params, which, goal, renderer, counter, grey=grey)
+    affine = current.spec.affine_params(current.options) if project else ()
+    linear = [p for p in params if p.name in affine]
+    if linear:
+        nonlinear = [p for p in params if p.name not in affine]
+        problem: _Problem = _Projected(current, nonlinear, linear, which, goal, renderer, counter, grey=grey)
+        if not nonlinear:  # nothing to descend on: the closed form is the fit
+            result = problem.result(np.zeros(0))
+            report(result, float(np.linalg.norm(problem.residual(np.zeros(0)))), 1, "solved in closed form")
+            return result
+    else:
+        problem = _Problem(current, params, which, goal, renderer, counter, grey=grey)
     result, sol = problem.solve(current, coarse=coarse)
     report(result, float(np.sqrt(2.0 * sol.cost)), problem.evaluations, str(sol.message))
     return result

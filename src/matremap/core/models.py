@@ -114,6 +114,15 @@ class ModelSpec:
     #: "cycles" (Cycles' bump shadowing term on diffuse closures, raised normals on glossy ones)
     normal_mapping: str = "plain"
     specialisations: tuple[tuple[str, float, Mapping[str, Any]], ...] = ()
+    #: parameters the probe image is jointly affine in, channel by channel (image = C + sum of value x B,
+    #: with C and B independent of them), each with the options it holds under (option -> the values
+    #: for which it does); a fit solves them in closed form (variable projection). Checked by rendering
+    #: in tests/test_separable.py.
+    affine: tuple[tuple[str, Mapping[str, tuple[str, ...]]], ...] = ()
+    #: the image is affine in them only where their per-channel sum is at most this (None: everywhere);
+    #: beyond it the renderer rescales them (Mitsuba 0.6's ensureEnergyConservation), so a fit loses
+    #: nothing by staying inside
+    affine_sum_limit: float | None = None
 
     def specialise(self, values: Mapping[str, Any]) -> ModelSpec:
         """The spec as a fit sees it when parameters are held at given values.
@@ -157,6 +166,14 @@ class ModelSpec:
         ``values`` (constants or per-texel maps; see :meth:`specialise`); None when it has no such part."""
         spec = self.specialise(values or {})
         return {"full": {}, "specular": spec.specular_only, "diffuse": spec.diffuse_only}[part]
+
+    def affine_params(self, options: Mapping[str, str]) -> tuple[str, ...]:
+        """The parameters the image is affine in under these options (see ``affine``)."""
+        return tuple(
+            name
+            for name, needs in self.affine
+            if all(str(options.get(o, self.option(o).default)) in values for o, values in needs.items())
+        )
 
     @property
     def param_names(self) -> tuple[str, ...]:

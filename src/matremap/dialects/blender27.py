@@ -32,6 +32,7 @@ from matremap.core.reflectance import SpecularParam
 
 WARD = ModelSpec(
     id="blender27:ward",
+    affine=(("diffuse_color", {}), ("specular_color", {})),
     summary="Blender Internal Lambert + WardIso specular (shadeoutput.c)",
     params=(
         ParamSpec("diffuse_color", "diffuse", (0.8,) * 3, (0.0, 1.0), channels=3, doc="Lambert colour"),

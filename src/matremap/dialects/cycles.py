@@ -49,6 +49,7 @@ from matremap.core.reflectance import Dielectric, SpecularParam
 
 GLOSSY = ModelSpec(
     id="cycles:glossy",
+    affine=(("Color", {"distribution": ("ggx", "beckmann", "ashikhmin_shirley")}), ("Diffuse Color", {})),
     summary="Glossy BSDF (+ Diffuse BSDF), alpha = Roughness^2",
     params=(
         ParamSpec("Color", "specular", (0.8,) * 3, (0.0, 1.0), channels=3),
@@ -64,6 +65,7 @@ GLOSSY = ModelSpec(
 
 DIFFUSE = ModelSpec(
     id="cycles:diffuse",
+    affine=(("Color", {}),),
     summary="Diffuse BSDF (Lambert)",
     params=(ParamSpec("Color", "diffuse", (0.8,) * 3, (0.0, 1.0), channels=3),),
     diffuse_only={},

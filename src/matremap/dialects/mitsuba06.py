@@ -72,6 +72,7 @@ def _distribution(choices: tuple[str, ...], default: str) -> OptionSpec:
 
 DIFFUSE = ModelSpec(
     id="mitsuba06:diffuse",
+    affine=(("reflectance", {}),),
     summary="Lambertian (diffuse.cpp)",
     params=(ParamSpec("reflectance", "diffuse", (0.5,) * 3, (0.0, 1.0), channels=3, doc="albedo"),),
     diffuse_only={},
@@ -80,6 +81,8 @@ DIFFUSE = ModelSpec(
 
 WARD = ModelSpec(
     id="mitsuba06:ward",
+    affine=(("specularReflectance", {}), ("diffuseReflectance", {})),
+    affine_sum_limit=1.0,  # ensureEnergyConservation rescales both beyond
     summary="Ward anisotropic model, isotropic use (ward.cpp)",
     params=(
         _alpha(hi=2.0),
@@ -95,6 +98,8 @@ WARD = ModelSpec(
 
 PHONG = ModelSpec(
     id="mitsuba06:phong",
+    affine=(("specularReflectance", {}), ("diffuseReflectance", {})),
+    affine_sum_limit=1.0,  # ensureEnergyConservation rescales both beyond
     summary="modified Phong (phong.cpp)",
     params=(
         ParamSpec("exponent", "roughness", 30.0, (1e-2, 1e5), log=True, doc="Phong exponent"),
@@ -109,6 +114,7 @@ PHONG = ModelSpec(
 
 ROUGHCONDUCTOR = ModelSpec(
     id="mitsuba06:roughconductor",
+    affine=(("specularReflectance", {}),),
     summary="rough conductor, exact conductor Fresnel (roughconductor.cpp)",
     params=(
         _alpha(),
@@ -134,6 +140,7 @@ ROUGHCONDUCTOR = ModelSpec(
 
 ROUGHPLASTIC = ModelSpec(
     id="mitsuba06:roughplastic",
+    affine=(("specularReflectance", {}), ("diffuseReflectance", {"nonlinear": ("false",)})),
     summary="rough dielectric coating over a Lambertian base (roughplastic.cpp)",
     params=(
         _alpha(),
@@ -153,6 +160,7 @@ ROUGHPLASTIC = ModelSpec(
 
 PBR = ModelSpec(
     id="mitsuba06:pbr",
+    affine=(("F0", {}), ("diffuseReflectance", {})),
     summary="the paper authors' microfacet plugin with Schlick Fresnel (pbr.cpp)",
     params=(
         _alpha(),

@@ -121,6 +121,7 @@ def _distribution() -> OptionSpec:
 
 DIFFUSE = ModelSpec(
     id="mitsuba3:diffuse",
+    affine=(("reflectance", {}),),
     summary="Lambertian (Mitsuba 3 diffuse)",
     params=(_rgb("reflectance", "diffuse", 0.5, 1.0, doc="albedo"),),
     diffuse_only={},
@@ -129,6 +130,7 @@ DIFFUSE = ModelSpec(
 
 ROUGHCONDUCTOR = ModelSpec(
     id="mitsuba3:roughconductor",
+    affine=(("specular_reflectance", {}),),
     summary="rough conductor, exact conductor Fresnel (Mitsuba 3 roughconductor)",
     params=(
         _alpha(),
@@ -168,6 +170,7 @@ ROUGHCONDUCTOR = ModelSpec(
 
 ROUGHPLASTIC = ModelSpec(
     id="mitsuba3:roughplastic",
+    affine=(("specular_reflectance", {}), ("diffuse_reflectance", {"nonlinear": ("false",)})),
     summary="rough dielectric coating over a Lambertian base (Mitsuba 3 roughplastic)",
     params=(
         _alpha(),
