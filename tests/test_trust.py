@@ -162,7 +162,8 @@ def test_a_renderer_that_is_not_installed_exits_4(tmp_path, monkeypatch, capsys)
     monkeypatch.setattr(registry, "_INSTANCES", {})  # no renderer started by an earlier test
     monkeypatch.setattr(registry, "_FACTORIES", {})  # nor one registered by a test
     monkeypatch.setenv("MATREMAP_BPY_PYTHON", str(tmp_path / "no-python"))
-    code = main(["fit", "--source", "mitsuba06:ward", "--target", "cycles:principled"])
+    # cycles:principled is emulated by the embedded renderer by default: ask for real Cycles
+    code = main(["fit", "--source", "mitsuba06:ward", "--target", "cycles:principled", "--target-renderer", "cycles"])
     assert code == 4 and "bpy" in capsys.readouterr().err
 
 

@@ -40,6 +40,18 @@ Diffuse Color   RGB in [0, 1], default 0 (no diffuse node); Lambertian Color/pi
   ``$MATREMAP_CACHE_DIR`` or ``~/.cache/matremap`` (skipped silently if not writable).
 
 cycles:diffuse -- the Diffuse BSDF node with Roughness 0 (Lambert): Color/pi.
+
+cycles:principled -- the Principled BSDF node of Blender 5.0 with the sockets below (the others at
+their defaults: no coat, sheen, subsurface, transmission, emission, thin film, Diffuse Roughness 0).
+Emulated by the embedded renderer (``renderers/embedded/evaluators/principled.py``, which follows
+``kernel/svm/closure.h`` ``CLOSURE_BSDF_PRINCIPLED_ID`` and says where Cycles departs from the
+published model) and drawn by real Cycles with ``--target-renderer cycles``:
+
+  a metal GGX lobe of weight Metallic with the F82-tint Fresnel (F0 = Base Color, tint = Specular
+  Tint); over the rest (1 - Metallic) a dielectric GGX lobe whose Fresnel is that of the IOR with F0
+  scaled by 2 Specular IOR Level and remapped to F0 Specular Tint, over a Lambertian of Base Color
+  weighted by 1 - the dielectric lobe's estimated directional albedo (the largest RGB channel);
+  Multiscatter GGX scales each lobe by Cycles' energy compensation.
 """
 
 from __future__ import annotations
@@ -75,7 +87,7 @@ DIFFUSE = ModelSpec(
 
 PRINCIPLED = ModelSpec(
     id="cycles:principled",
-    summary="Principled BSDF (Blender 5.0 Cycles; multiscatter GGX, F82-tint metals); real Cycles only",
+    summary="Principled BSDF (Blender 5.0 Cycles; multiscatter GGX, F82-tint metals)",
     params=(
         ParamSpec(
             "Base Color",

@@ -8,7 +8,7 @@ function ``f(params, options, geometry)`` returning f * cos(theta_light) for a b
 
 from __future__ import annotations
 
-from matremap.renderers.embedded.evaluators import blender27, cycles, gltf, mitsuba06
+from matremap.renderers.embedded.evaluators import blender27, cycles, gltf, mitsuba06, principled
 from matremap.renderers.embedded.geometry import Evaluator
 
 #: every model the embedded renderer draws: model id -> evaluator
@@ -16,6 +16,7 @@ EVALUATORS: dict[str, Evaluator] = {
     **mitsuba06.EVALUATORS,
     **blender27.EVALUATORS,
     **cycles.EVALUATORS,
+    **principled.EVALUATORS,
     **gltf.EVALUATORS,
 }
 

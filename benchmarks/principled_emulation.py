@@ -1,0 +1,138 @@
+"""The embedded ``cycles:principled`` against real Blender 5.0 Cycles on a grid of parameters.
+
+    .venv/bin/python benchmarks/principled_emulation.py [--resolution 64] [--rows]
+
+Both renderers draw the probe sphere (``Scene.probe([0, 45])``: a headlight and a light 45 degrees
+off, in one image) for every case of the grid, in one batch each; the table gives the relative RMSE
+over sphere pixels, ||embedded - cycles|| / ||cycles||, per lobe and distribution (median and worst
+case of the group), and, for the full material, the same with an ablated emulation whose diffuse
+base is weighted by 1 - F0 (the specular albedo table of Cycles left out), to show that the
+measurement sees the layering. ``--rows`` prints every case.
+
+Groups (each for distribution multi_ggx and ggx):
+
+* diffuse: Metallic 0, Specular IOR Level 0 (no specular lobe), coloured Base Color, Roughness and
+  IOR over the grid (they should not matter);
+* dielectric: Base Color 0, Metallic 0, Roughness 0.05..1, IOR 1.1 / 1.5 / 2.5, Specular IOR Level
+  0.5 / 1, Specular Tint white / coloured;
+* metal: Metallic 1, coloured Base Color, Roughness 0.05..1, Specular Tint white / coloured;
+* full: coloured Base Color, Metallic 0 / 0.5, Roughness 0.05..1, IOR 1.1 / 1.5 / 2.5, Specular IOR
+  Level 0 / 0.5 / 1, Specular Tint white / coloured.
+
+Needs the bpy venv (``python3.11 -m venv .venv-bpy && .venv-bpy/bin/pip install bpy==5.0.1``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import sys
+import time
+from contextlib import contextmanager
+
+import numpy as np
+
+from matremap.core.material import Material
+from matremap.core.scene import Scene
+from matremap.renderers.embedded import EmbeddedRenderer
+from matremap.renderers.embedded.evaluators import principled
+
+ROUGHNESS = (0.05, 0.2, 0.4, 0.7, 1.0)
+IORS = (1.1, 1.5, 2.5)
+TINTS = ((1.0, 1.0, 1.0), (1.0, 0.6, 0.3))
+BASE = (0.8, 0.4, 0.2)
+DISTRIBUTIONS = ("multi_ggx", "ggx")
+
+
+def grid() -> list[tuple[str, str, dict]]:
+    """(group, distribution, parameter values) of every case."""
+    cases: list[tuple[str, str, dict]] = []
+    for dist in DISTRIBUTIONS:
+        for r, ior in itertools.product(ROUGHNESS, IORS):
+            cases.append(("diffuse", dist, {"Base Color": BASE, "Roughness": r, "IOR": ior, "Specular IOR Level": 0.0}))
+        for r, ior, level, tint in itertools.product(ROUGHNESS, IORS, (0.5, 1.0), TINTS):
+            values = {"Base Color": 0.0, "Roughness": r, "IOR": ior, "Specular IOR Level": level, "Specular Tint": tint}
+            cases.append(("dielectric", dist, values))
+        for r, tint in itertools.product(ROUGHNESS, TINTS):
+            cases.append(("metal", dist, {"Base Color": BASE, "Metallic": 1.0, "Roughness": r, "Specular Tint": tint}))
+        for m, r, ior, level, tint in itertools.product((0.0, 0.5), ROUGHNESS, IORS, (0.0, 0.5, 1.0), TINTS):
+            values = {
+                "Base Color": BASE,
+                "Metallic": m,
+                "Roughness": r,
+                "IOR": ior,
+                "Specular IOR Level": level,
+                "Specular Tint": tint,
+            }
+            cases.append(("full", dist, values))
+    return cases
+
+
+@contextmanager
+def diffuse_under_one_minus_f0():
+    """The ablation: the specular albedo estimate's s set to 0, so the diffuse takes 1 - F0 tint."""
+    saved = principled.specular_albedo_s
+    principled.specular_albedo_s = lambda rough, mu, eta: np.zeros(np.broadcast(rough, mu, eta).shape)
+    try:
+        yield
+    finally:
+        principled.specular_albedo_s = saved
+
+
+def relative_rmse(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Per image of a batch: ||a - b|| / ||b|| over the masked pixels."""
+    d = (a - b)[:, mask]
+    return np.linalg.norm(d.reshape(len(a), -1), axis=1) / np.linalg.norm(b[:, mask].reshape(len(b), -1), axis=1)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--resolution", type=int, default=64)
+    ap.add_argument("--rows", action="store_true", help="print every case")
+    args = ap.parse_args(argv)
+
+    from matremap.renderers.cycles.client import INSTALL_HINT, bpy_available
+    from matremap.renderers.cycles.probe import CyclesRenderer
+
+    if not bpy_available():
+        print(INSTALL_HINT, file=sys.stderr)
+        return 4
+    scene = Scene.probe([0.0, 45.0], resolution=args.resolution)
+    mask = scene.mask()
+    cases = grid()
+    mats = [Material.create("cycles:principled", {**values, "distribution": d}) for _, d, values in cases]
+    t0 = time.perf_counter()
+    embedded = EmbeddedRenderer().render(mats, scene)
+    t_emb = time.perf_counter() - t0
+    with diffuse_under_one_minus_f0():
+        ablated = EmbeddedRenderer().render(mats, scene)
+    cycles = CyclesRenderer(timeout=1800.0)
+    try:
+        t0 = time.perf_counter()
+        real = cycles.render(mats, scene)
+        t_real = time.perf_counter() - t0
+    finally:
+        cycles.close()
+    err = relative_rmse(embedded, real, mask)
+    err_ablated = relative_rmse(ablated, real, mask)
+    if args.rows:
+        for (group, dist, values), e in zip(cases, err, strict=True):
+            print(f"{group:10s} {dist:9s} {e:.2e} {values}")
+    timing = f"embedded {t_emb:.2f} s, Cycles {t_real:.1f} s"
+    print(f"{len(cases)} cases at {args.resolution}^2, lights at 0 and 45 degrees: {timing}")
+    print("| lobe | distribution | cases | median rel. RMSE | worst | worst, diffuse under 1 - F0 |")
+    print("|---|---|---|---|---|---|")
+    for group in ("diffuse", "dielectric", "metal", "full"):
+        for dist in DISTRIBUTIONS:
+            sel = np.array([g == group and d == dist for g, d, _ in cases])
+            worst = int(np.argmax(np.where(sel, err, -1.0)))
+            print(
+                f"| {group} | {dist} | {sel.sum()} | {np.median(err[sel]):.1e} | {err[worst]:.1e} | "
+                f"{err_ablated[sel].max():.1e} |"
+            )
+    print(f"worst case overall: {err.max():.2e} ({cases[int(np.argmax(err))]})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
