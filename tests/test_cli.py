@@ -162,6 +162,15 @@ def test_fit_compare_writes_source_target_difference(capsys, tmp_path):
     assert np.linalg.norm(target - source) / np.linalg.norm(source) == pytest.approx(loss, rel=1e-3)
     np.testing.assert_allclose(diff, 10 * np.abs(target - source), rtol=1e-4, atol=1e-6)
 
+    png = tmp_path / "cmp.png"  # a picture to look at: a caption band names the panels
+    assert (
+        run(capsys, "fit", "--source", WARD, "--target", "cycles:glossy", "--size", "48", "--compare", str(png))[0] == 0
+    )
+    labelled, _ = read_image(png, "srgb")
+    assert labelled.shape[0] > 48 and labelled.shape[1] == 3 * 48 + 8
+    band = labelled[: labelled.shape[0] - 48]
+    assert band.max() > 0.5 and np.median(band) < 0.1  # white text on a dark band
+
 
 def test_renderers_lists_the_backends_and_their_models(capsys):
     code, out, _ = run(capsys, "renderers", "--json")

@@ -52,10 +52,11 @@ def fit(
     )
 
 
-def comparison_strip(result: core_fit.FitResult, gap: int = 4) -> np.ndarray:
-    """[H, 3W + 2 gap, 3] linear image of a fit: source (irradiance-matched), target, and
-    |target - source| scaled so that 10 % of the source's peak reads as the peak; exposure puts the
-    source's 99.5th percentile at 1 (sRGB-encoded when written as PNG)."""
+def comparison_strip(result: core_fit.FitResult, gap: int = 4, labels: bool = True) -> np.ndarray:
+    """[H (+ a caption band), 3W + 2 gap, 3] linear image of a fit: source (irradiance-matched), target,
+    and |target - source| scaled so that 10 % of the source's peak reads as the peak; exposure puts the
+    source's 99.5th percentile at 1 (sRGB-encoded when written as PNG). ``labels``: a band above
+    names each panel (the models and the difference's scale)."""
     scene = result.scene
     src = get_renderer(result.source_renderer).render([result.source], scene)[0] * result.irradiance_scale
     tgt = get_renderer(result.target_renderer).render([result.target], scene)[0]
@@ -63,8 +64,28 @@ def comparison_strip(result: core_fit.FitResult, gap: int = 4) -> np.ndarray:
     diff = np.abs(tgt - src) / (0.1 * peak) * peak
     h = scene.resolution
     spacer = np.full((h, gap, 3), 0.02 * peak, dtype=np.float32)
-    strip = np.concatenate([src, spacer, tgt, spacer, diff.astype(np.float32)], axis=1)
-    return strip / peak
+    strip = np.concatenate([src, spacer, tgt, spacer, diff.astype(np.float32)], axis=1) / peak
+    if not labels:
+        return strip
+    names = [f"source {result.source.model}", f"target {result.target.model}", "|difference| x10"]
+    band = caption_band(strip.shape[1], [(i * (h + gap), h, t) for i, t in enumerate(names)])
+    return np.concatenate([band, strip], axis=0)
 
 
-__all__ = ["comparison_strip", "fit"]
+def caption_band(width: int, captions: list[tuple[int, int, str]], height: int = 18) -> np.ndarray:
+    """A dark [height, width, 3] band with each caption ``(x, panel width, text)`` written in white
+    (matplotlib's Agg rasteriser), all at the size that fits the tightest panel."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width / 100, height / 100), dpi=100, facecolor=(0.08, 0.08, 0.08))
+    canvas = FigureCanvasAgg(fig)
+    size = min([9.0, *(1.35 * 72 * w / 100 / max(len(text), 1) for _, w, text in captions)])
+    for x, _, text in captions:
+        fig.text((x + 3) / width, 0.5, text, color="white", fontsize=size, va="center", ha="left")
+    canvas.draw()
+    rgba = np.asarray(canvas.buffer_rgba(), dtype=np.float32)[..., :3] / 255.0
+    return (rgba**2.2).astype(np.float32)  # linear, as the strip; written sRGB-encoded
+
+
+__all__ = ["caption_band", "comparison_strip", "fit"]

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -128,7 +129,9 @@ def cmd_fit(args: argparse.Namespace) -> int:
         from matremap.core.imageio import write_image
         from matremap.uniform import comparison_strip
 
-        write_image(compare, comparison_strip(result), force=args.force)
+        # a picture to look at is labelled; an EXR keeps the measured values, unlabelled
+        labels = Path(compare).suffix.lower() != ".exr"
+        write_image(compare, comparison_strip(result, labels=labels), force=args.force)
     if out is not None:
         from matremap.core.imageio import write_text
 
