@@ -1,5 +1,5 @@
 """What the command groups share: reading materials and NAME=VALUE lists, the probe scene, and the
-options several commands take (``--fix``, ``--strategy``, the renderers, ``--force``)."""
+options several commands take (``--fix``, ``--strategy``, the renderers, ``--force``, ``--allow-path``)."""
 
 from __future__ import annotations
 
@@ -89,3 +89,16 @@ def add_renderer_options(p: argparse.ArgumentParser) -> None:
 def add_force_option(p: argparse.ArgumentParser, help: str) -> None:
     """``--force``: overwrite existing outputs (``help`` says which)."""
     p.add_argument("--force", action="store_true", help=help)
+
+
+def add_allow_path_option(p: argparse.ArgumentParser) -> None:
+    """The repeatable ``--allow-path DIR``: a folder outside the asset's own that the files a material
+    file names may lie in (entered with :func:`matremap.formats.confine.allowed_paths`)."""
+    p.add_argument(
+        "--allow-path",
+        action="append",
+        default=[],
+        metavar="DIR",
+        help="let the material file's textures and buffers lie in DIR too (repeatable; by default only "
+        "files inside the material file's own folder are read)",
+    )

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 from matremap.cli.common import (
     Subparsers,
+    add_allow_path_option,
     add_command,
     add_fix_option,
     add_force_option,
@@ -245,20 +246,24 @@ def add_remap(subparsers: Subparsers) -> None:
         "where it emulates the model, else the model's own renderer)",
     )
     p.add_argument("--no-evaluate", action="store_true", help="skip the evaluation renders")
+    add_allow_path_option(p)
     add_force_option(p, "write into an existing output folder")
     p.set_defaults(func=cmd_remap)
 
 
 def cmd_remap(args: argparse.Namespace) -> int:
     """Remap a map set folder, or one material of a glTF / MaterialX / Mitsuba file, onto the target model."""
-    from matremap.formats import is_material_file
+    from matremap.formats import allowed_paths, is_material_file
+    from matremap.formats.confine import output_inside
     from matremap.remap import remap, remap_file
 
     material_file = is_material_file(args.maps)
     if material_file and args.source:
         raise MatremapError(f"{args.maps} names its own model; drop --from")
-    if not material_file and (args.material is not None or args.write is not None):
-        raise MatremapError("--material and --write apply to material files (.gltf, .glb, .mtlx, .xml)")
+    if not material_file and (args.material is not None or args.write is not None or args.allow_path):
+        raise MatremapError("--material, --write and --allow-path apply to material files (.gltf, .glb, .mtlx, .xml)")
+    if args.write is not None:
+        output_inside(args.output, args.write)
     thresholds = Thresholds.parse(args.max_error)
     options: dict[str, Any] = {
         "fix": parse_assignments(args.fix, "--fix"),
@@ -277,7 +282,8 @@ def cmd_remap(args: argparse.Namespace) -> int:
         "thresholds": thresholds,
     }
     if material_file:
-        fres = remap_file(args.maps, args.target, args.output, material=args.material, write=args.write, **options)
+        with allowed_paths(args.allow_path):
+            fres = remap_file(args.maps, args.target, args.output, material=args.material, write=args.write, **options)
         print(
             f"{'done' if fres.verdict.passed else 'written'}: {fres.source_model} -> {fres.target_model}"
             + (f", wrote {fres.file}" if fres.file else "")

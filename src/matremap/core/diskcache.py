@@ -1,30 +1,85 @@
-"""matremap's on-disk cache: numerically integrated tables and learned transforms.
+"""matremap's on-disk cache: numerically integrated tables, learned transforms, extracted glTF images.
 
-The folder is ``$MATREMAP_CACHE_DIR`` or ``~/.cache/matremap``. Tables are ``.npz`` files named with
-a digest of what decides them, written atomically; a failure to write is ignored (the table is
-rebuilt next time), and files of other versions of the same table are removed.
+The folder is ``$MATREMAP_CACHE`` (or the older name ``$MATREMAP_CACHE_DIR``), else the per-user
+cache folder ``$XDG_CACHE_HOME/matremap`` or ``~/.cache/matremap``. matremap creates it, and every
+folder inside it, with mode 0700, and uses a folder only while it is owned by the current user and
+not writable by the group or others (:func:`ensure_private`): another user must not be able to plant
+files that matremap would then read as its own. Whoever needs the cache to work (the glTF reader's
+extracted images) gets a one-line error otherwise; optional tables skip caching silently.
+
+Tables are ``.npz`` files named with a digest of what decides them, written atomically; a failure to
+write is ignored (the table is rebuilt next time), and files of other versions of the same table are
+removed.
 """
 
 from __future__ import annotations
 
 import os
+import stat
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from matremap.errors import MatremapError
+
+#: the environment variables naming the cache folder, first found wins
+CACHE_ENV = ("MATREMAP_CACHE", "MATREMAP_CACHE_DIR")
+
 
 def cache_dir() -> Path:
-    env = os.environ.get("MATREMAP_CACHE_DIR")
-    return Path(env) if env else Path.home() / ".cache" / "matremap"
+    """Where the cache is (see the module doc); neither created nor checked here (see :func:`private_cache_dir`)."""
+    for name in CACHE_ENV:
+        env = os.environ.get(name)
+        if env:
+            return Path(env).expanduser()
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    base = Path(xdg) if xdg and Path(xdg).is_absolute() else Path.home() / ".cache"
+    return base / "matremap"
+
+
+def ensure_private(folder: Path) -> Path:
+    """``folder``, created with mode 0700 if missing (its parents as usual); refused with one line when
+    it is not a folder, is owned by another user, or is writable by the group or others."""
+    hint = f"set MATREMAP_CACHE to a folder of your own (mode 700), or fix {folder}"
+    try:
+        if not folder.exists():
+            folder.parent.mkdir(parents=True, exist_ok=True)
+            try:
+                folder.mkdir(mode=0o700)
+                os.chmod(folder, 0o700)  # whatever the umask
+            except FileExistsError:  # made meanwhile: checked below like any existing folder
+                pass
+        st = os.stat(folder)
+    except OSError as e:
+        raise MatremapError(f"cannot create the cache folder {folder}: {e.strerror or e}; {hint}") from None
+    if not stat.S_ISDIR(st.st_mode):
+        raise MatremapError(f"the cache folder {folder} is not a folder; {hint}")
+    if hasattr(os, "getuid") and st.st_uid != os.getuid():
+        raise MatremapError(f"the cache folder {folder} is owned by another user (uid {st.st_uid}); {hint}")
+    if st.st_mode & (stat.S_IWGRP | stat.S_IWOTH):
+        raise MatremapError(
+            f"the cache folder {folder} is writable by other users (mode {stat.S_IMODE(st.st_mode):o}); {hint}"
+        )
+    return folder
+
+
+def private_cache_dir(*parts: str) -> Path:
+    """The cache folder, or the folder ``parts`` inside it, each level created and checked by
+    :func:`ensure_private` (raises :class:`~matremap.errors.MatremapError` when one is unsafe)."""
+    folder = ensure_private(cache_dir())
+    for part in parts:
+        folder = ensure_private(folder / part)
+    return folder
 
 
 def save_tables(path: Path, stale: str, **arrays: np.ndarray) -> None:
     """Write ``arrays`` to ``path`` (.npz) atomically and remove the files matching the glob
-    ``stale`` beside it (other versions); give up silently if that fails."""
+    ``stale`` beside it (other versions); give up silently if that fails or the folder is not private
+    (:func:`ensure_private`)."""
     tmp = None
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
+        ensure_private(path.parent)
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.stem + ".", suffix=".tmp")
         with os.fdopen(fd, "wb") as f:
             np.savez(f, **arrays)  # type: ignore[arg-type]  # numpy's stub: a key could be allow_pickle
@@ -34,7 +89,7 @@ def save_tables(path: Path, stale: str, **arrays: np.ndarray) -> None:
         for old in path.parent.glob(stale):
             if old != path:
                 old.unlink(missing_ok=True)
-    except OSError:
+    except (OSError, MatremapError):
         pass
     finally:
         if tmp is not None:

@@ -1,7 +1,10 @@
 """Material files in and out: glTF 2.0, MaterialX, Mitsuba 3 XML, Blender .blend.
 
-Every reader has the signature ``read(path, material=None) -> MaterialAsset`` (``material`` picks
-one material of the file by name or index; the first by default) and every writer
+Every reader has the signature ``read(path, material=None, *, confinement=None) -> MaterialAsset``
+(``material`` picks one material of the file by name or index; the first by default; ``confinement``
+the folders besides the file's own that the files it names may lie in, see
+:mod:`matremap.formats.confine`: by default the ones the command line allowed with ``--allow-path``,
+else none) and every writer
 ``write(out, result, source=None, force=False) -> Path`` where ``result`` is a uniform
 :class:`~matremap.core.material.Material` or a :class:`~matremap.svbrdf.textures.MapSet` of converted maps, and
 ``source`` the asset it was remapped from (the glTF writer copies the source file with the new
@@ -21,6 +24,7 @@ from typing import Any
 
 from matremap.errors import MatremapError
 from matremap.formats.asset import MaterialAsset, TextureRef
+from matremap.formats.confine import Confinement, allowed_paths
 
 #: file suffix -> (format name, module)
 READERS = {
@@ -46,15 +50,18 @@ def is_material_file(path: str | os.PathLike) -> bool:
     return Path(path).suffix.lower() in READERS and Path(path).is_file()
 
 
-def read_asset(path: str | os.PathLike, material: str | int | None = None) -> MaterialAsset:
-    """Read one material of a glTF/.glb, MaterialX or Mitsuba XML file."""
+def read_asset(
+    path: str | os.PathLike, material: str | int | None = None, *, confinement: Confinement | None = None
+) -> MaterialAsset:
+    """Read one material of a glTF/.glb, MaterialX or Mitsuba XML file; the files it names must lie in
+    its folder or a folder ``confinement`` allows (default: the one in effect, see :func:`allowed_paths`)."""
     p = Path(path)
     if not p.is_file():
         raise MatremapError(f"{p} not found")
     suffix = p.suffix.lower()
     if suffix not in READERS:
         raise MatremapError(f"{p}: matremap reads {', '.join(sorted(READERS))} material files, not {suffix or 'this'}")
-    return _module(READERS[suffix][1]).read(p, material)
+    return _module(READERS[suffix][1]).read(p, material, confinement=confinement)
 
 
 def format_for(out: str | os.PathLike) -> str:
@@ -78,8 +85,10 @@ def write_asset(out: str | os.PathLike, result: Any, source: MaterialAsset | Non
 __all__ = [
     "READERS",
     "WRITERS",
+    "Confinement",
     "MaterialAsset",
     "TextureRef",
+    "allowed_paths",
     "format_for",
     "is_material_file",
     "read_asset",

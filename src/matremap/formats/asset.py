@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,13 +34,16 @@ class TextureRef:
 
     ``channels``: the image channels to take (``(2,)`` for the blue channel of a packed map), or
     None for all; ``colorspace``: how the file's values are encoded ("srgb" or "linear");
-    ``scale``: a factor (scalar or RGB) the format multiplies the texture by (glTF's factors).
+    ``scale``: a factor (scalar or RGB) the format multiplies the texture by (glTF's factors);
+    ``extracted``: the file is matremap's own copy in its cache (an image stored inside a .glb or a
+    ``data:`` URI), not a file of the asset, so a map set copies it instead of pointing at it.
     """
 
     path: Path
     channels: tuple[int, ...] | None = None
     colorspace: str = "linear"
     scale: float | tuple[float, ...] = 1.0
+    extracted: bool = False
 
     @property
     def plain_factor(self) -> bool:
@@ -90,7 +94,9 @@ class MaterialAsset:
         """Write the textured parameters as a map set in ``workdir`` (one image per parameter,
         channels picked and factors multiplied in, a ``material.json``); returns the folder.
 
-        A texture used as it is (all channels, factor 1) is referenced where it lies, not copied.
+        A texture of the asset used as it is (all channels, factor 1) is referenced where it lies, not
+        copied; one matremap extracted into its cache is copied into ``workdir``, so that the manifest
+        never points into the cache.
         """
         if not self.textures:
             raise MatremapError(f"{self.path}: material {self.name!r} has no textures; use it as a uniform material")
@@ -116,7 +122,7 @@ class MaterialAsset:
             "provenance": {"file": str(self.path), "material": self.name, "format": self.format},
         }
         if self.normal is not None:
-            manifest["normal"] = str(self.normal.path.resolve())
+            manifest["normal"] = self._kept_file(self.normal, "normal", out)
         (out / "material.json").write_text(json.dumps(manifest, indent=1))
         return out
 
@@ -134,7 +140,7 @@ class MaterialAsset:
         header = image_info(ref.path, ref.colorspace, colour=False)
         whole = ref.channels is None or tuple(ref.channels) == tuple(range(header.channels))
         if ref.plain_factor and whole and (p.channels == 3 or header.channels == 1):
-            return str(ref.path.resolve()), ref.colorspace, (header.height, header.width)
+            return self._kept_file(ref, name, out), ref.colorspace, (header.height, header.width)
         image, info = read_image(ref.path, ref.colorspace, colour=True)
         image = self._picked_channels(p, ref, np.atleast_3d(image))
         scale = np.asarray(ref.scale, dtype=np.float32).reshape(-1)
@@ -154,6 +160,16 @@ class MaterialAsset:
             force=True,
         )
         return fname, "linear", image.shape[:2]
+
+    @staticmethod
+    def _kept_file(ref: TextureRef, name: str, out: Path) -> str:
+        """The manifest's entry for a texture used as it is: its own file (absolute), or, for a copy
+        matremap extracted into its cache, a copy of it in ``out`` (relative)."""
+        if not ref.extracted:
+            return str(ref.path.resolve())
+        fname = f"{name.replace(' ', '_')}{ref.path.suffix.lower()}"
+        shutil.copyfile(ref.path, out / fname)
+        return fname
 
     @staticmethod
     def _picked_channels(p: ParamSpec, ref: TextureRef, image: np.ndarray) -> np.ndarray:

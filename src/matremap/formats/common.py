@@ -1,4 +1,10 @@
-"""What the format modules share: picking a material of a file, and writing a document's maps beside it.
+"""What the format modules share: parsing untrusted XML, picking a material of a file, and writing a
+document's maps beside it.
+
+The XML readers (Mitsuba, and MaterialX before its own parser sees the file) parse with
+:func:`parse_untrusted_xml`: defusedxml refuses entity declarations (so no entity expansion and no
+external entity is ever resolved, whatever the expat version) and the parse stops past
+:data:`MAX_XML_DEPTH` nested elements.
 
 Writers of documents that reference their maps (Mitsuba 3 XML, MaterialX) take a result apart with
 :func:`result_parts`, refuse existing map files up front with :func:`check_map_destinations`, and
@@ -9,6 +15,7 @@ put every map beside the document with :func:`place_map`, inside the document's
 from __future__ import annotations
 
 import re
+import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -21,6 +28,42 @@ from matremap.errors import MatremapError
 
 #: the suffixes :func:`place_map` may give a map
 MAP_SUFFIXES = (".png", ".exr")
+#: the deepest element nesting an XML material file may have (scenes and documents nest a few levels)
+MAX_XML_DEPTH = 100
+
+
+def parse_untrusted_xml(path: Path, expected: str, data: bytes | None = None) -> ET.Element:
+    """The root element of XML file ``path`` (or of its bytes ``data``), parsed safely: entity
+    declarations (entity expansion, external entities) are refused and nesting stops at
+    :data:`MAX_XML_DEPTH`. ``expected`` says what the file should be, in errors."""
+    import io
+
+    import defusedxml  # type: ignore[import-untyped]
+    import defusedxml.ElementTree as DET  # type: ignore[import-untyped]
+
+    depth = 0
+    try:
+        source = io.BytesIO(data if data is not None else path.read_bytes())
+        events = DET.iterparse(source, events=("start", "end"), forbid_dtd=False, forbid_entities=True)
+        for event, _ in events:
+            depth += 1 if event == "start" else -1
+            if depth > MAX_XML_DEPTH:
+                raise MatremapError(
+                    f"{path} nests elements deeper than {MAX_XML_DEPTH} levels; give {expected} "
+                    f"(a real one nests a few levels)"
+                )
+        root = events.root  # set once the parse is complete
+    except defusedxml.DefusedXmlException as e:
+        raise MatremapError(
+            f"{path}: the XML declares entities or external references ({type(e).__name__}), which matremap "
+            f"refuses (entity expansion and external entities can exhaust memory or read other files); "
+            f"give {expected} without a DTD"
+        ) from None
+    except ET.ParseError as e:
+        raise MatremapError(f"{path} is not valid XML ({e}); give {expected}") from None
+    except OSError as e:
+        raise MatremapError(f"cannot read {path}: {e}") from None
+    return root
 
 
 def pick_material(path: Path, names: list[str], material: str | int | None, noun: str = "material") -> int:
@@ -140,10 +183,12 @@ def place_map(
 
 __all__ = [
     "MAP_SUFFIXES",
+    "MAX_XML_DEPTH",
     "ResultParts",
     "check_map_destinations",
     "default_colorspace",
     "map_destination",
+    "parse_untrusted_xml",
     "pick_material",
     "place_map",
 ]

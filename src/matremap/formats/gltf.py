@@ -22,8 +22,14 @@ extension READMEs:
 A reader picks one material and returns a :class:`~matremap.formats.asset.MaterialAsset` whose
 ``document`` is a :class:`GltfDocument` (the parsed JSON and, for a ``.glb``, its BIN chunk).
 Images stored inside the file (buffer views, ``data:`` URIs) are extracted once to a cache folder,
-``$MATREMAP_CACHE_DIR/gltf-images/<hash of the file>`` (default ``~/.cache/matremap``), named by their
-content's digest and checked against it when reused, so that every texture has a real path.
+``<cache>/gltf-images/<hash of the file>`` of matremap's private cache (:func:`matremap.core.diskcache.cache_dir`),
+named by their content's digest and checked against it when reused, so that every texture has a real path;
+such textures are marked ``extracted`` (a map set copies them rather than pointing into the cache).
+
+The file is untrusted: external URIs must resolve inside the file's folder or a folder the user allowed
+(:mod:`matremap.formats.confine`), a GLB's chunks and buffer views must lie inside the file and their
+offsets be non-negative integers, ``data:`` URIs must be valid base64, and the JSON may nest at most
+:data:`MAX_JSON_DEPTH` levels; anything else is refused with one line.
 
 The writer copies the source file with the chosen material replaced, or writes a small file of its
 own (the material on a UV sphere) when there is no glTF source.
@@ -32,13 +38,17 @@ own (the material on a UV sphere) when there is no glTF source.
 from __future__ import annotations
 
 import base64
+import binascii
 import copy
+import dataclasses
 import hashlib
 import json
 import math
 import os
+import re
 import struct
 from dataclasses import dataclass
+from glob import escape as glob_escape
 from pathlib import Path
 from typing import Any
 from urllib.parse import quote, unquote, unquote_to_bytes
@@ -51,6 +61,7 @@ from matremap.core.material import Material
 from matremap.dialects import get_model
 from matremap.errors import MatremapError
 from matremap.formats.asset import MaterialAsset, TextureRef
+from matremap.formats.confine import Confinement, resolve_reference
 
 MODEL = "gltf:metal-rough"
 IOR = "KHR_materials_ior"
@@ -60,6 +71,8 @@ DEFAULT_IOR = 1.5
 GLB_MAGIC = 0x46546C67
 CHUNK_JSON = 0x4E4F534A
 CHUNK_BIN = 0x004E4942
+#: the deepest JSON nesting read (glTF files nest about ten levels; deeper is an attack or a broken file)
+MAX_JSON_DEPTH = 100
 _MIME_SUFFIX = {"image/png": ".png", "image/jpeg": ".jpg", "image/webp": ".webp", "image/ktx2": ".ktx2"}
 
 
@@ -100,6 +113,17 @@ def _parse(path: Path, data: bytes) -> tuple[dict[str, Any], bytes | None]:
         raise MatremapError(
             f"{path} is not valid glTF JSON: {e.msg} at line {e.lineno}, column {e.colno}; fix or re-export the file"
         ) from None
+    except RecursionError:
+        obj = None  # nested past what the parser can follow: refused below, with the depth check's words
+    except ValueError:  # an integer of more digits than Python converts
+        raise MatremapError(
+            f"{path} is not valid glTF JSON: a number in it has too many digits to read; fix or re-export the file"
+        ) from None
+    if obj is None or _too_deep(obj):
+        raise MatremapError(
+            f"{path}: its JSON nests deeper than {MAX_JSON_DEPTH} levels; a glTF file is far shallower, "
+            f"so it is broken or hostile (re-export it)"
+        )
     if not isinstance(obj, dict):
         raise MatremapError(f"{path}: a glTF file is a JSON object with 'asset'; this one is not")
     asset = obj.get("asset")
@@ -112,6 +136,18 @@ def _parse(path: Path, data: bytes) -> tuple[dict[str, Any], bytes | None]:
             f"glTF 1.0 to 2.0 converter)"
         )
     return obj, bin_chunk
+
+
+def _too_deep(obj: Any) -> bool:
+    """Whether JSON value ``obj`` nests more than :data:`MAX_JSON_DEPTH` arrays/objects (walked
+    without recursion)."""
+    level: list[Any] = [obj]
+    for _ in range(MAX_JSON_DEPTH + 1):
+        level = [v for x in level for v in (x.values() if isinstance(x, dict) else x if isinstance(x, list) else ())]
+        level = [v for v in level if isinstance(v, dict | list)]
+        if not level:
+            return False
+    return True
 
 
 def _glb_chunks(path: Path, data: bytes) -> tuple[bytes, bytes | None]:
@@ -146,11 +182,16 @@ def _glb_chunks(path: Path, data: bytes) -> tuple[bytes, bytes | None]:
 
 
 def _cache_dir(data: bytes) -> Path:
-    """The folder of a file's extracted images, in matremap's documented cache (``$MATREMAP_CACHE_DIR``,
-    default ``~/.cache/matremap``), never in a shared temporary folder."""
-    from matremap.core.diskcache import cache_dir
+    """The folder of a file's extracted images in matremap's private cache (created 0700, refused when
+    another user owns it or others may write to it), never in a shared temporary folder."""
+    from matremap.core.diskcache import private_cache_dir
 
-    return cache_dir() / "gltf-images" / hashlib.sha256(data).hexdigest()[:20]
+    return private_cache_dir("gltf-images", hashlib.sha256(data).hexdigest()[:20])
+
+
+def _digest_matches(f: Path, digest: str) -> bool:
+    """Whether cache file ``f`` is a regular file whose content has ``digest`` (a prefix of its SHA-256)."""
+    return f.is_file() and not f.is_symlink() and hashlib.sha256(f.read_bytes()).hexdigest()[: len(digest)] == digest
 
 
 def _cached_copy(folder: Path, stem: str, suffix: str, data: bytes) -> Path:
@@ -158,19 +199,25 @@ def _cached_copy(folder: Path, stem: str, suffix: str, data: bytes) -> Path:
     content still has that digest (an edited or truncated cache file is written again)."""
     digest = hashlib.sha256(data).hexdigest()[:16]
     f = folder / f"{stem}-{digest}{suffix}"
-    if not (f.is_file() and hashlib.sha256(f.read_bytes()).hexdigest()[:16] == digest):
-        folder.mkdir(parents=True, exist_ok=True)
+    if not _digest_matches(f, digest):
         with atomic_output(f) as tmp, open(tmp, "wb") as out:
             out.write(data)
     return f
 
 
-def _data_uri(uri: str) -> tuple[str, bytes]:
-    """(media type, bytes) of a ``data:`` URI (RFC 2397; base64 or percent-encoded)."""
+def _data_uri(path: Path, uri: str, what: str) -> tuple[str, bytes]:
+    """(media type, bytes) of a ``data:`` URI (RFC 2397; base64 or percent-encoded); ``what`` names
+    the item holding it (in errors)."""
     head, _, payload = uri[5:].partition(",")
     mime = head.split(";")[0]
     if head.endswith(";base64"):
-        return mime, base64.b64decode(payload)
+        try:
+            text = "".join(unquote(payload).split())  # line breaks and spaces are not part of base64
+            return mime, base64.b64decode(text.encode("ascii"), validate=True)
+        except (binascii.Error, UnicodeEncodeError):
+            raise MatremapError(
+                f"{path}: {what} is a data: URI whose base64 payload is not valid base64; re-export the file"
+            ) from None
     return mime, unquote_to_bytes(payload)
 
 
@@ -184,74 +231,109 @@ def _sniff(data: bytes) -> str:
     return ".bin"
 
 
-class _Reader:
-    """Resolves the indices of one document (textures, images, buffers) to files and bytes."""
+def _index(value: Any) -> bool:
+    """Whether a JSON value is a valid index or count (a non-negative integer, not a boolean)."""
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 0
 
-    def __init__(self, path: Path, doc: GltfDocument, data: bytes):
+
+class _Reader:
+    """Resolves the indices of one document (textures, images, buffers) to files and bytes; external
+    files must lie where ``confinement`` allows (the file's folder, or an allowed folder)."""
+
+    def __init__(self, path: Path, doc: GltfDocument, data: bytes, confinement: Confinement | None = None):
         self.path, self.doc, self.data = path, doc, data
+        self.confinement = confinement
         self._buffers: dict[int, bytes] = {}
         self._images: dict[int, Path] = {}
+        #: the images that are matremap's extracted copies (in its cache), not files of the asset
+        self.extracted: set[Path] = set()
 
     def item(self, key: str, index: Any, where: str) -> dict[str, Any]:
         found = self.doc.json.get(key)
         items: list[Any] = found if isinstance(found, list) else []
         n = len(items)
-        if not isinstance(index, int) or isinstance(index, bool) or not 0 <= index < n:
+        if not _index(index) or not index < n:
             raise MatremapError(
-                f"{self.path}: {where} refers to {key}[{index}], but the file has {n}; the file is broken, re-export it"
+                f"{self.path}: {where} refers to {key}[{index!r}], but the file has {n}; the file is broken, "
+                f"re-export it"
             )
         obj = items[index]
         if not isinstance(obj, dict):
             raise MatremapError(f"{self.path}: {key}[{index}] is not an object; the file is broken, re-export it")
         return obj
 
+    def external(self, uri: str, what: str) -> Path:
+        """The file a relative (or absolute) URI names, confined; refused for other URI schemes."""
+        if re.match(r"[A-Za-z][A-Za-z0-9+.-]*://", uri):
+            raise MatremapError(
+                f"{self.path}: {what} {uri!r} is not a local file; matremap reads files beside the glTF "
+                f"(download it and fix the uri)"
+            )
+        return resolve_reference(unquote(uri), self.doc.base, f"{self.path}: {what}", self.confinement)
+
     def buffer(self, index: Any, where: str) -> bytes:
-        if index not in self._buffers:
-            buf = self.item("buffers", index, where)
-            uri = buf.get("uri")
-            if uri is None:
-                if index != 0 or self.doc.bin is None:
-                    raise MatremapError(
-                        f"{self.path}: buffers[{index}] has no uri and no GLB BIN chunk holds it; re-export the file"
-                    )
-                data = self.doc.bin
-            elif uri.startswith("data:"):
-                data = _data_uri(uri)[1]
-            else:
-                f = self.doc.base / unquote(uri)
-                if not f.is_file():
-                    raise MatremapError(
-                        f"{self.path}: buffer file {uri!r} not found at {f}; put it beside "
-                        f"{self.path.name} or fix its uri"
-                    )
-                data = f.read_bytes()
-            need = buf.get("byteLength", 0)
-            if len(data) < need:
+        buf = self.item("buffers", index, where)
+        if index in self._buffers:
+            return self._buffers[index]
+        uri = buf.get("uri")
+        if uri is None:
+            if index != 0 or self.doc.bin is None:
                 raise MatremapError(
-                    f"{self.path}: buffers[{index}] holds {len(data)} bytes but says byteLength "
-                    f"{need}; the file is truncated, re-export it"
+                    f"{self.path}: buffers[{index}] has no uri and no GLB BIN chunk holds it; re-export the file"
                 )
-            self._buffers[index] = data
-        return self._buffers[index]
+            data = self.doc.bin
+        elif not isinstance(uri, str):
+            raise MatremapError(f"{self.path}: buffers[{index}].uri is not a string; the file is broken, re-export it")
+        elif uri.startswith("data:"):
+            data = _data_uri(self.path, uri, f"buffers[{index}]")[1]
+        else:
+            f = self.external(uri, f"buffer {index} uri")
+            if not f.is_file():
+                raise MatremapError(
+                    f"{self.path}: buffer file {uri!r} not found at {f}; put it beside {self.path.name} or fix its uri"
+                )
+            data = f.read_bytes()
+        need = buf.get("byteLength", 0)
+        if not _index(need):
+            raise MatremapError(
+                f"{self.path}: buffers[{index}].byteLength is {need!r}, not a byte count; the file is broken, "
+                f"re-export it"
+            )
+        if len(data) < need:
+            raise MatremapError(
+                f"{self.path}: buffers[{index}] holds {len(data)} bytes but says byteLength "
+                f"{need}; the file is truncated, re-export it"
+            )
+        self._buffers[index] = data
+        return data
 
     def buffer_view(self, index: Any, where: str) -> bytes:
         bv = self.item("bufferViews", index, where)
         data = self.buffer(bv.get("buffer"), f"bufferViews[{index}]")
-        off, n = int(bv.get("byteOffset", 0)), int(bv.get("byteLength", 0))
+        off, n = bv.get("byteOffset", 0), bv.get("byteLength")
+        for key, value in (("byteOffset", off), ("byteLength", n)):
+            if not _index(value):
+                raise MatremapError(
+                    f"{self.path}: bufferViews[{index}].{key} is {value!r}, not a non-negative integer; "
+                    f"the file is broken, re-export it"
+                )
         if off + n > len(data):
             raise MatremapError(
-                f"{self.path}: bufferViews[{index}] runs past the end of its buffer; the file is broken, re-export it"
+                f"{self.path}: bufferViews[{index}] (bytes {off} to {off + n}) runs past the end of its buffer "
+                f"({len(data)} bytes); the file is broken, re-export it"
             )
         return data[off : off + n]
 
     def image(self, index: Any, where: str) -> Path:
         """A file holding image ``index``: the external file itself, or an extracted copy."""
+        img = self.item("images", index, where)
         if index in self._images:
             return self._images[index]
-        img = self.item("images", index, where)
         uri = img.get("uri")
-        if isinstance(uri, str) and not uri.startswith("data:"):
-            f = self.doc.base / unquote(uri)
+        if uri is not None and not isinstance(uri, str):
+            raise MatremapError(f"{self.path}: images[{index}].uri is not a string; the file is broken, re-export it")
+        if uri is not None and not uri.startswith("data:"):
+            f = self.external(uri, f"image {index} uri")
             if not f.is_file():
                 raise MatremapError(
                     f"{self.path}: image {uri!r} ({where}) not found at {f}; put it beside "
@@ -259,15 +341,16 @@ class _Reader:
                 )
             self._images[index] = f
             return f
-        if isinstance(uri, str):
-            mime, data = _data_uri(uri)
+        if uri is not None:
+            mime, data = _data_uri(self.path, uri, f"images[{index}]")
         elif "bufferView" in img:
             mime, data = img.get("mimeType", ""), self.buffer_view(img["bufferView"], f"images[{index}]")
         else:
             raise MatremapError(f"{self.path}: images[{index}] has neither a uri nor a bufferView; re-export the file")
-        suffix = _MIME_SUFFIX.get(mime) or _sniff(data)
+        suffix = (_MIME_SUFFIX.get(mime) if isinstance(mime, str) else None) or _sniff(data)
         f = _cached_copy(_cache_dir(self.data), f"image{index}", suffix, data)
         self._images[index] = f
+        self.extracted.add(f)
         return f
 
 
@@ -276,13 +359,16 @@ def _without_alpha(path: Path) -> Path:
 
     PNG stores colour unassociated with alpha (§3.8.2 images are PNG or JPEG); OpenImageIO
     premultiplies colour by alpha on read unless told otherwise, which would darken base colours
-    and packed channels wherever alpha < 1. The copy keeps the stored colour values."""
+    and packed channels wherever alpha < 1. The copy keeps the stored colour values. It lives in the
+    folder of the image's own content and carries its digest in its name, checked when reused."""
+    import tempfile
+
     import OpenImageIO as oiio
 
     folder = _cache_dir(path.read_bytes())
-    out = folder / f"{path.stem}-rgb.png"
-    if out.is_file():
-        return out
+    for f in sorted(folder.glob(f"{glob_escape(path.stem)}-rgb-*.png")):
+        if _digest_matches(f, f.stem.rsplit("-", 1)[-1]):
+            return f
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)
     inp = oiio.ImageInput.open(str(path), config)
@@ -295,14 +381,18 @@ def _without_alpha(path: Path) -> Path:
     if pixels is None:
         raise MatremapError(f"cannot read {path}: the image is corrupt; re-export it")
     colour = np.ascontiguousarray(pixels[..., :3] if spec.nchannels == 4 else pixels[..., :1])
-    folder.mkdir(parents=True, exist_ok=True)
-    with atomic_output(out) as tmp:
+    fd, tmp = tempfile.mkstemp(prefix=".rgb.", suffix=".png", dir=folder)
+    os.close(fd)
+    try:
         o = oiio.ImageOutput.create(tmp)
         if o is None or not o.open(tmp, oiio.ImageSpec(spec.width, spec.height, colour.shape[-1], fmt)):
-            raise MatremapError(f"cannot write {out}: {oiio.geterror().strip()}")
+            raise MatremapError(f"cannot write an alpha-free copy of {path} in {folder}: {oiio.geterror().strip()}")
         o.write_image(colour)
         o.close()
-    return out
+        data = Path(tmp).read_bytes()
+    finally:
+        os.unlink(tmp)
+    return _cached_copy(folder, f"{path.stem}-rgb", ".png", data)
 
 
 def _select(path: Path, materials: list[Any], material: str | int | None) -> int:
@@ -335,7 +425,9 @@ def _number(path: Path, where: str, value: Any, default: Any, size: int = 1) -> 
     return [float(v) for v in vals] if size > 1 else float(vals[0])
 
 
-def read(path: str | os.PathLike, material: str | int | None = None) -> MaterialAsset:
+def read(
+    path: str | os.PathLike, material: str | int | None = None, *, confinement: Confinement | None = None
+) -> MaterialAsset:
     """Read one material of a ``.gltf`` / ``.glb`` file as a ``gltf:metal-rough`` asset.
 
     ``material``: a name or an index (the first material by default). Textures become
@@ -343,7 +435,8 @@ def read(path: str | os.PathLike, material: str | int | None = None) -> Material
     (green and blue of the metallicRoughnessTexture, §3.9.2), specular (alpha of
     specularTexture) and specularColor (sRGB RGB of specularColorTexture) of
     KHR_materials_specular; the normal map as ``asset.normal``. Inputs matremap does not remap
-    are listed in ``asset.notes``.
+    are listed in ``asset.notes``. External images and buffers must lie in the file's folder or
+    a folder ``confinement`` allows (default: the one in effect, :mod:`matremap.formats.confine`).
     """
     p = Path(path)
     if not p.is_file():
@@ -358,19 +451,28 @@ def read(path: str | os.PathLike, material: str | int | None = None) -> Material
     m = mats[idx]
     if not isinstance(m, dict):
         raise MatremapError(f"{p}: materials[{idx}] is not an object; the file is broken, re-export it")
-    name = m.get("name") or f"material {idx}"
+    given = m.get("name")
+    name = given if isinstance(given, str) and given else f"material {idx}"
     notes: list[str] = []
     if material is None and len(mats) > 1:
         notes.append(f"{p.name} has {len(mats)} materials; using the first, {name!r} (choose another by name or index)")
     where = f"material {name!r}"
     pbr = m.get("pbrMetallicRoughness", {}) or {}
     ext = m.get("extensions", {}) or {}
-    if not isinstance(pbr, dict) or not isinstance(ext, dict):
+    if (
+        not isinstance(pbr, dict)
+        or not isinstance(ext, dict)
+        or not all(isinstance(ext.get(k) or {}, dict) for k in (IOR, SPECULAR))
+    ):
         raise MatremapError(f"{p}: {where} has a malformed pbrMetallicRoughness or extensions; re-export the file")
     constants = _read_factors(p, where, pbr, ext, notes)
-    textures = _MaterialTextures(_Reader(p, doc, data), where, notes)
-    maps = textures.read_maps(pbr, ext.get(SPECULAR) or {}, constants)
+    reader = _Reader(p, doc, data, confinement)
+    textures = _MaterialTextures(reader, where, notes)
+    maps = {
+        k: _marked(t, reader.extracted) for k, t in textures.read_maps(pbr, ext.get(SPECULAR) or {}, constants).items()
+    }
     normal = textures.read_normal(m)
+    normal = _marked(normal, reader.extracted) if normal is not None else None
     _note_unremapped(m, ext, obj, notes)
     return MaterialAsset(
         path=p,
@@ -385,6 +487,11 @@ def read(path: str | os.PathLike, material: str | int | None = None) -> Material
         index=idx,
         lost=lost_look(ext),
     )
+
+
+def _marked(ref: TextureRef, extracted: set[Path]) -> TextureRef:
+    """``ref`` marked ``extracted`` when its file is one of matremap's extracted copies."""
+    return dataclasses.replace(ref, extracted=True) if ref.path in extracted else ref
 
 
 def _read_factors(path: Path, where: str, pbr: dict[str, Any], ext: dict[str, Any], notes: list[str]) -> dict[str, Any]:
@@ -427,10 +534,9 @@ def _alpha_channel(nch: int) -> int | None:
     return {4: 3, 2: 1}.get(nch)
 
 
-def _colour_file(f: Path, n: int) -> tuple[Path, int]:
-    """The file to take colour channels from (and its channel count): an alpha-free copy when the
-    image has alpha."""
-    return (_without_alpha(f), n - 1) if n in (2, 4) else (f, n)
+def _dict(value: Any) -> dict[str, Any]:
+    """A JSON value that should be an object, or {} when it is not one."""
+    return value if isinstance(value, dict) else {}
 
 
 class _MaterialTextures:
@@ -448,7 +554,7 @@ class _MaterialTextures:
         src = tex.get("source")
         if src is None:  # an extension may give the only source (EXT_texture_webp, KHR_texture_basisu)
             src = next(
-                (e["source"] for e in (tex.get("extensions") or {}).values() if isinstance(e, dict) and "source" in e),
+                (e["source"] for e in _dict(tex.get("extensions")).values() if isinstance(e, dict) and "source" in e),
                 None,
             )
         if src is None:
@@ -458,11 +564,20 @@ class _MaterialTextures:
         f = r.image(src, f"{where} {slot}")
         if info.get("texCoord", 0) != 0:
             self.notes.append(f"{slot} uses texCoord {info['texCoord']}; the map is taken as it is (UV set ignored)")
-        if "KHR_texture_transform" in (info.get("extensions") or {}):
+        if "KHR_texture_transform" in _dict(info.get("extensions")):
             self.notes.append(f"{slot}: KHR_texture_transform ignored; the map is taken untransformed")
         from matremap.svbrdf.textures import image_info
 
         return f, image_info(f, "linear", colour=False).channels
+
+    def colour_file(self, f: Path, n: int) -> tuple[Path, int]:
+        """The file to take colour channels from (and its channel count): an alpha-free copy (in the
+        cache, so marked extracted) when the image has alpha."""
+        if n not in (2, 4):
+            return f, n
+        copy = _without_alpha(f)
+        self.reader.extracted.add(copy)
+        return copy, n - 1
 
     def read_maps(
         self, pbr: dict[str, Any], spec_ext: dict[str, Any], constants: dict[str, Any]
@@ -472,13 +587,13 @@ class _MaterialTextures:
         textures: dict[str, TextureRef] = {}
         if "baseColorTexture" in pbr:
             raw = self.file(pbr["baseColorTexture"], "baseColorTexture")
-            f, n = _colour_file(*raw)
+            f, n = self.colour_file(*raw)
             rgb = tuple(_channel(c, n) for c in range(3))
             textures["baseColor"] = TextureRef(f, rgb, "srgb", tuple(constants["baseColor"]))
             if raw[1] in (2, 4):
                 self.notes.append("baseColorTexture alpha ignored (matremap remaps opaque reflectance)")
         if "metallicRoughnessTexture" in pbr:
-            f, n = _colour_file(*self.file(pbr["metallicRoughnessTexture"], "metallicRoughnessTexture"))
+            f, n = self.colour_file(*self.file(pbr["metallicRoughnessTexture"], "metallicRoughnessTexture"))
             textures["roughness"] = TextureRef(f, (_channel(1, n),), "linear", constants["roughness"])
             textures["metallic"] = TextureRef(f, (_channel(2, n),), "linear", constants["metallic"])
         if "specularTexture" in spec_ext:
@@ -491,7 +606,7 @@ class _MaterialTextures:
             else:
                 textures["specular"] = TextureRef(f, (a,), "linear", constants["specular"])
         if "specularColorTexture" in spec_ext:
-            f, n = _colour_file(*self.file(spec_ext["specularColorTexture"], "specularColorTexture"))
+            f, n = self.colour_file(*self.file(spec_ext["specularColorTexture"], "specularColorTexture"))
             rgb = tuple(_channel(c, n) for c in range(3))
             textures["specularColor"] = TextureRef(f, rgb, "srgb", tuple(constants["specularColor"]))
         return textures
@@ -501,7 +616,7 @@ class _MaterialTextures:
         if "normalTexture" not in m:
             return None
         f, _ = self.file(m["normalTexture"], "normalTexture")
-        scale = m["normalTexture"].get("scale", 1.0)
+        scale = _number(self.reader.path, f"{self.where} normalTexture.scale", m["normalTexture"].get("scale"), 1.0)
         if scale != 1:
             self.notes.append(f"normalTexture scale {scale:g} ignored; the normal map is used as stored (scale 1)")
         return TextureRef(f, None, "linear", 1.0)
@@ -513,13 +628,15 @@ def lost_look(ext: dict[str, Any]) -> list[str]:
     velvet). A clear coat (colourless in glTF) only changes the gloss and is noted instead."""
     lost = []
     tr = ext.get("KHR_materials_transmission")
-    if isinstance(tr, dict) and (float(tr.get("transmissionFactor", 0.0)) > 0.5 or "transmissionTexture" in tr):
-        lost.append(f"KHR_materials_transmission (transmissionFactor {float(tr.get('transmissionFactor', 0.0)):g})")
+    if isinstance(tr, dict):
+        factor = _number(Path("KHR_materials_transmission"), "transmissionFactor", tr.get("transmissionFactor"), 0.0)
+        if factor > 0.5 or "transmissionTexture" in tr:
+            lost.append(f"KHR_materials_transmission (transmissionFactor {factor:g})")
     sh = ext.get("KHR_materials_sheen")
-    if isinstance(sh, dict) and (
-        max(float(x) for x in sh.get("sheenColorFactor", [0, 0, 0])) > 0.5 or "sheenColorTexture" in sh
-    ):
-        lost.append("KHR_materials_sheen (a coloured sheen)")
+    if isinstance(sh, dict):
+        colour = _number(Path("KHR_materials_sheen"), "sheenColorFactor", sh.get("sheenColorFactor"), [0.0] * 3, 3)
+        if max(colour) > 0.5 or "sheenColorTexture" in sh:
+            lost.append("KHR_materials_sheen (a coloured sheen)")
     return lost
 
 
@@ -537,7 +654,8 @@ def _note_unremapped(m: dict[str, Any], ext: dict[str, Any], obj: dict[str, Any]
         notes.append(
             f"{name} is not remapped (matremap fits the base metallic-roughness layer); a written copy keeps it"
         )
-    required = set(obj.get("extensionsRequired") or []) - {IOR, SPECULAR}
+    listed = obj.get("extensionsRequired")
+    required = {e for e in (listed if isinstance(listed, list) else []) if isinstance(e, str)} - {IOR, SPECULAR}
     if required:
         notes.append(f"the file requires {', '.join(sorted(required))}; matremap ignores them")
 
@@ -730,6 +848,7 @@ class _Target:
                 doc["materials"][0]["name"] = source.name
             return cls(doc, bin_data, None, 0, [])
         doc = copy.deepcopy(gdoc.json)
+        _check_writable_source(source.path, doc, source.index)
         inputs = [
             source.path,
             *(t.path for t in source.textures.values()),
@@ -831,12 +950,37 @@ def _refuse_overwrites(out: Path, planned: list[Path], inputs: list[Path], force
             check_output(f, force)
 
 
+def _check_writable_source(path: Path, doc: dict[str, Any], index: int) -> None:
+    """Refuse a source document whose parts the writer edits have the wrong JSON types (the reader
+    looks only at the material it reads); null arrays are dropped, empty or null material members
+    become empty objects."""
+    for key in ("buffers", "bufferViews", "images", "textures", "extensionsUsed", "extensionsRequired"):
+        if key in doc and doc[key] is None:
+            del doc[key]
+        if key in doc and not isinstance(doc[key], list):
+            raise MatremapError(f"{path}: {key} is not an array; the file is broken, re-export it")
+    for key in ("buffers", "bufferViews", "images", "textures"):
+        if not all(isinstance(x, dict) for x in doc.get(key, [])):
+            raise MatremapError(f"{path}: an item of {key} is not an object; the file is broken, re-export it")
+    if not all(_index(bv.get("buffer")) for bv in doc.get("bufferViews", [])):
+        raise MatremapError(f"{path}: a bufferView has no valid buffer index; the file is broken, re-export it")
+    for key in ("extensionsUsed", "extensionsRequired"):
+        if key in doc:
+            doc[key] = [e for e in doc[key] if isinstance(e, str)]
+    mat = doc["materials"][index]
+    for key in ("pbrMetallicRoughness", "extensions"):
+        if not mat.get(key):
+            mat[key] = {}
+        elif not isinstance(mat[key], dict):
+            raise MatremapError(f"{path}: materials[{index}].{key} is not an object; re-export the file")
+
+
 def _add_bin_buffer(doc: dict[str, Any]) -> bytes:
     """Insert an empty buffer 0 (a GLB's BIN chunk) and shift every buffer view's buffer index."""
     doc.setdefault("buffers", []).insert(0, {"byteLength": 0})
     for bv in doc.get("bufferViews", []):
         bv["buffer"] += 1
-        meshopt = (bv.get("extensions") or {}).get("EXT_meshopt_compression")
+        meshopt = _dict(bv.get("extensions")).get("EXT_meshopt_compression")
         if isinstance(meshopt, dict) and "buffer" in meshopt:
             meshopt["buffer"] += 1
     return b""

@@ -25,6 +25,13 @@ document without materials falls back to its shader nodes) and reads its surface
   that says so and lists every input it does not remap whose value differs from the node's
   default (coat, sheen, subsurface, transmission, emission, thin film, anisotropy, ...).
 
+The document is untrusted: before MaterialX's own parser sees it, it is parsed with
+:func:`~matremap.formats.common.parse_untrusted_xml` (entity declarations and nesting past
+:data:`~matremap.formats.common.MAX_XML_DEPTH` refused), ``xi:include`` is refused (MaterialX would
+read the included file from anywhere), and MaterialX then reads the very bytes that were checked.
+Texture files must lie in the document's folder or a folder the user allowed
+(:mod:`matremap.formats.confine`).
+
 Texture inputs are ``image``, ``tiledimage`` and ``gltf_image`` nodes (in the document or a
 nodegraph), optionally behind an ``extract`` or ``separate3`` node that picks one channel (a packed
 occlusion-roughness-metallic map); ``gltf_image``'s ``factor`` becomes the texture's scale. A
@@ -58,7 +65,15 @@ from matremap.core.material import Material
 from matremap.dialects import get_model
 from matremap.errors import MatremapError
 from matremap.formats.asset import MaterialAsset, TextureRef
-from matremap.formats.common import check_map_destinations, map_destination, pick_material, place_map, result_parts
+from matremap.formats.common import (
+    check_map_destinations,
+    map_destination,
+    parse_untrusted_xml,
+    pick_material,
+    place_map,
+    result_parts,
+)
+from matremap.formats.confine import Confinement, resolve_reference
 
 FORMAT = "mtlx"
 MODEL = "gltf:metal-rough"
@@ -129,8 +144,15 @@ def _parse(text: str, where: str, channels: int) -> list[float]:
 
 @dataclass
 class _Ctx:
+    """The document being read, the notes gathered, and where its texture files may lie."""
+
     path: Path
     notes: list[str]
+    confinement: Confinement | None = None
+
+    def file(self, rel: str, what: str) -> Path:
+        """The file a ``file`` input names (relative to the document, or absolute), confined."""
+        return resolve_reference(rel, self.path.resolve().parent, f"{self.path}: {what}", self.confinement)
 
 
 def _defaults(node) -> dict[str, str]:
@@ -164,7 +186,7 @@ def _texture(ctx: _Ctx, node, param: str, colour: bool) -> TextureRef:
     if f is None or not f.getResolvedValueString():
         raise MatremapError(f"{ctx.path}: image node {node.getName()!r} for {param} has no file; set its file input")
     rel = Path(f.getResolvedValueString())
-    path = rel if rel.is_absolute() else ctx.path.resolve().parent / rel
+    path = ctx.file(f.getResolvedValueString(), f"image node {node.getName()!r} file")
     if not path.is_file():
         raise MatremapError(
             f"{ctx.path}: texture {rel} for {param} not found at {path}; put it beside the "
@@ -364,7 +386,7 @@ def _normal_map(ctx: _Ctx, shader) -> TextureRef | None:
     rel = Path(f.getResolvedValueString()) if f is not None else None
     if rel is None or not str(rel):
         raise MatremapError(f"{ctx.path}: the normal map's image node has no file")
-    npath = rel if rel.is_absolute() else ctx.path.resolve().parent / rel
+    npath = ctx.file(str(rel), f"normal map image node {img.getName()!r} file")
     if not npath.is_file():
         raise MatremapError(f"{ctx.path}: normal map {rel} not found at {npath}; put it beside the document")
     ctx.notes.append(f"normal map {rel.name} (through {nnode.getCategory()}) is the asset's normal map")
@@ -450,23 +472,40 @@ def _same(a: str, b: str) -> bool:
         return a.strip() == b.strip()
 
 
-def read(path: str | Path, material: str | int | None = None) -> MaterialAsset:
+def _parse_document(mx: Any, p: Path) -> Any:
+    """The MaterialX document of file ``p``: its bytes checked as untrusted XML (no entities, bounded
+    nesting, no ``xi:include``), then those same bytes given to MaterialX's parser."""
+    data = p.read_bytes()
+    if not data[:4096].lstrip().startswith(b"<"):
+        raise MatremapError(f"{p} is not a MaterialX document (not XML)")
+    root = parse_untrusted_xml(p, "a MaterialX document", data)
+    if root.tag != "materialx":
+        raise MatremapError(f"{p} is not a MaterialX document: its root element is not <materialx>")
+    if any(isinstance(el.tag, str) and el.tag.rsplit("}", 1)[-1] == "include" for el in root.iter()):
+        raise MatremapError(f"{p}: xi:include is not supported; paste the included document's elements into it")
+    doc = mx.createDocument()
+    options = mx.XmlReadOptions()
+    options.readXIncludeFunction = None  # refused above already; never let MaterialX follow one
+    try:
+        mx.readFromXmlString(doc, data.decode("utf-8-sig"), mx.FileSearchPath(), options)
+    except UnicodeDecodeError:
+        raise MatremapError(f"{p} is not a MaterialX document: it is not UTF-8 text") from None
+    except Exception as e:  # MaterialX raises its own ExceptionParseError
+        raise MatremapError(f"{p} is not a MaterialX document ({str(e).strip() or type(e).__name__})") from None
+    return doc
+
+
+def read(
+    path: str | Path, material: str | int | None = None, *, confinement: Confinement | None = None
+) -> MaterialAsset:
     """One material of a MaterialX document as a ``gltf:metal-rough`` :class:`MaterialAsset`.
-    ``material``: a surfacematerial's name or index (the first by default)."""
+    ``material``: a surfacematerial's name or index (the first by default). Texture files must lie
+    in the document's folder or a folder ``confinement`` allows (default: the one in effect)."""
     mx = _mx()
     p = Path(path)
     if not p.is_file():
         raise MatremapError(f"{p} not found")
-    head = p.read_bytes()[:4096].lstrip()
-    if not head.startswith(b"<"):
-        raise MatremapError(f"{p} is not a MaterialX document (not XML)")
-    doc = mx.createDocument()
-    try:
-        mx.readFromXmlFile(doc, str(p))
-    except Exception as e:  # MaterialX raises its own ExceptionParseError / ExceptionFileMissing
-        raise MatremapError(f"{p} is not a MaterialX document ({str(e).strip() or type(e).__name__})") from None
-    if not re.search(rb"<\s*materialx[\s>]", head):
-        raise MatremapError(f"{p} is not a MaterialX document: its root element is not <materialx>")
+    doc = _parse_document(mx, p)
     ok, why = doc.validate()
     notes: list[str] = []
     if not ok:
@@ -489,7 +528,7 @@ def read(path: str | Path, material: str | int | None = None) -> MaterialAsset:
     name, shader = found[index]
     if shader is None:
         raise MatremapError(f"{p}: material {name!r} has no surface shader connected")
-    return _shader_asset(_Ctx(p, notes), shader, name, index, doc)
+    return _shader_asset(_Ctx(p, notes, confinement), shader, name, index, doc)
 
 
 # ---------------------------------------------------------------------------------------------

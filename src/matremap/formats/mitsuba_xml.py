@@ -22,12 +22,17 @@ name, with Mitsuba's parameter names. Values Mitsuba accepts are read as Mitsuba
 * ``alpha_u`` = ``alpha_v`` is the isotropic ``alpha`` (anisotropy is refused);
 * ``principled``'s ``eta`` becomes ``specular = ((eta - 1)/(eta + 1))^2 / 0.08``, the relation
   Mitsuba's plugin documents between the two;
-* a ``bitmap`` texture's file is relative to the XML file. With ``raw="true"`` its values are used
+* a ``bitmap`` texture's file is relative to the XML file, and must lie in the XML file's folder or a
+  folder the user allowed (:mod:`matremap.formats.confine`). With ``raw="true"`` its values are used
   as they are (linear); without, Mitsuba decodes 8/16-bit files from sRGB -- for every parameter,
   scalar ones included (checked with Mitsuba 3.9.1: a grey 128 PNG gives alpha 0.216 unless
   raw) -- and float files (EXR) are linear either way. The :class:`TextureRef` says the same.
 * documents older than version 2 (Mitsuba 0.6) have their camelCase parameter names turned into
   snake_case, as Mitsuba 3's own upgrade does (``intIOR`` -> ``int_ior``).
+
+The XML is parsed with defusedxml: entity declarations (entity expansion, external entities) are
+refused whatever the expat version, as are documents nested deeper than
+:data:`~matremap.formats.common.MAX_XML_DEPTH` elements.
 
 Anything else -- another BSDF or texture plugin, spectra given as wavelength lists, an unknown
 parameter -- raises a :class:`MatremapError` naming it; parameters without an effect on the
@@ -59,7 +64,15 @@ from matremap.core.material import Material
 from matremap.dialects import get_model
 from matremap.errors import MatremapError
 from matremap.formats.asset import MaterialAsset, TextureRef
-from matremap.formats.common import check_map_destinations, map_destination, pick_material, place_map, result_parts
+from matremap.formats.common import (
+    check_map_destinations,
+    map_destination,
+    parse_untrusted_xml,
+    pick_material,
+    place_map,
+    result_parts,
+)
+from matremap.formats.confine import Confinement, resolve_reference
 
 FORMAT = "mitsuba-xml"
 
@@ -157,9 +170,10 @@ class _Prop:
 
 
 class _Reader:
-    def __init__(self, path: Path, root: ET.Element) -> None:
+    def __init__(self, path: Path, root: ET.Element, confinement: Confinement | None = None) -> None:
         self.path = path
         self.root = root
+        self.confinement = confinement
         self.ids: dict[str, ET.Element] = {}
         for el in root.iter():
             if el.get("id") is not None and el.tag in ("bsdf", "texture"):
@@ -312,9 +326,9 @@ class _Reader:
         fname = props.get("filename")
         if fname is None or fname.kind != "string" or not fname.value:
             raise self.fail(f'{what}: the bitmap has no <string name="filename">; add the image\'s file name')
-        path = Path(fname.value)
-        if not path.is_absolute():
-            path = self.path.resolve().parent / path
+        path = resolve_reference(
+            fname.value, self.path.resolve().parent, f"{self.path}: bitmap filename for {param}", self.confinement
+        )
         if not path.is_file():
             raise self.fail(
                 f"bitmap {fname.value} for {param} not found at {path}; put it beside the XML or fix its filename"
@@ -557,26 +571,24 @@ def _substitute(root: ET.Element, path: Path) -> None:
                 el.set(k, pattern.sub(repl, v))
 
 
-def read(path: str | Path, material: str | int | None = None) -> MaterialAsset:
+def read(
+    path: str | Path, material: str | int | None = None, *, confinement: Confinement | None = None
+) -> MaterialAsset:
     """One material of a Mitsuba 3 scene (or bare ``<bsdf>``) XML file as a :class:`MaterialAsset`
     of a ``mitsuba3:*`` model. ``material``: a BSDF id (see the module doc for names) or an index;
-    the first by default."""
+    the first by default. Bitmaps must lie in the file's folder or a folder ``confinement`` allows
+    (default: the one in effect, :mod:`matremap.formats.confine`)."""
     p = Path(path)
     if not p.is_file():
         raise MatremapError(f"{p} not found")
-    try:
-        root = ET.parse(p).getroot()
-    except ET.ParseError as e:
-        raise MatremapError(f"{p} is not valid XML ({e}); give a Mitsuba 3 scene file") from None
-    except OSError as e:
-        raise MatremapError(f"cannot read {p}: {e}") from None
+    root = parse_untrusted_xml(p, "a Mitsuba 3 scene file")
     if root.tag not in ("scene", "bsdf"):
         raise MatremapError(f"{p} is not a Mitsuba scene: its root element is <{root.tag}>, not <scene> or <bsdf>")
     for el in root.iter():
         if el.tag == "include":
             raise MatremapError(f"{p}: <include> is not supported; paste the included file's BSDFs into the scene")
     _substitute(root, p)
-    reader = _Reader(p, root)
+    reader = _Reader(p, root, confinement)
     found = reader.candidates()
     if not found:
         raise MatremapError(f"{p} holds no <bsdf>; matremap reads a scene's BSDFs (top-level or inside shapes)")
