@@ -13,6 +13,8 @@ code  meaning
       the output folder and its report says FAILED and why
 4     a renderer or the environment failed (:class:`RendererUnavailable`): not installed, crashed,
       timed out; nothing was written and nothing was cached, so a retry after the fix starts afresh
+70    an internal error (a bug, not the input): one line naming the exception; ``matremap --debug ...``
+      shows the traceback
 130   interrupted
 ====  ========================================================================================
 """
@@ -23,6 +25,10 @@ from __future__ import annotations
 EXIT_QUALITY = 3
 #: exit status of a renderer or environment failure
 EXIT_RENDERER = 4
+#: exit status of an unexpected exception (a bug): BSD's EX_SOFTWARE
+EXIT_INTERNAL = 70
+#: exit status when interrupted (128 + SIGINT)
+EXIT_INTERRUPTED = 130
 
 
 class MatremapError(ValueError):
@@ -42,3 +48,9 @@ class QualityGateFailed(MatremapError):
     """The result was written but failed the quality gate; the message gives the worst measure (exit 3)."""
 
     exit_code = EXIT_QUALITY
+
+
+class TransformChecksumError(MatremapError):
+    """A transform file's content does not match the checksum stored in it (edited or damaged since it was
+    written), or a transform that must carry one has none. A cached transform that fails this is
+    recomputed; a shipped one means a damaged installation."""

@@ -16,7 +16,9 @@ held-out error) from a source node to a target node.
 from __future__ import annotations
 
 import heapq
-from collections.abc import Callable, Mapping
+import json
+import sys
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
 from pathlib import Path
@@ -25,6 +27,8 @@ from typing import Any
 import numpy as np
 
 from matremap.dialects import get_model
+from matremap.errors import TransformChecksumError
+from matremap.regress import schema
 from matremap.regress.transform import Transform
 
 LIBRARY_DIR = Path(__file__).with_name("transforms")
@@ -212,7 +216,32 @@ def _load(directory: str) -> tuple[Entry, ...]:
     d = Path(directory)
     if not d.is_dir():
         return ()
-    return tuple(Entry(p.stem, p, Transform.load(p)) for p in sorted(d.glob("*.json")))
+    out = []
+    for p in sorted(d.glob("*.json")):
+        try:
+            out.append(Entry(p.stem, p, Transform.load(p, require_checksum=True)))
+        except TransformChecksumError as e:
+            raise TransformChecksumError(f"the transform library is damaged: {e}; reinstall matremap") from None
+    return tuple(out)
+
+
+def seal(paths: Iterable[str | Path]) -> list[Path]:
+    """Store (or renew) the checksum of transform files written by hand or by an older matremap, after
+    checking their content; the rest of each file is kept as it is. Returns the files rewritten."""
+    from matremap.core.documents import read_document
+    from matremap.core.imageio import write_text
+
+    changed = []
+    for p in map(Path, paths):
+        doc = read_document(p, "transform")
+        content = {k: v for k, v in schema.obj(doc, str(p)).items() if k != "checksum"}
+        Transform.from_dict(content, str(p))
+        sealed = {**content, "checksum": schema.checksum(content)}
+        if sealed != doc:
+            write_text(p, json.dumps(sealed, indent=1) + "\n")
+            changed.append(p)
+    _load.cache_clear()
+    return changed
 
 
 def entries(directory: str | Path | None = None) -> tuple[Entry, ...]:
@@ -241,8 +270,10 @@ def listing(directory: str | Path | None = None) -> list[dict[str, Any]]:
 
 def _renderers(t: Transform) -> dict[str, str]:
     """Which renderer drew each side of a transform's sweep (swapped for a reverse transform)."""
-    r = dict((t.provenance.get("sweep") or {}).get("renderers", {}))
-    if (t.provenance.get("library") or {}).get("reverse"):
+    sweep, library = t.provenance.get("sweep"), t.provenance.get("library")
+    r = sweep.get("renderers") if isinstance(sweep, dict) else None
+    r = {k: str(v) for k, v in r.items()} if isinstance(r, dict) else {}
+    if isinstance(library, dict) and library.get("reverse"):
         r = {"source": r.get("target", "embedded"), "target": r.get("source", "embedded")}
     return r
 
@@ -429,4 +460,13 @@ __all__ = [
     "node_key",
     "reverse_name",
     "route",
+    "seal",
 ]
+
+
+if __name__ == "__main__":  # python -m matremap.regress.library seal [FILE ...]: renew the shipped checksums
+    if sys.argv[1:2] != ["seal"]:
+        sys.exit("usage: python -m matremap.regress.library seal [TRANSFORM.json ...] (default: the library)")
+    files = [Path(a) for a in sys.argv[2:]] or sorted(LIBRARY_DIR.glob("*.json"))
+    for f in seal(files):
+        print(f"sealed {f}")

@@ -27,8 +27,9 @@ import numpy as np
 from matremap import __version__
 from matremap.core.models import ModelSpec
 from matremap.dialects import get_model
-from matremap.errors import MatremapError
+from matremap.errors import MatremapError, TransformChecksumError
 from matremap.regress import quantities as qty
+from matremap.regress import schema
 from matremap.regress.learners import LEARNERS, evaluate_mapping, get_learner
 
 SCHEMA = "matremap.transform/1"
@@ -78,65 +79,83 @@ class Transform:
         return d
 
     def save(self, path: str | Path, force: bool = False) -> Path:
+        """Write the transform as JSON with its checksum (:func:`.schema.checksum`); a transform that
+        would not load back (a NaN coefficient) is refused before anything is written."""
         from matremap.core.imageio import check_output, write_text
 
         p = check_output(path, force, (".json",))
-        write_text(p, json.dumps(self.to_dict(), indent=1) + "\n")
+        write_text(p, json.dumps(self.sealed(), indent=1) + "\n")
         return p
 
+    def sealed(self) -> dict[str, Any]:
+        """:meth:`to_dict` as it reads back from JSON, validated, with its ``checksum``."""
+        doc = json.loads(json.dumps(self.to_dict()))
+        Transform.from_dict(doc, f"transform {self.describe()}")
+        return {**doc, "checksum": schema.checksum(doc)}
+
     @classmethod
-    def from_dict(cls, d: Any, where: str = "transform") -> Transform:
-        """Validate and build; every problem is one MatremapError naming it."""
-        if not isinstance(d, Mapping):
-            raise MatremapError(f"{where}: not a JSON object")
+    def from_dict(cls, d: Any, where: str = "transform", require_checksum: bool = False) -> Transform:
+        """Validate (:mod:`.schema`) and build; every problem is one MatremapError naming it. A ``checksum``
+        field is verified (a mismatch is :class:`TransformChecksumError`); ``require_checksum``: its
+        absence is one too (cached and shipped transforms)."""
+        d = schema.obj(d, where)
+        unknown = set(d) - schema.KEYS
+        if unknown:
+            raise MatremapError(f"{where}: unknown keys {', '.join(sorted(unknown))}")
+        if "checksum" in d or require_checksum:
+            stored = d.get("checksum")
+            if stored is None:
+                raise TransformChecksumError(f"{where} carries no checksum, so its content cannot be trusted")
+            if stored != schema.checksum(d):
+                raise TransformChecksumError(
+                    f"{where} was changed after it was written (its content does not match its checksum)"
+                )
         if d.get("schema") != SCHEMA:
             raise MatremapError(f"{where}: schema {d.get('schema')!r} is not {SCHEMA!r}; relearn it with this version")
         method = d.get("method")
         if method not in METHODS:
             raise MatremapError(f"{where}: method {method!r} is not one of {', '.join(METHODS)}")
-        try:
-            src, tgt = d["source"], d["target"]
-            t = cls(
-                method,
-                src["model"],
-                tgt["model"],
-                dict(src.get("options", {})),
-                dict(tgt.get("options", {})),
-                domain={k: [float(a), float(b)] for k, (a, b) in d.get("domain", {}).items()},
-                errors=dict(d.get("errors", {})),
-                provenance=dict(d.get("provenance", {})),
-            )
-        except (KeyError, TypeError, ValueError) as e:
-            raise MatremapError(f"{where}: malformed source/target/domain ({e})") from None
-        get_model(t.source), get_model(t.target)  # known models
+        source, source_options = schema.side(d, "source", where)
+        target, target_options = schema.side(d, "target", where)
+        t = cls(
+            method,
+            source.id,
+            target.id,
+            source_options,
+            target_options,
+            domain=schema.domain(d.get("domain", {}), where),
+            errors=schema.errors(d.get("errors", {}), where),
+            provenance=dict(schema.obj(d.get("provenance", {}), f"{where}: 'provenance'")),
+        )
         if method == "chain":
-            steps = d.get("steps")
-            if not isinstance(steps, list) or len(steps) < 2:
-                raise MatremapError(f"{where}: a chain needs a list of at least two steps")
+            steps = schema.steps_list(d, where)
             t.steps = [cls.from_dict(s, f"{where} step {i + 1}") for i, s in enumerate(steps)]
+            linked = cls.chain(t.steps)  # the steps link up
+            if (linked.source, linked.target) != (t.source, t.target):
+                raise MatremapError(f"{where}: the chain runs {linked.describe()}, not {t.source} -> {t.target}")
             return t
-        mappings, template = d.get("mappings"), d.get("template")
-        if not isinstance(mappings, Mapping) or not mappings or not isinstance(template, Mapping):
-            raise MatremapError(f"{where}: needs 'mappings' and 'template' objects")
-        unknown = set(mappings) - set(qty.QUANTITIES)
-        if unknown:
-            raise MatremapError(f"{where}: unknown quantities {', '.join(sorted(unknown))}")
+        mappings = schema.obj(d.get("mappings"), f"{where}: 'mappings'")
+        if not mappings:
+            raise MatremapError(f"{where}: 'mappings' is empty")
         for name, m in mappings.items():
-            if not isinstance(m, Mapping) or "kind" not in m:
-                raise MatremapError(f"{where}: mapping {name} has no 'kind'")
-        spec = get_model(t.target)
-        missing = [p.name for p in spec.params if p.name not in template]
+            schema.mapping(name, m, source, target, where)
+        template = schema.obj(d.get("template"), f"{where}: 'template'")
+        missing = [p.name for p in target.params if p.name not in template]
         if missing:
             raise MatremapError(f"{where}: template lacks target parameters {', '.join(missing)}")
+        schema.values(target, template, f"{where}: template")
+        source_template = schema.obj(d.get("source_template", {}), f"{where}: 'source_template'")
+        schema.values(source, source_template, f"{where}: source_template")
         t.mappings, t.template = {k: dict(v) for k, v in mappings.items()}, dict(template)
-        t.source_template = dict(d.get("source_template", {}))
+        t.source_template = dict(source_template)
         return t
 
     @classmethod
-    def load(cls, path: str | Path) -> Transform:
+    def load(cls, path: str | Path, require_checksum: bool = False) -> Transform:
+        """Read and validate a transform file (see :meth:`from_dict` for ``require_checksum``)."""
         from matremap.core.documents import read_document
 
-        return cls.from_dict(read_document(path, "transform"), str(path))
+        return cls.from_dict(read_document(path, "transform"), str(path), require_checksum)
 
     # -- application ----------------------------------------------------------------------------
     def apply(self, values: Mapping[str, Any]) -> tuple[dict[str, np.ndarray], np.ndarray]:
@@ -193,11 +212,11 @@ class Transform:
             if not np.all(np.isfinite(probe)):
                 raise MatremapError(f"{self.source} input {name} holds NaN or infinite values; fix or mask them first")
             off = (v < lo - slack) | (v > hi + slack)
-            if off.ndim == outside.ndim:
-                outside |= off
-            else:  # per channel: or the columns (any(axis=-1) over 3 channels is several times slower)
-                for c in range(off.shape[-1]):
-                    outside |= off[..., c]
+            # roughness is one value per element, the others one per channel: or the channel columns
+            # (any(axis=-1) over 3 channels is several times slower); a uniform input's mask (shape
+            # (), or (3,) before its columns are taken) broadcasts over the elements
+            for col in [off] if name == "roughness" or off.ndim == 0 else [off[..., c] for c in range(off.shape[-1])]:
+                outside |= col
         y = {}
         for name, m in self.mappings.items():
             used = _inputs(m, x)
@@ -207,7 +226,18 @@ class Transform:
                 y[name] = np.broadcast_to(one, (shape[0], *one.shape[1:]))
             else:
                 y[name] = evaluate_mapping(m, x)
+            self._check_finite(name, y[name])
         return qty.write(get_model(self.target), y, self.template), outside
+
+    def _check_finite(self, name: str, a: np.ndarray) -> None:
+        """Refuse a mapping's output holding NaN or infinity (a second line of defence behind the
+        schema: NaN in an 8-bit map would silently become 0)."""
+        probe = a[:1] if qty.uniform(a) else a
+        if probe.size and not (np.isfinite(np.min(probe)) and np.isfinite(np.max(probe))):
+            raise MatremapError(
+                f"transform {self.describe()} gave NaN or infinite {name} values for finite inputs; "
+                f"its {name} mapping is broken: relearn it (matremap learn) or use another transform"
+            )
 
     # -- composition -----------------------------------------------------------------------------
     @classmethod
