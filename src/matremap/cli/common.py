@@ -31,12 +31,21 @@ def add_command(subparsers: Subparsers, name: str, help: str, examples: str | No
 def load_material(arg: str) -> Material:
     """A material from a JSON file path, inline JSON, or the compact form MODEL,name=value,..."""
     text = arg.strip()
-    looks_like_file = text.endswith(".json") or os.sep in text and not text.startswith("{")
-    if looks_like_file or (Path(text).is_file() and not text.startswith("{")):
+    if text.startswith("{"):  # inline JSON: never a path (a long one is not even a valid file name)
+        return parse_material(text)
+    if text.endswith(".json") or os.sep in text or _is_file(text):
         from matremap.core.documents import read_document
 
         return Material.from_dict(read_document(text, "material file"), where=text)
     return parse_material(text)
+
+
+def _is_file(text: str) -> bool:
+    """Whether ``text`` names an existing file; a string no file can have (too long) does not."""
+    try:
+        return Path(text).is_file()
+    except (OSError, ValueError):
+        return False
 
 
 def parse_assignments(items: Sequence[str], flag: str) -> dict[str, str]:

@@ -143,11 +143,9 @@ def parse_material(text: str) -> Material:
     ``MODEL,name=value,name=value`` with RGB values written ``r:g:b``."""
     text = text.strip()
     if text.startswith("{"):
-        try:
-            obj = json.loads(text)
-        except json.JSONDecodeError as e:
-            raise MatremapError(f"inline material is not valid JSON: {e.msg} at character {e.pos}") from None
-        return Material.from_dict(obj, "inline material")
+        from matremap.core.documents import parse_json
+
+        return Material.from_dict(parse_json(text, "inline material"), "inline material")
     model, *assignments = [s.strip() for s in text.split(",")]
     params: dict[str, Any] = {}
     for a in assignments:

@@ -490,15 +490,25 @@ def _bind_manifest(manifest: Path, root: Path, model: str | None) -> _Bindings:
             f"{manifest} says the maps are for {mmodel}, not {model}; drop the model argument or fix the manifest"
         )
     maps_obj = obj.get("maps", {})
-    if not isinstance(maps_obj, dict) or not all(isinstance(v, str) for v in maps_obj.values()):
+    if not isinstance(maps_obj, dict) or not all(_file_name(v) for v in maps_obj.values()):
         raise MatremapError(f"{manifest}: 'maps' must map parameter names to file names")
-    normal = root / str(obj["normal"]) if obj.get("normal") is not None else None
+    if obj.get("normal") is not None and not _file_name(obj["normal"]):
+        raise MatremapError(f"{manifest}: 'normal' must be the file name of a normal map")
+    normal = root / obj["normal"] if obj.get("normal") is not None else None
     cs_obj = obj.get("colorspace", {}) or {}
-    if not isinstance(cs_obj, dict):
+    if not isinstance(cs_obj, dict) or not all(isinstance(v, str) for v in cs_obj.values()):
         raise MatremapError(f"{manifest}: 'colorspace' must map file or parameter names to srgb/linear")
     colorspace = {k: normalise_colorspace(v, f"{manifest}: {k}: ") for k, v in cs_obj.items()}
+    params = obj.get("params", {}) or {}
+    if not isinstance(params, dict):
+        raise MatremapError(f"{manifest}: 'params' must map parameter names to values, e.g. {{\"alpha\": 0.2}}")
     files = {k: root / v for k, v in maps_obj.items()}
-    return _Bindings(mmodel, files, normal, dict(obj.get("params", {}) or {}), colorspace, str(manifest))
+    return _Bindings(mmodel, files, normal, dict(params), colorspace, str(manifest))
+
+
+def _file_name(v: Any) -> bool:
+    """Whether a manifest value can name a file: a non-empty string of a sane length without NUL."""
+    return isinstance(v, str) and 0 < len(v.strip()) and len(v) <= 4096 and "\0" not in v
 
 
 def _bind_conventions(root: Path, model: str | None) -> _Bindings:

@@ -10,6 +10,7 @@ with another configuration is refused, so results are never mixed.
 from __future__ import annotations
 
 import json
+import math
 import sqlite3
 import time
 from collections.abc import Iterable, Mapping
@@ -19,6 +20,8 @@ from typing import Any
 from matremap.errors import MatremapError
 
 SCHEMA_VERSION = 1
+#: seconds a connection waits for another process's write lock
+BUSY_TIMEOUT = 30.0
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -94,36 +97,40 @@ class SweepStore:
         conn = cls._connect(p)
         try:
             version = conn.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone()
+            columns = {row[1] for row in conn.execute("PRAGMA table_info(points)")}
         except sqlite3.DatabaseError as e:
             conn.close()
             raise MatremapError(f"{p} is not a matremap sweep database ({e})") from None
-        if version is None or int(json.loads(version[0])) != SCHEMA_VERSION:
+        if version is None or _loads(version[0]) != SCHEMA_VERSION:
             conn.close()
             raise MatremapError(f"{p} is not a matremap sweep database of schema {SCHEMA_VERSION}")
+        missing = [c for c in COLUMNS if c not in columns]
+        if missing:
+            conn.close()
+            raise MatremapError(
+                f"{p} lacks the column(s) {', '.join(missing)} of a sweep database; it was altered: "
+                "run the sweep again into a new --db file"
+            )
         return cls(p, conn)
 
     @classmethod
     def create_or_open(cls, path: str | Path, config: Mapping[str, Any]) -> SweepStore:
         """Open the database for this configuration, creating it if it does not exist; a database
-        made with another configuration is refused (with the differing keys named)."""
+        made with another configuration is refused (with the differing keys named). Two sweeps
+        starting on a new file at once agree: the first to take the write lock writes the schema and
+        its configuration, the other waits for it and is then checked against it like any resume."""
         p = Path(path)
-        if p.exists():
-            store = cls.open(p)
-            stored = store.config
-            diff = _diff(stored, config)
-            if diff:
-                store.close()
-                raise MatremapError(
-                    f"{p} holds a sweep with a different configuration ({', '.join(diff[:6])} differ); "
-                    "use another --db file, or repeat the original command to resume"
-                )
-            return store
         if not p.parent.is_dir():
             raise MatremapError(f"cannot create {p}: folder {p.parent} does not exist")
+        conn = cls._connect(p)
         try:
-            conn = cls._connect(p)
-            with conn:
-                conn.executescript(_SCHEMA)
+            conn.execute("BEGIN IMMEDIATE")  # one writer at a time; the others wait (busy timeout)
+            tables = {name for (name,) in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+            created = "meta" not in tables and not tables
+            if created:
+                for statement in _SCHEMA.split(";"):
+                    if statement.strip():
+                        conn.execute(statement)
                 conn.executemany(
                     "INSERT INTO meta (key, value) VALUES (?, ?)",
                     [
@@ -132,15 +139,41 @@ class SweepStore:
                         ("created", json.dumps(time.time())),
                     ],
                 )
-        except sqlite3.Error as e:
-            raise MatremapError(f"cannot create database {p}: {e}") from None
-        return cls(p, conn)
+            conn.commit()
+        except sqlite3.DatabaseError as e:
+            conn.close()
+            raise MatremapError(f"cannot use {p} as a sweep database: {e}") from None
+        except BaseException:
+            conn.close()
+            raise
+        if created:
+            return cls(p, conn)
+        conn.close()
+        store = cls.open(p)
+        diff = _diff(store.config, config)
+        if diff:
+            store.close()
+            raise MatremapError(
+                f"{p} holds a sweep with a different configuration ({', '.join(diff[:6])} differ); "
+                "use another --db file, or repeat the original command to resume"
+            )
+        return store
 
     @staticmethod
     def _connect(p: Path) -> sqlite3.Connection:
         try:
-            conn = sqlite3.connect(p, timeout=30.0)
-            conn.execute("PRAGMA journal_mode=WAL")
+            conn = sqlite3.connect(p, timeout=BUSY_TIMEOUT)
+            # switching a new file to WAL while another process creates it answers "locked" at once,
+            # without waiting: wait here as the busy timeout would
+            deadline = time.monotonic() + BUSY_TIMEOUT
+            while True:
+                try:
+                    conn.execute("PRAGMA journal_mode=WAL")
+                    break
+                except sqlite3.OperationalError as e:
+                    if "locked" not in str(e) or time.monotonic() > deadline:
+                        raise
+                    time.sleep(0.02)
             conn.execute("PRAGMA synchronous=NORMAL")
         except sqlite3.Error as e:
             raise MatremapError(f"cannot open database {p}: {e}") from None
@@ -157,8 +190,14 @@ class SweepStore:
 
     # -- meta --------------------------------------------------------------------------------
     def _meta(self, key: str) -> Any:
-        row = self.conn.execute("SELECT value FROM meta WHERE key = ?", (key,)).fetchone()
-        return None if row is None else json.loads(row[0])
+        try:
+            row = self.conn.execute("SELECT value FROM meta WHERE key = ?", (key,)).fetchone()
+        except sqlite3.Error as e:
+            raise MatremapError(f"cannot read {self.path}: {e}") from None
+        value = None if row is None else _loads(row[0])
+        if value is _BAD:
+            raise MatremapError(f"{self.path}: its stored {key} is not valid JSON; the database was altered")
+        return value
 
     def set_meta(self, key: str, value: Any) -> None:
         with self.conn:
@@ -166,7 +205,10 @@ class SweepStore:
 
     @property
     def config(self) -> dict[str, Any]:
-        return self._meta("config")
+        config = self._meta("config")
+        if not isinstance(config, dict):
+            raise MatremapError(f"{self.path} holds no sweep configuration; the database was altered")
+        return config
 
     @property
     def grid(self) -> dict[str, Any] | None:
@@ -202,15 +244,83 @@ class SweepStore:
         if status is not None:
             q += " WHERE status = ?"
             args = (status,)
-        out = []
         # by key, not by insertion: lines finish in any order, and what is learned must not depend on it
-        for values in self.conn.execute(q + " ORDER BY key", args):
-            r = dict(zip(COLUMNS, values, strict=True))
-            for c in JSON_COLUMNS:
-                if r[c] is not None:
-                    r[c] = json.loads(r[c])
-            out.append(r)
-        return out
+        try:
+            raw = self.conn.execute(q + " ORDER BY key", args).fetchall()
+        except sqlite3.Error as e:
+            raise MatremapError(f"cannot read the points of {self.path}: {e}") from None
+        params = _model_params(self._meta("config"))
+        return [check_row(dict(zip(COLUMNS, values, strict=True)), str(self.path), params) for values in raw]
 
     def count(self) -> dict[str, int]:
         return dict(self.conn.execute("SELECT status, COUNT(*) FROM points GROUP BY status").fetchall())
+
+
+_BAD = object()
+
+
+def _loads(text: Any) -> Any:
+    """Stored JSON text as values; :data:`_BAD` for anything that is not (text, depth, size)."""
+    if not isinstance(text, str):
+        return _BAD
+    try:
+        return json.loads(text)
+    except (ValueError, RecursionError):
+        return _BAD
+
+
+def _model_params(config: Any) -> tuple[dict[str, int], dict[str, int]] | None:
+    """Parameter name -> channels of the sweep's source and target models, or None if the configuration
+    does not name known models (the rows are then checked for types only)."""
+    from matremap.dialects import get_model
+
+    try:
+        specs = get_model(config["source"]["model"]), get_model(config["target"]["model"])
+    except (KeyError, TypeError, MatremapError):
+        return None
+    source, target = ({p.name: p.channels for p in s.params} for s in specs)
+    return source, target
+
+
+_NUMBER_COLUMNS = ("loss", "seconds", "back_loss", "finished")
+_INT_COLUMNS = ("renders", "warm")
+
+
+def check_row(r: dict[str, Any], where: str, params: tuple[dict[str, int], dict[str, int]] | None) -> dict[str, Any]:
+    """A stored row with its JSON columns decoded, checked as the readers use it: one MatremapError naming
+    the point and the column for text where a number goes, bad JSON or a missing parameter."""
+    key = r["key"]
+    at = f"{where}: point {str(key)[:80]!r}"
+    if not isinstance(key, str) or r["status"] not in ("ok", "failed"):
+        raise MatremapError(f"{at}: not a row of a sweep (key {key!r}, status {r['status']!r}); the file was altered")
+    for c in JSON_COLUMNS:
+        if r[c] is not None:
+            r[c] = _loads(r[c])
+            if r[c] is _BAD:
+                raise MatremapError(f"{at}: column {c} is not valid JSON; the file was altered")
+    for c in _NUMBER_COLUMNS + _INT_COLUMNS:
+        v = r[c]
+        ok_type = int if c in _INT_COLUMNS else (int, float)
+        if v is not None and (isinstance(v, bool) or not isinstance(v, ok_type) or not math.isfinite(v)):
+            raise MatremapError(f"{at}: column {c} holds {str(v)[:40]!r}, not a number; the file was altered")
+    if r["finished"] is None:
+        raise MatremapError(f"{at}: column finished is empty; the file was altered")
+    for c, kind in (("swept", dict), ("source", dict), ("target", dict), ("back", dict), ("warnings", list)):
+        if (r[c] is not None or c in ("swept", "source")) and not isinstance(r[c], kind):
+            raise MatremapError(f"{at}: column {c} holds {type(r[c]).__name__}, not a JSON {kind.__name__}")
+    if r["status"] == "ok":
+        if r["target"] is None or r["loss"] is None:
+            raise MatremapError(f"{at}: a successful fit without its target parameters or loss; the file was altered")
+        if params is not None:
+            for c, names in zip(("source", "target"), params, strict=True):
+                _check_params(r[c], names, f"{at}: {c}")
+    return r
+
+
+def _check_params(values: dict[str, Any], channels: dict[str, int], at: str) -> None:
+    """Every parameter of the model present, a finite number or a list of that many finite numbers."""
+    for name, n in channels.items():
+        v = values.get(name)
+        items = (v if isinstance(v, list) and len(v) == n else [None]) if n > 1 else [v]
+        if not all(not isinstance(x, bool) and isinstance(x, (int, float)) and math.isfinite(x) for x in items):
+            raise MatremapError(f"{at} parameter {name} is {str(v)[:40]!r}, not {n} finite number(s)")
