@@ -4,6 +4,7 @@ sets under an environment map) and ``remap`` (the main job: sweep, learn, conver
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -213,7 +214,13 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 def add_remap(subparsers: Subparsers) -> None:
     """The ``remap`` command."""
     p = add_command(subparsers, "remap", "the main job: sweep, learn, convert and evaluate a map set", REMAP_EXAMPLES)
-    p.add_argument("maps", metavar="MAPS|FILE", help="a map set folder, or a .gltf/.glb/.mtlx/Mitsuba .xml file")
+    p.add_argument(
+        "maps",
+        nargs="+",
+        metavar="PATH",
+        help="a map set folder, or a .gltf/.glb/.mtlx/Mitsuba .xml file; several files, folders of them or glob "
+        "patterns convert every material of every file (OUT/summary.csv, summary.json, index.html)",
+    )
     p.add_argument("--from", dest="source", metavar="MODEL", help="source model (default: the manifest's)")
     p.add_argument("--material", metavar="NAME|INDEX", help="which material of the file (default: the first)")
     p.add_argument(
@@ -246,6 +253,7 @@ def add_remap(subparsers: Subparsers) -> None:
         "where it emulates the model, else the model's own renderer)",
     )
     p.add_argument("--no-evaluate", action="store_true", help="skip the evaluation renders")
+    p.add_argument("--json", action="store_true", help="print the result (a batch's summary) as JSON on stdout")
     add_allow_path_option(p)
     add_force_option(p, "write into an existing output folder")
     p.set_defaults(func=cmd_remap)
@@ -257,6 +265,9 @@ def cmd_remap(args: argparse.Namespace) -> int:
     from matremap.formats.confine import output_inside
     from matremap.remap import remap, remap_file
 
+    if is_batch(args.maps):
+        return _remap_batch(args)
+    args.maps = args.maps[0]
     material_file = is_material_file(args.maps)
     if material_file and args.source:
         raise MatremapError(f"{args.maps} names its own model; drop --from")
@@ -284,6 +295,10 @@ def cmd_remap(args: argparse.Namespace) -> int:
     if material_file:
         with allowed_paths(args.allow_path):
             fres = remap_file(args.maps, args.target, args.output, material=args.material, write=args.write, **options)
+        if args.json:
+            doc = {"file": str(fres.file) if fres.file else None, "verdict": fres.verdict.to_dict()}
+            print(json.dumps({"source_model": fres.source_model, "target_model": fres.target_model, **doc}, indent=1))
+            return _verdict(fres.verdict)
         print(
             f"{'done' if fres.verdict.passed else 'written'}: {fres.source_model} -> {fres.target_model}"
             + (f", wrote {fres.file}" if fres.file else "")
@@ -293,6 +308,9 @@ def cmd_remap(args: argparse.Namespace) -> int:
         return _verdict(fres.verdict)
     scene = Scene.probe(lights=parse_lights(args.light)) if args.light else None
     result = remap(args.maps, args.source, args.target, args.output, scene=scene, **options)
+    if args.json:
+        print(json.dumps({"maps": str(result.maps), "verdict": result.verdict.to_dict()}, indent=1))
+        return _verdict(result.verdict)
     print(
         f"{'done' if result.verdict.passed else 'written'} in {result.seconds['total']:.1f} s: maps {result.maps}"
         + (f", report {result.report}" if result.report else "")
@@ -300,6 +318,57 @@ def cmd_remap(args: argparse.Namespace) -> int:
         + f"; {result.verdict.line()}"
     )
     return _verdict(result.verdict)
+
+
+def is_batch(paths: list[str]) -> bool:
+    """Whether ``remap`` was given a batch: several paths, a glob pattern, or a folder of material files
+    (a folder with a ``material.json`` manifest, or maps named by suffix, is one map set)."""
+    from matremap.formats import is_material_file
+
+    if len(paths) > 1 or any(ch in paths[0] for ch in "*?["):
+        return True
+    folder = Path(paths[0])
+    if not folder.is_dir() or (folder / "material.json").is_file():
+        return False
+    return any(p.is_file() and is_material_file(p) for p in folder.rglob("*"))
+
+
+def _remap_batch(args: argparse.Namespace) -> int:
+    """Every material of every file ``args.maps`` names (:mod:`matremap.batch`)."""
+    from matremap.batch import run_batch
+
+    if args.source or args.write or args.light:
+        raise MatremapError("--from, --write and --light apply to one input; a batch takes each file's own model")
+    options: dict[str, Any] = {
+        "fix": parse_assignments(args.fix, "--fix"),
+        "strategy": args.strategy,
+        "envmap": args.envmap,
+        "rotations": args.rotations,
+        "resolution": args.size,
+        "lights": args.lights,
+        "cache": Path(args.cache) if args.cache else None,
+        "evaluate": not args.no_evaluate,
+        "target_renderer": args.target_renderer,
+        "library": not args.sweep,
+        "thresholds": Thresholds.parse(args.max_error),
+        "workers": 1,  # the batch runs items in parallel; each sweeps on one core
+    }
+    result = run_batch(
+        args.maps,
+        args.target,
+        args.output,
+        material=args.material,
+        workers=args.workers,
+        options=options,
+        allow_paths=args.allow_path,
+        log=lambda m: print(m, file=sys.stderr),
+    )
+    if args.json:
+        print((result.out / "summary.json").read_text(), end="")
+    else:
+        print(f"summary: {result.out / 'index.html'}")
+        print(result.line())
+    return result.exit_code
 
 
 #: command name -> the function adding its parser

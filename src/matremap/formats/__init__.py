@@ -64,6 +64,17 @@ def read_asset(
     return _module(READERS[suffix][1]).read(p, material, confinement=confinement)
 
 
+def material_names(path: str | os.PathLike) -> list[str]:
+    """The names of the materials of a glTF/.glb, MaterialX or Mitsuba XML file, in the order
+    :func:`read_asset` indexes them."""
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix not in READERS:
+        raise MatremapError(f"{p}: matremap reads {', '.join(sorted(READERS))} material files, not {suffix or 'this'}")
+    names: list[str] = _module(READERS[suffix][1]).material_names(p)
+    return names
+
+
 def format_for(out: str | os.PathLike) -> str:
     """The output format a file name asks for."""
     suffix = Path(out).suffix.lower()
@@ -91,6 +102,7 @@ __all__ = [
     "allowed_paths",
     "format_for",
     "is_material_file",
+    "material_names",
     "read_asset",
     "write_asset",
 ]

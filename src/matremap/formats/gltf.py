@@ -425,6 +425,25 @@ def _number(path: Path, where: str, value: Any, default: Any, size: int = 1) -> 
     return [float(v) for v in vals] if size > 1 else float(vals[0])
 
 
+def _materials(p: Path) -> tuple[bytes, dict[str, Any], bytes | None, list[Any]]:
+    """The file's bytes, its JSON, its binary chunk and its (non-empty) material list."""
+    if not p.is_file():
+        raise MatremapError(f"{p} not found")
+    data = p.read_bytes()
+    obj, bin_chunk = _parse(p, data)
+    mats = obj.get("materials")
+    if not isinstance(mats, list) or not mats:
+        raise MatremapError(f"{p} has no materials; export it with its materials")
+    return data, obj, bin_chunk, mats
+
+
+def material_names(path: str | os.PathLike) -> list[str]:
+    """The names of a file's materials, in order ("material N" for an unnamed one)."""
+    mats = _materials(Path(path))[3]
+    names = [m.get("name") if isinstance(m, dict) else None for m in mats]
+    return [n if isinstance(n, str) and n else f"material {i}" for i, n in enumerate(names)]
+
+
 def read(
     path: str | os.PathLike, material: str | int | None = None, *, confinement: Confinement | None = None
 ) -> MaterialAsset:
@@ -439,14 +458,8 @@ def read(
     a folder ``confinement`` allows (default: the one in effect, :mod:`matremap.formats.confine`).
     """
     p = Path(path)
-    if not p.is_file():
-        raise MatremapError(f"{p} not found")
-    data = p.read_bytes()
-    obj, bin_chunk = _parse(p, data)
+    data, obj, bin_chunk, mats = _materials(p)
     doc = GltfDocument(obj, bin_chunk, p.suffix.lower() == ".glb", p.parent)
-    mats = obj.get("materials")
-    if not isinstance(mats, list) or not mats:
-        raise MatremapError(f"{p} has no materials; export it with its materials")
     idx = _select(p, mats, material)
     m = mats[idx]
     if not isinstance(m, dict):

@@ -501,13 +501,28 @@ def read(
     """One material of a MaterialX document as a ``gltf:metal-rough`` :class:`MaterialAsset`.
     ``material``: a surfacematerial's name or index (the first by default). Texture files must lie
     in the document's folder or a folder ``confinement`` allows (default: the one in effect)."""
-    mx = _mx()
     p = Path(path)
+    notes: list[str] = []
+    doc, found = _materials(p, notes)
+    index = pick_material(p, [n for n, _ in found], material, "material")
+    name, shader = found[index]
+    if shader is None:
+        raise MatremapError(f"{p}: material {name!r} has no surface shader connected")
+    return _shader_asset(_Ctx(p, notes, confinement), shader, name, index, doc)
+
+
+def material_names(path: str | Path) -> list[str]:
+    """The names of a document's materials (surfacematerials, else surface shaders), in order."""
+    return [n for n, _ in _materials(Path(path), [])[1]]
+
+
+def _materials(p: Path, notes: list[str]) -> tuple[Any, list[tuple[str, Any]]]:
+    """The validated document and its materials as (name, surface shader or None)."""
+    mx = _mx()
     if not p.is_file():
         raise MatremapError(f"{p} not found")
     doc = _parse_document(mx, p)
     ok, why = doc.validate()
-    notes: list[str] = []
     if not ok:
         raise MatremapError(f"{p} is not a valid MaterialX document: {why.strip().splitlines()[0]}")
     materials = doc.getMaterialNodes()
@@ -524,11 +539,7 @@ def read(
             f"{p} holds no surfacematerial or surface shader; matremap reads gltf_pbr, "
             f"standard_surface and open_pbr_surface materials"
         )
-    index = pick_material(p, [n for n, _ in found], material, "material")
-    name, shader = found[index]
-    if shader is None:
-        raise MatremapError(f"{p}: material {name!r} has no surface shader connected")
-    return _shader_asset(_Ctx(p, notes, confinement), shader, name, index, doc)
+    return doc, found
 
 
 # ---------------------------------------------------------------------------------------------

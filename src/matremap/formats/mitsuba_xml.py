@@ -571,14 +571,13 @@ def _substitute(root: ET.Element, path: Path) -> None:
                 el.set(k, pattern.sub(repl, v))
 
 
-def read(
-    path: str | Path, material: str | int | None = None, *, confinement: Confinement | None = None
-) -> MaterialAsset:
-    """One material of a Mitsuba 3 scene (or bare ``<bsdf>``) XML file as a :class:`MaterialAsset`
-    of a ``mitsuba3:*`` model. ``material``: a BSDF id (see the module doc for names) or an index;
-    the first by default. Bitmaps must lie in the file's folder or a folder ``confinement`` allows
-    (default: the one in effect, :mod:`matremap.formats.confine`)."""
-    p = Path(path)
+def material_names(path: str | Path) -> list[str]:
+    """The names of a scene's BSDFs (their ids, or the names the module doc gives unnamed ones), in order."""
+    return [n for n, _ in _materials(Path(path), None)[2]]
+
+
+def _materials(p: Path, confinement: Confinement | None) -> tuple[Any, _Reader, list[tuple[str, Any]]]:
+    """The parsed scene, its reader and its BSDFs as (name, element)."""
     if not p.is_file():
         raise MatremapError(f"{p} not found")
     root = parse_untrusted_xml(p, "a Mitsuba 3 scene file")
@@ -592,6 +591,18 @@ def read(
     found = reader.candidates()
     if not found:
         raise MatremapError(f"{p} holds no <bsdf>; matremap reads a scene's BSDFs (top-level or inside shapes)")
+    return root, reader, found
+
+
+def read(
+    path: str | Path, material: str | int | None = None, *, confinement: Confinement | None = None
+) -> MaterialAsset:
+    """One material of a Mitsuba 3 scene (or bare ``<bsdf>``) XML file as a :class:`MaterialAsset`
+    of a ``mitsuba3:*`` model. ``material``: a BSDF id (see the module doc for names) or an index;
+    the first by default. Bitmaps must lie in the file's folder or a folder ``confinement`` allows
+    (default: the one in effect, :mod:`matremap.formats.confine`)."""
+    p = Path(path)
+    root, reader, found = _materials(p, confinement)
     index = pick_material(p, [n for n, _ in found], material, "BSDF")
     asset = reader.material(*found[index], index)
     if reader.legacy:

@@ -1,0 +1,410 @@
+"""Many files at once: every material of every input file, in parallel, resumable, with one summary.
+
+``matremap remap PATH... --to MODEL -o OUT`` with several inputs, a folder or a glob lands here. Each
+material of each file is one *item*, remapped by :func:`matremap.remap.remap_file` into its own folder
+``OUT/<file>/<material>/`` (all or nothing, as for one file). Items run in parallel worker processes
+(one per core by default). An item's folder holds ``item.json``: the key it was made with (a digest of
+the input file and every file it references, the target, the options and matremap's version) and its
+summary row; a rerun skips items whose key is unchanged, so an edited input (or texture) is redone.
+
+At the end ``OUT/summary.csv``, ``OUT/summary.json`` and ``OUT/index.html`` list every item: file,
+material, models, route (identity, library, cached or new sweep, fit), the quality gate's measures,
+the verdict (passed, failed, refused, error) and seconds; the page shows each item's source and target
+renders and sorts by any column. The exit status is 0 only when every item passed; otherwise the worst
+one's (:mod:`matremap.errors`).
+"""
+
+from __future__ import annotations
+
+import csv
+import glob
+import hashlib
+import html
+import json
+import os
+import re
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from matremap import __version__
+from matremap.core.imageio import write_text
+from matremap.errors import EXIT_QUALITY, MatremapError
+
+#: the exit status of bad input (MatremapError's)
+EXIT_INPUT = MatremapError.exit_code
+
+#: the per-item record a rerun compares against
+ITEM_FILE = "item.json"
+#: verdicts in the order of how bad they are
+VERDICTS = ("passed", "failed", "refused", "error")
+
+
+@dataclass(frozen=True)
+class Item:
+    """One material of one file, and the folder its result goes to (relative to OUT)."""
+
+    file: Path
+    material: int
+    name: str
+    slot: str
+
+
+@dataclass
+class Row:
+    """One line of the summary."""
+
+    file: str
+    material: str
+    slot: str
+    source_model: str = ""
+    target_model: str = ""
+    route: str = ""
+    verdict: str = "error"
+    exit_code: int = EXIT_INPUT
+    reason: str = ""
+    measures: dict[str, float] = field(default_factory=dict)
+    seconds: float = 0.0
+    output: str = ""
+    thumbnails: dict[str, str] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass
+class BatchResult:
+    rows: list[Row]
+    skipped: int
+    out: Path
+
+    def counts(self) -> dict[str, int]:
+        return {v: sum(r.verdict == v for r in self.rows) for v in VERDICTS}
+
+    @property
+    def exit_code(self) -> int:
+        """0 when every item passed, else the highest exit status among the items."""
+        return max((r.exit_code for r in self.rows), default=0)
+
+    def line(self) -> str:
+        c = self.counts()
+        worst = max((r for r in self.rows if r.verdict != "passed"), key=lambda r: r.exit_code, default=None)
+        tail = f"; worst: {worst.file} [{worst.material}]: {worst.reason}" if worst else ""
+        return (
+            f"{len(self.rows)} material(s): {c['passed']} passed, {c['failed']} failed the quality gate, "
+            f"{c['refused']} refused, {c['error']} error(s) ({self.skipped} unchanged, not redone){tail}"
+        )
+
+
+def expand_inputs(paths: Sequence[str | os.PathLike]) -> list[Path]:
+    """Material files named by ``paths``: files as given, folders searched recursively, glob patterns
+    expanded; each file once, in the order found. A path that names nothing is an error."""
+    from matremap.formats import is_material_file
+
+    found: list[Path] = []
+    for raw in paths:
+        text = str(raw)
+        if any(ch in text for ch in "*?["):
+            matches = [Path(m) for m in sorted(glob.glob(text, recursive=True))]
+            files = [m for m in matches if m.is_file() and is_material_file(m)]
+            if not files:
+                raise MatremapError(f"{text}: the pattern matches no material file (.gltf, .glb, .mtlx, .xml)")
+        elif Path(text).is_dir():
+            files = sorted(p for p in Path(text).rglob("*") if p.is_file() and is_material_file(p))
+            if not files:
+                raise MatremapError(f"{text}: the folder holds no material file (.gltf, .glb, .mtlx, .xml)")
+        elif Path(text).is_file():
+            files = [Path(text)]
+        else:
+            raise MatremapError(f"{text} not found")
+        found += [f for f in files if f.resolve() not in {g.resolve() for g in found}]
+    return found
+
+
+def _slug(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", text).strip("._") or "material"
+
+
+def plan(files: Sequence[Path], material: str | None = None) -> list[Item]:
+    """Every material of every file (or only the one named ``material``), each with its own folder."""
+    from matremap.formats import material_names
+
+    stems: dict[str, int] = {}
+    items = []
+    for f in files:
+        stem = _slug(f.name)
+        stems[stem] = stems.get(stem, 0) + 1
+        folder = stem if stems[stem] == 1 else f"{stem}-{stems[stem]}"
+        names = material_names(f)
+        for i, name in enumerate(names):
+            if material is not None and material not in (name, str(i)):
+                continue
+            slug = _slug(name)
+            slot = f"{folder}/{i:03d}-{slug}" if len(names) > 1 else f"{folder}/{slug}"
+            items.append(Item(f, i, name, slot))
+        if material is not None and not any(it.file == f for it in items):
+            raise MatremapError(f"{f} has no material {material!r}; its materials are {', '.join(names)}")
+    return items
+
+
+def item_key(item: Item, target: str, options: Mapping[str, Any]) -> str:
+    """A digest of everything that decides an item's result: the file's bytes and those of every file
+    beside it that it references, the material, the target, the options and matremap's version."""
+    h = hashlib.sha256()
+    h.update(item.file.read_bytes())
+    text = item.file.read_bytes()
+    for ref in sorted(p for p in item.file.parent.rglob("*") if p.is_file() and p != item.file):
+        if ref.name.encode() in text:  # referenced by name (a texture, a .bin buffer, an include)
+            h.update(ref.name.encode())
+            h.update(ref.read_bytes())
+    doc = {"material": item.material, "target": target, "options": options, "version": __version__}
+    h.update(json.dumps(doc, sort_keys=True, default=str).encode())
+    return h.hexdigest()
+
+
+def run_batch(
+    paths: Sequence[str | os.PathLike],
+    target: str,
+    out: str | os.PathLike,
+    *,
+    material: str | None = None,
+    workers: int | None = None,
+    options: Mapping[str, Any] | None = None,
+    allow_paths: Sequence[str | os.PathLike] | None = None,
+    log: Callable[[str], None] = print,
+    progress: bool = True,
+) -> BatchResult:
+    """Long: planning, resuming, the parallel loop and its clean stop read best in one place.
+
+    Remap every material of the files ``paths`` name onto ``target`` into ``out`` (see the module
+    docstring). ``options``: keyword arguments of :func:`matremap.remap.remap_file` (no ``log``: each
+    item logs to ``OUT/<item>/log.txt``). ``workers``: processes (default: the cores). ``allow_paths``:
+    folders outside each file's own that its references may point into (``--allow-path``)."""
+    from tqdm import tqdm
+
+    from matremap.dialects import get_model
+
+    target = get_model(target).id
+    out = Path(out)
+    options = dict(options or {})
+    allow = [str(p) for p in allow_paths or ()]
+    items = plan(expand_inputs(paths), material)
+    out.mkdir(parents=True, exist_ok=True)
+    rows: dict[Item, Row] = {}
+    todo: list[tuple[Item, str]] = []
+    for item in items:
+        key = item_key(item, target, options)
+        done = _finished(out, item, key)
+        if done is not None:
+            rows[item] = done
+        else:
+            todo.append((item, key))
+    log(f"batch: {len(items)} material(s) in {len(set(i.file for i in items))} file(s); {len(rows)} unchanged")
+    workers = max(1, min(workers or os.cpu_count() or 1, len(todo) or 1))
+    bar = tqdm(total=len(todo), unit="material", desc="remap", disable=None if progress else True)
+    pool = ProcessPoolExecutor(max_workers=workers)
+    try:
+        pending: dict[Future[dict[str, Any]], Item] = {
+            pool.submit(remap_item, item, key, target, str(out), options, allow): item for item, key in todo
+        }
+        while pending:
+            finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in finished:
+                item = pending.pop(fut)
+                rows[item] = _row_of(fut, item)
+                bar.update(1)
+                r = rows[item]
+                bar.clear()
+                log(f"{r.verdict:>7}  {item.file.name} [{item.name}] {r.reason}")
+    except KeyboardInterrupt:
+        pool.shutdown(wait=True, cancel_futures=True)  # items finish or roll back; nothing half-written
+        raise
+    finally:
+        bar.close()
+        pool.shutdown(wait=True)
+    result = BatchResult([rows[i] for i in items], len(items) - len(todo), out)
+    write_summary(result)
+    return result
+
+
+def _finished(out: Path, item: Item, key: str) -> Row | None:
+    """The row of an item already made with this key (its output still there), else None."""
+    try:
+        doc = json.loads((out / item.slot / ITEM_FILE).read_text())
+        row = Row(**doc["row"]) if isinstance(doc, dict) and doc.get("key") == key else None
+    except (OSError, ValueError, TypeError, KeyError):
+        return None
+    if row is None or row.verdict == "error" or (row.output and not (out / row.output).exists()):
+        return None  # errors (a renderer missing, a crash) are retried, never kept as results
+    return row
+
+
+def _row_of(fut: Future[dict[str, Any]], item: Item) -> Row:
+    try:
+        return Row(**fut.result())
+    except Exception as e:  # noqa: BLE001 - a worker that died (killed, out of memory) is this item's error
+        return Row(str(item.file), item.name, item.slot, reason=f"internal error: {type(e).__name__}: {e}")
+
+
+def remap_item(
+    item: Item, key: str, target: str, out: str, options: Mapping[str, Any], allow: Sequence[str] = ()
+) -> dict[str, Any]:
+    """One item, in a worker process: ``remap_file`` into ``OUT/<slot>``, its row and ``item.json``."""
+    from matremap.formats import allowed_paths
+    from matremap.remap import remap_file
+    from matremap.sweep.executors import limit_blas_threads
+
+    limit_blas_threads()
+    folder = Path(out) / item.slot
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    row = Row(str(item.file), item.name, item.slot)
+    lines: list[str] = []
+    t0 = time.perf_counter()
+    try:
+        with allowed_paths(allow):
+            res = remap_file(item.file, target, folder, material=item.material, force=True, log=lines.append, **options)
+        row.source_model, row.target_model = res.source_model, res.target_model
+        row.route = _route(res)
+        row.measures = {c.name: float(c.value) for c in res.verdict.checks}
+        row.verdict = "passed" if res.verdict.passed else "failed"
+        row.exit_code = 0 if res.verdict.passed else EXIT_QUALITY
+        row.reason = res.verdict.line()
+        row.output = str(Path(item.slot) / res.file.name) if res.file else item.slot
+        row.thumbnails = _thumbnails(folder, item.slot)
+    except MatremapError as e:
+        row.verdict = "refused" if e.exit_code == EXIT_INPUT else "error"
+        row.exit_code, row.reason = e.exit_code, str(e)
+    except KeyboardInterrupt:
+        raise
+    except Exception as e:  # noqa: BLE001 - one item's bug must not stop the batch; it is reported
+        row.verdict, row.exit_code = "error", 70
+        row.reason = f"internal error: {type(e).__name__}: {e}"
+    row.seconds = round(time.perf_counter() - t0, 2)
+    if folder.is_dir():
+        write_text(folder / "log.txt", "\n".join(lines) + "\n")
+        write_text(folder / ITEM_FILE, json.dumps({"key": key, "row": row.to_dict()}, indent=1) + "\n")
+    elif row.verdict in ("refused", "error"):  # nothing was written: keep the reason beside the others
+        folder.mkdir(parents=True)
+        write_text(folder / "log.txt", "\n".join([*lines, row.reason]) + "\n")
+        write_text(folder / ITEM_FILE, json.dumps({"key": key, "row": row.to_dict()}, indent=1) + "\n")
+    return row.to_dict()
+
+
+def _route(res: Any) -> str:
+    if res.remap is None:
+        return "identity" if any(c.where == "identity" for c in res.verdict.checks) else "fit"
+    r = res.remap
+    if r.identity:
+        return "identity"
+    if r.transform is None:
+        return "library"
+    return "cached sweep" if r.cached else "sweep"
+
+
+def _thumbnails(folder: Path, slot: str) -> dict[str, str]:
+    """Source and target renders of an item, relative to OUT: the first environment rotation of its
+    report, or its probe comparison strip."""
+    images = folder / "report" / "images"
+    out = {}
+    for kind in ("source", "target"):
+        found = sorted(images.glob(f"r*_full_{kind}.png")) if images.is_dir() else []
+        if found:
+            out[kind] = f"{slot}/report/images/{found[0].name}"
+    if not out and (folder / "compare.png").is_file():
+        out["compare"] = f"{slot}/compare.png"
+    return out
+
+
+# -- the summary ------------------------------------------------------------------------------------
+
+COLUMNS = ("file", "material", "source_model", "target_model", "route", "verdict", "seconds", "reason", "output")
+
+
+def write_summary(result: BatchResult) -> None:
+    """``summary.csv``, ``summary.json`` and ``index.html`` in the output folder."""
+    out = result.out
+    measures = sorted({m for r in result.rows for m in r.measures})
+    lines: list[list[Any]] = [[*COLUMNS, *measures]]
+    for r in result.rows:
+        d = r.to_dict()
+        lines.append([*(d[c] for c in COLUMNS), *(r.measures.get(m, "") for m in measures)])
+    import io
+
+    buf = io.StringIO()
+    csv.writer(buf).writerows(lines)
+    write_text(out / "summary.csv", buf.getvalue())
+    doc = {"counts": result.counts(), "exit_code": result.exit_code, "items": [r.to_dict() for r in result.rows]}
+    write_text(out / "summary.json", json.dumps(doc, indent=1) + "\n")
+    write_text(out / "index.html", index_page(result.rows, result.line()))
+
+
+_SORT_SCRIPT = """
+function sortBy(th) {
+  const table = th.closest('table'), body = table.tBodies[0], col = th.cellIndex;
+  const dir = th.dataset.dir === 'asc' ? 'desc' : 'asc';
+  for (const h of th.parentNode.cells) delete h.dataset.dir;
+  th.dataset.dir = dir;
+  const key = tr => { const c = tr.cells[col]; const v = c.dataset.value ?? c.textContent;
+                      const n = parseFloat(v); return isNaN(n) ? v : n; };
+  const rows = Array.from(body.rows).sort((a, b) => {
+    const x = key(a), y = key(b); const r = x < y ? -1 : x > y ? 1 : 0; return dir === 'asc' ? r : -r; });
+  rows.forEach(r => body.appendChild(r));
+}
+window.addEventListener('DOMContentLoaded', () => {
+  const want = new URLSearchParams(location.search).get('sort');
+  if (want) { const th = document.querySelector(`th[data-key="${want}"]`); if (th) sortBy(th); }
+});
+"""
+
+
+def _worst_measure(row: Row) -> float:
+    """The sort key "error": the item's dissimilarity if measured, else its probe fit error."""
+    for name in ("dssim", "fit_error"):
+        if name in row.measures:
+            return row.measures[name]
+    return float("inf") if row.verdict != "passed" else 0.0
+
+
+def index_page(rows: Iterable[Row], title_line: str) -> str:
+    """The batch's page: one row per item with its thumbnails and verdict, sortable by every column
+    (click a header; ``index.html?sort=error`` opens sorted by error)."""
+    e = html.escape
+    head = "".join(
+        f'<th data-key="{k}" onclick="sortBy(this)">{e(label)}</th>'
+        for k, label in (
+            ("file", "file"),
+            ("material", "material"),
+            ("models", "source → target"),
+            ("route", "route"),
+            ("verdict", "verdict"),
+            ("error", "error"),
+            ("seconds", "seconds"),
+            ("images", "source | target"),
+            ("reason", "why"),
+        )
+    )
+    body = []
+    for r in rows:
+        thumbs = "".join(
+            f'<img src="{e(path)}" alt="{e(kind)}" title="{e(kind)}" height="96">'
+            for kind, path in r.thumbnails.items()
+        )
+        err = _worst_measure(r)
+        body.append(
+            f'<tr class="{e(r.verdict)}"><td>{e(r.file)}</td><td>{e(r.material)}</td>'
+            f"<td>{e(r.source_model)} → {e(r.target_model)}</td><td>{e(r.route)}</td>"
+            f'<td data-value="{VERDICTS.index(r.verdict)}">{e(r.verdict)}</td>'
+            f'<td data-value="{err}">{"" if err == float("inf") else f"{err:.4f}"}</td>'
+            f"<td>{r.seconds:.1f}</td><td>{thumbs}</td><td>{e(r.reason)}</td></tr>"
+        )
+    return (
+        '<!doctype html><html><head><meta charset="utf-8"><title>matremap batch</title><style>'
+        "body{font:14px sans-serif;margin:1em}table{border-collapse:collapse}td,th{border:1px solid #ccc;"
+        "padding:3px 6px;vertical-align:top}th{cursor:pointer;background:#eee}tr.failed td{background:#fde}"
+        "tr.refused td,tr.error td{background:#fed}</style>"
+        f"<script>{_SORT_SCRIPT}</script></head><body><h1>matremap batch</h1><p>{e(title_line)}</p>"
+        f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table></body></html>\n"
+    )

@@ -1,0 +1,171 @@
+"""Many files at once (issue 20): every material of every file, a summary a person can scan and a script
+can read, an exit status that is 0 only when every material passed, a rerun that redoes only what
+changed, and an index page checked in a real headless browser."""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from matremap.batch import expand_inputs, plan, run_batch
+from matremap.cli import main
+from matremap.errors import MatremapError
+
+CORPUS = Path(__file__).parent / "data" / "corpus"
+FAST = {"rotations": "0:360:2", "resolution": 48, "lights": 32}
+
+
+def gltf_library(folder: Path, red: float = 0.8) -> Path:
+    """A glTF with three uniform materials: a red dielectric, a gold metal, and a clear-coated blue
+    whose coat colour matremap's models cannot carry (refused)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    materials = [
+        {"name": "red paint", "pbrMetallicRoughness": {"baseColorFactor": [red, 0.1, 0.1, 1], "metallicFactor": 0.0}},
+        {
+            "name": "gold",
+            "pbrMetallicRoughness": {
+                "baseColorFactor": [1.0, 0.77, 0.34, 1],
+                "metallicFactor": 1.0,
+                "roughnessFactor": 0.3,
+            },
+        },
+        {
+            "name": "coated",
+            "pbrMetallicRoughness": {"baseColorFactor": [0.1, 0.2, 0.8, 1], "metallicFactor": 0.0},
+            "extensions": {
+                "KHR_materials_clearcoat": {"clearcoatFactor": 1.0},
+                "KHR_materials_sheen": {"sheenColorFactor": [1, 0, 0]},
+            },
+        },
+    ]
+    doc = {
+        "asset": {"version": "2.0"},
+        "extensionsUsed": ["KHR_materials_clearcoat", "KHR_materials_sheen"],
+        "materials": materials,
+    }
+    path = folder / "library.gltf"
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def mitsuba_scene(folder: Path) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / "scene.xml"
+    path.write_text(
+        '<scene version="3.0.0">\n'
+        '  <bsdf type="diffuse" id="wall"><rgb name="reflectance" value="0.6, 0.5, 0.4"/></bsdf>\n'
+        '  <bsdf type="roughconductor" id="steel"><string name="material" value="Cr"/>'
+        '<float name="alpha" value="0.2"/></bsdf>\n'
+        "</scene>\n"
+    )
+    return path
+
+
+def test_inputs_expand_files_folders_and_globs(tmp_path):
+    a = gltf_library(tmp_path / "a")
+    b = mitsuba_scene(tmp_path / "b" / "deeper")
+    (tmp_path / "b" / "notes.txt").write_text("not a material file")
+    assert expand_inputs([tmp_path]) == [a, b]
+    assert expand_inputs([str(tmp_path / "**" / "*.xml")]) == [b]
+    assert expand_inputs([a, tmp_path / "a"]) == [a]  # each file once
+    with pytest.raises(MatremapError, match="not found"):
+        expand_inputs([tmp_path / "missing.gltf"])
+    items = plan([a, b])
+    assert [(i.file.name, i.name) for i in items] == [
+        ("library.gltf", "red paint"),
+        ("library.gltf", "gold"),
+        ("library.gltf", "coated"),
+        ("scene.xml", "wall"),
+        ("scene.xml", "steel"),
+    ]
+    assert len({i.slot for i in items}) == len(items)
+
+
+def test_a_folder_converts_in_one_run_with_a_summary_and_a_resume(tmp_path, capsys):
+    src = tmp_path / "in"
+    gltf = gltf_library(src)
+    mitsuba_scene(src)
+    out = tmp_path / "out"
+    result = run_batch([src], "mitsuba06:ward", out, workers=2, options=FAST, log=lambda m: None, progress=False)
+    by_name = {r.material: r for r in result.rows}
+    assert set(by_name) == {"red paint", "gold", "coated", "wall", "steel"}
+    assert by_name["coated"].verdict == "refused" and "sheen" in by_name["coated"].reason
+    for name in ("red paint", "gold", "wall", "steel"):
+        r = by_name[name]
+        assert r.verdict == "passed", (name, r.reason)
+        assert (out / r.slot / "material.json").is_file()
+        written = json.loads((out / r.slot / "material.json").read_text())
+        assert written["model"] == "mitsuba06:ward"
+    # the red paint stays red, the wall stays warm: checked on the written values, not on matremap's score
+    red = json.loads((out / by_name["red paint"].slot / "material.json").read_text())["params"]["diffuseReflectance"]
+    assert red[0] > 3 * red[1] and red[0] > 3 * red[2]
+    assert by_name["wall"].route == "fit" and by_name["red paint"].route == "fit"
+    assert result.exit_code == 2  # one refused
+    assert "4 passed" in result.line() and "1 refused" in result.line()
+
+    rows = list(csv.DictReader((out / "summary.csv").open()))
+    assert len(rows) == 5 and {r["verdict"] for r in rows} == {"passed", "refused"}
+    assert "fit_error" in rows[0]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["counts"]["passed"] == 4 and summary["exit_code"] == 2
+    page = (out / "index.html").read_text()
+    assert all(name in page for name in ("red paint", "gold", "coated", "wall", "steel"))
+
+    stamp = {r.slot: (out / r.slot / "item.json").stat().st_mtime_ns for r in result.rows}
+    again = run_batch([src], "mitsuba06:ward", out, workers=2, options=FAST, log=lambda m: None, progress=False)
+    assert again.skipped == 5 and [r.to_dict() for r in again.rows] == [r.to_dict() for r in result.rows]
+    assert all((out / s / "item.json").stat().st_mtime_ns == t for s, t in stamp.items())
+
+    gltf_library(src, red=0.3)  # an edited input is redone; the untouched file is not
+    edited = run_batch([src], "mitsuba06:ward", out, workers=2, options=FAST, log=lambda m: None, progress=False)
+    assert edited.skipped == 2
+    assert gltf.is_file()
+    red2 = json.loads((out / by_name["red paint"].slot / "material.json").read_text())["params"]["diffuseReflectance"]
+    assert red2[0] < red[0]
+
+
+def test_the_cli_takes_many_paths_and_exits_by_the_worst_item(tmp_path, capsys):
+    src = tmp_path / "in"
+    mitsuba_scene(src)
+    shutil.copy(CORPUS / "mitsuba-roughplastic" / "roughplastic.xml", src / "plastic.xml")
+    out = tmp_path / "out"
+    code = main(["remap", str(src / "scene.xml"), str(src / "plastic.xml"), "--to", "mitsuba06:ward", "-o", str(out)])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert captured.out.strip().splitlines()[-1].startswith("3 material(s): 3 passed")
+    strict = tmp_path / "strict"
+    code = main(
+        ["remap", str(src), "--to", "mitsuba06:ward", "-o", str(strict), "--max-error", "fit_error=0", "--json"]
+    )
+    doc = json.loads(capsys.readouterr().out)
+    assert code == 3 and doc["counts"]["failed"] == 3 and doc["exit_code"] == 3
+
+
+@pytest.mark.skipif(shutil.which("chromium") is None, reason="no headless chromium")
+def test_the_index_page_sorts_by_error_in_a_real_browser(tmp_path):
+    from matremap.batch import Row, index_page
+
+    rows = [
+        Row("a.gltf", "worst", "a/worst", verdict="failed", measures={"fit_error": 0.9}),
+        Row("a.gltf", "best", "a/best", verdict="passed", measures={"fit_error": 0.01}),
+        Row("b.xml", "middle", "b/middle", verdict="passed", measures={"fit_error": 0.2}),
+    ]
+    page = tmp_path / "index.html"
+    page.write_text(index_page(rows, "3 material(s)"))
+    dom = subprocess.run(
+        ["chromium", "--headless", "--no-sandbox", "--disable-gpu", "--dump-dom", f"{page.as_uri()}?sort=error"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=True,
+    ).stdout
+    order = [name for name in ("best", "middle", "worst") if name in dom]
+    positions = [dom.index(f"<td>{n}</td>") for n in order]
+    assert order == ["best", "middle", "worst"] and positions == sorted(positions), dom[:500]
+    unsorted = page.read_text()
+    assert unsorted.index("<td>worst</td>") < unsorted.index("<td>best</td>")  # the browser sorted it
