@@ -430,3 +430,34 @@ def test_a_map_set_never_points_into_the_cache(tmp_path, private_cache):
     ms = load_map_set(out)
     assert ms.maps["baseColor"].parent == out and Path(ms.maps["baseColor"]).read_bytes() == data
     assert Path(ms.normal).parent == out and Path(ms.normal).read_bytes() == normal
+
+
+def test_a_table_planted_in_a_shared_cache_folder_is_not_read(tmp_path):
+    """Numerically integrated tables are read back only from a private folder: a world-writable cache
+    folder holding a poisoned table (right name, spec and shape) gets the table rebuilt, not trusted."""
+    import subprocess
+    import sys
+
+    code = (
+        "import numpy as np; from matremap.renderers.embedded.evaluators.cycles import albedo_tables; "
+        "print(float(albedo_tables()[1].mean()))"
+    )
+
+    def mean_albedo(cache: Path) -> float:
+        env = {**os.environ, "MATREMAP_CACHE": str(cache)}
+        out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+        return float(out.stdout.strip().splitlines()[-1])
+
+    private = tmp_path / "private"
+    honest = mean_albedo(private)
+    (table,) = private.glob("cycles_ggx_albedo_*.npz")
+    shared = tmp_path / "shared"
+    shared.mkdir()
+    os.chmod(shared, 0o777)
+    with np.load(table, allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["E_avg"] = np.full_like(arrays["E_avg"], 0.123)
+    np.savez(shared / table.name, **arrays)
+    assert mean_albedo(shared) == pytest.approx(honest, rel=1e-9)
+    os.chmod(shared, 0o700)  # the same file in a private folder is read: the check is what stopped it
+    assert mean_albedo(shared) == pytest.approx(0.123)

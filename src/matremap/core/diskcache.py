@@ -73,6 +73,16 @@ def private_cache_dir(*parts: str) -> Path:
     return folder
 
 
+def trusted(path: Path) -> bool:
+    """Whether a cached table at ``path`` may be read: its folder is private to this user
+    (:func:`ensure_private`); a table planted in a shared folder is ignored and rebuilt."""
+    try:
+        ensure_private(path.parent)
+    except MatremapError:
+        return False
+    return True
+
+
 def save_tables(path: Path, stale: str, **arrays: np.ndarray) -> None:
     """Write ``arrays`` to ``path`` (.npz) atomically and remove the files matching the glob
     ``stale`` beside it (other versions); give up silently if that fails or the folder is not private

@@ -37,7 +37,8 @@ Diffuse Color   RGB in [0, 1], default 0 (no diffuse node); Lambertian Color/pi
   integration of this module's single-scatter GGX (:func:`ggx_directional_albedo`) instead of
   Cycles' quasi-Monte Carlo, on the same nodes and read the same way, so the emulation inherits
   Cycles' interpolation. They take about a second to build and are cached in memory and in
-  ``$MATREMAP_CACHE_DIR`` or ``~/.cache/matremap`` (skipped silently if not writable).
+  matremap's private cache folder (``$MATREMAP_CACHE``, default ``~/.cache/matremap``;
+  skipped silently if not writable or not private).
 
 cycles:diffuse -- the Diffuse BSDF node with Roughness 0 (Lambert): Color/pi.
 

@@ -53,7 +53,8 @@ eta' is clamped to [1, 4]. mu is clamped to [1e-6, 1]; a negative cosine means l
 other side: T(-mu, alpha, eta) = T(mu, alpha, 1/eta), as in ``RoughTransmittance::eval``.
 
 Tables take about 2-3 s per distribution to build (two threads) and are cached in memory and on
-disk, in ``$MATREMAP_CACHE_DIR`` or ``~/.cache/matremap`` (skipped silently if not writable).
+disk, in matremap's private cache folder (``$MATREMAP_CACHE``, default ``~/.cache/matremap``;
+skipped silently if not writable or not private).
 """
 
 from __future__ import annotations
@@ -68,7 +69,7 @@ from pathlib import Path
 
 import numpy as np
 
-from matremap.core.diskcache import cache_dir, save_tables
+from matremap.core.diskcache import cache_dir, save_tables, trusted
 from matremap.core.optics import fresnel_dielectric
 from matremap.renderers.embedded.microfacet import ALPHA_MIN, g1_beckmann_rational, g1_ggx, phong_exponent
 
@@ -435,6 +436,8 @@ def _build(d: str) -> dict[str, np.ndarray]:
 
 
 def _load(path: Path, d: str) -> dict[str, np.ndarray] | None:
+    if not trusted(path):  # a table in a folder others can write is not read
+        return None
     try:
         with np.load(path, allow_pickle=False) as z:
             if str(z["spec"]) != _spec(d):

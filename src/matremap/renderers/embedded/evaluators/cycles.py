@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from matremap.core.diskcache import cache_dir, save_tables
+from matremap.core.diskcache import cache_dir, save_tables, trusted
 from matremap.dialects.cycles import DIFFUSE, GLOSSY
 from matremap.renderers.embedded import microfacet as mf
 
@@ -131,6 +131,8 @@ def _build_albedo_tables() -> tuple[np.ndarray, np.ndarray]:
 
 
 def _load_albedo_tables(path: Path) -> tuple[np.ndarray, np.ndarray] | None:
+    if not trusted(path):  # a table in a folder others can write is not read
+        return None
     n = ALBEDO_NODES
     try:
         with np.load(path, allow_pickle=False) as z:
