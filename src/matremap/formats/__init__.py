@@ -93,6 +93,26 @@ def write_asset(out: str | os.PathLike, result: Any, source: MaterialAsset | Non
     return _module(module).write(Path(out), result, source=source, force=force)
 
 
+def write_all(
+    out: str | os.PathLike,
+    results: list[tuple[str, Any]],
+    source: str | os.PathLike | None = None,
+    force: bool = False,
+) -> Path:
+    """Write every ``(material name, result)`` into one file of the format ``out``'s suffix names: a copy
+    of ``source`` with those materials replaced when it is of that format, else a fresh file holding all
+    of them (see each module's ``write_all``)."""
+    fmt = format_for(out)
+    module = _module(WRITERS[fmt][0])
+    if not hasattr(module, "write_all"):
+        raise MatremapError(f"writing every material into one {fmt} file is not supported yet; see OUT/<file>/*")
+    same = (
+        source is not None and Path(source).suffix.lower() in READERS and READERS[Path(source).suffix.lower()][0] == fmt
+    )
+    path: Path = module.write_all(Path(out), results, Path(source) if same and source else None, force=force)
+    return path
+
+
 __all__ = [
     "READERS",
     "WRITERS",
@@ -104,5 +124,6 @@ __all__ = [
     "is_material_file",
     "material_names",
     "read_asset",
+    "write_all",
     "write_asset",
 ]
