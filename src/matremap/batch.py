@@ -70,6 +70,8 @@ class Row:
     seconds: float = 0.0
     output: str = ""
     thumbnails: dict[str, str] = field(default_factory=dict)
+    #: the file holding every converted material of the input (relative to OUT), when one was written
+    whole_file: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -226,8 +228,44 @@ def run_batch(
         bar.close()
         pool.shutdown(wait=True)
     result = BatchResult([rows[i] for i in items], len(items) - len(todo), out)
+    for f in dict.fromkeys(i.file for i in items):
+        mine = [i for i in items if i.file == f]
+        whole = assemble(out, f, [(i, rows[i]) for i in mine], target, log)
+        for i in mine:
+            rows[i].whole_file = whole
     write_summary(result)
     return result
+
+
+def assemble(out: Path, source: Path, done: Sequence[tuple[Item, Row]], target: str, log: Callable[[str], None]) -> str:
+    """One file holding every converted material of ``source`` (``OUT/<file>/<name>``, the target's
+    format; :func:`matremap.formats.write_all`); its path relative to OUT, or "" when there is none (no
+    file format takes the target, the format cannot hold several, or no material converted)."""
+    from matremap.core.material import Material
+    from matremap.formats import READERS, write_all
+    from matremap.remap import default_suffix
+    from matremap.svbrdf.textures import load_map_set
+
+    fmt = READERS[source.suffix.lower()][0]
+    suffix = default_suffix(target, fmt) or (source.suffix.lower() if target.startswith("gltf:") else None)
+    converted = [(i, r) for i, r in done if r.verdict in ("passed", "failed")]
+    if suffix is None or not converted:
+        return ""
+    results: list[tuple[str, Any]] = []
+    for item, _ in converted:
+        folder = out / item.slot
+        if (folder / "maps" / "material.json").is_file():
+            results.append((item.name, load_map_set(folder / "maps")))
+        else:
+            results.append((item.name, Material.from_dict(json.loads((folder / "material.json").read_text()))))
+    dest = out / done[0][0].slot.split("/")[0] / f"{source.stem}{suffix}"
+    try:
+        written = write_all(dest, results, source, force=True)
+    except MatremapError as e:
+        log(f"note: {source.name}: the materials stay one file each ({e})")
+        return ""
+    log(f"wrote {written} ({len(results)} of {len(done)} material(s))")
+    return str(written.relative_to(out))
 
 
 def _finished(out: Path, item: Item, key: str) -> Row | None:
@@ -320,7 +358,18 @@ def _thumbnails(folder: Path, slot: str) -> dict[str, str]:
 
 # -- the summary ------------------------------------------------------------------------------------
 
-COLUMNS = ("file", "material", "source_model", "target_model", "route", "verdict", "seconds", "reason", "output")
+COLUMNS = (
+    "file",
+    "material",
+    "source_model",
+    "target_model",
+    "route",
+    "verdict",
+    "seconds",
+    "reason",
+    "output",
+    "whole_file",
+)
 
 
 def write_summary(result: BatchResult) -> None:
