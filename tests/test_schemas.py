@@ -61,6 +61,7 @@ def _with(doc: dict, path: str, value) -> dict:
         ("mappings.diffuse.coef", [0.5] * 7, "list of 1 or 3 numbers"),
         ("mappings.roughness.coef", [0.1] * 9, "list of 1 or 2 or 3 or 4 or 5 numbers"),
         ("mappings.roughness.kind", "exec", "kind 'exec' is not one of"),
+        ("mappings.roughness.kind", ["polynomial"], "kind a list of 1 is not one of"),  # found by the fuzzer
         ("mappings.roughness.kind", "k_alpha", "cannot give roughness"),
         ("mappings.diffuse", {"kind": "constant", "value": [0.1, float("nan"), 0.1]}, "not a finite number"),
         ("target.options", {"distribution": "as", "colour": "red"}, "unknown to mitsuba06:pbr"),
@@ -286,6 +287,10 @@ def make_db(path: Path) -> Path:
         ("UPDATE points SET target = '{\"alpha\": \"x\"}' WHERE key = 'a'", "target parameter"),
         ("UPDATE points SET target = NULL WHERE key = 'a'", "without its target parameters"),
         ("UPDATE points SET status = 'maybe' WHERE key = 'a'", "not a row of a sweep"),
+        (
+            "UPDATE points SET source = json_remove(source, '$.variant')",
+            "source option variant is 'None', not a string",
+        ),  # fuzzer
         ("UPDATE points SET swept = '" + "[" * 5000 + "]" * 5000 + "' WHERE key = 'a'", "not valid JSON"),
         ("ALTER TABLE points DROP COLUMN back_loss", "lacks the column"),
         ("UPDATE meta SET value = '{' WHERE key = 'config'", "config is not valid JSON"),

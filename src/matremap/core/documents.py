@@ -26,9 +26,9 @@ def read_document(path: str | Path, what: str) -> Any:
         text = p.read_text()
     except FileNotFoundError:
         raise MatremapError(f"{what} {p} not found") from None
-    except (OSError, UnicodeDecodeError) as e:
+    except (OSError, ValueError) as e:  # ValueError: undecodable text, a NUL in the name
         reason = e.strerror if isinstance(e, OSError) and e.strerror else e
-        raise MatremapError(f"cannot read {what} {p}: {reason}") from None
+        raise MatremapError(f"cannot read {what} {p!s:.200}: {reason}") from None
     except MemoryError:
         raise MatremapError(f"cannot read {what} {p}: too large to hold in memory") from None
     if p.suffix.lower() == ".toml":

@@ -167,7 +167,7 @@ def mapping(name: str, m: Any, source: ModelSpec, target: ModelSpec, where: str)
     if name not in qty.available(target):
         raise MatremapError(f"{at}: target model {target.id} has no {name}")
     kind = m.get("kind")
-    if kind not in KINDS or not isinstance(kind, str):
+    if not isinstance(kind, str) or kind not in KINDS:
         raise MatremapError(f"{at}: kind {_show(kind)} is not one of {', '.join(KINDS)}")
     if name not in KINDS[kind]:
         raise MatremapError(f"{at}: a {kind} mapping cannot give {name}")

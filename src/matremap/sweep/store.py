@@ -270,15 +270,15 @@ def _loads(text: Any) -> Any:
 
 
 def _model_params(config: Any) -> tuple[dict[str, int], dict[str, int]] | None:
-    """Parameter name -> channels of the sweep's source and target models, or None if the configuration
-    does not name known models (the rows are then checked for types only)."""
+    """Parameter name -> channels (0 for an option) of the sweep's source and target models, or None if
+    the configuration does not name known models (the rows are then checked for types only)."""
     from matremap.dialects import get_model
 
     try:
         specs = get_model(config["source"]["model"]), get_model(config["target"]["model"])
     except (KeyError, TypeError, MatremapError):
         return None
-    source, target = ({p.name: p.channels for p in s.params} for s in specs)
+    source, target = ({**{p.name: p.channels for p in s.params}, **{o: 0 for o in s.option_names}} for s in specs)
     return source, target
 
 
@@ -318,9 +318,14 @@ def check_row(r: dict[str, Any], where: str, params: tuple[dict[str, int], dict[
 
 
 def _check_params(values: dict[str, Any], channels: dict[str, int], at: str) -> None:
-    """Every parameter of the model present, a finite number or a list of that many finite numbers."""
+    """Every parameter of the model present, a finite number or a list of that many finite numbers;
+    every option (``channels`` 0) a string."""
     for name, n in channels.items():
         v = values.get(name)
+        if n == 0:
+            if not isinstance(v, str):
+                raise MatremapError(f"{at} option {name} is {str(v)[:40]!r}, not a string")
+            continue
         items = (v if isinstance(v, list) and len(v) == n else [None]) if n > 1 else [v]
         if not all(not isinstance(x, bool) and isinstance(x, (int, float)) and math.isfinite(x) for x in items):
             raise MatremapError(f"{at} parameter {name} is {str(v)[:40]!r}, not {n} finite number(s)")
