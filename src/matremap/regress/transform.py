@@ -11,6 +11,12 @@ A transform file is plain JSON (loading one never runs code)::
 
 A chain holds its steps instead of mappings (``"steps": [transform, ...]``). Quantities are
 explained in :mod:`.quantities`; mapping forms in :mod:`.parametric` and :mod:`.svr`.
+
+Every field is checked on load (:mod:`.schema`: finite bounded coefficients, their counts, known
+options and quantities). :meth:`Transform.save` adds ``"checksum": "sha256:..."`` over the rest of the
+content; loading verifies it, and cached and shipped transforms must carry one, so a file edited after
+it was written is never used as if it had been learned. A hand-written transform without one still
+loads when given explicitly.
 """
 
 from __future__ import annotations
