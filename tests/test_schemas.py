@@ -388,3 +388,30 @@ def test_inline_material_longer_than_255_characters_on_the_command_line(capsys, 
     code = main(["render", material, "-o", str(tmp_path / "r.exr"), "--size", "16"])
     err = capsys.readouterr().err
     assert code == 0, err
+
+
+def test_an_edited_cached_transform_is_recomputed_not_used(tmp_path, capsys):
+    """A cached transform edited after it was written (a constant roughness map and a black diffuse came out
+    with exit 0 before) is not trusted: the remap notes it, sweeps again and overwrites it."""
+    from matremap.cli import main
+    from matremap.svbrdf.textures import load_map_set, read_image
+
+    examples = Path(__file__).resolve().parents[1] / "examples"
+    cache = tmp_path / "cache"
+    args = ["remap", str(examples / "blue-plastic"), "--to", "mitsuba06:pbr", "--fix", "distribution=as"]
+    args += ["--sweep", "--no-evaluate"]
+    assert main([*args, "-o", str(tmp_path / "first"), "--cache", str(cache)]) == 0
+    (cached,) = cache.glob("*.json")
+    doc = json.loads(cached.read_text())
+    for mapping in doc["mappings"].values():  # every mapping flattened to a constant, the checksum kept
+        if "coef" in mapping:
+            mapping["coef"] = [0.5] + [0.0] * (len(mapping["coef"]) - 1)
+    cached.write_text(json.dumps(doc))
+    capsys.readouterr()
+    assert main([*args, "-o", str(tmp_path / "second"), "--cache", str(cache)]) == 0
+    err = capsys.readouterr().err
+    assert "changed after it was written" in err and "recomputing" in err, err
+    maps = load_map_set(tmp_path / "second" / "maps")
+    diffuse, _ = read_image(maps.maps["diffuseReflectance"], maps.colorspace["diffuseReflectance"])
+    assert diffuse.std() > 0.01 and diffuse.mean() > 0.05  # a real map, not a constant or black
+    assert json.loads(cached.read_text())["checksum"] != ""  # rewritten with a valid seal

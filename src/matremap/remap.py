@@ -43,7 +43,7 @@ from matremap.core.material import Material, SVMaterial
 from matremap.core.scene import Scene
 from matremap.dialects import get_model
 from matremap.dialects.equivalence import Equivalence, equivalence
-from matremap.errors import MatremapError
+from matremap.errors import MatremapError, TransformChecksumError
 from matremap.regress import quantities as qty
 from matremap.regress.transform import Transform
 from matremap.renderers import renderer_for
@@ -87,9 +87,10 @@ class RemapResult:
 
 
 def default_cache() -> Path:
-    from matremap.core.diskcache import cache_dir
+    """The transform cache: ``transforms/`` in matremap's private cache folder (created 0700, owner checked)."""
+    from matremap.core.diskcache import private_cache_dir
 
-    return cache_dir() / "transforms"
+    return private_cache_dir("transforms")
 
 
 def load_arrays(map_set: MapSet, only: Collection[str] | None = None) -> tuple[dict[str, Any], np.ndarray | None]:
@@ -314,8 +315,12 @@ def cached_transform(
     cache.mkdir(parents=True, exist_ok=True)
     path = cache / f"{spec.id.replace(':', '-')}--{config.target.replace(':', '-')}-{key}.json"
     if path.is_file():
-        log(f"transform: cached {path}")
-        return Transform.load(path), path, True
+        try:
+            t = Transform.load(path, require_checksum=True)
+            log(f"transform: cached {path}")
+            return t, path, True
+        except TransformChecksumError as e:  # edited or damaged since it was written: not trusted
+            log(f"note: {e}; recomputing it")
     db = path.with_suffix(".sqlite")
     grid = parse_grid(grid_text, spec)
     log(f"sweep: {spec.id} -> {config.target}, {len(grid)} fits over {grid_text}")
@@ -766,6 +771,9 @@ def _output_name(
             suffix = p.suffix.lower()
         name = f"{p.stem}{suffix}" if suffix else None
     else:
+        from matremap.formats.confine import output_inside
+
+        output_inside(out, write)  # a name like ../../x.gltf is refused: outputs stay under OUT
         name = write
     if name is not None:
         format_for(name)  # fails early on a suffix no writer takes

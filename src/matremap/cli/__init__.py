@@ -87,8 +87,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return args.func(args)
     except MatremapError as e:
+        text = str(e)
         kind = "FAILED" if e.exit_code == EXIT_QUALITY else "error"
-        print(f"matremap: {kind}: {e}", file=sys.stderr)
+        # a verdict line already starts with its word ("FAILED: clamped ..."): not said twice
+        print(f"matremap: {text}" if text.startswith(f"{kind}:") else f"matremap: {kind}: {text}", file=sys.stderr)
         return e.exit_code
     except KeyboardInterrupt:
         print("matremap: interrupted", file=sys.stderr)
