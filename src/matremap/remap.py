@@ -442,7 +442,7 @@ def remap_into(
             "clamped",
             clipped / max(texels, 1),
             job.thresholds.clamped,
-            f"values clipped to the files' range: {clipped}",
+            f"values clipped to the target's bounds or the files' range: {clipped}",
         ),
     ]
     checks += map_quality(map_set, params, result_set, target_params, job.thresholds)
@@ -525,7 +525,8 @@ def _convert_maps(
         f"convert: {report.texels} texels"
         + (f"; {report.outside} outside the training domain (see maps/{MASK_NAME})" if report.outside else "")
     )
-    return int(report.texels), int(report.outside), int(report.clipped), tpath, cached
+    # values the transform asked for beyond the target's bounds, and values beyond what the files hold
+    return int(report.texels), int(report.outside), int(report.clipped + report.bounded), tpath, cached
 
 
 def _transform_for(

@@ -67,9 +67,21 @@ def _channels(spec: ModelSpec) -> dict[str, int]:
     return {p.name: p.channels for p in spec.params}
 
 
-def write(spec: ModelSpec, quantities: Mapping[str, np.ndarray], template: Mapping[str, Any]) -> dict[str, np.ndarray]:
+#: a value moved by more than this share of its parameter's range when clipped counts as clipped (the
+#: nudges that keep F0 below 1 or a roughness above its mirror limit do not)
+CLIP_TOLERANCE = 1e-3
+
+
+def write(
+    spec: ModelSpec,
+    quantities: Mapping[str, np.ndarray],
+    template: Mapping[str, Any],
+    clipped: dict[str, int] | None = None,
+) -> dict[str, np.ndarray]:
     """Parameter arrays for ``quantities``; parameters no quantity drives keep ``template``'s value
-    (returned as read-only broadcast views: no memory per texel)."""
+    (returned as read-only broadcast views: no memory per texel). Driven values are clipped to what the
+    renderer accepts; ``clipped`` (parameter -> count) adds up the values that moved by more than
+    :data:`CLIP_TOLERANCE` of the range (a regression asking for more than the target can give)."""
     if "roughness" in quantities:
         shape = np.shape(quantities["roughness"])
     else:
@@ -86,7 +98,10 @@ def write(spec: ModelSpec, quantities: Mapping[str, np.ndarray], template: Mappi
         out[rp.name] = as_floats(quantities["roughness"])
         driven.append(rp.name)
     if spec.reflectance is not None and "reflectance" in quantities:
-        f0 = clip(as_floats(quantities["reflectance"]), 0.0, 1.0 - 1e-7)
+        f0 = as_floats(quantities["reflectance"])
+        if clipped is not None:
+            count_clipped(f0, 0.0, 1.0, "reflectance", clipped)
+        f0 = clip(f0, 0.0, 1.0 - 1e-7)
         driven += spec.reflectance.write_f0(f0, out, _channels(spec), quantities.get("diffuse"))
     dp = diffuse_param(spec)
     writes_albedo = spec.reflectance is not None and spec.reflectance.writes_albedo
@@ -96,6 +111,8 @@ def write(spec: ModelSpec, quantities: Mapping[str, np.ndarray], template: Mappi
     bounds = {p.name: p.bounds for p in spec.params}
     for name in driven:  # stay inside what the renderer accepts (in place: these arrays are ours)
         a = out[name]
+        if clipped is not None:
+            count_clipped(a, *bounds[name], name, clipped)
         if uniform(a):
             out[name] = clip(a, *bounds[name])
             continue
@@ -103,6 +120,16 @@ def write(spec: ModelSpec, quantities: Mapping[str, np.ndarray], template: Mappi
             a = np.array(a)
         out[name] = np.clip(a, *bounds[name], out=a)
     return out
+
+
+def count_clipped(a: np.ndarray, lo: float, hi: float, name: str, counts: dict[str, int]) -> None:
+    """Add to ``counts[name]`` the values of ``a`` that clipping to [lo, hi] moves by more than
+    :data:`CLIP_TOLERANCE` of the range (a broadcast of one value counts for every element)."""
+    tol = CLIP_TOLERANCE * (hi - lo)
+    probe = a[:1] if uniform(a) else a
+    n = int(np.count_nonzero((probe < lo - tol) | (probe > hi + tol)))
+    if n:
+        counts[name] = counts.get(name, 0) + (n * a.shape[0] if uniform(a) else n)
 
 
 def uniform(a: np.ndarray) -> bool:

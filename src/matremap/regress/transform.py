@@ -164,16 +164,19 @@ class Transform:
         return cls.from_dict(read_document(path, "transform"), str(path), require_checksum)
 
     # -- application ----------------------------------------------------------------------------
-    def apply(self, values: Mapping[str, Any]) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    def apply(
+        self, values: Mapping[str, Any], clipped: dict[str, int] | None = None
+    ) -> tuple[dict[str, np.ndarray], np.ndarray]:
         """Map source parameter arrays (scalars [...], RGB [..., 3]; missing ones take the values
         the training sweep held them at) to target parameter arrays; also return a boolean [...]
-        array that is True where an input lies outside the training domain."""
+        array that is True where an input lies outside the training domain. ``clipped`` (parameter ->
+        count) adds up the output values clipped to the target's bounds (:func:`quantities.write`)."""
         src = get_model(self.source)
         arrays = _complete(src, values, self.source_template)
         shape = _shape(src, arrays)
         n = int(np.prod(shape))
         if n <= CHUNK:
-            return self._apply(arrays, shape)
+            return self._apply(arrays, shape, clipped)
         # large inputs (texture maps) in cache-sized chunks of texels: same results, less memory traffic;
         # a uniform input (a broadcast template value) stays a broadcast view of one element
         flat = {k: _flatten(a, shape, n) for k, a in arrays.items()}
@@ -185,7 +188,7 @@ class Transform:
             chunk = {
                 k: (a[part] if a.shape[0] == n else np.broadcast_to(a[0], (m, *a.shape[1:]))) for k, a in flat.items()
             }
-            o, off = self._apply(chunk, (m,))
+            o, off = self._apply(chunk, (m,), clipped)
             outside[part] = off
             for k, a in o.items():
                 if k not in out:
@@ -197,11 +200,13 @@ class Transform:
                     out[k][part] = a
         return {k: a.reshape(*shape, *a.shape[1:]) for k, a in out.items()}, outside.reshape(shape)
 
-    def _apply(self, arrays: dict[str, np.ndarray], shape: tuple[int, ...]) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    def _apply(
+        self, arrays: dict[str, np.ndarray], shape: tuple[int, ...], clipped: dict[str, int] | None = None
+    ) -> tuple[dict[str, np.ndarray], np.ndarray]:
         if self.method == "chain":
-            out, outside = self.steps[0].apply(arrays)
+            out, outside = self.steps[0].apply(arrays, clipped)
             for step in self.steps[1:]:
-                out, o = step.apply(out)
+                out, o = step.apply(out, clipped)
                 outside = outside | o
             return out, outside
         src = get_model(self.source)
@@ -233,7 +238,7 @@ class Transform:
             else:
                 y[name] = evaluate_mapping(m, x)
             self._check_finite(name, y[name])
-        return qty.write(get_model(self.target), y, self.template), outside
+        return qty.write(get_model(self.target), y, self.template, clipped), outside
 
     def _check_finite(self, name: str, a: np.ndarray) -> None:
         """Refuse a mapping's output holding NaN or infinity (a second line of defence behind the

@@ -54,6 +54,8 @@ class ConvertReport:
     notes: list[str] = field(default_factory=list)
     #: values clipped to fit an 8/16-bit file's [0, 1] (the notes say which maps)
     clipped: int = 0
+    #: values the transform asked for beyond what the target model accepts, clipped to its bounds
+    bounded: int = 0
 
     @property
     def outside_fraction(self) -> float:
@@ -193,6 +195,7 @@ def _run(plan: _Plan, outputs: list[_Output], progress_every: int = 0, progress=
     readers: dict[str, MapReader] = {}
     writers: list[tuple[_Output, MapWriter]] = []
     outside = 0
+    bounded: dict[str, int] = {}
     first: dict[str, Any] = {}
     try:
         for name, path in plan.maps.items():
@@ -203,7 +206,7 @@ def _run(plan: _Plan, outputs: list[_Output], progress_every: int = 0, progress=
         bands = _bands(plan.size[0], plan.rows)
         for i, (y0, y1) in enumerate(bands):
             values = _band_values(plan, readers, y0, y1)
-            out, off = t.apply(values)
+            out, off = t.apply(values, clipped=bounded)
             outside += int(np.count_nonzero(off))
             if i == 0:
                 first = {k: np.asarray(v)[(0,) * (np.ndim(off))].tolist() for k, v in out.items()}
@@ -213,7 +216,8 @@ def _run(plan: _Plan, outputs: list[_Output], progress_every: int = 0, progress=
                 progress(y1, plan.size[0])
         for _, w in writers:
             w.close()
-        return {"outside": outside, "clipped": {o.param: w.clipped for o, w in writers if o.param}, "first": first}
+        clipped = {o.param: w.clipped for o, w in writers if o.param}
+        return {"outside": outside, "clipped": clipped, "bounded": bounded, "first": first}
     finally:
         for r in readers.values():
             r.close()
@@ -294,6 +298,11 @@ def convert(
         outside = results[0]["outside"]
         notes += _clipping_notes(results, outputs)
         clipped = sum(int(n) for r in results for n in r["clipped"].values())
+        bounded = sum(int(n) for n in results[0]["bounded"].values())  # every group applies the transform
+        notes += [
+            f"{n} values of {name} lay beyond what {t.target} accepts and were clipped to its bounds"
+            for name, n in results[0]["bounded"].items()
+        ]
         doc = _manifest(map_set, t, outputs, results[0]["first"], final_normal, outside)
         files.write_text(out / MANIFEST_NAME, json.dumps(doc, indent=1) + "\n")
         if map_set.normal and final_normal is not None:
@@ -306,7 +315,14 @@ def convert(
             stacklevel=2,
         )
     return ConvertReport(
-        texels, outside, files.destinations, time.perf_counter() - start, t.target, notes, clipped=clipped
+        texels,
+        outside,
+        files.destinations,
+        time.perf_counter() - start,
+        t.target,
+        notes,
+        clipped=clipped,
+        bounded=bounded,
     )
 
 
