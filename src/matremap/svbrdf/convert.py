@@ -296,13 +296,7 @@ def convert(
         )
         results = _execute(plan, outputs, workers, progress)
         outside = results[0]["outside"]
-        notes += _clipping_notes(results, outputs)
-        clipped = sum(int(n) for r in results for n in r["clipped"].values())
-        bounded = sum(int(n) for n in results[0]["bounded"].values())  # every group applies the transform
-        notes += [
-            f"{n} values of {name} lay beyond what {t.target} accepts and were clipped to its bounds"
-            for name, n in results[0]["bounded"].items()
-        ]
+        clipped, bounded = _clip_counts(results, outputs, t.target, notes)
         doc = _manifest(map_set, t, outputs, results[0]["first"], final_normal, outside)
         files.write_text(out / MANIFEST_NAME, json.dumps(doc, indent=1) + "\n")
         if map_set.normal and final_normal is not None:
@@ -324,6 +318,21 @@ def convert(
         clipped=clipped,
         bounded=bounded,
     )
+
+
+def _clip_counts(
+    results: Sequence[Mapping[str, Any]], outputs: Sequence[_Output], target: str, notes: list[str]
+) -> tuple[int, int]:
+    """Values clipped to the files' range and values clipped to the target's bounds, with a note for
+    each map or parameter concerned (appended to ``notes``)."""
+    notes += _clipping_notes(results, outputs)
+    clipped = sum(int(n) for r in results for n in r["clipped"].values())
+    bounded = sum(int(n) for n in results[0]["bounded"].values())  # every group applies the transform
+    notes += [
+        f"{n} values of {name} lay beyond what {target} accepts and were clipped to its bounds"
+        for name, n in results[0]["bounded"].items()
+    ]
+    return clipped, bounded
 
 
 def _cost(name: str | None, info: ImageInfo) -> float:
