@@ -148,3 +148,23 @@ def test_convert_to_a_model_without_a_route_fails_cleanly(tmp_path, capsys):
         == 2
     )
     assert "no route" in capsys.readouterr().err and not out.exists()
+
+
+def test_no_route_names_the_nearest_transforms_with_every_option(capsys):
+    """The README's Ward example swept every time without saying why: its Ward is variant=ward, the
+    library's Ward transforms variant=balanced. The message now shows both sides' options."""
+    from matremap.cli import main
+    from matremap.regress.library import nearest_routes
+
+    near = nearest_routes("mitsuba06:ward", {"variant": "ward"}, "mitsuba06:pbr", {"distribution": "ggx"})
+    assert near and near[0].split(":")[0] in ("ward-ggx", "ward-as")
+    assert all("variant=balanced" in n for n in near[:2]) and "mitsuba06:pbr (distribution=" in near[0]
+    code = main(
+        ["transforms", "--route", "mitsuba06:ward", "mitsuba06:pbr", "--fix", "distribution=ggx"]
+        + ["--source-option", "variant=ward"]
+    )
+    err = capsys.readouterr().err
+    assert code == 2 and "nearest: ward-" in err and "variant=balanced" in err
+    assert main(["transforms"]) == 0
+    listing = capsys.readouterr().out
+    assert "mitsuba06:ward (variant=balanced) -> mitsuba06:pbr (distribution=as)" in listing  # defaults shown

@@ -252,13 +252,19 @@ def library_transform(
     map_set: MapSet, params: Mapping[str, Any], target: str, fix: Mapping[str, Any], log: Callable[[str], None]
 ) -> Transform | None:
     """A transform from the shipped library (direct or chained) that covers these maps, or None."""
-    from matremap.regress.library import find_route
+    from matremap.regress.library import describe_node, find_route, nearest_routes, node_key
 
     spec = map_set.spec
     held = {name: params[name] for name, _, _ in spec.specialisations if name in params}
     found = find_route(spec.id, map_set.options, target, fix, source_values=held)
     if found is None:
-        log(f"library: no route from {spec.id} to {target} with {_fmt_fix(fix)}; sweeping")
+        asked = describe_node(node_key(spec.id, map_set.options), defaults=True)
+        near = nearest_routes(spec.id, map_set.options, target, fix)
+        log(
+            f"library: no route from {asked} to {describe_node(node_key(target, fix), defaults=True)}"
+            + (f"; nearest: {'; '.join(near)}" if near else "")
+            + "; sweeping"
+        )
         return None
     transform = found.transform
     sample = {
@@ -271,10 +277,6 @@ def library_transform(
         return None
     log(f"library: {found.describe()}")
     return transform
-
-
-def _fmt_fix(fix: Mapping[str, Any]) -> str:
-    return ", ".join(f"{k}={v}" for k, v in fix.items()) or "no fixed values"
 
 
 def cached_transform(

@@ -109,16 +109,19 @@ def add_transforms(subparsers: Subparsers) -> None:
 
 def cmd_transforms(args: argparse.Namespace) -> int:
     """The library as a table (or JSON), or the route between two models."""
-    from matremap.regress.library import find_route, listing
+    from matremap.regress.library import find_route, listing, nearest_routes
 
     if args.route:
         source, target = args.route
         fix = parse_assignments(args.fix, "--fix")
-        found = find_route(
-            get_model(source).id, parse_assignments(args.source_option, "--source-option"), get_model(target).id, fix
-        )
+        options = parse_assignments(args.source_option, "--source-option")
+        found = find_route(get_model(source).id, options, get_model(target).id, fix)
         if found is None:
-            raise MatremapError(f"no route from {source} to {target} in the library; `matremap remap` sweeps instead")
+            near = nearest_routes(source, options, target, fix)
+            raise MatremapError(
+                f"no route from {source} to {target} in the library; `matremap remap` sweeps instead"
+                + (f"; nearest: {'; '.join(near)}" if near else "")
+            )
         print(found.describe())
         return 0
     rows = listing()

@@ -177,10 +177,12 @@ def node_key(model: str, options: Mapping[str, Any], values: Mapping[str, Any] |
     return (spec.id, tuple(sorted(opts.items())), tuple(held))
 
 
-def describe_node(key: tuple) -> str:
+def describe_node(key: tuple, defaults: bool = False) -> str:
+    """``model (option=value, ...)``: the options that differ from the model's defaults, or all of them
+    with ``defaults`` (so that a Ward ``variant=ward`` reads differently from ``variant=balanced``)."""
     model, opts, held = key
     spec = get_model(model)
-    shown = [f"{k}={v}" for k, v in opts if v != spec.option(k).default] + [
+    shown = [f"{k}={v}" for k, v in opts if defaults or v != spec.option(k).default] + [
         f"{k}={v:g}" for k, v in held if v is not None
     ]
     return model + (f" ({', '.join(shown)})" if shown else "")
@@ -257,8 +259,8 @@ def listing(directory: str | Path | None = None) -> list[dict[str, Any]]:
         rows.append(
             {
                 "name": e.name,
-                "source": describe_node(e.source),
-                "target": describe_node(e.target),
+                "source": describe_node(e.source, defaults=True),
+                "target": describe_node(e.target, defaults=True),
                 "method": t.method,
                 "heldout_rmse": {k: v.get("heldout_rmse") for k, v in t.errors.items()},
                 "domain": t.domain,
@@ -361,6 +363,30 @@ def find_route(
         node_key(target_model, fix, fix),
         directory,
     )
+
+
+def nearest_routes(
+    source_model: str,
+    source_options: Mapping[str, Any],
+    target_model: str,
+    fix: Mapping[str, Any],
+    count: int = 3,
+    directory: str | Path | None = None,
+) -> list[str]:
+    """When :func:`find_route` finds nothing: the library transforms closest to what was asked, every
+    option shown (the same two models first, then the same source model, then the same target model),
+    so that a message can say which option kept each one out."""
+    source_model, target_model = get_model(source_model).id, get_model(target_model).id
+
+    def rank(e: Entry) -> int:
+        same = (e.source[0] == source_model, e.target[0] == target_model)
+        return {(True, True): 0, (True, False): 1, (False, True): 2}.get(same, 3)
+
+    close = sorted((e for e in entries(directory) if rank(e) < 3), key=lambda e: (rank(e), e.error))
+    return [
+        f"{e.name}: {describe_node(e.source, defaults=True)} -> {describe_node(e.target, defaults=True)}"
+        for e in close[:count]
+    ]
 
 
 # ---------------------------------------------------------------------------------------------
