@@ -34,7 +34,7 @@ def test_a_direct_route_is_preferred_and_options_must_match():
     ggx = find_route("mitsuba06:ward", {}, "mitsuba06:pbr", {"distribution": "ggx"})
     assert [e.name for e in ggx.steps] == ["ward-ggx"]
     # the library's Ward is the balanced variant: another variant has no route
-    assert find_route("mitsuba06:ward", {"variant": "ward"}, "mitsuba06:pbr", {"distribution": "as"}) is None
+    assert find_route("mitsuba06:ward", {"variant": "ward-duer"}, "mitsuba06:pbr", {"distribution": "as"}) is None
 
 
 def test_a_chain_is_found_when_no_direct_transform_exists():
@@ -141,7 +141,7 @@ def test_convert_to_a_model_takes_the_library_route(tmp_path, capsys):
 
 
 def test_convert_to_a_model_without_a_route_fails_cleanly(tmp_path, capsys):
-    _ward_maps(tmp_path / "in", "ward")  # the library's Ward is the balanced variant
+    _ward_maps(tmp_path / "in", "ward-duer")  # the library's Ward transforms are the ward and balanced variants
     out = tmp_path / "out"
     assert (
         main(["convert", str(tmp_path / "in"), "--to", "mitsuba06:pbr", "--fix", "distribution=as", "-o", str(out)])
@@ -156,15 +156,15 @@ def test_no_route_names_the_nearest_transforms_with_every_option(capsys):
     from matremap.cli import main
     from matremap.regress.library import nearest_routes
 
-    near = nearest_routes("mitsuba06:ward", {"variant": "ward"}, "mitsuba06:pbr", {"distribution": "ggx"})
-    assert near and near[0].split(":")[0] in ("ward-ggx", "ward-as")
-    assert all("variant=balanced" in n for n in near[:2]) and "mitsuba06:pbr (distribution=" in near[0]
+    near = nearest_routes("mitsuba06:ward", {"variant": "ward-duer"}, "mitsuba06:pbr", {"distribution": "ggx"})
+    assert near and near[0].split(":")[0] in ("ward-ggx", "ward-as", "wardclassic-ggx", "wardclassic-as")
+    assert all("variant=" in n for n in near[:2]) and "mitsuba06:pbr (distribution=" in near[0]
     code = main(
         ["transforms", "--route", "mitsuba06:ward", "mitsuba06:pbr", "--fix", "distribution=ggx"]
-        + ["--source-option", "variant=ward"]
+        + ["--source-option", "variant=ward-duer"]
     )
     err = capsys.readouterr().err
-    assert code == 2 and "nearest: ward-" in err and "variant=balanced" in err
+    assert code == 2 and "nearest: ward" in err and "variant=balanced" in err
     assert main(["transforms"]) == 0
     listing = capsys.readouterr().out
     assert "mitsuba06:ward (variant=balanced) -> mitsuba06:pbr (distribution=as)" in listing  # defaults shown

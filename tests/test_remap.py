@@ -33,6 +33,7 @@ def test_remap_sweeps_learns_converts_and_evaluates_then_reuses_the_transform(pl
         fix={"distribution": "as"},
         cache=cache,
         log=lambda m: None,
+        library=False,  # the shipped wardclassic-as would serve these maps: sweep them here
         **FAST,
     )
     assert not first.cached and first.transform.is_file() and first.outside == 0
@@ -59,6 +60,7 @@ def test_remap_sweeps_learns_converts_and_evaluates_then_reuses_the_transform(pl
         fix={"distribution": "as"},
         cache=cache,
         log=lambda m: None,
+        library=False,
         **FAST,
     )
     assert second.cached and second.transform == first.transform
@@ -93,6 +95,7 @@ def test_cli_remap_convert_evaluate(plastic, tmp_path, capsys):
             "16",
             "--workers",
             "1",
+            "--sweep",
         ]
     )
     assert code == 0

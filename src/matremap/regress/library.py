@@ -61,6 +61,23 @@ _CYCLES_GRID = "Roughness=0.15:0.95:10,Color=0.02:0.9:6,Diffuse Color=0;0.5"
 PAIRS: tuple[Pair, ...] = (
     Pair("ward-as", "mitsuba06:ward", "mitsuba06:pbr", _WARD_GRID, fix={"distribution": "as"}),
     Pair("ward-ggx", "mitsuba06:ward", "mitsuba06:pbr", _WARD_GRID, fix={"distribution": "ggx"}),
+    # Mitsuba 0.6's default Ward variant, the one the examples (and the README's main job) use
+    Pair(
+        "wardclassic-as",
+        "mitsuba06:ward",
+        "mitsuba06:pbr",
+        _WARD_GRID,
+        source_params={"variant": "ward"},
+        fix={"distribution": "as"},
+    ),
+    Pair(
+        "wardclassic-ggx",
+        "mitsuba06:ward",
+        "mitsuba06:pbr",
+        _WARD_GRID,
+        source_params={"variant": "ward"},
+        fix={"distribution": "ggx"},
+    ),
     Pair(
         "blender27ward-ward",
         "blender27:ward",
