@@ -275,7 +275,10 @@ def evaluate(
     comparison = _Comparison(mask, scale)
     # a part whose overrides change nothing (a conductor's specular part) is the full render: reuse it
     same_as_full = {who: get_model(m.model).part_overrides("specular", m.params) == {} for who, m in materials.items()}
-    for k, rot in enumerate(rotations):
+    from tqdm import tqdm  # a real renderer takes seconds per view: say how far it is (on a terminal)
+
+    views = tqdm(rotations, desc="evaluate", unit="rotation", disable=None, leave=False)
+    for k, rot in enumerate(views):
         drawn: dict[tuple[str, str], np.ndarray] = {}
         for part in PARTS:
             for who in materials:
