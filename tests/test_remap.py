@@ -38,6 +38,8 @@ def test_remap_sweeps_learns_converts_and_evaluates_then_reuses_the_transform(pl
     )
     assert not first.cached and first.transform.is_file() and first.outside == 0
     assert first.report.is_file() and 0.0 <= first.mean_dssim < 0.5
+    results = (first.report.parent / "results.json").read_text()
+    assert ".partial-" not in results and json.loads(results)["report"] == "report.html"  # no staging paths
     result = load_map_set(first.maps)
     assert result.model == "mitsuba06:pbr" and set(result.maps) == {"alpha", "F0", "diffuseReflectance"}
     assert result.normal.read_bytes() == load_map_set(plastic).normal.read_bytes()

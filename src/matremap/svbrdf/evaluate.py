@@ -75,7 +75,8 @@ class EvaluationResult:
             "mean_dssim_full": self.mean_full,
             "mean_dssim_specular": self.mean_specular,
             "irradiance_scale": self.irradiance_scale,
-            "report": str(self.report),
+            # beside results.json: a relative name stays true when the folder moves (from staging into OUT)
+            "report": self.report.name,
             "verdict": self.verdict.to_dict(),
         }
 
