@@ -238,17 +238,37 @@ def test_remap_reads_an_outside_texture_when_its_folder_is_allowed(tmp_path, cap
     assert copied, "the allowed texture was not used"
 
 
-def test_allow_path_must_exist_and_applies_to_material_files_only(tmp_path, capsys):
+def test_allow_path_must_exist(tmp_path, capsys):
     src = gltf_image(tmp_path / "asset", "base.png")
     png(tmp_path / "asset" / "base.png")
     out = tmp_path / "out"
     code, err = run(capsys, "remap", str(src), "--to", "mitsuba06:ward", "-o", str(out), "--allow-path", "/nope/x")
     assert code == 2 and "is not a folder" in err and not out.exists()
-    (tmp_path / "maps").mkdir()
-    code, err = run(
-        capsys, "remap", str(tmp_path / "maps"), "--to", "mitsuba06:ward", "-o", str(out), "--allow-path", "/tmp"
-    )
-    assert code == 2 and "--allow-path apply to material files" in err and not out.exists()
+
+
+@pytest.mark.parametrize("command", ["convert", "remap", "evaluate"])
+def test_a_map_set_manifest_naming_a_file_outside_its_folder_is_refused(tmp_path, capsys, command):
+    """A material.json naming ../secret.png (or an absolute path) was read and its image copied into OUT."""
+    png(tmp_path / "elsewhere" / "secret.png")
+    maps = tmp_path / "maps"
+    maps.mkdir()
+    png(maps / "rough.png")
+    doc = {"model": "mitsuba06:ward", "maps": {"diffuseReflectance": "../elsewhere/secret.png", "alpha": "rough.png"}}
+    (maps / "material.json").write_text(json.dumps(doc))
+    out = tmp_path / "out"
+    args = {
+        "convert": ["convert", str(maps), "--to", "mitsuba06:pbr", "--fix", "distribution=ggx", "-o", str(out)],
+        "remap": ["remap", str(maps), "--to", "mitsuba06:pbr", "--fix", "distribution=ggx", "-o", str(out)],
+        "evaluate": ["evaluate", str(maps), str(maps), "-o", str(out), "--rotations", "0", "--size", "16"],
+    }[command]
+    code, err = run(capsys, *args)
+    assert code == 2 and "'../elsewhere/secret.png'" not in err or "points outside" in err
+    assert code == 2 and "points outside" in err and not out.exists(), err
+    (tmp_path / "elsewhere" / "secret.png").unlink()  # the same line whether or not the file exists
+    assert run(capsys, *args)[1] == err
+    png(tmp_path / "elsewhere" / "secret.png")
+    code, err = run(capsys, *args, "--allow-path", str(tmp_path / "elsewhere"))
+    assert "points outside" not in err
 
 
 @pytest.mark.parametrize("name", ["../../escaped.gltf", "../escaped.gltf", "ABSOLUTE"])

@@ -70,6 +70,7 @@ def add_convert(subparsers: Subparsers) -> None:
     p.add_argument("--model", "--from", dest="model", help="source model, when the folder has no manifest")
     p.add_argument("--format", help="output format instead of the inputs' (e.g. exr, png16)")
     p.add_argument("--workers", type=int, default=2, metavar="N")
+    add_allow_path_option(p)
     add_force_option(p, "overwrite existing outputs")
     p.set_defaults(func=cmd_convert)
 
@@ -104,9 +105,8 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
     from matremap.regress.transform import Transform
     from matremap.svbrdf.convert import convert
-    from matremap.svbrdf.textures import load_map_set
 
-    map_set = load_map_set(args.maps, args.model)
+    map_set = user_map_set(args.maps, args.model, args.allow_path)
     if args.transform:
         if args.target:
             raise MatremapError("give either --transform files or --to MODEL (a route through the library), not both")
@@ -153,6 +153,7 @@ def add_evaluate(subparsers: Subparsers) -> None:
     p.add_argument("--size", type=int, default=256, metavar="N", help="render resolution (default 256)")
     p.add_argument("--lights", type=int, default=256, help="directional lights sampled from the map (256)")
     p.add_argument("-o", "--output", required=True, metavar="DIR")
+    add_allow_path_option(p)
     add_force_option(p, "overwrite an existing report")
     _max_error(p)
     p.set_defaults(func=cmd_evaluate)
@@ -181,12 +182,12 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from matremap.core.envmap import resolve
     from matremap.remap import load_arrays
     from matremap.svbrdf.evaluate import evaluate, parse_rotations
-    from matremap.svbrdf.textures import load_map_set
 
     rotations = parse_rotations(args.rotations)
     env = resolve(args.envmap)
     sets = [
-        load_map_set(p, m) for p, m in ((args.source_maps, args.source_model), (args.target_maps, args.target_model))
+        user_map_set(p, m, args.allow_path)
+        for p, m in ((args.source_maps, args.source_model), (args.target_maps, args.target_model))
     ]
     materials = []
     for ms in sets:
@@ -271,8 +272,10 @@ def cmd_remap(args: argparse.Namespace) -> int:
     material_file = is_material_file(args.maps)
     if material_file and args.source:
         raise MatremapError(f"{args.maps} names its own model; drop --from")
-    if not material_file and (args.material is not None or args.write is not None or args.allow_path):
-        raise MatremapError("--material, --write and --allow-path apply to material files (.gltf, .glb, .mtlx, .xml)")
+    if not material_file and (args.material is not None or args.write is not None):
+        raise MatremapError("--material and --write apply to material files (.gltf, .glb, .mtlx, .xml)")
+    if not material_file:
+        user_map_set(args.maps, args.source, args.allow_path)  # its files lie where it may name them
     if args.write is not None:
         output_inside(args.output, args.write)
     thresholds = Thresholds.parse(args.max_error)
@@ -318,6 +321,15 @@ def cmd_remap(args: argparse.Namespace) -> int:
         + f"; {result.verdict.line()}"
     )
     return _verdict(result.verdict)
+
+
+def user_map_set(path: str, model: str | None, allow: list[str] | None) -> Any:
+    """A map set the user gave, its files confined to its folder and the ``--allow-path`` folders."""
+    from matremap.formats import allowed_paths
+    from matremap.svbrdf.textures import load_map_set
+
+    with allowed_paths(allow or []):
+        return load_map_set(path, model, confine=True)
 
 
 def is_batch(paths: list[str]) -> bool:

@@ -438,16 +438,27 @@ def _read_manifest(path: Path) -> dict[str, Any]:
     return obj
 
 
-def load_map_set(path: str | os.PathLike, model: str | None = None, params: Mapping[str, Any] | None = None) -> MapSet:
+def load_map_set(
+    path: str | os.PathLike,
+    model: str | None = None,
+    params: Mapping[str, Any] | None = None,
+    *,
+    confine: bool = False,
+) -> MapSet:
     """Load a map set from a folder (with a manifest, else by file-name conventions) or from a
     manifest file. ``model`` is required for conventions (and must agree with a manifest);
-    ``params`` adds constants/options (a manifest's win)."""
+    ``params`` adds constants/options (a manifest's win). ``confine``: refuse, before looking at them,
+    files the manifest names outside the map set's folder and the folders allowed with ``--allow-path``
+    (the command line confines the map sets a user gives it; map sets matremap unpacks itself name the
+    asset's own textures, already confined by the asset's reader)."""
     p = Path(path)
     if not p.exists():
         raise MatremapError(f"map set {p} not found; give a folder of maps or a material.json")
     manifest = p if p.is_file() else next((p / m for m in MANIFESTS if (p / m).is_file()), None)
     root = p.parent if p.is_file() else p
     found = _bind_manifest(manifest, root, model) if manifest is not None else _bind_conventions(root, model)
+    if confine:
+        _check_confined(found, root)
     spec = get_model(found.model)
     constants = _check_bindings(spec, found.files, {**dict(params or {}), **found.constants}, found.where)
     ms = MapSet(spec.id, found.files, root, normal=found.normal, constants=constants)
@@ -470,6 +481,16 @@ class _Bindings:
     constants: dict[str, Any]
     colorspace: dict[str, str]
     where: str
+
+
+def _check_confined(found: _Bindings, root: Path) -> None:
+    """Refuse a file named outside ``root`` and the allowed folders (the message is the same whether it
+    exists: :func:`matremap.formats.confine.resolve_reference` does not look at the file)."""
+    from matremap.formats.confine import resolve_reference
+
+    named = [*found.files.items(), *([("normal", found.normal)] if found.normal else [])]
+    for name, f in named:
+        resolve_reference(os.path.relpath(f, root), root, f"map set {root}: the {name} map")
 
 
 def _bind_manifest(manifest: Path, root: Path, model: str | None) -> _Bindings:
