@@ -8,12 +8,13 @@ function ``f(params, options, geometry)`` returning f * cos(theta_light) for a b
 
 from __future__ import annotations
 
-from matremap.renderers.embedded.evaluators import blender27, cycles, gltf, mitsuba06, principled
+from matremap.renderers.embedded.evaluators import blender27, cycles, gltf, mitsuba06, mitsuba3, principled
 from matremap.renderers.embedded.geometry import Evaluator
 
 #: every model the embedded renderer draws: model id -> evaluator
 EVALUATORS: dict[str, Evaluator] = {
     **mitsuba06.EVALUATORS,
+    **mitsuba3.EVALUATORS,
     **blender27.EVALUATORS,
     **cycles.EVALUATORS,
     **principled.EVALUATORS,
