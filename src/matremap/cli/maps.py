@@ -278,23 +278,8 @@ def cmd_remap(args: argparse.Namespace) -> int:
         user_map_set(args.maps, args.source, args.allow_path)  # its files lie where it may name them
     if args.write is not None:
         output_inside(args.output, args.write)
-    thresholds = Thresholds.parse(args.max_error)
-    options: dict[str, Any] = {
-        "fix": parse_assignments(args.fix, "--fix"),
-        "strategy": args.strategy,
-        "envmap": args.envmap,
-        "rotations": args.rotations,
-        "resolution": args.size,
-        "lights": args.lights,
-        "workers": args.workers,
-        "cache": Path(args.cache) if args.cache else None,
-        "evaluate": not args.no_evaluate,
-        "force": args.force,
-        "log": lambda m: print(m, file=sys.stderr),
-        "target_renderer": args.target_renderer,
-        "library": not args.sweep,
-        "thresholds": thresholds,
-    }
+    options = remap_options(args)
+    options.update(workers=args.workers, force=args.force, log=lambda m: print(m, file=sys.stderr))
     if material_file:
         with allowed_paths(args.allow_path):
             fres = remap_file(args.maps, args.target, args.output, material=args.material, write=args.write, **options)
@@ -345,13 +330,9 @@ def is_batch(paths: list[str]) -> bool:
     return any(p.is_file() and is_material_file(p) for p in folder.rglob("*"))
 
 
-def _remap_batch(args: argparse.Namespace) -> int:
-    """Every material of every file ``args.maps`` names (:mod:`matremap.batch`)."""
-    from matremap.batch import run_batch
-
-    if args.source or args.write or args.light:
-        raise MatremapError("--from, --write and --light apply to one input; a batch takes each file's own model")
-    options: dict[str, Any] = {
+def remap_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The :class:`matremap.remap.RemapJob` fields ``remap``'s options set (one input or a batch)."""
+    return {
         "fix": parse_assignments(args.fix, "--fix"),
         "strategy": args.strategy,
         "envmap": args.envmap,
@@ -363,8 +344,17 @@ def _remap_batch(args: argparse.Namespace) -> int:
         "target_renderer": args.target_renderer,
         "library": not args.sweep,
         "thresholds": Thresholds.parse(args.max_error),
-        "workers": 1,  # the batch runs items in parallel; each sweeps on one core
     }
+
+
+def _remap_batch(args: argparse.Namespace) -> int:
+    """Every material of every file ``args.maps`` names (:mod:`matremap.batch`)."""
+    from matremap.batch import run_batch
+
+    if args.source or args.write or args.light:
+        raise MatremapError("--from, --write and --light apply to one input; a batch takes each file's own model")
+    options = remap_options(args)
+    options["workers"] = 1  # the batch runs items in parallel; each sweeps on one core
     result = run_batch(
         args.maps,
         args.target,
