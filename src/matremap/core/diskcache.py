@@ -17,6 +17,7 @@ from __future__ import annotations
 import os
 import stat
 import tempfile
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -81,6 +82,23 @@ def trusted(path: Path) -> bool:
     except MatremapError:
         return False
     return True
+
+
+def load_tables(path: Path, spec: str, shapes: Mapping[str, tuple[int, ...]]) -> dict[str, np.ndarray] | None:
+    """The arrays :func:`save_tables` wrote to ``path``, as float arrays of the given ``shapes``; None when
+    the table must be rebuilt: missing, unreadable or corrupt, made for another ``spec``, of another shape,
+    holding NaN or infinity, or in a folder others can write (:func:`trusted`)."""
+    if not trusted(path):  # a table in a folder others can write is not read
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if str(z["spec"]) != spec:
+                return None
+            data = {name: np.array(z[name], dtype=float) for name in shapes}
+    except (OSError, KeyError, ValueError, EOFError):
+        return None
+    ok = all(data[k].shape == shape and np.isfinite(data[k]).all() for k, shape in shapes.items())
+    return data if ok else None
 
 
 def save_tables(path: Path, stale: str, **arrays: np.ndarray) -> None:

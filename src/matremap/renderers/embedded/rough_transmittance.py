@@ -69,7 +69,7 @@ from pathlib import Path
 
 import numpy as np
 
-from matremap.core.diskcache import cache_dir, save_tables, trusted
+from matremap.core.diskcache import cache_dir, load_tables, save_tables
 from matremap.core.optics import fresnel_dielectric
 from matremap.renderers.embedded.microfacet import ALPHA_MIN, g1_beckmann_rational, g1_ggx, phong_exponent
 
@@ -436,20 +436,9 @@ def _build(d: str) -> dict[str, np.ndarray]:
 
 
 def _load(path: Path, d: str) -> dict[str, np.ndarray] | None:
-    if not trusted(path):  # a table in a folder others can write is not read
-        return None
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            if str(z["spec"]) != _spec(d):
-                return None
-            data = {f"{q}_{s}": np.array(z[f"{q}_{s}"], dtype=float) for q in ("T", "Fdr") for s in _SIDES}
-    except (OSError, KeyError, ValueError, EOFError):
-        return None  # missing, unreadable or corrupt: rebuild
     shape = (_N_ALPHA, _N_ETA, _N_MU)
-    for s in _SIDES:
-        if data[f"T_{s}"].shape != shape or data[f"Fdr_{s}"].shape != shape[:2]:
-            return None
-    return data if all(np.isfinite(v).all() for v in data.values()) else None
+    shapes = {**{f"T_{s}": shape for s in _SIDES}, **{f"Fdr_{s}": shape[:2] for s in _SIDES}}
+    return load_tables(path, _spec(d), shapes)
 
 
 def _save(path: Path, d: str, data: dict[str, np.ndarray]) -> None:

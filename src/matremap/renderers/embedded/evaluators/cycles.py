@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from matremap.core.diskcache import cache_dir, save_tables, trusted
+from matremap.core.diskcache import cache_dir, load_tables, save_tables
 from matremap.dialects.cycles import DIFFUSE, GLOSSY
 from matremap.renderers.embedded import microfacet as mf
 
@@ -131,19 +131,9 @@ def _build_albedo_tables() -> tuple[np.ndarray, np.ndarray]:
 
 
 def _load_albedo_tables(path: Path) -> tuple[np.ndarray, np.ndarray] | None:
-    if not trusted(path):  # a table in a folder others can write is not read
-        return None
     n = ALBEDO_NODES
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            if str(z["spec"]) != _albedo_spec():
-                return None
-            e, e_avg = np.array(z["E"], dtype=float), np.array(z["E_avg"], dtype=float)
-    except (OSError, KeyError, ValueError, EOFError):
-        return None
-    if e.shape != (n, n) or e_avg.shape != (n,) or not (np.isfinite(e).all() and np.isfinite(e_avg).all()):
-        return None
-    return e, e_avg
+    data = load_tables(path, _albedo_spec(), {"E": (n, n), "E_avg": (n,)})
+    return None if data is None else (data["E"], data["E_avg"])
 
 
 def _save_albedo_tables(path: Path, e: np.ndarray, e_avg: np.ndarray) -> None:

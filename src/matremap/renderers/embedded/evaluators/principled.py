@@ -54,7 +54,7 @@ from pathlib import Path
 
 import numpy as np
 
-from matremap.core.diskcache import cache_dir, save_tables, trusted
+from matremap.core.diskcache import cache_dir, load_tables, save_tables
 from matremap.core.optics import f0_from_ior, fresnel_dielectric, ior_from_f0
 from matremap.dialects.cycles import PRINCIPLED
 from matremap.renderers.embedded import microfacet as mf
@@ -158,17 +158,9 @@ def _build_ior_s_table() -> np.ndarray:
 
 
 def _load_table(path: Path) -> np.ndarray | None:
-    if not trusted(path):  # a table in a folder others can write is not read
-        return None
     n = SCHLICK_NODES
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            if str(z["spec"]) != _table_spec():
-                return None
-            table = np.array(z["s"], dtype=float)
-    except (OSError, KeyError, ValueError, EOFError):
-        return None
-    return table if table.shape == (n, n, n) and np.isfinite(table).all() else None
+    data = load_tables(path, _table_spec(), {"s": (n, n, n)})
+    return None if data is None else data["s"]
 
 
 @functools.cache
