@@ -132,9 +132,12 @@ def test_a_folder_converts_in_one_run_with_a_summary_and_a_resume(tmp_path, caps
 def test_the_cli_takes_many_paths_and_exits_by_the_worst_item(tmp_path, capsys):
     src = tmp_path / "in"
     mitsuba_scene(src)
-    shutil.copy(CORPUS / "mitsuba-roughplastic" / "roughplastic.xml", src / "plastic.xml")
+    (src / "metal.xml").write_text(  # a second scene: every model here is drawn without Mitsuba installed
+        '<scene version="3.0.0"><bsdf type="roughconductor" id="gold"><string name="material" value="Au"/>'
+        '<float name="alpha" value="0.3"/></bsdf></scene>\n'
+    )
     out = tmp_path / "out"
-    code = main(["remap", str(src / "scene.xml"), str(src / "plastic.xml"), "--to", "mitsuba06:ward", "-o", str(out)])
+    code = main(["remap", str(src / "scene.xml"), str(src / "metal.xml"), "--to", "mitsuba06:ward", "-o", str(out)])
     captured = capsys.readouterr()
     assert code == 0, captured.err
     assert captured.out.strip().splitlines()[-1].startswith("3 material(s): 3 passed")
