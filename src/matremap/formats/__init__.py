@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from matremap.errors import MatremapError
-from matremap.formats.asset import MaterialAsset, TextureRef
+from matremap.formats.asset import CarriedInput, MaterialAsset, TextureRef
 from matremap.formats.confine import Confinement, allowed_paths
 
 #: file suffix -> (format name, module)
@@ -115,6 +115,7 @@ def write_all(
 
 __all__ = [
     "READERS",
+    "CarriedInput",
     "WRITERS",
     "Confinement",
     "MaterialAsset",

@@ -13,7 +13,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -36,7 +36,12 @@ class TextureRef:
     None for all; ``colorspace``: how the file's values are encoded ("srgb" or "linear");
     ``scale``: a factor (scalar or RGB) the format multiplies the texture by (glTF's factors);
     ``extracted``: the file is matremap's own copy in its cache (an image stored inside a .glb or a
-    ``data:`` URI), not a file of the asset, so a map set copies it instead of pointing at it.
+    ``data:`` URI), not a file of the asset, so a map set copies it instead of pointing at it;
+    ``bake``: when the renderer does not sample ``path`` as it is stored (a texture transform, a wrap
+    mode, a node graph or a procedural texture), a callable returning what it sees at each texel of
+    the map, as linear float32 ``[H, W, C]`` before ``channels`` and ``scale`` are applied (see
+    :mod:`matremap.formats.bake`); ``path`` is then the file the values come from (or the document,
+    for a procedural texture), for messages and cache keys.
     """
 
     path: Path
@@ -44,6 +49,7 @@ class TextureRef:
     colorspace: str = "linear"
     scale: float | tuple[float, ...] = 1.0
     extracted: bool = False
+    bake: Callable[[], np.ndarray] | None = field(default=None, compare=False)
 
     @property
     def plain_factor(self) -> bool:
@@ -52,20 +58,45 @@ class TextureRef:
 
     @property
     def plain(self) -> bool:
-        """Whether the file can be used as the map itself (all channels, no factor)."""
-        return self.channels is None and self.plain_factor
+        """Whether the file can be used as the map itself (all channels, no factor, not baked)."""
+        return self.channels is None and self.plain_factor and self.bake is None
+
+
+@dataclass(frozen=True)
+class CarriedInput:
+    """An input no model remaps but a writer can carry into the target file as it is.
+
+    Readers fill :attr:`MaterialAsset.carried` under these keys (linear values, the format's factor
+    already in ``value``):
+
+    * ``"emission"``: ``value`` the emitted radiance colour (RGB, strength multiplied in), ``texture``
+      an RGB texture it multiplies;
+    * ``"occlusion"``: ``texture`` an ambient-occlusion map (its first channel, or ``channels``),
+      ``value`` its strength;
+    * ``"opacity"``: ``value`` the opacity factor in [0, 1], ``texture`` a texture it multiplies (the
+      alpha channel of a base-colour texture names it in ``channels``); ``settings`` ``mode``
+      (``"blend"`` or ``"mask"``) and ``cutoff`` (for mask);
+
+    ``settings`` holds whatever else the format says of it. A writer whose format has the slot writes
+    it; one that has not adds a note naming what was left behind.
+    """
+
+    value: float | tuple[float, ...] | None = None
+    texture: TextureRef | None = None
+    settings: Mapping[str, Any] = field(default_factory=dict)
 
 
 @dataclass
 class MaterialAsset:
     """One material of a file, in a matremap model's terms.
 
-    ``constants``: parameter values and options (model units); a parameter named in ``textures``
-    is textured and its constant, if any, is ignored. ``document`` keeps whatever the reader parsed,
-    for writers that copy the input with a new material. ``notes`` are the reader's decisions and
-    the inputs it skipped, for the user to see. ``lost``: inputs that carry the look and that no
-    matremap model has (a coloured coat, transmission, sheen): such a material is copied onto its own
-    model but not converted to another (see :func:`matremap.remap.remap_file`).
+        ``constants``: parameter values and options (model units); a parameter named in ``textures``
+        is textured and its constant, if any, is ignored. ``document`` keeps whatever the reader parsed,
+        for writers that copy the input with a new material. ``notes`` are the reader's decisions and
+        the inputs it skipped, for the user to see. ``carried``: inputs passed on unchanged to a writer
+    (emission, occlusion, opacity: :class:`CarriedInput`). ``lost``: inputs that carry the look and that no
+        matremap model has (a coloured coat, transmission, sheen): such a material is copied onto its own
+        model but not converted to another (see :func:`matremap.remap.remap_file`).
     """
 
     path: Path
@@ -79,6 +110,7 @@ class MaterialAsset:
     document: Any = None
     index: int = 0
     lost: list[str] = field(default_factory=list)
+    carried: dict[str, CarriedInput] = field(default_factory=dict)
 
     @property
     def textured(self) -> bool:
@@ -130,18 +162,23 @@ class MaterialAsset:
         """(the manifest's file, its colour space, (height, width)) of the map of parameter ``p``:
         the texture's own file when it can be used as it is, else its values (channels picked, the
         factor multiplied in, clipped to the parameter's bounds) written to ``out`` as linear EXR."""
-        from matremap.svbrdf.textures import image_info, read_image, write_image_like
+        from matremap.svbrdf.textures import ImageInfo, image_info, read_image, write_image_like
 
         name = p.name
-        if not ref.path.is_file():
+        if ref.bake is None and not ref.path.is_file():
             raise MatremapError(
                 f"{self.path}: texture {ref.path} for {name} not found; put it beside the file or fix its uri"
             )
-        header = image_info(ref.path, ref.colorspace, colour=False)
-        whole = ref.channels is None or tuple(ref.channels) == tuple(range(header.channels))
-        if ref.plain_factor and whole and (p.channels == 3 or header.channels == 1):
-            return self._kept_file(ref, name, out), ref.colorspace, (header.height, header.width)
-        image, info = read_image(ref.path, ref.colorspace, colour=True)
+        if ref.bake is None:
+            header = image_info(ref.path, ref.colorspace, colour=False)
+            whole = ref.channels is None or tuple(ref.channels) == tuple(range(header.channels))
+            if ref.plain_factor and whole and (p.channels == 3 or header.channels == 1):
+                return self._kept_file(ref, name, out), ref.colorspace, (header.height, header.width)
+            image, _ = read_image(ref.path, ref.colorspace, colour=True)
+        else:
+            image = np.asarray(ref.bake(), dtype=np.float32)
+            if not np.all(np.isfinite(image)):
+                raise MatremapError(f"{self.path}: the texture baked for {name} has non-finite values")
         image = self._picked_channels(p, ref, np.atleast_3d(image))
         scale = np.asarray(ref.scale, dtype=np.float32).reshape(-1)
         if scale.size not in (1, image.shape[-1]):  # an RGB factor on picked channels: their factors
@@ -153,18 +190,23 @@ class MaterialAsset:
             scale = scale[list(ref.channels)]
         image = np.clip((image * scale).astype(np.float32), *p.bounds)
         fname = f"{name.replace(' ', '_')}.exr"
-        write_image_like(
-            out / fname,
-            image,
-            info.like(format="exr", pixel_type="float", channels=image.shape[-1], colorspace="linear"),
-            force=True,
-        )
+        h, w, c = image.shape
+        write_image_like(out / fname, image, ImageInfo("exr", "float", c, w, h, "linear"), force=True)
         return fname, "linear", image.shape[:2]
 
     @staticmethod
     def _kept_file(ref: TextureRef, name: str, out: Path) -> str:
         """The manifest's entry for a texture used as it is: its own file (absolute), or, for a copy
-        matremap extracted into its cache, a copy of it in ``out`` (relative)."""
+        matremap extracted into its cache, a copy of it in ``out`` (relative); a baked one (a
+        transformed normal map) is written to ``out`` as linear EXR of its code values."""
+        if ref.bake is not None:
+            from matremap.svbrdf.textures import ImageInfo, write_image_like
+
+            image = np.atleast_3d(np.asarray(ref.bake(), dtype=np.float32))
+            fname = f"{name.replace(' ', '_')}.exr"
+            h, w, c = image.shape
+            write_image_like(out / fname, image, ImageInfo("exr", "float", c, w, h, "linear"), force=True)
+            return fname
         if not ref.extracted:
             return str(ref.path.resolve())
         fname = f"{name.replace(' ', '_')}{ref.path.suffix.lower()}"

@@ -1,0 +1,159 @@
+"""Textures as a renderer samples them, baked onto a plain map: UV transforms, wrap modes, node graphs.
+
+A map set's maps are images laid on the object's UVs as they are stored (row 0 at the top). Material
+files often sample their images differently -- glTF's ``KHR_texture_transform``, MaterialX's
+``tiledimage`` / ``place2d``, USD's ``UsdTransform2d``, Mitsuba's bitmap ``to_uv`` -- or compute a
+parameter from several images and constants (MaterialX node graphs, Mitsuba's ``checkerboard``). A
+reader that meets such an input gives its :class:`~matremap.formats.asset.TextureRef` a ``bake``
+callable that returns what the renderer would see at each texel of the output map; this module holds
+the pieces those callables share.
+
+Conventions. *Image space* ``(s, t)``: ``s`` from the left edge (0) to the right edge (1), ``t`` from
+the top row (0) to the bottom row (1); a texel's centre is at ``((i + 0.5) / W, (j + 0.5) / H)``. A
+format's own UV space has its origin at the top left (glTF 2.0 §3.8.4.2: "the origin of the UV
+coordinates (0, 0) corresponds to the upper left corner of a texture image"; Mitsuba's bitmap, which
+flips ``v`` on load) or at the bottom left (MaterialX 1.39, "texture coordinate space ... (0,0) at the
+lower left"; USD's ``st``); :class:`UVTransform` says which. Sampling is bilinear between texel
+centres with the wrap modes of OpenGL / glTF samplers (``repeat``, ``mirror``, ``clamp``) or a
+constant ``border`` value outside [0, 1] (MaterialX's ``constant`` address mode, Mitsuba's ``clamp``
+is ``clamp``).
+
+Values are decoded to linear before filtering, as GPUs and offline renderers filter sRGB textures
+(OpenGL 4.6 §8.24: sRGB decode happens before filtering).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from matremap.errors import MatremapError
+
+WRAP_MODES = ("repeat", "mirror", "clamp", "border")
+
+
+def translate(du: float, dv: float) -> np.ndarray:
+    """The 3x3 homogeneous matrix moving UVs by ``(du, dv)``."""
+    return np.array([[1.0, 0.0, du], [0.0, 1.0, dv], [0.0, 0.0, 1.0]])
+
+
+def scale(su: float, sv: float) -> np.ndarray:
+    """The 3x3 homogeneous matrix scaling UVs by ``(su, sv)`` about the origin."""
+    return np.array([[su, 0.0, 0.0], [0.0, sv, 0.0], [0.0, 0.0, 1.0]])
+
+
+def rotate(radians: float) -> np.ndarray:
+    """The 3x3 homogeneous matrix rotating UVs by ``radians`` about the origin (counter-clockwise
+    in a frame whose second axis points the way the format's ``v`` does)."""
+    c, s = np.cos(radians), np.sin(radians)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+@dataclass(frozen=True)
+class UVTransform:
+    """Where a texel of the output map samples its image, in the format's own UV convention.
+
+    ``matrix``: 3x3 homogeneous, taking the UV at which the surface is shaded to the UV at which the
+    image is looked up (compose it from :func:`translate`, :func:`scale`, :func:`rotate` in the
+    order the format's specification gives); ``origin``: where the format's UV (0, 0) lies on the
+    image, ``"top-left"`` or ``"bottom-left"``; ``wrap``: the wrap mode along ``u`` and ``v``."""
+
+    matrix: np.ndarray
+    origin: str = "top-left"
+    wrap: tuple[str, str] = ("repeat", "repeat")
+    border: float = 0.0
+
+    def __post_init__(self) -> None:
+        m = np.asarray(self.matrix, dtype=float)
+        if m.shape != (3, 3) or not np.all(np.isfinite(m)):
+            raise MatremapError("a texture transform must be a finite 3x3 matrix")
+        if self.origin not in ("top-left", "bottom-left"):
+            raise MatremapError(f"texture origin {self.origin!r} is not top-left or bottom-left")
+        for w in self.wrap:
+            if w not in WRAP_MODES:
+                raise MatremapError(f"wrap mode {w!r} is not one of {', '.join(WRAP_MODES)}")
+        object.__setattr__(self, "matrix", m)
+
+    @property
+    def identity(self) -> bool:
+        return bool(np.allclose(self.matrix, np.eye(3), rtol=0, atol=1e-12))
+
+    def lookup(self, s: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The image-space coordinates sampled for output texels at image-space ``(s, t)``."""
+        u, v = (s, t) if self.origin == "top-left" else (s, 1.0 - t)
+        m = self.matrix
+        lu = m[0, 0] * u + m[0, 1] * v + m[0, 2]
+        lv = m[1, 0] * u + m[1, 1] * v + m[1, 2]
+        return (lu, lv) if self.origin == "top-left" else (lu, 1.0 - lv)
+
+
+def texel_grid(size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Image-space ``(s, t)`` of the texel centres of a map of ``size`` = (height, width), each [H, W]."""
+    h, w = size
+    if h < 1 or w < 1:
+        raise MatremapError(f"a baked map needs a positive size, not {h}x{w}")
+    t, s = np.meshgrid((np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")
+    return s, t
+
+
+def _wrap_index(i: np.ndarray, n: int, mode: str) -> tuple[np.ndarray, np.ndarray | None]:
+    """Texel indices ``i`` (any integers) brought into [0, n) by ``mode``; for ``border``, the mask of
+    those that fell outside."""
+    if mode == "repeat":
+        return np.mod(i, n), None
+    if mode == "mirror":
+        period = np.mod(i, 2 * n)
+        return np.where(period < n, period, 2 * n - 1 - period), None
+    inside = (i >= 0) & (i < n)
+    return np.clip(i, 0, n - 1), (None if mode == "clamp" else ~inside)
+
+
+def sample(
+    image: np.ndarray, s: np.ndarray, t: np.ndarray, wrap: tuple[str, str] = ("repeat", "repeat"), border: float = 0.0
+) -> np.ndarray:
+    """Bilinear lookup of ``image`` [H, W, C] at image-space ``(s, t)`` (any equal shapes), with the
+    wrap mode along s and t; returns float32 [..., C]."""
+    img = np.asarray(image, dtype=np.float32)
+    if img.ndim == 2:
+        img = img[..., None]
+    h, w = img.shape[:2]
+    x = np.asarray(s, dtype=np.float64) * w - 0.5
+    y = np.asarray(t, dtype=np.float64) * h - 0.5
+    x0f, y0f = np.floor(x), np.floor(y)
+    fx = (x - x0f).astype(np.float32)[..., None]
+    fy = (y - y0f).astype(np.float32)[..., None]
+    x0, y0 = x0f.astype(np.int64), y0f.astype(np.int64)
+    out = np.zeros((*x.shape, img.shape[-1]), dtype=np.float32)
+    for dy, wy in ((0, 1.0 - fy), (1, fy)):
+        yi, ymask = _wrap_index(y0 + dy, h, wrap[1])
+        for dx, wx in ((0, 1.0 - fx), (1, fx)):
+            xi, xmask = _wrap_index(x0 + dx, w, wrap[0])
+            texel = img[yi, xi]
+            masks = [m for m in (xmask, ymask) if m is not None]
+            if masks:
+                outside = masks[0] if len(masks) == 1 else masks[0] | masks[1]
+                texel = np.where(outside[..., None], np.float32(border), texel)
+            out += wx * wy * texel
+    return out
+
+
+def bake_image(image: np.ndarray, transform: UVTransform, size: tuple[int, int] | None = None) -> np.ndarray:
+    """``image`` [H, W, C] (linear) as seen through ``transform``, on a map of ``size`` (the
+    image's own by default): float32 [h, w, C]."""
+    size = size or (int(image.shape[0]), int(image.shape[1]))
+    s, t = texel_grid(size)
+    ls, lt = transform.lookup(s, t)
+    return sample(image, ls, lt, transform.wrap, transform.border)
+
+
+__all__ = [
+    "WRAP_MODES",
+    "UVTransform",
+    "bake_image",
+    "rotate",
+    "sample",
+    "scale",
+    "texel_grid",
+    "translate",
+]
