@@ -701,7 +701,7 @@ def remap_file(
     :func:`remap_into` (``out/source`` holds its maps as matremap reads them, ``out/maps`` the converted
     ones); a uniform one is fitted directly (copied when it is the identity). ``options`` are the fields
     of :class:`RemapJob`. The result carries the quality gate's verdict."""
-    from matremap.formats import format_for, read_asset, write_asset
+    from matremap.formats import read_asset, write_asset
 
     p = Path(path)
     asset = read_asset(p, material)
@@ -730,8 +730,9 @@ def remap_file(
         else:
             produced = _remap_uniform(asset.material(), job, stage, result, log)
         if name is not None:
-            same_format = format_for(name) in ("gltf", "mtlx") and asset.format == format_for(name)
-            result.file = write_asset(stage / name, produced, source=asset if same_format else None, force=True)
+            # every writer gets the asset: a writer of the same format copies its document, any writer
+            # carries what it has a slot for (asset.carried: emission, occlusion, opacity)
+            result.file = write_asset(stage / name, produced, source=asset, force=True)
         write_text(stage / "verdict.json", json.dumps(result.verdict.to_dict(), indent=1) + "\n")
     if result.remap is not None:
         result.remap = result.remap.moved(stage, out)
