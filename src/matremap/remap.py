@@ -676,11 +676,12 @@ class FileRemapResult:
 
 def default_suffix(target: str, source_format: str) -> str | None:
     """The file a target model's users read: glTF (or MaterialX when the input was one) for
-    ``gltf:*``, Mitsuba 3 XML for ``mitsuba3:*``, a .blend for ``cycles:*``; None otherwise."""
+    ``gltf:*``, Mitsuba 3 XML for ``mitsuba3:*``, a .blend for ``cycles:*``, USD (.usda) for ``usd:*``;
+    None otherwise."""
     family = target.split(":", 1)[0]
     if family == "gltf":
         return {"gltf": None, "mtlx": ".mtlx"}.get(source_format, ".gltf")
-    return {"mitsuba3": ".xml", "cycles": ".blend"}.get(family)
+    return {"mitsuba3": ".xml", "cycles": ".blend", "usd": ".usda"}.get(family)
 
 
 def remap_file(

@@ -1,4 +1,4 @@
-"""Material files in and out: glTF 2.0, MaterialX, Mitsuba 3 XML, Blender .blend.
+"""Material files in and out: glTF 2.0, MaterialX, Mitsuba 3 XML, USD, Blender .blend.
 
 Every reader has the signature ``read(path, material=None, *, confinement=None) -> MaterialAsset``
 (``material`` picks one material of the file by name or index; the first by default; ``confinement``
@@ -32,6 +32,10 @@ READERS = {
     ".glb": ("gltf", "gltf"),
     ".mtlx": ("mtlx", "materialx"),
     ".xml": ("mitsuba-xml", "mitsuba_xml"),
+    ".usda": ("usd", "usd"),
+    ".usdc": ("usd", "usd"),
+    ".usdz": ("usd", "usd"),
+    ".usd": ("usd", "usd"),
 }
 #: format name -> (module, the suffixes it writes)
 WRITERS = {
@@ -39,6 +43,7 @@ WRITERS = {
     "mtlx": ("materialx", (".mtlx",)),
     "mitsuba-xml": ("mitsuba_xml", (".xml",)),
     "blend": ("blend", (".blend",)),
+    "usd": ("usd", (".usda", ".usdc", ".usdz", ".usd")),
 }
 
 
