@@ -53,6 +53,8 @@ CONDUCTOR = ("mitsuba3:roughconductor", GGX)
 PLASTIC = ("mitsuba3:roughplastic", GGX)
 GLTF = ("gltf:metal-rough", [])
 CYCLES = ("cycles:principled", [])
+USD = ("usd:preview_surface", [])
+USD_SUFFIXES = (".usda", ".usdc", ".usdz", ".usd")
 
 
 @dataclass
@@ -70,17 +72,41 @@ class Asset:
 # Targets: the file's own model first (identity), then across formats.
 ASSETS: list[Asset] = [
     Asset(
+        "usd-TextureCoordinateTest",
+        "usd-TextureCoordinateTest/TextureCoordinateTest.usda",
+        "usd:preview_surface",
+        [USD, GLTF, PLASTIC],
+        material="TopRightMat",
+        note="UsdPreviewSurface, sRGB texture x per-channel scale, roughness 1",
+    ),
+    Asset(
+        "usd-TextureTransformTest",
+        "usd-TextureTransformTest/TextureTransformTest.usd",
+        "usd:preview_surface",
+        [USD, GLTF],
+        material="Correct_53142",
+        note="legacy isSRGB=auto texture, grey specular workflow read as metalness (transforms: tests)",
+    ),
+    Asset(
+        "usd-RoughnessTest",
+        "usd-RoughnessTest/RoughnessTest.usdz",
+        "usd:preview_surface",
+        [USD, GLTF],
+        material="Const033",
+        note=".usdz, metallic 0.6, opacity from alpha",
+    ),
+    Asset(
         "BoxTextured",
         "gltf-BoxTextured/BoxTextured.gltf",
         "gltf:metal-rough",
-        [GLTF, PLASTIC, CYCLES],
+        [GLTF, PLASTIC, CYCLES, USD],
         note="textured base colour, metallic 0",
     ),
     Asset(
         "TwoSidedPlane",
         "gltf-TwoSidedPlane/TwoSidedPlane.gltf",
         "gltf:metal-rough",
-        [GLTF, PLASTIC, CYCLES],
+        [GLTF, PLASTIC, CYCLES, USD],
         note="textured base colour, packed metal-rough (metal 0), normal map",
     ),
     Asset(
@@ -325,8 +351,79 @@ def map_stats(out: Path, input_varies: bool | None) -> str:
     return f"{bad}/{len(files)}" if files else ""
 
 
+def usd_colour(path: Path, material: str | int | None = None) -> Any:
+    """Linear diffuseColor (UsdPreviewSurface; base_color of a MaterialX gltf_pbr) of a USD material, read with
+    pxr and OpenImageIO (tests/corpus_checks.read_image; the texture's scale applied), not with matremap."""
+    import tempfile
+    import zipfile
+
+    import numpy as np
+    from pxr import Usd, UsdShade
+
+    stage = Usd.Stage.Open(str(path))
+    mats = [UsdShade.Material(p) for p in stage.Traverse() if p.IsA(UsdShade.Material)]
+    if isinstance(material, str):
+        mats = [m for m in mats if str(m.GetPath()) == material or m.GetPrim().GetName() == material] or mats
+    elif isinstance(material, int):
+        mats = mats[material:]
+    shader, _, _ = mats[0].ComputeSurfaceSource()
+    name = "diffuseColor" if shader.GetIdAttr().Get() == "UsdPreviewSurface" else "base_color"
+    inp = shader.GetInput(name)
+    sources, _ = inp.GetConnectedSources() if inp else ([], [])
+    if not sources:
+        value = inp.Get() if inp else (0.18, 0.18, 0.18)
+        return np.asarray(value, dtype=np.float64)[None, None, :3]
+    tex = UsdShade.Shader(sources[0].source.GetPrim())
+    asset = tex.GetInput("file").Get()
+    cs = tex.GetInput("sourceColorSpace")
+    srgb = {"raw": False, "sRGB": True}.get(cs.Get() if cs else "", None)  # auto: integer files decoded
+    if "[" in asset.resolvedPath:  # a usdz member
+        package, member = asset.resolvedPath.rstrip("]").split("[", 1)
+        with zipfile.ZipFile(package) as z, tempfile.TemporaryDirectory() as tmp:
+            f = Path(tmp) / Path(member).name
+            f.write_bytes(z.read(member))
+            lin = cc.read_image(f, srgb)[..., :3]
+    else:
+        lin = cc.read_image(asset.resolvedPath, srgb)[..., :3]
+    sc = tex.GetInput("scale")
+    return lin * (np.asarray(sc.Get(), dtype=np.float64)[:3] if sc and sc.Get() is not None else 1.0)
+
+
+def usd_loads(path: Path) -> tuple[bool, str]:
+    """Whether pxr opens the stage and every material's surface and textures resolve."""
+    from pxr import Usd, UsdShade
+
+    stage = Usd.Stage.Open(str(path))
+    if stage is None:
+        return False, "Usd.Stage.Open failed"
+    for p in stage.Traverse():
+        if p.IsA(UsdShade.Shader):
+            f = UsdShade.Shader(p).GetInput("file")
+            if f and f.Get() is not None and not f.Get().resolvedPath:
+                return False, f"{p.GetPath()}: texture {f.Get().path} not found"
+    return True, "pxr opens it"
+
+
+def material_colour(path: Path, material: str | int | None = None) -> Any:
+    return usd_colour(path, material) if path.suffix.lower() in USD_SUFFIXES else cc.material_colour(path, material)
+
+
+def find_output_file(out: Path) -> Path | None:
+    for suffix in USD_SUFFIXES:
+        found = sorted(p for p in out.glob(f"*{suffix}") if p.is_file()) if out.is_dir() else []
+        if found:
+            return found[0]
+    return cc.find_output_file(out)
+
+
 def output_colour(path: Path, asset: Asset, n_input_materials: int | None) -> tuple[Any, bool | None, str]:
     """(colour, loads, message) of a written target file."""
+    if path.suffix.lower() in USD_SUFFIXES:
+        ok, msg = usd_loads(path)
+        try:
+            return usd_colour(path, asset.material if asset.own == "usd:preview_surface" else None), ok, msg
+        except Exception as e:  # noqa: BLE001
+            return None, ok, f"{msg}; colour: {type(e).__name__}: {e}"[:200]
     kind = cc.file_kind(path)
     if kind == "blend":
         if not BPY_PYTHON.exists():
@@ -368,7 +465,7 @@ def run_case(asset: Asset, target: str, extra: list[str], out_root: Path, timeou
     )
 
     try:
-        cin = cc.material_colour(src, asset.material)
+        cin = material_colour(src, asset.material)
         s_in = cc.summary(cin)
         c.lum_in, c.hue_in, c.in_varies = s_in["lum"], s_in["hue"], s_in["varies"]
         n_in = len(cc.gltf_load(src)[0].get("materials", [])) if cc.file_kind(src) == "gltf" else None
@@ -376,7 +473,7 @@ def run_case(asset: Asset, target: str, extra: list[str], out_root: Path, timeou
         cin, n_in = None, None
         c.why.append(f"input colour: {e}")
     if c.exit == 0:
-        f = cc.find_output_file(out)
+        f = find_output_file(out)
         c.output = str(f.relative_to(out_root)) if f else None
         if f is None:
             c.loads, c.loads_msg = False, "no target file in OUT"
