@@ -8,7 +8,16 @@ function ``f(params, options, geometry)`` returning f * cos(theta_light) for a b
 
 from __future__ import annotations
 
-from matremap.renderers.embedded.evaluators import blender27, cycles, gltf, mitsuba06, mitsuba3, principled
+from matremap.renderers.embedded.evaluators import (
+    blender27,
+    cycles,
+    gltf,
+    mitsuba06,
+    mitsuba3,
+    openpbr,
+    principled,
+    standard_surface,
+)
 from matremap.renderers.embedded.geometry import Evaluator
 
 #: every model the embedded renderer draws: model id -> evaluator
@@ -19,6 +28,8 @@ EVALUATORS: dict[str, Evaluator] = {
     **cycles.EVALUATORS,
     **principled.EVALUATORS,
     **gltf.EVALUATORS,
+    **openpbr.EVALUATORS,
+    **standard_surface.EVALUATORS,
 }
 
 __all__ = ["EVALUATORS", "Evaluator"]
