@@ -37,6 +37,11 @@ the closure mixture with reflectance() the lobes' directional albedos
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
 from matremap.core.models import ModelSpec, OptionSpec, ParamSpec
 from matremap.core.reflectance import Dielectric
 
@@ -80,8 +85,10 @@ OPEN_PBR_SURFACE = ModelSpec(
         _held("fuzz_roughness", 0.5, doc="fuzz roughness (fibre-like at 0, dusty at 1)"),
     ),
     options=(_MULTISCATTER,),
-    diffuse_only={"base_metalness": 0.0, "specular_weight": 0.0, "coat_weight": 0.0, "fuzz_weight": 0.0},
-    specular_only={"base_color": 0.0},
+    # the diffuse part keeps the fuzz (a sheen is absorbed by a diffuse) and the coat's tint (coat_ior 1: no
+    # coat reflection, no darkening); the specular part is every lobe over a black base, without the fuzz
+    diffuse_only={"base_metalness": 0.0, "specular_weight": 0.0, "coat_ior": 1.0},
+    specular_only={"base_color": 0.0, "fuzz_weight": 0.0},
     specialisations=(
         (
             "base_metalness",
@@ -113,8 +120,8 @@ STANDARD_SURFACE = ModelSpec(
         _held("sheen_roughness", 0.3, doc="roughness of the sheen lobe"),
     ),
     options=(_MULTISCATTER,),
-    diffuse_only={"metalness": 0.0, "specular": 0.0, "coat": 0.0, "sheen": 0.0},
-    specular_only={"base_color": 0.0},
+    diffuse_only={"metalness": 0.0, "specular": 0.0, "coat_IOR": 1.0},  # keeps the sheen and the coat's tint
+    specular_only={"base_color": 0.0, "sheen": 0.0},
     specialisations=(
         (
             "metalness",
@@ -129,3 +136,35 @@ STANDARD_SURFACE = ModelSpec(
 MODELS = (OPEN_PBR_SURFACE, STANDARD_SURFACE)
 #: a white Lambertian surface of albedo 1 in this family (no specular lobe, Lambertian diffuse)
 WHITE_REFERENCE = ("mtlx:standard_surface", {"base": 1.0, "base_color": 1.0, "specular": 0.0})
+
+#: the layers of the layered models (any dialect) a fit can lose: layer -> the parameter weighing it in
+LAYERS: dict[str, dict[str, str]] = {
+    OPEN_PBR_SURFACE.id: {"coat": "coat_weight", "sheen": "fuzz_weight"},
+    STANDARD_SURFACE.id: {"coat": "coat", "sheen": "sheen"},
+    "mitsuba3:principled": {"coat": "clearcoat", "sheen": "sheen"},
+}
+
+
+def absorbed_layers(
+    source_model: str, source_values: Mapping[str, Any], target_model: str, target_values: Mapping[str, Any]
+) -> list[str]:
+    """One note per layer the source has (weight > 0) that the fitted target has not: a target without such
+    a layer, or with it held off (then how to free it). The fit's other parameters absorbed its look."""
+    notes = []
+    target_layers = LAYERS.get(target_model, {})
+    for layer, weight in LAYERS.get(source_model, {}).items():
+        amount = float(np.max(np.asarray(source_values.get(weight, 0.0), dtype=float)))
+        if amount <= 0.0:
+            continue
+        own = target_layers.get(layer)
+        if own is not None and float(np.max(np.asarray(target_values.get(own, 0.0), dtype=float))) > 0.0:
+            continue
+        where = (
+            f"{target_model} has no {layer} layer"
+            if own is None
+            else f"{target_model}'s {own} stayed 0 (free it with --free {own} --strategy simple)"
+        )
+        notes.append(
+            f"the source's {layer} layer ({weight} {amount:.3g}) was absorbed into the other parameters: {where}"
+        )
+    return notes
