@@ -174,10 +174,10 @@ def relative_rmse(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> np.ndarray:
 
 def run_mitsuba(resolution: int, rows: bool) -> int:
     from matremap.renderers.embedded import EmbeddedRenderer
-    from matremap.renderers.mitsuba3 import mitsuba_available
+    from matremap.renderers.mitsuba3.plugins import INSTALL_HINT, mitsuba_installed
 
-    if not mitsuba_available():
-        print("Mitsuba 3 is not installed: pip install -e '.[mitsuba]'", file=sys.stderr)
+    if not mitsuba_installed():
+        print(INSTALL_HINT, file=sys.stderr)
         return 4
     from matremap.renderers.mitsuba3.probe import Mitsuba3Renderer
 
