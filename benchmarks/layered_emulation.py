@@ -7,9 +7,9 @@ against real Mitsuba 3.
 ``fits``: ``matremap.fit`` (two-stage, the probe of ``matremap fit``) from OpenPBR and Standard Surface
 materials (a plastic, a copper, a coated copper, a sheen) onto gltf:metal-rough, cycles:principled,
 mitsuba3:roughconductor / roughplastic and the other MaterialX model, and from plain glTF and Cycles
-materials onto the layered ones; prints the relative RMSE of each fit, its time and the layer the target
-absorbed (the fit's note). Targets drawn by the embedded renderer need nothing; mitsuba3:roughplastic needs
-Mitsuba 3 (skipped without it).
+materials and a clear-coated Mitsuba 3 principled onto the MaterialX ones; prints the relative RMSE of each
+fit, its time and the layer the target absorbed (the fit's note). Targets drawn by the embedded renderer
+need nothing; mitsuba3:roughplastic needs Mitsuba 3 (skipped without it).
 
 ``mitsuba``: the embedded ``mitsuba3:principled`` and Mitsuba 3 draw the probe sphere (lights at 0 and 45
 degrees) for a grid of parameters, in one batch each; the table gives the relative RMSE over sphere pixels
@@ -74,6 +74,10 @@ SOURCES = {
     "gltf plastic": ("gltf:metal-rough", {"baseColor": [0.8, 0.3, 0.1], "metallic": 0.0, "roughness": 0.4}),
     "gltf copper": ("gltf:metal-rough", {"baseColor": COPPER, "metallic": 1.0, "roughness": 0.35}),
     "cycles plastic": ("cycles:principled", {"Base Color": [0.8, 0.3, 0.1], "Roughness": 0.4}),
+    "mitsuba3 principled clearcoat": (
+        "mitsuba3:principled",
+        {"base_color": [0.8, 0.3, 0.1], "roughness": 0.4, "clearcoat": 1.0, "clearcoat_gloss": 0.5},
+    ),
 }
 #: the parameter holding a target metallic, per model
 METALLIC = {
