@@ -19,6 +19,7 @@ from matremap.core.material import Material
 from matremap.core.models import ModelSpec
 from matremap.core.scene import Scene
 from matremap.dialects import get_model
+from matremap.dialects.mtlx import absorbed_layers
 from matremap.renderers.base import Renderer
 from matremap.renderers.registry import get_renderer, resolve_renderer
 
@@ -38,7 +39,7 @@ def fit(
 ) -> core_fit.FitResult:
     """:func:`matremap.core.fit.fit` with renderers given by name, object or None (the model's own)."""
     spec = target_model if isinstance(target_model, ModelSpec) else get_model(target_model)
-    return core_fit.fit(
+    result = core_fit.fit(
         source,
         spec,
         strategy,
@@ -50,6 +51,8 @@ def fit(
         start=start,
         coarse=coarse,
     )
+    result.warnings.extend(absorbed_layers(source.model, source.values, spec.id, result.target.values))
+    return result
 
 
 def comparison_strip(result: core_fit.FitResult, gap: int = 4, labels: bool = True) -> np.ndarray:

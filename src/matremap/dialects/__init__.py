@@ -1,6 +1,7 @@
 """Model specs as data, one module per renderer family, and the registry of every model.
 
-Each module (:mod:`.mitsuba06`, :mod:`.mitsuba3`, :mod:`.blender27`, :mod:`.cycles`, :mod:`.gltf`, :mod:`.usd`) declares
+Each module (:mod:`.mitsuba06`, :mod:`.mitsuba3`, :mod:`.blender27`, :mod:`.cycles`, :mod:`.gltf`,
+:mod:`.mtlx`, :mod:`.usd`) declares
 its models as :class:`~matremap.core.models.ModelSpec` values in ``MODELS`` -- the renderer's own
 parameter names, ranges, roles and options, and how to draw the diffuse-only and specular-only parts --
 and names its white Lambertian reference (``WHITE_REFERENCE``: a model and parameters). Its docstring is
@@ -18,7 +19,7 @@ from types import ModuleType
 from typing import Any
 
 from matremap.core.models import ModelSpec
-from matremap.dialects import blender27, cycles, gltf, mitsuba06, mitsuba3, usd
+from matremap.dialects import blender27, cycles, gltf, mitsuba06, mitsuba3, mtlx, usd
 from matremap.errors import MatremapError
 
 #: the dialect modules, one per renderer family
@@ -29,6 +30,7 @@ FAMILIES: dict[str, ModuleType] = {
     "cycles": cycles,
     "gltf": gltf,
     "usd": usd,
+    "mtlx": mtlx,
 }
 
 

@@ -15,7 +15,8 @@ mitsuba3:roughplastic      distribution {beckmann*, ggx}; nonlinear {false*, tru
                            specular_reflectance (1); diffuse_reflectance (0.5)
 mitsuba3:principled        base_color (0.5); roughness, metallic, specular (0.5), spec_tint,
                            anisotropic, sheen, sheen_tint, clearcoat, clearcoat_gloss,
-                           spec_trans (scalars; those after specular held at 0 in fits)
+                           spec_trans (scalars; those after specular held at 0 in fits);
+                           emulated by the embedded renderer but for spec_trans, anisotropic
 =========================  ====================================================================
 """
 

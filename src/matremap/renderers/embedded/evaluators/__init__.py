@@ -8,7 +8,17 @@ function ``f(params, options, geometry)`` returning f * cos(theta_light) for a b
 
 from __future__ import annotations
 
-from matremap.renderers.embedded.evaluators import blender27, cycles, gltf, mitsuba06, mitsuba3, principled, usd
+from matremap.renderers.embedded.evaluators import (
+    blender27,
+    cycles,
+    gltf,
+    mitsuba06,
+    mitsuba3,
+    openpbr,
+    principled,
+    standard_surface,
+    usd,
+)
 from matremap.renderers.embedded.geometry import Evaluator
 
 #: every model the embedded renderer draws: model id -> evaluator
@@ -20,6 +30,8 @@ EVALUATORS: dict[str, Evaluator] = {
     **principled.EVALUATORS,
     **gltf.EVALUATORS,
     **usd.EVALUATORS,
+    **openpbr.EVALUATORS,
+    **standard_surface.EVALUATORS,
 }
 
 __all__ = ["EVALUATORS", "Evaluator"]

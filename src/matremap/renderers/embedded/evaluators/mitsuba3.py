@@ -9,18 +9,39 @@ the RGB eta and k Mitsuba's rgb variants convert its spectral data to
 (:mod:`matremap.dialects.mitsuba3_conductors`); ``none`` is Mitsuba's perfect mirror (Fresnel 1).
 Checked against the real Mitsuba 3 in tests/test_mitsuba3_emulation.py.
 
-``roughplastic`` and ``principled`` are not emulated: Mitsuba 3's roughplastic diffuse layer differs from
-Mitsuba 0.6's (2-59 % relative RMSE, see :mod:`matremap.dialects.equivalence`); both are drawn by Mitsuba 3.
+``principled``: Mitsuba 3.9 ``src/bsdfs/principled.cpp`` (``Principled::eval``) and ``principledhelpers.h``,
+the reflection of the front side, in Mitsuba's own terms (its ``wi`` is the viewer, ``wo`` the light):
+
+* specular: F D G / (4 cos_view) with GGX D and the separable Smith G of alpha = max(0.001, roughness^2),
+  F = (1 - metallic)(1 - spec_tint) F_dielectric(o.h, eta) + metallic Schlick(base_color)
+  + (1 - metallic) spec_tint Schlick(c_tint ((eta - 1)/(eta + 1))^2), eta = 2/(1 - sqrt(0.08 specular)) - 1,
+  c_tint = base_color / luminance (Rec. 709 weights) or 1; the whole lobe (metal included) is off where
+  F_dielectric is 0, i.e. at specular 0 (a Mitsuba quirk: a metal then has no reflection at all);
+* clearcoat: 0.25 clearcoat Schlick(0.04) D_GTR1 G cos_light with GTR1 alpha = lerp(0.1, 0.001,
+  clearcoat_gloss) and G the product of GGX G1 at alpha 0.25. Unlike Burley's clearcoat, Mitsuba's has no
+  1 / (4 cos_view cos_light) (its G1 is the plain Smith term); followed here;
+* diffuse: (1 - metallic) base_color / pi ((1 - F_v/2)(1 - F_l/2) + R_r (F_l + F_v + F_l F_v (R_r - 1)))
+  cos_light, F_x = (1 - cos_x)^5, R_r = 2 roughness (h.l)^2;
+* sheen: sheen (1 - metallic) (1 - h.l)^5 lerp(1, c_tint, sheen_tint) cos_light (no 1/pi, as Burley's).
+
+Not emulated: spec_trans > 0 (transmission) and anisotropic > 0 (refused with one line; Mitsuba 3 draws
+them with ``--target-renderer mitsuba3``). Checked against the real Mitsuba 3 in
+tests/test_mitsuba3_principled_emulation.py. ``roughplastic`` is not emulated: Mitsuba 3's roughplastic
+diffuse layer differs from Mitsuba 0.6's (2-59 % relative RMSE, see :mod:`matremap.dialects.equivalence`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from matremap.core.optics import fresnel_conductor
-from matremap.dialects.mitsuba3 import DIFFUSE, ROUGHCONDUCTOR
+from matremap.core.optics import fresnel_conductor, fresnel_dielectric
+from matremap.dialects.mitsuba3 import DIFFUSE, PRINCIPLED, ROUGHCONDUCTOR
 from matremap.dialects.mitsuba3_conductors import CONDUCTOR_RGB
+from matremap.errors import MatremapError
 from matremap.renderers.embedded import microfacet as mf
+
+#: Mitsuba's ``luminance`` of linear sRGB (Rec. 709)
+LUMINANCE = np.array([0.212671, 0.715160, 0.072169])
 
 
 def diffuse(p, opt, g):
@@ -44,5 +65,54 @@ def roughconductor(p, opt, g):
     return p["specular_reflectance"] * f * (d * gg / (4.0 * g.cos_o))
 
 
+def schlick_weight(cos) -> np.ndarray:
+    """Mitsuba's ``schlick_weight``: clip(1 - cos, 0, 1)^5."""
+    m = np.clip(1.0 - cos, 0.0, 1.0)
+    return m * m * m * m * m
+
+
+def principled(p, opt, g):
+    """f * cos(theta_light) of Mitsuba 3's ``principled`` (see the module docstring)."""
+    for name in ("spec_trans", "anisotropic"):
+        if np.any(p[name] > 0.0):
+            raise MatremapError(
+                f"mitsuba3:principled with {name} > 0 is not emulated by the embedded renderer; "
+                "draw it with Mitsuba 3 (--target-renderer mitsuba3 / --source-renderer mitsuba3)"
+            )
+    base, rough, metallic = p["base_color"], p["roughness"], p["metallic"]
+    eta = 2.0 / (1.0 - np.sqrt(0.08 * p["specular"])) - 1.0
+    weights = LUMINANCE.reshape((1, 3) + (1,) * (base.ndim - 2))
+    lum = np.sum(base * weights, axis=1, keepdims=True) if base.shape[1] == 3 else base
+    c_tint = np.where(lum > 0.0, base / np.where(lum > 0.0, lum, 1.0), 1.0)
+    alpha = np.maximum(0.001, rough * rough)
+    d = mf.d_mitsuba06("ggx", g, alpha)
+    gg = mf.g_mitsuba06("ggx", g.tan_i, g.tan_o, alpha)
+    w_h = schlick_weight(g.i_dot_h)
+    f_d = fresnel_dielectric(g.i_dot_h, eta)
+    spec_tint = p["spec_tint"]
+    r0 = c_tint * ((eta - 1.0) / (eta + 1.0)) ** 2
+    fresnel = (
+        (1.0 - metallic) * (1.0 - spec_tint) * f_d
+        + metallic * (base + (1.0 - base) * w_h)
+        + (1.0 - metallic) * spec_tint * (r0 + (1.0 - r0) * w_h)
+    )
+    specular = np.where(f_d > 0.0, fresnel * d * gg / (4.0 * g.cos_o), 0.0)
+    # clearcoat: GTR1, Schlick 0.04, G1 at alpha 0.25, no 1/(4 cos cos)
+    a2 = (0.1 + p["clearcoat_gloss"] * (0.001 - 0.1)) ** 2
+    d_cc = (a2 - 1.0) / (np.pi * np.log(a2) * (1.0 + (a2 - 1.0) * g.cos_h**2))
+    d_cc = np.where(d_cc * g.cos_h > 1e-20, d_cc, 0.0)
+    a_cc = np.full(1, 0.25)
+    g_cc = mf.g1_ggx(g.tan_i, a_cc) * mf.g1_ggx(g.tan_o, a_cc)
+    clearcoat = 0.25 * p["clearcoat"] * (0.04 + 0.96 * w_h) * d_cc * g_cc * g.cos_i
+    # diffuse with retro-reflection, and sheen
+    f_l, f_v = schlick_weight(g.cos_i), schlick_weight(g.cos_o)
+    rr = 2.0 * rough * g.i_dot_h**2
+    lobe = (1.0 - 0.5 * f_v) * (1.0 - 0.5 * f_l) + rr * (f_l + f_v + f_l * f_v * (rr - 1.0))
+    diffuse = (1.0 - metallic) * base * g.lambert * lobe
+    c_sheen = 1.0 + p["sheen_tint"] * (c_tint - 1.0)
+    sheen = p["sheen"] * (1.0 - metallic) * w_h * c_sheen * g.cos_i
+    return specular + clearcoat + diffuse + sheen
+
+
 #: model id -> evaluator
-EVALUATORS = {DIFFUSE.id: diffuse, ROUGHCONDUCTOR.id: roughconductor}
+EVALUATORS = {DIFFUSE.id: diffuse, ROUGHCONDUCTOR.id: roughconductor, PRINCIPLED.id: principled}

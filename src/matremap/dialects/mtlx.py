@@ -1,0 +1,170 @@
+"""MaterialX 1.39 surface shaders as models: OpenPBR Surface and Autodesk Standard Surface (opaque part).
+
+Parameters are named exactly as the MaterialX 1.39 inputs of ``ND_open_pbr_surface_surfaceshader`` and
+``ND_standard_surface_surfaceshader``, with their defaults. Only the opaque reflection of each shader is
+modelled: transmission, subsurface, thin film, emission, opacity, anisotropy and normal inputs are not
+parameters here (a file using them is refused by its reader, not silently flattened).
+
+mtlx:open_pbr_surface -- OpenPBR Surface specification v1.1 (ASWF, 2024; text of v1.1.1), reduced to a
+mixture of lobes with albedo scaling as its section "Reduction to a mixture of lobes" derives
+(evaluated by ``renderers/embedded/evaluators/openpbr.py``, which cites each section):
+
+  f = F fuzz + (1 - F E_fuzz) [ C coat + lerp(1, T_coat (1 - E_coat), C) Delta_C base ]
+  base = lerp(specular + (1 - E_specular) base_weight EON(base_color, base_diffuse_roughness),
+              metal, base_metalness)
+
+  with the dielectric specular lobe's IOR ratio from specular_ior (over the coat where coat_weight,
+  with the spec's TIR fix) modulated by specular_weight and its Fresnel tinted by specular_color; the
+  metal's F82-tint Fresnel (F0 = base_weight base_color, tint = specular_color, times specular_weight);
+  the coat's own GGX lobe (coat_roughness, coat_ior), its absorption coat_color along the refracted
+  view and light paths, its darkening Delta_C (coat_darkening) and its roughening of the base lobes; the
+  Zeltner et al. LTC fuzz (fuzz_weight, fuzz_color, fuzz_roughness). Option ``multiscatter``: Turquin's
+  energy compensation on every GGX lobe (default) or none.
+
+mtlx:standard_surface -- Autodesk Standard Surface specification v1.0.1 (``1.0.1.1``), section "Closures":
+the closure mixture with reflectance() the lobes' directional albedos
+(``renderers/embedded/evaluators/standard_surface.py``):
+
+  coat_layer = coat coat_brdf + lerp(1, coat_color (1 - E_coat), coat) specular_mixture
+  specular_mixture = metalness metal_brdf + (1 - metalness) specular_reflection_layer
+  specular_reflection_layer = specular specular_color specular_brdf
+                              + (1 - specular specular_color E_specular) sheen_layer
+  sheen_layer = sheen sheen_color sheen_brdf + (1 - sheen E_sheen) base base_color oren_nayar
+
+  metal_brdf with Gulbrandsen's artist-friendly Fresnel (reflectivity base base_color, edge tint
+  specular specular_color); Estevez-Kulla ("Charlie") sheen; Oren-Nayar diffuse (diffuse_roughness).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from matremap.core.models import ModelSpec, OptionSpec, ParamSpec
+from matremap.core.reflectance import Dielectric
+
+
+def _rgb(name: str, role: str, default: float, fit: bool = True, doc: str = "") -> ParamSpec:
+    return ParamSpec(name, role, (default,) * 3, (0.0, 1.0), channels=3, fit=fit, doc=doc)
+
+
+def _held(
+    name: str, default: float, bounds: tuple[float, float] = (0.0, 1.0), role: str = "other", doc: str = ""
+) -> ParamSpec:
+    return ParamSpec(name, role, default, bounds, fit=False, doc=doc)
+
+
+_MULTISCATTER = OptionSpec(
+    "multiscatter",
+    ("turquin", "none"),
+    "turquin",
+    "energy compensation of the GGX lobes: Turquin 2019 (the lobe times 1 + F0 (1 - E)/E) or none",
+)
+
+OPEN_PBR_SURFACE = ModelSpec(
+    id="mtlx:open_pbr_surface",
+    summary="OpenPBR Surface 1.1 (opaque): EON diffuse, F82-tint metal, coat, fuzz; albedo-scaled layers",
+    params=(
+        _held("base_weight", 1.0, doc="multiplier of base_color (diffuse albedo and metal F0)"),
+        _rgb("base_color", "diffuse", 0.8, doc="diffuse albedo; the metal's F0"),
+        _held("base_metalness", 0.0, role="specular", doc="mix of metal over dielectric (held at 0 in fits)"),
+        _held("base_diffuse_roughness", 0.0, doc="EON (energy-preserving Oren-Nayar) roughness"),
+        _held("specular_weight", 1.0, (0.0, 10.0), doc="multiplies the dielectric F0 (through the IOR) and the metal"),
+        _rgb("specular_color", "other", 1.0, fit=False, doc="tints the dielectric Fresnel; the metal's F82 edge tint"),
+        ParamSpec("specular_roughness", "roughness", 0.3, (0.0, 1.0), doc="alpha = roughness^2"),
+        ParamSpec("specular_ior", "fresnel", 1.5, (1.0, 5.0), doc="IOR of the base dielectric"),
+        _held("coat_weight", 0.0, role="specular", doc="coverage of the coat (held at 0 in fits: --free coat_weight)"),
+        _rgb("coat_color", "other", 1.0, fit=False, doc="square of the coat's normal-incidence transmittance"),
+        _held("coat_roughness", 0.0, doc="roughness of the coat's GGX lobe"),
+        _held("coat_ior", 1.6, (1.0, 5.0), doc="IOR of the coat"),
+        _held("coat_darkening", 1.0, doc="1: the coat darkens the base by internal reflection; 0: compensated"),
+        _held("fuzz_weight", 0.0, doc="coverage of the fuzz (Zeltner et al. LTC sheen)"),
+        _rgb("fuzz_color", "other", 1.0, fit=False, doc="reflection albedo colour of the fuzz"),
+        _held("fuzz_roughness", 0.5, doc="fuzz roughness (fibre-like at 0, dusty at 1)"),
+    ),
+    options=(_MULTISCATTER,),
+    # the diffuse part keeps the fuzz (a sheen is absorbed by a diffuse) and the coat's tint (coat_ior 1: no
+    # coat reflection, no darkening); the specular part is every lobe over a black base, without the fuzz
+    diffuse_only={"base_metalness": 0.0, "specular_weight": 0.0, "coat_ior": 1.0},
+    specular_only={"base_color": 0.0, "fuzz_weight": 0.0},
+    specialisations=(
+        (
+            "base_metalness",
+            1.0,
+            {"roles": {"base_color": "specular", "specular_ior": "other"}, "diffuse_only": None, "specular_only": {}},
+        ),
+    ),
+    reflectance=Dielectric("specular_ior"),
+)
+
+STANDARD_SURFACE = ModelSpec(
+    id="mtlx:standard_surface",
+    summary="Autodesk Standard Surface 1.0.1 (opaque): Oren-Nayar, artist-friendly metal, coat, sheen",
+    params=(
+        _held("base", 1.0, doc="multiplier of base_color"),
+        _rgb("base_color", "diffuse", 0.8, doc="diffuse albedo; the metal's reflectivity at normal incidence"),
+        _held("diffuse_roughness", 0.0, doc="Oren-Nayar roughness"),
+        _held("metalness", 0.0, role="specular", doc="mix of metal over the dielectric layers (held at 0 in fits)"),
+        _held("specular", 1.0, doc="weight of the dielectric specular lobe; multiplier of the metal's edge tint"),
+        _rgb("specular_color", "other", 1.0, fit=False, doc="tint of the dielectric lobe; the metal's edge colour"),
+        ParamSpec("specular_roughness", "roughness", 0.2, (0.0, 1.0), doc="alpha = roughness^2"),
+        ParamSpec("specular_IOR", "fresnel", 1.5, (1.0, 5.0), doc="IOR of the dielectric specular lobe"),
+        _held("coat", 0.0, role="specular", doc="weight of the coat (held at 0 in fits: --free coat)"),
+        _rgb("coat_color", "other", 1.0, fit=False, doc="tint of everything under the coat"),
+        _held("coat_roughness", 0.1, doc="roughness of the coat's GGX lobe (alpha = roughness^2)"),
+        _held("coat_IOR", 1.5, (1.0, 5.0), doc="IOR of the coat"),
+        _held("sheen", 0.0, doc="weight of the sheen lobe"),
+        _rgb("sheen_color", "other", 1.0, fit=False, doc="colour of the sheen lobe"),
+        _held("sheen_roughness", 0.3, doc="roughness of the sheen lobe"),
+    ),
+    options=(_MULTISCATTER,),
+    diffuse_only={"metalness": 0.0, "specular": 0.0, "coat_IOR": 1.0},  # keeps the sheen and the coat's tint
+    specular_only={"base_color": 0.0, "sheen": 0.0},
+    specialisations=(
+        (
+            "metalness",
+            1.0,
+            {"roles": {"base_color": "specular", "specular_IOR": "other"}, "diffuse_only": None, "specular_only": {}},
+        ),
+    ),
+    reflectance=Dielectric("specular_IOR"),
+)
+
+#: the models of this dialect, in the order they are listed
+MODELS = (OPEN_PBR_SURFACE, STANDARD_SURFACE)
+#: a white Lambertian surface of albedo 1 in this family (no specular lobe, Lambertian diffuse)
+WHITE_REFERENCE = ("mtlx:standard_surface", {"base": 1.0, "base_color": 1.0, "specular": 0.0})
+
+#: the layers of the layered models (any dialect) a fit can lose: layer -> the parameter weighing it in
+LAYERS: dict[str, dict[str, str]] = {
+    OPEN_PBR_SURFACE.id: {"coat": "coat_weight", "sheen": "fuzz_weight"},
+    STANDARD_SURFACE.id: {"coat": "coat", "sheen": "sheen"},
+    "mitsuba3:principled": {"coat": "clearcoat", "sheen": "sheen"},
+}
+
+
+def absorbed_layers(
+    source_model: str, source_values: Mapping[str, Any], target_model: str, target_values: Mapping[str, Any]
+) -> list[str]:
+    """One note per layer the source has (weight > 0) that the fitted target has not: a target without such
+    a layer, or with it held off (then how to free it). The fit's other parameters absorbed its look."""
+    notes = []
+    target_layers = LAYERS.get(target_model, {})
+    for layer, weight in LAYERS.get(source_model, {}).items():
+        amount = float(np.max(np.asarray(source_values.get(weight, 0.0), dtype=float)))
+        if amount <= 0.0:
+            continue
+        own = target_layers.get(layer)
+        if own is not None and float(np.max(np.asarray(target_values.get(own, 0.0), dtype=float))) > 0.0:
+            continue
+        where = (
+            f"{target_model} has no {layer} layer"
+            if own is None
+            else f"{target_model}'s {own} stayed 0 (free it with --free {own} --strategy simple)"
+        )
+        notes.append(
+            f"the source's {layer} layer ({weight} {amount:.3g}) was absorbed into the other parameters: {where}"
+        )
+    return notes
