@@ -66,7 +66,7 @@ def test_multiscatter_tables_match_direct_integration_and_are_cached(tmp_path, m
     are read back bilinearly, and come from the disk cache the second time."""
     from matremap.renderers.embedded.evaluators import cycles as dc
 
-    monkeypatch.setenv("MATREMAP_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv("MATREMAP_CACHE", str(tmp_path))
     dc.albedo_tables.cache_clear()
     try:
         e, e_avg = dc.albedo_tables()

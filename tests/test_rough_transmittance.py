@@ -17,7 +17,7 @@ DISTS = ("beckmann", "ggx")
 @pytest.fixture(scope="module", autouse=True)
 def _isolated_cache(tmp_path_factory):
     with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("MATREMAP_CACHE_DIR", str(tmp_path_factory.mktemp("matremap-cache")))
+        mp.setenv("MATREMAP_CACHE", str(tmp_path_factory.mktemp("matremap-cache")))
         rt._tables.cache_clear()
         yield
     rt._tables.cache_clear()
@@ -30,7 +30,7 @@ def small_tables(monkeypatch, tmp_path):
     monkeypatch.setattr(rt, "_N_MU", 12)
     monkeypatch.setattr(rt, "_N_ALPHA", 8)
     monkeypatch.setattr(rt, "_N_ETA", 6)
-    monkeypatch.setenv("MATREMAP_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv("MATREMAP_CACHE", str(tmp_path / "cache"))
     rt._tables.cache_clear()
     yield tmp_path / "cache"
     rt._tables.cache_clear()
@@ -223,7 +223,7 @@ def test_disk_cache_is_written_and_reused(small_tables, monkeypatch):
     monkeypatch.setattr(rt, "_N_MU", 12)
     monkeypatch.setattr(rt, "_N_ALPHA", 8)
     monkeypatch.setattr(rt, "_N_ETA", 6)
-    monkeypatch.setenv("MATREMAP_CACHE_DIR", str(small_tables))
+    monkeypatch.setenv("MATREMAP_CACHE", str(small_tables))
     files[0].write_bytes(b"not a npz file")
     rt._tables.cache_clear()
     np.testing.assert_array_equal(rt.transmittance("phong", *args), first)
@@ -233,7 +233,7 @@ def test_disk_cache_is_written_and_reused(small_tables, monkeypatch):
 def test_unwritable_cache_dir_is_not_fatal(small_tables, monkeypatch, tmp_path):
     blocker = tmp_path / "a-file"
     blocker.write_text("")
-    monkeypatch.setenv("MATREMAP_CACHE_DIR", str(blocker / "cache"))  # cannot be created
+    monkeypatch.setenv("MATREMAP_CACHE", str(blocker / "cache"))  # cannot be created
     t = rt.transmittance("beckmann", np.linspace(0.0, 1.0, 5), 0.2, 1.5)
     assert np.all(np.isfinite(t)) and np.all((t >= 0) & (t <= 1))
     assert blocker.is_file()
