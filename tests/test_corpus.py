@@ -94,3 +94,21 @@ def test_mixed_metal_sample_never_exits_0_with_a_conductor(tmp_path, capsys):
     src = one("gltf-NormalTangentTest/*.gltf")
     code, _ = remap(src, "mitsuba06:roughconductor", tmp_path / "out", "--fix", "distribution=ggx")
     assert code != 0 and "Traceback" not in capsys.readouterr().err
+
+
+def test_a_red_textured_usd_dielectric_onto_gltf_passes_with_its_colour(tmp_path):
+    """usd-wg TextureCoordinateTest (CC-BY 4.0), TopRightMat: an sRGB texture times a red scale, roughness 1.
+    Every texel counted as outside the transform's domain (exit 3): the sweep's black point was dropped for
+    its relative loss and the diffuse domain began at 0.117, above the texture's near-black channels."""
+    pytest.importorskip("pxr")
+    src = one("usd-TextureCoordinateTest/*.usda")
+    code, _ = remap(src, "gltf:metal-rough", tmp_path / "out", "--material", "TopRightMat")
+    assert code == 0
+    out = cc.find_output_file(tmp_path / "out")
+    assert out is not None and cc.file_loads(out)[0]
+    from matremap.svbrdf.textures import read_image
+
+    cin = read_image(tmp_path / "out" / "source" / "diffuseColor.exr", "linear")[0]
+    cout = cc.gltf_base_colour(out)
+    assert cc.hue_difference(cc.mean_hue(cin), cc.mean_hue(cout)) < 5
+    assert 0.95 < cc.mean_luminance(cout) / cc.mean_luminance(cin) < 1.05

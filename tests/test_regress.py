@@ -263,3 +263,24 @@ def test_a_constant_beside_a_map_takes_the_maps_shape():
     assert outside.shape == (8, 6) and out["alpha"].shape in ((8, 6), ())
     one, _ = t.apply({"alpha": np.full((8, 6), 0.2), "specularReflectance": spec_map, "diffuseReflectance": 0.0})
     np.testing.assert_allclose(np.broadcast_to(out["F0"], one["F0"].shape), one["F0"])
+
+
+def test_a_quantity_read_only_by_scales_through_the_origin_answers_down_to_zero():
+    """A black albedo is black in every renderer, so a diffuse mapped by a scale through the origin is exact at
+    0 even when the sweep's darkest point was not used (a red texture's black channels counted as outside)."""
+    from matremap.regress.transform import training_domain
+
+    x = {
+        "diffuse": np.array([[0.12] * 3, [0.8] * 3]),
+        "roughness": np.array([0.2, 0.6]),
+        "reflectance": np.array([[0.05] * 3, [0.5] * 3]),
+    }
+    mappings = {
+        "diffuse": {"kind": "scale", "input": "diffuse", "coef": [1.0, 1.0, 1.0]},
+        "reflectance": {"kind": "k_alpha", "coef": [1.0, 0.0, 0.0, 0.0, 0.0]},
+        "roughness": {"kind": "poly", "input": "roughness", "coef": [0.0, 1.0]},
+    }
+    domain = training_domain(x, mappings)
+    assert domain["diffuse"] == [0.0, 0.8]
+    assert domain["reflectance"] == [0.05, 0.5]  # read by k(alpha): not linear in it alone, kept as trained
+    assert domain["roughness"] == [0.2, 0.6]

@@ -22,7 +22,7 @@ def plastic(tmp_path):
     return dst
 
 
-def test_remap_sweeps_learns_converts_and_evaluates_then_reuses_the_transform(plastic, tmp_path):
+def test_remap_sweeps_learns_converts_and_evaluates_then_reuses_the_transform(plastic, tmp_path, monkeypatch):
     pytest.importorskip("skimage")
     cache = tmp_path / "cache"
     first = remap(
@@ -71,6 +71,24 @@ def test_remap_sweeps_learns_converts_and_evaluates_then_reuses_the_transform(pl
     assert sorted(p.name for p in maps2.iterdir()) == sorted(p.name for p in maps1.iterdir())
     for p in maps1.glob("*.png"):
         assert (maps2 / p.name).read_bytes() == p.read_bytes()
+
+
+    # a transform cached by a matremap whose fitting or learning gave other results is not reused
+    import matremap.core.diskcache as diskcache
+
+    monkeypatch.setattr(diskcache, "RESULTS_REVISION", diskcache.RESULTS_REVISION + 1)
+    third = remap(
+        plastic,
+        None,
+        "mitsuba06:pbr",
+        tmp_path / "out3",
+        fix={"distribution": "as"},
+        cache=cache,
+        log=lambda m: None,
+        library=False,
+        **FAST,
+    )
+    assert not third.cached and third.transform != first.transform
 
 
 def test_cli_remap_convert_evaluate(plastic, tmp_path, capsys):

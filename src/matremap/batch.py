@@ -154,7 +154,7 @@ def plan(files: Sequence[Path], material: str | None = None) -> list[Item]:
 
 def item_key(item: Item, target: str, options: Mapping[str, Any]) -> str:
     """A digest of everything that decides an item's result: the file's bytes and those of every file
-    beside it that it references, the material, the target, the options and matremap's version."""
+    beside it that it references, the material, the target, the options, matremap's version and its results revision."""
     h = hashlib.sha256()
     h.update(item.file.read_bytes())
     text = item.file.read_bytes()
@@ -162,7 +162,15 @@ def item_key(item: Item, target: str, options: Mapping[str, Any]) -> str:
         if ref.name.encode() in text:  # referenced by name (a texture, a .bin buffer, an include)
             h.update(ref.name.encode())
             h.update(ref.read_bytes())
-    doc = {"material": item.material, "target": target, "options": options, "version": __version__}
+    from matremap.core.diskcache import RESULTS_REVISION
+
+    doc = {
+        "material": item.material,
+        "target": target,
+        "options": options,
+        "version": __version__,
+        "revision": RESULTS_REVISION,
+    }
     h.update(json.dumps(doc, sort_keys=True, default=str).encode())
     return h.hexdigest()
 

@@ -312,7 +312,9 @@ def cached_transform(
         source_renderer=renderer_for(spec.id),
         target_renderer=target_renderer,
     )
-    key_doc = {"config": config.to_dict(), "grid": grid_text, "version": __version__}
+    from matremap.core.diskcache import RESULTS_REVISION
+
+    key_doc = {"config": config.to_dict(), "grid": grid_text, "version": __version__, "revision": RESULTS_REVISION}
     key = hashlib.sha256(json.dumps(key_doc, sort_keys=True).encode()).hexdigest()[:16]
     cache.mkdir(parents=True, exist_ok=True)
     path = cache / f"{spec.id.replace(':', '-')}--{config.target.replace(':', '-')}-{key}.json"

@@ -26,6 +26,10 @@ from matremap.errors import MatremapError
 
 #: the environment variables naming the cache folder, first found wins
 CACHE_ENV = ("MATREMAP_CACHE", "MATREMAP_CACHE_DIR")
+#: part of the key of every cached result (swept databases, learned transforms): bump it in the commit that
+#: changes what fitting, sweeping or learning would give for the same inputs, so results cached by an older
+#: matremap are recomputed rather than reused (3: a scale mapping's domain reaches 0)
+RESULTS_REVISION = 3
 
 
 def cache_dir() -> Path:

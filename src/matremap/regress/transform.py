@@ -370,12 +370,26 @@ def learn_transform(
     )
 
 
+def training_domain(x: Mapping[str, np.ndarray], mappings: Mapping[str, Mapping[str, Any]]) -> dict[str, list[float]]:
+    """The range of each source quantity the transform answers for: the training data's, except that a
+    quantity read only by ``scale`` mappings (target = c * source, through the origin: a Lambertian
+    albedo) reaches down to 0, where every such mapping is exact (a black albedo is black in every
+    renderer). Without it, a sweep whose darkest point was dropped (a high *relative* loss where only a
+    dim specular lobe is left to fit) made every texel with one black channel count as outside."""
+    domain = {name: [float(np.min(v)), float(np.max(v))] for name, v in x.items()}
+    for name, rng in domain.items():
+        readers = [m for m in mappings.values() if name in _inputs(m, x)]
+        if readers and all(m["kind"] == "scale" for m in readers) and rng[0] > 0.0:
+            rng[0] = 0.0
+    return domain
+
+
 def transform_from_data(
     data: TrainingData, method: str = "parametric", holdout: float = 0.2, seed: int = 0
 ) -> Transform:
     """Learn a transform from training data in memory (:class:`.data.TrainingData`, e.g. a subset)."""
     mappings = get_learner(method)(data, holdout=holdout, seed=seed)
-    domain = {name: [float(np.min(v)), float(np.max(v))] for name, v in data.x.items()}
+    domain = training_domain(data.x, mappings)
     errors: dict[str, dict[str, float | None]] = {}
     for name, m in mappings.items():
         pred = evaluate_mapping(m, data.x)
