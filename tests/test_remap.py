@@ -72,7 +72,6 @@ def test_remap_sweeps_learns_converts_and_evaluates_then_reuses_the_transform(pl
     for p in maps1.glob("*.png"):
         assert (maps2 / p.name).read_bytes() == p.read_bytes()
 
-
     # a transform cached by a matremap whose fitting or learning gave other results is not reused
     import matremap.core.diskcache as diskcache
 
