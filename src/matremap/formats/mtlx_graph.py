@@ -132,6 +132,7 @@ class Scope:
     graph: Any
     interface: Callable[[str, str], Value] | None
     label: str
+    owner: tuple[Any, Scope] | None = None  # for a library definition: the node it implements, and its scope
 
 
 @dataclass
@@ -359,9 +360,7 @@ class GraphEvaluator:
         out = impl.getOutput(output) if output else (impl.getOutputs() or [None])[0]
         if out is None:
             raise MatremapError(f"{self.path}: node {node.getName()!r} has no output {output!r}")
-        inner = Scope(
-            impl, self._instance(node, scope), f"{node.getCategory()} {node.getName()!r} (its library definition)"
-        )
+        inner = Scope(impl, self._instance(node, scope), "its library definition", (node, scope))
         self._pass.scopes.append(inner)
         return self.port(out, out.getType(), inner)
 
@@ -374,11 +373,18 @@ class GraphEvaluator:
         return interface
 
     def refuse(self, node: Any, scope: Scope, why: str = "") -> NoReturn:
+        """Refuse ``node`` in one line naming the document's node that leads to it (the node itself, or the
+        library node whose definition uses it) and the shader input it feeds."""
+        inner = ""
+        while scope.owner is not None:  # up to the node the document itself holds
+            inner = inner or f"; its library definition uses a {node.getCategory()!r} node"
+            node, scope = scope.owner
         where = "" if scope.graph is self.doc else f" in {scope.label}"
         raise MatremapError(
-            f"{self.path}: {self._feeding} is fed by a {node.getCategory()!r} node ({node.getName()!r}{where})"
-            + (f": {why}" if why else "")
-            + f", which matremap cannot evaluate; it evaluates {', '.join(SUPPORTED)} (bake the graph into an image)"
+            f"{self.path}: {self._feeding} is fed by a {node.getCategory()!r} node ({node.getName()!r}{where}"
+            + inner
+            + f"{': ' + why if why else ''}), which matremap cannot evaluate; it evaluates "
+            + f"{', '.join(SUPPORTED)} (bake the graph into an image)"
         )
 
     # -- structure: plain textures and normal maps ------------------------------------------------
@@ -487,7 +493,7 @@ class GraphEvaluator:
             if not isinstance(impl, mx.NodeGraph):
                 self.refuse(node, scope, "only a normalmap node (or gltf_normalmap) gives a normal map")
             out = impl.getOutput(output) if output else (impl.getOutputs() or [None])[0]
-            inner = Scope(impl, self._instance(node, scope), f"{node.getCategory()}")
+            inner = Scope(impl, self._instance(node, scope), "its library definition", (node, scope))
             self._pass.scopes.append(inner)
             found = self.upstream(out, inner) if out is not None else None
             if plain is not None and found is not None and found[0].getCategory() == "normalmap":
