@@ -463,7 +463,8 @@ class GraphEvaluator:
         if info.channels < n and (channel is None or channel >= info.channels):
             return None  # the spec pads missing channels with 0: not the file as it is
         factor: Any = 1.0
-        if node.getInput("factor") is not None or node.getCategory() == "gltf_image":
+        nd = node.getNodeDef()
+        if nd is not None and nd.getActiveInput("factor") is not None:
             fv = _in(self, node, "factor", scope)
             if fv.ndim != 1:
                 return None

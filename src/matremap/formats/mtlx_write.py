@@ -27,7 +27,6 @@ else a fresh document holding all of them.
 
 from __future__ import annotations
 
-import os
 import re
 from pathlib import Path
 from typing import Any
@@ -263,14 +262,14 @@ def _texture_file(
 def write_all(out: Path, results: list[tuple[str, Any]], source: Path | None, force: bool = False) -> Path:
     """Write every ``(material name, gltf:metal-rough result)`` into one MaterialX document ``out``: a copy
     of MaterialX document ``source`` with those materials' shaders replaced, else a fresh document
-    holding all of them (see the module docstring). Maps go beside it as ``<stem>_<material>_<param>``."""
+    holding all of them (see the module docstring). Maps go beside it as ``<stem>_<material>_<param>``;
+    the files the copy still references (the other materials' textures) are copied into ``<stem>_files/``."""
     out = Path(out)
     check_output(out, force, (".mtlx",))
     if not results:
         raise MatremapError(f"{out}: no material to write")
-    doc = _source_copy(source, out) if source is not None else None
-    with AtomicFiles(force) as files:
-        if doc is None or source is None:
+    with AtomicFiles(force, make_folders=True) as files:
+        if source is None:
             doc = mx().createDocument()
             doc.setColorSpace("lin_rec709")
             for name, result in results:
@@ -280,26 +279,51 @@ def write_all(out: Path, results: list[tuple[str, Any]], source: Path | None, fo
                 mat = doc.addNode("surfacematerial", mname, "material")
                 mat.addInput("surfaceshader", "surfaceshader").setNodeName(shader.getName())
         else:
+            doc = parse_document(source)
+            refs = _file_references(doc, source)
             _replace_shaders(doc, results, out, source, files)
+            _copy_references(doc, refs, source, out, files)
         files.write_text(out, _serialise(doc, out))
     return out
 
 
-def _source_copy(source: Path, out: Path) -> Any:
-    """The source document parsed again, its ``file`` references rewritten relative to ``out``'s folder."""
-    doc = parse_document(source)
-    base = source.resolve().parent
-    inputs = [el for el in doc.traverseTree() if el.getCategory() == "input" and el.getType() == "filename"]
-    resolved = {id(el): el.getResolvedValueString() for el in inputs}
+def _file_references(doc: Any, source: Path) -> dict[str, str]:
+    """Name path -> the text of every ``file`` input of the source document, ``fileprefix`` applied (the
+    attribute is then removed: the copy's references are rewritten relative to its own folder)."""
+    refs = {
+        el.getNamePath(): el.getResolvedValueString()
+        for el in doc.traverseTree()
+        if el.getCategory() == "input" and el.getType() == "filename" and el.getValueString()
+    }
     for el in doc.traverseTree():
         if el.hasAttribute("fileprefix"):
             el.removeAttribute("fileprefix")
-    for el in inputs:
-        text = resolved[id(el)]
-        if text and el.getValueString():
-            target = Path(text) if Path(text).is_absolute() else base / text
-            el.setValueString(Path(os.path.relpath(target.resolve(), out.resolve().parent)).as_posix())
-    return doc
+    return refs
+
+
+def _copy_references(doc: Any, refs: dict[str, str], source: Path, out: Path, files: AtomicFiles) -> None:
+    """Copy the files the copied document still references (confined to the source's folder and the
+    allowed ones) into ``<stem>_files/`` beside ``out`` and point the references there."""
+    from matremap.formats.confine import resolve_reference
+
+    folder = f"{out.stem}_files"
+    placed: dict[Path, str] = {}
+    for el in doc.traverseTree():
+        text = refs.get(el.getNamePath()) if el.getCategory() == "input" else None
+        if not text or el.getValueString() == "" or el.getType() != "filename":
+            continue
+        src = resolve_reference(text, source.resolve().parent, f"{source}: {el.getParent().getName()!r} file")
+        if src not in placed:
+            if not src.is_file():
+                raise MatremapError(f"{source}: texture {text} of {el.getParent().getName()!r} not found at {src}")
+            stem, n = src.stem, 1
+            name = src.name
+            while name in placed.values():
+                n += 1
+                name = f"{stem}_{n}{src.suffix}"
+            placed[src] = name
+            files.copy(src, out.parent / folder / name)
+        el.setValueString(f"{folder}/{placed[src]}")
 
 
 def _replace_shaders(doc: Any, results: list[tuple[str, Any]], out: Path, source: Path, files: AtomicFiles) -> None:
