@@ -52,6 +52,7 @@ GGX = ["--fix", "distribution=ggx"]
 CONDUCTOR = ("mitsuba3:roughconductor", GGX)
 PLASTIC = ("mitsuba3:roughplastic", GGX)
 GLTF = ("gltf:metal-rough", [])
+ALLOW_CORPUS = ["--allow-path", str(CORPUS)]  # documents whose fileprefix reaches a shared Images folder
 CYCLES = ("cycles:principled", [])
 USD = ("usd:preview_surface", [])
 USD_SUFFIXES = (".usda", ".usdc", ".usdz", ".usd")
@@ -67,6 +68,7 @@ class Asset:
     targets: list[tuple[str, list[str]]]
     material: str | None = None
     note: str = ""
+    args: list[str] = field(default_factory=list)  # extra remap arguments (--allow-path for shared image folders)
 
 
 # Targets: the file's own model first (identity), then across formats.
@@ -205,6 +207,59 @@ ASSETS: list[Asset] = [
         "mtlx:standard_surface",  # read through a translation: no identity target
         [GLTF, PLASTIC, CYCLES],
         note="node graph, tiledimage colour + roughness",
+        args=ALLOW_CORPUS,
+    ),
+    Asset(
+        "ss-brick-procedural",
+        "mtlx-standard_surface_brick_procedural/resources/Materials/Examples/StandardSurface/standard_surface_brick_procedural.mtlx",  # noqa: E501
+        "mtlx:standard_surface",
+        [GLTF, PLASTIC, CYCLES],
+        note="procedural graph: tiledimage x 6, mix, HSV, clamp, normalmap",
+        args=ALLOW_CORPUS,
+    ),
+    Asset(
+        "ss-greysphere-place2d",
+        "mtlx-standard_surface_greysphere_calibration/resources/Materials/Examples/StandardSurface/standard_surface_greysphere_calibration.mtlx",  # noqa: E501
+        "mtlx:standard_surface",
+        [GLTF, PLASTIC, CYCLES],
+        note="texcoord -> place2d -> image, clamp",
+        args=ALLOW_CORPUS,
+    ),
+    Asset(
+        "ss-chess-queen-w",
+        "mtlx-standard_surface_chess_set/standard_surface_chess_set.mtlx",
+        "mtlx:standard_surface",
+        [GLTF, CONDUCTOR, PLASTIC, CYCLES],
+        material="M_Queen_W",
+        note="15-material document with a look; textured, normal map",
+    ),
+    Asset(
+        "ss-velvet",
+        "mtlx-standard_surface_velvet/standard_surface_velvet.mtlx",
+        "mtlx:standard_surface",
+        [GLTF],
+        note="specular_IOR 0 with specular 0; sheen 1 (refused: the look is the sheen)",
+    ),
+    Asset(
+        "ss-marble",
+        "mtlx-standard_surface_marble_solid/standard_surface_marble_solid.mtlx",
+        "mtlx:standard_surface",
+        [GLTF],
+        note="3D procedural (fractal3d, position): refused naming the node",
+    ),
+    Asset(
+        "gltfpbr-boombox",
+        "mtlx-gltf_pbr_boombox/gltf_pbr_boombox.mtlx",
+        "gltf:metal-rough",
+        [GLTF, CONDUCTOR, PLASTIC, CYCLES],
+        note="gltf_colorimage, separate3 ORM, gltf_normalmap, emission carried",
+    ),
+    Asset(
+        "openpbr-lightbulb",
+        "mtlx-open_pbr_lightbulb/open_pbr_lightbulb.mtlx",
+        "mtlx:open_pbr_surface",
+        [GLTF, PLASTIC],
+        note="open_pbr emission 10000 nits (carried)",
     ),
     Asset(
         "gltfpbr-gold",
@@ -446,7 +501,7 @@ def run_case(asset: Asset, target: str, extra: list[str], out_root: Path, timeou
     out = out_root / case_name(asset, target)
     if out.exists():
         shutil.rmtree(out)
-    args = [str(MATREMAP), "remap", str(src), "--to", target, "-o", str(out), *extra, *common]
+    args = [str(MATREMAP), "remap", str(src), "--to", target, "-o", str(out), *extra, *asset.args, *common]
     if asset.material is not None:
         args += ["--material", asset.material]
     c = Case(asset.name, target, args[1:], identity=(target == asset.own))

@@ -133,9 +133,12 @@ def test_standard_surface_translation_warns_about_what_it_drops(tmp_path):
     assert a.constants["specular"] == 1.0 and a.constants["specularColor"] == [1.0, 1.0, 1.0]  # library defaults
     warning = a.notes[0]
     assert warning.startswith("WARNING") and "hand-made translation" in warning
-    for dropped in ("coat=0.5", "emission=0.2", "specular_anisotropy=0.4"):
+    for dropped in ("coat=0.5", "specular_anisotropy=0.4"):
         assert dropped in warning
     assert "sheen" not in warning  # at its default
+    # emission is not remapped but carried to the writer: emission_color (default white) x emission
+    assert a.carried["emission"].value == pytest.approx((0.2, 0.2, 0.2)) and a.carried["emission"].texture is None
+    assert any(n.startswith("carried unchanged") and "emission (0.2" in n for n in a.notes)
 
 
 def test_open_pbr_surface(tmp_path):
@@ -185,7 +188,7 @@ def test_material_selection(tmp_path):
             '<?xml version="1.0"?><materialx version="1.39"><UsdPreviewSurface name="U" type="surfaceshader"/>'
             '<surfacematerial name="M" type="material"><input name="surfaceshader" type="surfaceshader" nodename="U"/>'
             "</surfacematerial></materialx>",
-            "'UsdPreviewSurface' shader",
+            "UsdPreviewSurface shader, which needs matremap's usd:preview_surface model",
         ),
         (
             '<?xml version="1.0"?><materialx version="1.39"><image name="i" type="color3">'

@@ -25,7 +25,7 @@ FUZZ = settings(
 CORPUS = Path(__file__).parent / "data" / "corpus"
 GLTF = sorted(CORPUS.glob("gltf-*/*.gltf"))
 GLB = sorted(CORPUS.glob("gltf-*/*.glb"))
-MTLX = sorted(CORPUS.glob("mtlx-*/*.mtlx"))
+MTLX = sorted(CORPUS.glob("mtlx-*/**/*.mtlx"))  # nested: documents kept in their repository layout
 XML = sorted(CORPUS.glob("mitsuba-*/*.xml"))
 
 scalars = (

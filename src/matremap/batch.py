@@ -236,9 +236,12 @@ def run_batch(
         bar.close()
         pool.shutdown(wait=True)
     result = BatchResult([rows[i] for i in items], len(items) - len(todo), out)
+    from matremap.formats import allowed_paths
+
     for f in dict.fromkeys(i.file for i in items):
         mine = [i for i in items if i.file == f]
-        whole = assemble(out, f, [(i, rows[i]) for i in mine], target, log)
+        with allowed_paths(allow):  # the whole file may copy what the input names, as the workers read it
+            whole = assemble(out, f, [(i, rows[i]) for i in mine], target, log)
         for i in mine:
             rows[i].whole_file = whole
     write_summary(result)

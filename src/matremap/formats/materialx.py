@@ -1,14 +1,13 @@
 """MaterialX documents (.mtlx) in and out, as glTF metallic-roughness materials.
 
 Sources: the MaterialX specification v1.39 (https://materialx.org/Specification.html: documents,
-``surfacematerial``, node connections through ``nodename`` / ``nodegraph`` + ``output``, the
-``colorspace`` attribute and its inheritance, which applies to color3/color4 data only), the glTF
-PBR node of MaterialX's data library (``libraries/bxdf/gltf_pbr.mtlx``, inputs ``base_color``,
-``metallic``, ``roughness``, ``ior``, ``specular``, ``specular_color``, ``normal``), the Autodesk
-Standard Surface specification v1.0.1 and the OpenPBR Surface specification v1.1 (their inputs and
-defaults as MaterialX 1.39's library declares them). Parsing and validation use the MaterialX
-Python API (``mx.readFromXmlFile``, ``doc.validate()``); the standard library is loaded only for
-the nodes' default values.
+``surfacematerial``, node connections through ``nodename`` / ``nodegraph`` + ``output`` /
+``interfacename``, ``fileprefix``, the ``colorspace`` attribute and its inheritance, which applies to
+color3/color4 data only), the glTF PBR node of MaterialX's data library (``libraries/bxdf/gltf_pbr.mtlx``),
+the Autodesk Standard Surface specification v1.0.1 and the OpenPBR Surface specification v1.1 (their
+inputs and defaults as MaterialX 1.39's library declares them). Documents are opened and validated
+with MaterialX's standard data libraries (:mod:`matremap.formats.mtlx_document`); node graphs are
+evaluated by :mod:`matremap.formats.mtlx_graph`; writing is :mod:`matremap.formats.mtlx_write`.
 
 **Reading.** :func:`read` picks a ``surfacematerial`` by name or index (the first by default; a
 document without materials falls back to its shader nodes) and reads its surface shader:
@@ -23,61 +22,53 @@ document without materials falls back to its shader nodes) and reads its surface
   -- Standard Surface's metal Fresnel uses specular_color as an edge tint that glTF's has no slot
   for, its dielectric lobe is energy-conserving differently -- so the asset carries a warning note
   that says so and lists every input it does not remap whose value differs from the node's
-  default (coat, sheen, subsurface, transmission, emission, thin film, anisotropy, ...).
+  default (coat, sheen, subsurface, transmission, thin film, anisotropy, ...);
+* ``UsdPreviewSurface`` needs matremap's ``usd:preview_surface`` model; without it the material is
+  refused in one line.
 
-The document is untrusted: before MaterialX's own parser sees it, it is parsed with
-:func:`~matremap.formats.common.parse_untrusted_xml` (entity declarations and nesting past
-:data:`~matremap.formats.common.MAX_XML_DEPTH` refused), ``xi:include`` is refused (MaterialX would
-read the included file from anywhere), and MaterialX then reads the very bytes that were checked.
-Texture files must lie in the document's folder or a folder the user allowed
-(:mod:`matremap.formats.confine`).
+An IOR below 1 (the velvet example's ``specular_IOR = 0``) means, in MaterialX's dielectric Fresnel
+(``libraries/pbrlib/genglsl/lib/mx_microfacet_specular.glsl``, ``mx_fresnel_dielectric``: total
+reflection whenever ior^2 + cos^2 - 1 < 0), a Fresnel of 1 at every angle: a mirror. Where the
+specular lobe is off anyway (specular weight 0, a black specular colour, or a full metal) it has no
+effect and ``ior`` is read as the default 1.5 with a note; otherwise the material is refused, since
+glTF's dielectric cannot express it.
 
-Texture inputs are ``image``, ``tiledimage`` and ``gltf_image`` nodes (in the document or a
-nodegraph), optionally behind an ``extract`` or ``separate3`` node that picks one channel (a packed
-occlusion-roughness-metallic map); ``gltf_image``'s ``factor`` becomes the texture's scale. A
-texture's file is relative to the document (``fileprefix`` applied) and its colour space is the
-``colorspace`` attribute in effect on the ``file`` input: ``srgb_texture`` -> sRGB,
-``lin_rec709``/``lin_srgb``/``raw``/none -> linear; any other is refused. Float-typed images are
-data and linear whatever the attribute says (the spec transforms colour types only). A ``normal``
-input fed by a ``normalmap`` (or ``gltf_normalmap``) node gives the asset's normal map.
+Every input of a shader may be driven by a node graph: a plain image (``image``, ``tiledimage``,
+``gltf_image`` at UV0 with no transform, optionally behind ``extract``/``separate`` picking a channel;
+``gltf_image``'s ``factor`` becomes the texture's scale) is used as the file it is; anything else the
+evaluator handles is baked onto a map at the size the graph asks for (see
+:mod:`matremap.formats.mtlx_graph`: tiling, place2d, arithmetic, mixing, channels, colour
+conversions); the textures of one material are brought to one size. A ``normal`` input (OpenPBR:
+``geometry_normal``) fed by ``normalmap`` / ``gltf_normalmap`` gives the asset's normal map.
 
-**Writing.** :func:`write` writes a ``gltf:metal-rough`` Material or MapSet as a document with one
-``gltf_pbr`` node and a ``surfacematerial``; maps are copied beside the document as
-``<stem>_<param>.png|.exr`` and read by ``image`` nodes (colour maps tagged ``srgb_texture`` or
-``lin_rec709``; data maps as float images), a normal map through ``image`` -> ``normalmap``. Values
-are written as Python's shortest round-tripping decimals, so reading the file back gives the very
-same numbers.
+``carried`` (inputs passed to the writer unchanged): ``emission`` = the emission colour x its weight
+(``emission_color x emission``, ``emissive x emissive_strength``, OpenPBR's ``emission_color x
+emission_luminance``), in the units MaterialX's own library gives its ``uniform_edf`` (the product as
+it is: linear radiance in the scene's units, OpenPBR's nits entering 1:1); ``opacity`` = ``alpha``
+(gltf_pbr, when ``alpha_mode`` is not opaque, with its mode and cutoff), ``opacity`` (Standard Surface,
+a colour: the mean of its channels, noted when they differ) or ``geometry_opacity`` (OpenPBR), mode
+blend; ``occlusion`` = gltf_pbr's ``occlusion``.
 """
 
 from __future__ import annotations
 
-import re
-from dataclasses import dataclass
-from functools import lru_cache
+from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from matremap.core.atomic import AtomicFiles
-from matremap.core.imageio import check_output
 from matremap.core.material import Material
 from matremap.dialects import get_model
 from matremap.errors import MatremapError
-from matremap.formats.asset import MaterialAsset, TextureRef
-from matremap.formats.common import (
-    check_map_destinations,
-    map_destination,
-    parse_untrusted_xml,
-    pick_material,
-    place_map,
-    result_parts,
-)
+from matremap.formats.asset import CarriedInput, MaterialAsset, TextureRef
+from matremap.formats.common import pick_material
 from matremap.formats.confine import Confinement, resolve_reference
-
-FORMAT = "mtlx"
-MODEL = "gltf:metal-rough"
-INSTALL_HINT = "reading and writing MaterialX needs its Python package: pip install 'matremap[materialx]'"
+from matremap.formats.mtlx_document import EMISSION, FORMAT, MODEL, OPACITY, valid_document
+from matremap.formats.mtlx_document import mx as materialx_module
+from matremap.formats.mtlx_graph import Analysis, GraphEvaluator, PlainImage, parse_value
+from matremap.formats.mtlx_write import build_document, write, write_all
 
 #: shader node category -> {its input: gltf:metal-rough parameter}; the base colour weight is applied apart
 SHADERS: dict[str, dict[str, str]] = {
@@ -107,39 +98,21 @@ SHADERS: dict[str, dict[str, str]] = {
     },
 }
 #: the input that multiplies base_color
-_WEIGHT = {"standard_surface": "base", "open_pbr_surface": "base_weight"}
-#: inputs that are not part of the appearance on the probe (geometry and connections handled apart)
-_NOT_LISTED = {"normal", "tangent", "geometry_normal", "geometry_tangent"}
-_IMAGES = ("image", "tiledimage", "gltf_image")
-_SRGB = ("srgb_texture",)
-_LINEAR = ("", "lin_rec709", "lin_srgb", "raw", "none", "linear")
-
-
-def _mx():
-    try:
-        import MaterialX as mx
-    except ImportError as e:
-        raise MatremapError(f"{INSTALL_HINT} ({e})") from None
-    return mx
-
-
-@lru_cache(maxsize=1)
-def _library():
-    """MaterialX's standard data library (node definitions and their defaults)."""
-    mx = _mx()
-    lib = mx.createDocument()
-    mx.loadLibraries(mx.getDefaultDataLibraryFolders(), mx.getDefaultDataSearchPath(), lib)
-    return lib
-
-
-def _parse(text: str, where: str, channels: int) -> list[float]:
-    try:
-        nums = [float(x) for x in text.replace(",", " ").split()]
-    except ValueError:
-        raise MatremapError(f"{where}: value {text!r} is not a number") from None
-    if len(nums) not in (1, channels) or not nums:
-        raise MatremapError(f"{where}: value {text!r} should have {channels} component(s)")
-    return nums
+WEIGHT = {"standard_surface": "base", "open_pbr_surface": "base_weight"}
+#: the shader input carrying the (tangent-space, through normalmap) normal
+NORMAL = {"gltf_pbr": "normal", "standard_surface": "normal", "open_pbr_surface": "geometry_normal"}
+#: inputs that are not part of the appearance on the probe, or are read apart (normal, carried inputs)
+_NOT_LISTED = {
+    "normal",
+    "tangent",
+    "geometry_normal",
+    "geometry_tangent",
+    "occlusion",
+    "alpha_mode",
+    "alpha_cutoff",
+    *(n for pair in EMISSION.values() for n in pair),
+    *OPACITY.values(),
+}
 
 
 @dataclass
@@ -155,122 +128,263 @@ class _Ctx:
         return resolve_reference(rel, self.path.resolve().parent, f"{self.path}: {what}", self.confinement)
 
 
-def _defaults(node) -> dict[str, str]:
-    """Input name -> default value string of a shader node, from its definition."""
-    nd = node.getNodeDef()
-    if nd is None:
-        lib = _library()
-        cands = [d for d in lib.getMatchingNodeDefs(node.getCategory()) if d.getType() == node.getType()]
-        nd = cands[0] if cands else None
-    if nd is None:
-        return {}
-    return {i.getName(): i.getValueString() for i in nd.getActiveInputs()}
+@dataclass
+class _Field:
+    """One shader input (or a product of inputs) as read: a uniform ``value``, or a texture -- ``root``
+    evaluates it in the evaluator's pass, ``analysis`` is what the probe found, ``plain`` the image file
+    when it is used as it is -- times a uniform ``scale``."""
+
+    name: str
+    value: np.ndarray | None = None
+    root: Any = None
+    analysis: Analysis | None = None
+    plain: PlainImage | None = None
+    scale: np.ndarray = field(default_factory=lambda: np.ones(1))
+
+    @property
+    def textured(self) -> bool:
+        return self.value is None
+
+    @property
+    def size(self) -> tuple[int, int]:
+        if self.plain is not None:
+            return self.plain.size
+        return self.analysis.size if self.analysis is not None else (1, 1)
+
+    def evaluate(self) -> np.ndarray:
+        """Its values in the evaluator's current pass (uniform [C] or [H, W, C]), scale included."""
+        return (self.value if self.value is not None else np.asarray(self.root())) * self.scale
+
+    def times(self, other: _Field) -> _Field:
+        """The product of two inputs (base_color x base, emission_color x emission)."""
+        if other.value is not None and self.value is not None:
+            return _Field(self.name, self.value * other.value)
+        if other.value is not None or self.value is not None:
+            tex, uni = (self, other) if other.value is not None else (other, self)
+            assert uni.value is not None
+            return _Field(tex.name, None, tex.root, tex.analysis, tex.plain, tex.scale * uni.value)
+        a, b = self.analysis, other.analysis
+        assert a is not None and b is not None
+        size = (max(a.size[0], b.size[0]), max(a.size[1], b.size[1]))
+        joint = Analysis(None, [*a.images, *b.images], size, a.capped or b.capped)
+        return _Field(f"{self.name} x {other.name}", None, lambda: self.evaluate() * other.evaluate(), joint)
 
 
-def _texture(ctx: _Ctx, node, param: str, colour: bool) -> TextureRef:
-    """A TextureRef of an image node (behind an optional channel picker)."""
-    channels: tuple[int, ...] | None = None
-    if node.getCategory() == "extract":
-        src, idx = node.getInput("in"), node.getInput("index")
-        up = src.getConnectedNode() if src is not None else None
-        if up is None:
-            raise MatremapError(f"{ctx.path}: extract node {node.getName()!r} for {param} is not fed by an image")
-        channels = (int(float(idx.getValueString())) if idx is not None else 0,)
-        node = up
-    if node.getCategory() not in _IMAGES:
-        raise MatremapError(
-            f"{ctx.path}: {param} is driven by a {node.getCategory()!r} node; matremap reads "
-            f"{', '.join(_IMAGES)} textures (bake the graph into an image)"
-        )
-    f = node.getInput("file")
-    if f is None or not f.getResolvedValueString():
-        raise MatremapError(f"{ctx.path}: image node {node.getName()!r} for {param} has no file; set its file input")
-    rel = Path(f.getResolvedValueString())
-    path = ctx.file(f.getResolvedValueString(), f"image node {node.getName()!r} file")
-    if not path.is_file():
-        raise MatremapError(
-            f"{ctx.path}: texture {rel} for {param} not found at {path}; put it beside the "
-            f"document or fix its file input"
-        )
-    cs = (f.getActiveColorSpace() or "").strip()
-    if cs.lower() in _SRGB:
-        colorspace = "srgb"
-    elif cs.lower() in _LINEAR:
-        colorspace = "linear"
-    else:
-        raise MatremapError(
-            f"{ctx.path}: texture {rel.name} has colour space {cs!r}; matremap reads srgb_texture "
-            f"and lin_rec709 (raw) textures, convert it to one of these"
-        )
-    if colorspace == "srgb" and (not colour or node.getType() in ("float", "vector2", "vector3")):
-        ctx.notes.append(
-            f"{rel.name}: {cs} ignored for {param}, a {node.getType()} texture (MaterialX transforms colour data only)"
-        )
-        colorspace = "linear"
-    scale: float | tuple[float, ...] = 1.0
-    factor = node.getInput("factor")
-    if factor is not None and factor.getValueString():
-        nums = _parse(factor.getValueString(), f"{ctx.path}: {node.getName()}.factor", 3)
-        scale = nums[0] if len(nums) == 1 else tuple(nums)
-        if channels is not None and len(nums) > 1:  # extract after the factor: the picked channel's factor
-            if channels[0] >= len(nums):
-                raise MatremapError(
-                    f"{ctx.path}: extract index {channels[0]} for {param} is beyond the {node.getType()} image"
-                )
-            scale = nums[channels[0]]
-    for unsupported in ("texcoord", "scale", "rotate", "offset", "uvtiling", "uvoffset"):
-        i = node.getInput(unsupported)
-        if (
-            i is not None
-            and (i.getValueString() or i.getConnectedNode() is not None)
-            and not (node.getCategory() == "tiledimage" and i.getValueString() in ("1.0, 1.0", "1, 1", "0.0, 0.0"))
-        ):
-            ctx.notes.append(
-                f"{rel.name}: {unsupported} on {node.getName()!r} ignored (maps are read on the sphere's own UVs)"
+class _ShaderReader:
+    """The inputs of one shader node: values (or the node definition's defaults) and the graphs
+    feeding them, as :class:`_Field` s, and the textures they become."""
+
+    def __init__(self, ctx: _Ctx, shader: Any, doc: Any) -> None:
+        self.ctx, self.shader = ctx, shader
+        self.category = shader.getCategory()
+        self.ev = GraphEvaluator(doc, ctx.path, ctx.file, ctx.notes)
+
+    def field(self, name: str, typ: str) -> _Field:
+        """Input ``name`` of the shader, of MaterialX type ``typ``."""
+        inp = self.shader.getInput(name)
+        where = f"{self.ctx.path}: {self.shader.getName()}.{name}"
+        if inp is None or not (inp.getAttribute("nodename") or inp.getAttribute("nodegraph")):
+            if inp is not None and inp.getAttribute("interfacename"):
+                raise MatremapError(f"{where} names an interface input outside a node graph; connect it to a node")
+            text = inp.getValueString() if inp is not None and inp.getValueString() else self._default(name)
+            return _Field(name, np.asarray(parse_value(text, typ, where), dtype=np.float64) if text else np.zeros(1))
+        analysis = self.ev.analyse(lambda: self.ev.port(inp, typ, self.ev.doc_scope), name)
+        if analysis.constant is not None:
+            self.ctx.notes.append(f"{name}: its node graph is the same everywhere; read as its value")
+            return _Field(name, analysis.constant)
+        plain = self.ev.plain_image(inp, name)
+        return _Field(name, None, lambda: self.ev.port(inp, typ, self.ev.doc_scope), analysis, plain)
+
+    def _default(self, name: str) -> str:
+        nd = self.shader.getNodeDef()
+        ndi = nd.getActiveInput(name) if nd is not None else None
+        return ndi.getValueString() if ndi is not None else ""
+
+    def params(self) -> dict[str, _Field]:
+        """gltf:metal-rough parameter -> its field (base colour x its weight)."""
+        spec = get_model(MODEL)
+        out = {}
+        for input_name, param in SHADERS[self.category].items():
+            out[param] = self.field(input_name, "color3" if spec.param(param).channels == 3 else "float")
+        if self.category in WEIGHT:
+            out["baseColor"] = out["baseColor"].times(self.field(WEIGHT[self.category], "float"))
+        return out
+
+    def textures(self, fields: dict[str, _Field]) -> dict[str, TextureRef]:
+        """The textured fields as TextureRefs of one size (the largest any of them asks for)."""
+        textured = {k: f for k, f in fields.items() if f.textured}
+        if not textured:
+            return {}
+        size = (max(f.size[0] for f in textured.values()), max(f.size[1] for f in textured.values()))
+        return {k: self.texture(f, size) for k, f in textured.items()}
+
+    def texture(self, f: _Field, size: tuple[int, int]) -> TextureRef:
+        """A TextureRef of a textured field at ``size``: its image file when it is used as it is at that
+        size, else a baked graph (with a note saying what was evaluated and at what size)."""
+        scale = tuple(float(x) for x in f.scale) if f.scale.size > 1 else float(f.scale[0])
+        if f.plain is not None and f.plain.size == size:
+            factor = np.asarray(f.plain.factor, dtype=np.float64) * f.scale
+            fs = tuple(float(x) for x in factor) if factor.size > 1 else float(factor.reshape(-1)[0])
+            return TextureRef(f.plain.file.path.resolve(), f.plain.channels, f.plain.colorspace, fs)
+        a = f.analysis
+        assert a is not None
+        self.ctx.notes.append(_bake_note(f, size))
+        path = a.images[0].path.resolve() if a.images else self.ctx.path.resolve()
+        return TextureRef(path, None, "linear", scale, bake=partial(self.ev.bake, f.root, f.name, size))
+
+    def normal(self) -> TextureRef | None:
+        """The normal map fed to the shader's normal input through ``normalmap`` / ``gltf_normalmap``."""
+        inp = self.shader.getInput(NORMAL[self.category])
+        if inp is None:
+            return None
+        found = self.ev.normal_map(inp, inp.getName())
+        if found is None:
+            return None
+        root, plain = found
+        if plain is not None and plain.channels is None:
+            self.ctx.notes.append(
+                f"normal map {plain.file.path.name} (through a normalmap node) is the asset's normal map"
             )
-    return TextureRef(path.resolve(), channels, colorspace, scale)
+            return TextureRef(plain.file.path.resolve())
+        a = self.ev.analyse(root, inp.getName())
+        if a.constant is not None:
+            self.ctx.notes.append(f"{inp.getName()}: a uniform normal map ignored")
+            return None
+        f = _Field(inp.getName(), None, root, a)
+        self.ctx.notes.append(_bake_note(f, a.size))
+        path = a.images[0].path.resolve() if a.images else self.ctx.path.resolve()
+        return TextureRef(path, bake=partial(self.ev.bake, root, inp.getName(), a.size))
+
+    def carried(self) -> dict[str, CarriedInput]:
+        """Emission, opacity and occlusion, for writers to carry over (see the module docstring)."""
+        out: dict[str, CarriedInput] = {}
+        colour, weight = EMISSION[self.category]
+        emission = self.field(colour, "color3").times(self.field(weight, "float"))
+        if emission.textured or np.any(emission.value != 0):
+            out["emission"] = self._carried(emission, 3)
+        opacity = self._opacity()
+        if opacity is not None:
+            out["opacity"] = opacity
+        if self.category == "gltf_pbr":
+            occ = self.field("occlusion", "float")
+            if occ.textured:
+                out["occlusion"] = self._carried(occ, 1)
+        if out:
+            what = ", ".join(f"{k} ({_carried_words(c)})" for k, c in out.items())
+            self.ctx.notes.append(f"carried unchanged to the written file (not remapped): {what}")
+        return out
+
+    def _opacity(self) -> CarriedInput | None:
+        name = OPACITY[self.category]
+        mode = "blend"
+        settings: dict[str, Any] = {"mode": mode}
+        if self.category == "gltf_pbr":
+            alpha_mode = int(self.field("alpha_mode", "integer").value[0])  # type: ignore[index]
+            if alpha_mode == 0:
+                return None  # OPAQUE: alpha is ignored (glTF 2.0 §3.9.4)
+            if alpha_mode == 1:
+                cutoff = float(self.field("alpha_cutoff", "float").value[0])  # type: ignore[index]
+                settings = {"mode": "mask", "cutoff": cutoff}
+        typ = "color3" if self.category == "standard_surface" else "float"
+        f = self.field(name, typ)
+        if typ == "color3":
+            if f.value is not None and np.ptp(f.value) > 1e-6:
+                self.ctx.notes.append(f"{name}={f.value.tolist()} is coloured; its mean is carried as the opacity")
+            f = _mean_channels(f)
+        if not f.textured and float(np.asarray(f.value).reshape(-1)[0]) >= 1.0:
+            return None
+        return self._carried(f, 1, settings)
+
+    def _carried(self, f: _Field, channels: int, settings: dict[str, Any] | None = None) -> CarriedInput:
+        settings = settings or {}
+        if not f.textured:
+            v = np.broadcast_to(np.asarray(f.value, dtype=np.float64), (channels,))
+            return CarriedInput(tuple(float(x) for x in v) if channels > 1 else float(v[0]), None, settings)
+        value = np.broadcast_to(f.scale, (channels,))
+        bare = _Field(f.name, None, f.root, f.analysis, f.plain)
+        ref = self.texture(bare, bare.size)
+        return CarriedInput(tuple(float(x) for x in value) if channels > 1 else float(value[0]), ref, settings)
+
+    def skipped(self) -> list[str]:
+        """The inputs not remapped that are textured or differ from their defaults, as ``name=value``."""
+        out = []
+        table, weight = SHADERS[self.category], WEIGHT.get(self.category)
+        for inp in self.shader.getInputs():
+            n = inp.getName()
+            if n in table or n == weight or n in _NOT_LISTED:
+                continue
+            if inp.getAttribute("nodename") or inp.getAttribute("nodegraph"):
+                out.append(f"{n} (textured)")
+                continue
+            text, default = inp.getValueString(), self._default(n)
+            if default and _same(text, default):
+                continue
+            out.append(f"{n}={text}")
+        return out
 
 
-def _connected(ctx: _Ctx, inp, param: str, colour: bool) -> TextureRef | None:
-    """The texture feeding input ``inp``, or None when it holds a value."""
-    node = inp.getConnectedNode()
-    if node is None:
-        if inp.getNodeName() or inp.getNodeGraphString() or inp.getInterfaceName():
-            raise MatremapError(
-                f"{ctx.path}: input {inp.getName()} names a node or graph that does not exist; fix the connection"
-            )
-        return None
-    channel: int | None = None
-    output = inp.getConnectedOutput()
-    out_name = inp.getOutputString() or (output.getOutputString() if output is not None else "")
-    if node.getCategory() == "separate3":
-        if out_name not in ("outr", "outg", "outb", "outx", "outy", "outz"):
-            raise MatremapError(f"{ctx.path}: {param} takes separate3 output {out_name!r}; use outr, outg or outb")
-        channel = "rgb".index(out_name[-1]) if out_name[-1] in "rgb" else "xyz".index(out_name[-1])
-        src = node.getInput("in")
-        up = src.getConnectedNode() if src is not None else None
-        if up is None:
-            raise MatremapError(f"{ctx.path}: separate3 node {node.getName()!r} is not fed by an image")
-        ref = _texture(ctx, up, param, colour)
-        return TextureRef(ref.path, (channel,), ref.colorspace, ref.scale)
-    return _texture(ctx, node, param, colour)
+def _carried_words(c: CarriedInput) -> str:
+    v = c.value
+    text = f"{v:.4g}" if isinstance(v, float) else ", ".join(f"{x:.4g}" for x in (v or ()))
+    return f"texture {c.texture.path.name} x {text}" if c.texture is not None else text
 
 
-def _shader_asset(ctx: _Ctx, shader, name: str, index: int, doc) -> MaterialAsset:
+def _mean_channels(f: _Field) -> _Field:
+    """A colour field as the mean of its channels."""
+    if f.value is not None:
+        return _Field(f.name, np.array([float(np.mean(f.value * f.scale))]))
+    return _Field(f.name, None, lambda: np.mean(f.evaluate(), axis=-1, keepdims=True), f.analysis)
+
+
+def _bake_note(f: _Field, size: tuple[int, int]) -> str:
+    """What was evaluated for a baked input, from which images, and at what size (and why)."""
+    a = f.analysis
+    h, w = size
+    parts = []
+    for u in a.images if a is not None else []:
+        tiled = "" if u.need == u.size else f", sampled at {u.need[1]}x{u.need[0]} texels (tiling)"
+        parts.append(f"{u.path.name} {u.size[1]}x{u.size[0]}{tiled}")
+    text = f"{f.name}: node graph evaluated onto a {w}x{h} map"
+    if parts:
+        text += f" from {'; '.join(parts)}"
+    elif a is not None:
+        text += " (it reads no image: a procedural size)"
+    if a is not None and a.capped:
+        text += f"; capped at {max(h, w)} texels per side"
+    return text
+
+
+def _same(a: str, b: str) -> bool:
+    try:
+        x = [float(v) for v in a.replace(",", " ").split()]
+        y = [float(v) for v in b.replace(",", " ").split()]
+        return len(x) == len(y) and np.allclose(x, y, rtol=0, atol=1e-9)
+    except ValueError:
+        return a.strip() == b.strip()
+
+
+def _shader_asset(ctx: _Ctx, shader: Any, name: str, index: int, doc: Any) -> MaterialAsset:
     """The asset of surface shader node ``shader`` (material ``name``, the ``index``-th of ``doc``)."""
     cat = shader.getCategory()
+    if cat == "UsdPreviewSurface":
+        raise MatremapError(
+            f"{ctx.path}: material {name!r} uses a UsdPreviewSurface shader, which needs matremap's "
+            f"usd:preview_surface model (not in this version); convert it to gltf_pbr or standard_surface"
+        )
     if cat not in SHADERS:
         raise MatremapError(f"{ctx.path}: material {name!r} uses a {cat!r} shader; matremap reads {', '.join(SHADERS)}")
-    inputs = _ShaderInputs(ctx, shader)
-    constants, textures = inputs.read_all()
-    inputs.apply_base_weight(constants, textures)
-    normal = _normal_map(ctx, shader)
+    reader = _ShaderReader(ctx, shader, doc)
+    fields = reader.params()
+    _check_ior(ctx, shader, fields)
+    constants = {k: _constant(f) for k, f in fields.items() if not f.textured}
+    textures = reader.textures(fields)
+    normal = reader.normal()
+    carried = reader.carried()
     lost = lost_look(shader)
-    _note_skipped(ctx, cat, inputs.skipped())
-    _clamp_colours(constants, textures, ctx.notes)
-    uniform = {k: v for k, v in constants.items() if k not in textures}
+    _note_skipped(ctx, cat, reader.skipped())
+    _clamp_colours(constants, ctx.notes)
     try:
-        Material.create(MODEL, uniform)  # ranges, with the model's messages
+        Material.create(MODEL, constants)  # ranges, with the model's messages
     except MatremapError as e:
         raise MatremapError(f"{ctx.path}: material {name!r}: {e}") from None
     return MaterialAsset(
@@ -285,112 +399,41 @@ def _shader_asset(ctx: _Ctx, shader, name: str, index: int, doc) -> MaterialAsse
         document=doc,
         index=index,
         lost=lost,
+        carried=carried,
     )
 
 
-class _ShaderInputs:
-    """The inputs of one shader node in ``gltf:metal-rough`` terms (:data:`SHADERS`): values (or the
-    node definition's defaults) and the textures connected to them."""
-
-    def __init__(self, ctx: _Ctx, shader) -> None:
-        self.ctx, self.shader = ctx, shader
-        self.category = shader.getCategory()
-        self.table = SHADERS[self.category]
-        self.weight = _WEIGHT.get(self.category)
-        self.defaults = _defaults(shader)
-        self.spec = get_model(MODEL)
-
-    def value_of(self, input_name: str) -> tuple[list[float] | None, TextureRef | None]:
-        """(numbers, None) of a value or default, (None, texture) of a connection, (None, None) when
-        neither the node nor its definition gives a value."""
-        inp = self.shader.getInput(input_name)
-        p = self.spec.param(self.table[input_name]) if input_name in self.table else None
-        channels = 3 if p is not None and p.channels == 3 else 1
-        if inp is None:
-            text = self.defaults.get(input_name, "")
-            return (_parse(text, f"{self.ctx.path}: {input_name}", channels) if text else None), None
-        ref = _connected(self.ctx, inp, input_name, channels == 3)
-        if ref is not None:
-            return None, ref
-        where = f"{self.ctx.path}: {self.shader.getName()}.{input_name}"
-        return _parse(inp.getValueString(), where, channels), None
-
-    def read_all(self) -> tuple[dict[str, Any], dict[str, TextureRef]]:
-        """(constants, textures) of the inputs the table maps, by ``gltf:metal-rough`` parameter."""
-        constants: dict[str, Any] = {}
-        textures: dict[str, TextureRef] = {}
-        for input_name, param in self.table.items():
-            vals, ref = self.value_of(input_name)
-            if ref is not None:
-                textures[param] = ref
-            elif vals is not None:
-                scalar = self.spec.param(param).channels == 1
-                constants[param] = vals[0] if scalar else (vals * 3 if len(vals) == 1 else vals)
-        return constants, textures
-
-    def apply_base_weight(self, constants: dict[str, Any], textures: dict[str, TextureRef]) -> None:
-        """Multiply the base colour (its constant, or its texture's factor) by the base weight input."""
-        if self.weight is None:
-            return
-        wvals, wref = self.value_of(self.weight)
-        if wref is not None:
-            raise MatremapError(
-                f"{self.ctx.path}: {self.category} {self.shader.getName()!r}: a texture on {self.weight} is not "
-                f"supported; multiply it into base_color's texture"
-            )
-        w = wvals[0] if wvals else 1.0
-        if "baseColor" in textures:
-            ref = textures["baseColor"]
-            scale = tuple(float(x) * w for x in np.broadcast_to(ref.scale, (3,))) if w != 1.0 else ref.scale
-            textures["baseColor"] = TextureRef(ref.path, ref.channels, ref.colorspace, scale)
-        else:
-            constants["baseColor"] = [float(x) * w for x in constants.get("baseColor", [1.0, 1.0, 1.0])]
-
-    def skipped(self) -> list[str]:
-        """The inputs not remapped that are textured or differ from their defaults, as ``name=value``."""
-        out = []
-        for inp in self.shader.getInputs():
-            n = inp.getName()
-            if n in self.table or n == self.weight or n in _NOT_LISTED:
-                continue
-            if inp.getConnectedNode() is not None:
-                out.append(f"{n} (textured)")
-                continue
-            text, default = inp.getValueString(), self.defaults.get(n)
-            if default is not None and _same(text, default):
-                continue
-            out.append(f"{n}={text}")
-        return out
+def _constant(f: _Field) -> Any:
+    v = np.asarray(f.evaluate(), dtype=np.float64).reshape(-1)
+    return float(v[0]) if v.size == 1 else [float(x) for x in v]
 
 
-def _normal_map(ctx: _Ctx, shader) -> TextureRef | None:
-    """The normal map fed to the shader's normal input through a ``normalmap`` (or
-    ``gltf_normalmap``) node; any other node there is noted and ignored."""
-    ninp = shader.getInput("normal" if shader.getCategory() != "open_pbr_surface" else "geometry_normal")
-    nnode = ninp.getConnectedNode() if ninp is not None else None
-    if nnode is None:
-        return None
-    if nnode.getCategory() not in ("normalmap", "gltf_normalmap"):
-        ctx.notes.append(f"normal input fed by a {nnode.getCategory()!r} node ignored (only normalmap is read)")
-        return None
-    if nnode.getCategory() == "gltf_normalmap":
-        img = nnode
-    else:
-        src = nnode.getInput("in")
-        img = src.getConnectedNode() if src is not None else None
-        if img is None:
-            raise MatremapError(f"{ctx.path}: normalmap node {nnode.getName()!r} is not fed by an image")
-    if img.getCategory() not in (*_IMAGES, "gltf_normalmap"):
-        raise MatremapError(f"{ctx.path}: the normal map is a {img.getCategory()!r} node; use an image")
-    f = img.getInput("file")
-    rel = Path(f.getResolvedValueString()) if f is not None else None
-    if rel is None or not str(rel):
-        raise MatremapError(f"{ctx.path}: the normal map's image node has no file")
-    npath = ctx.file(str(rel), f"normal map image node {img.getName()!r} file")
-    if not npath.is_file():
-        raise MatremapError(f"{ctx.path}: normal map {rel} not found at {npath}; put it beside the document")
-    ctx.notes.append(f"normal map {rel.name} (through {nnode.getCategory()}) is the asset's normal map")
-    return TextureRef(npath.resolve())
+def _check_ior(ctx: _Ctx, shader: Any, fields: dict[str, _Field]) -> None:
+    """An IOR below 1 (see the module docstring): read as the default where the specular lobe is off,
+    else refused."""
+    f = fields["ior"]
+    if f.textured:
+        return
+    ior = float(np.asarray(f.evaluate()).reshape(-1)[0])
+    if ior >= 1.0:
+        return
+    input_name = f.name
+    off = {k: fields[k] for k in ("specular", "specularColor", "metallic")}
+    reason = ""
+    if not off["specular"].textured and float(_constant(off["specular"])) == 0.0:
+        reason = "the specular weight is 0"
+    elif not off["specularColor"].textured and not any(_constant(off["specularColor"])):
+        reason = "the specular colour is black"
+    elif not off["metallic"].textured and float(_constant(off["metallic"])) == 1.0:
+        reason = "the material is a full metal"
+    if not reason:
+        raise MatremapError(
+            f"{ctx.path}: {shader.getName()}.{input_name}={ior:g}: an IOR below 1 gives a Fresnel of 1 at "
+            f"every angle in MaterialX's dielectric (total reflection), a mirror that gltf:metal-rough's "
+            f"dielectric cannot express; set {input_name} to 1 or more (1.5 is its default)"
+        )
+    fields["ior"] = _Field(input_name, np.array([1.5]))
+    ctx.notes.append(f"{input_name}={ior:g} has no effect since {reason}; ior read as the default 1.5")
 
 
 #: inputs that carry a material's look where gltf:metal-rough has nothing to put them: (weight input, what
@@ -407,8 +450,8 @@ _LOOK = {
 
 def lost_look(shader: Any) -> list[str]:
     """The inputs that carry the material's look and that gltf:metal-rough has nothing for: a coloured coat
-    over the base (Standard Surface's copper is a white metal under a copper coat), transmission (glass),
-    sheen (velvet)."""
+    over the base (Standard Surface's copper is a white metal under a copper coat; a textured coat colour,
+    the tiled brass), transmission (glass), sheen (velvet)."""
     lost = []
     for weight, (colour, limit) in _LOOK.items():
         w = _float_input(shader, weight)
@@ -416,6 +459,9 @@ def lost_look(shader: Any) -> list[str]:
             continue
         if colour is not None:
             c = shader.getInput(colour)
+            if c is not None and (c.getAttribute("nodename") or c.getAttribute("nodegraph")):
+                lost.append(f"{weight}={w:g} with {colour} textured")
+                continue
             rgb = [float(x) for x in c.getValueString().split(",")] if c is not None and c.getValueString() else []
             if rgb and max(abs(x - 1.0) for x in rgb) > limit:
                 lost.append(f"{weight}={w:g} with {colour}={', '.join(f'{x:.3g}' for x in rgb)}")
@@ -426,7 +472,7 @@ def lost_look(shader: Any) -> list[str]:
 
 def _float_input(shader: Any, name: str) -> float | None:
     inp = shader.getInput(name)
-    if inp is None or inp.getConnectedNode() is not None or not inp.getValueString():
+    if inp is None or inp.getAttribute("nodename") or inp.getAttribute("nodegraph") or not inp.getValueString():
         return None
     try:
         return float(inp.getValueString())
@@ -441,58 +487,26 @@ def _note_skipped(ctx: _Ctx, category: str, skipped: list[str]) -> None:
             ctx.notes.append(f"gltf_pbr inputs not remapped: {', '.join(skipped)}")
         return
     what = "Standard Surface" if category == "standard_surface" else "OpenPBR Surface"
-    names = ", ".join(f"{k} -> {v}" for k, v in SHADERS[category].items())
+    names = ", ".join(f"{k} -> {v}" for k, v in SHADERS[category].items() if k != "base_color")
     ctx.notes.insert(
         0,
         f"WARNING: {what} read through matremap's hand-made translation to gltf:metal-rough "
-        f"(base_color x {_WEIGHT[category]} -> baseColor, {names}); it is approximate"
+        f"(base_color x {WEIGHT[category]} -> baseColor, {names}); it is approximate"
         + (f". Inputs NOT remapped: {', '.join(skipped)}" if skipped else "; every other input is at its default"),
     )
 
 
-def _clamp_colours(constants: dict[str, Any], textures: dict[str, TextureRef], notes: list[str]) -> None:
+def _clamp_colours(constants: dict[str, Any], notes: list[str]) -> None:
     """Clamp uniform colours past the model's range (e.g. gold's base colour 1.059), with a note."""
     spec = get_model(MODEL)
     for k, v in list(constants.items()):
-        if k in spec.param_names and k not in textures and spec.param(k).channels == 3:
+        if k in spec.param_names and spec.param(k).channels == 3:
             lo, hi = spec.param(k).bounds
             arr = np.asarray(v, dtype=float)
             if np.all(np.isfinite(arr)) and (np.any(arr < lo) or np.any(arr > hi)):
                 clipped = np.clip(arr, lo, hi)
                 constants[k] = clipped.tolist() if clipped.ndim else float(clipped)
                 notes.append(f"{k}={v} lies outside [{lo:g}, {hi:g}] and was clamped to {constants[k]}")
-
-
-def _same(a: str, b: str) -> bool:
-    try:
-        x = [float(v) for v in a.replace(",", " ").split()]
-        y = [float(v) for v in b.replace(",", " ").split()]
-        return len(x) == len(y) and np.allclose(x, y, rtol=0, atol=1e-9)
-    except ValueError:
-        return a.strip() == b.strip()
-
-
-def _parse_document(mx: Any, p: Path) -> Any:
-    """The MaterialX document of file ``p``: its bytes checked as untrusted XML (no entities, bounded
-    nesting, no ``xi:include``), then those same bytes given to MaterialX's parser."""
-    data = p.read_bytes()
-    if not data[:4096].lstrip().startswith(b"<"):
-        raise MatremapError(f"{p} is not a MaterialX document (not XML)")
-    root = parse_untrusted_xml(p, "a MaterialX document", data)
-    if root.tag != "materialx":
-        raise MatremapError(f"{p} is not a MaterialX document: its root element is not <materialx>")
-    if any(isinstance(el.tag, str) and el.tag.rsplit("}", 1)[-1] == "include" for el in root.iter()):
-        raise MatremapError(f"{p}: xi:include is not supported; paste the included document's elements into it")
-    doc = mx.createDocument()
-    options = mx.XmlReadOptions()
-    options.readXIncludeFunction = None  # refused above already; never let MaterialX follow one
-    try:
-        mx.readFromXmlString(doc, data.decode("utf-8-sig"), mx.FileSearchPath(), options)
-    except UnicodeDecodeError:
-        raise MatremapError(f"{p} is not a MaterialX document: it is not UTF-8 text") from None
-    except Exception as e:  # MaterialX raises its own ExceptionParseError
-        raise MatremapError(f"{p} is not a MaterialX document ({str(e).strip() or type(e).__name__})") from None
-    return doc
 
 
 def read(
@@ -518,16 +532,12 @@ def material_names(path: str | Path) -> list[str]:
 
 def _materials(p: Path, notes: list[str]) -> tuple[Any, list[tuple[str, Any]]]:
     """The validated document and its materials as (name, surface shader or None)."""
-    mx = _mx()
     if not p.is_file():
         raise MatremapError(f"{p} not found")
-    doc = _parse_document(mx, p)
-    ok, why = doc.validate()
-    if not ok:
-        raise MatremapError(f"{p} is not a valid MaterialX document: {why.strip().splitlines()[0]}")
-    materials = doc.getMaterialNodes()
+    doc = valid_document(p)
+    mx = materialx_module()
     found: list[tuple[str, Any]] = []
-    for m in materials:
+    for m in doc.getMaterialNodes():
         shaders = mx.getShaderNodes(m)
         found.append((m.getName(), shaders[0] if shaders else None))
     if not found:
@@ -542,92 +552,16 @@ def _materials(p: Path, notes: list[str]) -> tuple[Any, list[tuple[str, Any]]]:
     return doc, found
 
 
-# ---------------------------------------------------------------------------------------------
-# Writing
-
-_INPUTS = {v: k for k, v in SHADERS["gltf_pbr"].items()}  # gltf:metal-rough parameter -> gltf_pbr input
-
-
-def _fmt(v: np.ndarray) -> str:
-    return ", ".join(repr(float(x)) for x in np.asarray(v, dtype=float).reshape(-1))
-
-
-def build_document(
-    m: Material, maps: dict[str, str], colorspace: dict[str, str], normal: str | None, name: str = "material"
-):
-    """The MaterialX document of a gltf:metal-rough material: ``maps`` are file names (relative to
-    the document) for textured parameters, ``colorspace`` their encodings (srgb/linear)."""
-    mx = _mx()
-    spec = m.spec
-    doc = mx.createDocument()
-    doc.setColorSpace("lin_rec709")
-    shader = doc.addNode("gltf_pbr", f"SR_{name}", "surfaceshader")
-    for param in ("baseColor", "metallic", "roughness", "ior", "specular", "specularColor"):
-        p = spec.param(param)
-        typ = "color3" if p.channels == 3 else "float"
-        inp = shader.addInput(_INPUTS[param], typ)
-        if param in maps:
-            img = doc.addNode("image", f"image_{param}", typ)
-            f = img.addInput("file", "filename")
-            f.setValueString(maps[param])
-            if typ == "color3":
-                f.setColorSpace("srgb_texture" if colorspace[param] == "srgb" else "lin_rec709")
-            inp.setNodeName(img.getName())
-        else:
-            inp.setValueString(_fmt(m.values[param]))
-    if normal is not None:
-        img = doc.addNode("image", "image_normal", "vector3")
-        img.addInput("file", "filename").setValueString(normal)
-        nm = doc.addNode("normalmap", "normalmap", "vector3")
-        nm.addInput("in", "vector3").setNodeName(img.getName())
-        shader.addInput("normal", "vector3").setNodeName(nm.getName())
-    mat = doc.addNode("surfacematerial", name, "material")
-    mat.addInput("surfaceshader", "surfaceshader").setNodeName(shader.getName())
-    return doc
-
-
-def write(out: str | Path, result: Any, source: MaterialAsset | None = None, force: bool = False) -> Path:
-    """Write ``result`` (a ``gltf:metal-rough`` Material or MapSet) as a MaterialX document with a
-    ``gltf_pbr`` shader and a ``surfacematerial``; maps are copied beside it. ``source`` names the
-    material when it came from a MaterialX file. The document and its maps are written together or
-    not at all."""
-    mx = _mx()
-    out = Path(out)
-    m, maps, cs, normal = result_parts(result, "the MaterialX writer", (MODEL,))
-    check_output(out, force, (".mtlx",))
-    check_map_destinations(out, [*maps, *(["normal"] if normal else [])], force)
-    name = "material"
-    if source is not None and re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", source.name or ""):
-        name = source.name
-    with AtomicFiles(force) as files:
-        names: dict[str, str] = {}
-        spaces: dict[str, str] = {}
-        for param, src in maps.items():
-            names[param], spaces[param] = _place_texture(m, param, src, cs[param], out, files)
-        nfile = None
-        if normal is not None:
-            nfile = place_map(normal, map_destination(out, "normal"), True, "linear", 3, files).name
-        doc = build_document(m, names, spaces, nfile, name)
-        ok, why = doc.validate()
-        if not ok:  # pragma: no cover - a bug here, not the user's
-            raise MatremapError(f"the MaterialX document for {out} does not validate: {why}")
-        files.write_text(out, mx.writeToXmlString(doc))
-    return out
-
-
-def _place_texture(
-    m: Material, param: str, src: Path, colorspace: str, out: Path, files: AtomicFiles
-) -> tuple[str, str]:
-    """Stage the map of ``param`` beside ``out``; (its file name, the colour space to declare).
-    Colour maps keep any encoding (it is declared); data maps must hold linear values."""
-    from matremap.svbrdf.textures import image_info
-
-    p = m.spec.param(param)
-    info = image_info(src, colorspace)
-    keep = p.channels == 3 or colorspace == "linear"
-    dest = place_map(src, map_destination(out, param), keep, colorspace, p.channels, files)
-    kept = dest.suffix.lower() == "." + info.format and keep
-    return dest.name, colorspace if kept else "linear"
-
-
-__all__ = ["FORMAT", "MODEL", "SHADERS", "build_document", "read", "write"]
+__all__ = [
+    "FORMAT",
+    "MODEL",
+    "NORMAL",
+    "SHADERS",
+    "WEIGHT",
+    "build_document",
+    "lost_look",
+    "material_names",
+    "read",
+    "write",
+    "write_all",
+]
