@@ -75,7 +75,6 @@ def test_translated_dielectrics_keep_their_hue(tmp_path, name):
     "name, target, why",
     [
         ("mtlx-standard_surface_copper/*.mtlx", "gltf:metal-rough", "coat_color"),
-        ("mtlx-usd_preview_surface_plastic/*.mtlx", "gltf:metal-rough", "UsdPreviewSurface"),
         ("mitsuba-conductor/*.xml", "gltf:metal-rough", "conductor"),
     ],
 )
@@ -112,3 +111,17 @@ def test_a_red_textured_usd_dielectric_onto_gltf_passes_with_its_colour(tmp_path
     cout = cc.gltf_base_colour(out)
     assert cc.hue_difference(cc.mean_hue(cin), cc.mean_hue(cout)) < 5
     assert 0.95 < cc.mean_luminance(cout) / cc.mean_luminance(cin) < 1.05
+
+
+def test_a_materialx_usd_preview_surface_onto_gltf_keeps_its_blue(tmp_path):
+    """MaterialX's UsdPreviewSurface plastic example (Apache-2.0) was refused; it is read as usd:preview_surface
+    and fitted onto glTF: the written gltf_pbr keeps the hue and brightness of its diffuseColor."""
+    pytest.importorskip("MaterialX")
+    src = one("mtlx-usd_preview_surface_plastic/*.mtlx")
+    code, _ = remap(src, "gltf:metal-rough", tmp_path / "out")
+    assert code == 0
+    out = cc.find_output_file(tmp_path / "out")
+    assert out is not None and cc.file_loads(out)[0]
+    cin, cout = cc.material_colour(src), cc.material_colour(out)
+    assert cc.hue_difference(cc.mean_hue(cin), cc.mean_hue(cout)) < 5
+    assert 0.9 < cc.mean_luminance(cout) / cc.mean_luminance(cin) < 1.1

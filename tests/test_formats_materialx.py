@@ -185,12 +185,6 @@ def test_material_selection(tmp_path):
         ("not xml at all", "not a MaterialX document"),
         ('<?xml version="1.0"?><scene version="3.0.0"><bsdf type="diffuse"/></scene>', "not a MaterialX document"),
         (
-            '<?xml version="1.0"?><materialx version="1.39"><UsdPreviewSurface name="U" type="surfaceshader"/>'
-            '<surfacematerial name="M" type="material"><input name="surfaceshader" type="surfaceshader" nodename="U"/>'
-            "</surfacematerial></materialx>",
-            "UsdPreviewSurface shader, which needs matremap's usd:preview_surface model",
-        ),
-        (
             '<?xml version="1.0"?><materialx version="1.39"><image name="i" type="color3">'
             '<input name="file" type="filename" value="missing.png"/></image><gltf_pbr name="S" type="surfaceshader">'
             '<input name="base_color" type="color3" nodename="i"/></gltf_pbr><surfacematerial name="M" type="material">'
@@ -314,3 +308,65 @@ def test_a_map_that_fails_after_another_was_placed_leaves_nothing(tmp_path):
     with pytest.raises(MatremapError):
         write(tmp_path / "out" / "mat.mtlx", ms)
     assert list((tmp_path / "out").iterdir()) == []
+
+
+def _preview_doc(tmp_path, inputs: str, nodes: str = "") -> Path:
+    from matremap.svbrdf.textures import ImageInfo, write_image_like
+
+    img = np.zeros((4, 4, 3), dtype=np.float32)
+    img[:, :2] = [0.8, 0.1, 0.1]
+    img[:, 2:] = [0.1, 0.1, 0.8]
+    write_image_like(tmp_path / "tex.png", img, ImageInfo("png", "uint8", 3, 4, 4, "srgb"), force=True)
+    p = tmp_path / "preview.mtlx"
+    p.write_text(
+        '<?xml version="1.0"?><materialx version="1.39" colorspace="lin_rec709">'
+        f'<UsdPreviewSurface name="U" type="surfaceshader">{inputs}</UsdPreviewSurface>{nodes}'
+        '<surfacematerial name="M" type="material"><input name="surfaceshader" type="surfaceshader" nodename="U"/>'
+        "</surfacematerial></materialx>"
+    )
+    return p
+
+
+_TEX = (
+    '<image name="t" type="color3"><input name="file" type="filename" value="tex.png" colorspace="srgb_texture"/>'
+    "</image>"
+)
+
+
+def test_a_usd_preview_surface_is_read_into_its_own_model_with_textures_and_a_mask(tmp_path):
+    p = _preview_doc(
+        tmp_path,
+        '<input name="diffuseColor" type="color3" nodename="t"/><input name="roughness" type="float" value="0.4"/>'
+        '<input name="clearcoat" type="float" value="0.5"/><input name="opacity" type="float" value="0.5"/>'
+        '<input name="opacityThreshold" type="float" value="0.25"/>'
+        '<input name="emissiveColor" type="color3" value="0.1, 0.2, 0.3"/>',
+        _TEX,
+    )
+    a = read(p)
+    assert a.model == "usd:preview_surface" and set(a.textures) == {"diffuseColor"}
+    assert a.textures["diffuseColor"].path.name == "tex.png" and a.textures["diffuseColor"].colorspace == "srgb"
+    assert a.constants["roughness"] == pytest.approx(0.4) and a.constants["clearcoat"] == pytest.approx(0.5)
+    assert a.constants["useSpecularWorkflow"] == "0"
+    assert a.carried["opacity"].value == pytest.approx(0.5)
+    assert a.carried["opacity"].settings == {"mode": "mask", "cutoff": 0.25}
+    assert a.carried["emission"].value == pytest.approx((0.1, 0.2, 0.3))
+
+
+def test_a_textured_coloured_specular_workflow_is_refused_and_a_grey_one_read_as_metalness(tmp_path):
+    p = _preview_doc(
+        tmp_path,
+        '<input name="useSpecularWorkflow" type="integer" value="1"/><input name="specularColor" type="color3" '
+        'nodename="t"/><input name="diffuseColor" type="color3" nodename="t"/>',
+        _TEX,
+    )
+    with pytest.raises(MatremapError, match="specular workflow with a coloured or textured specularColor"):
+        read(p)
+    grey = _preview_doc(
+        tmp_path,
+        '<input name="useSpecularWorkflow" type="integer" value="1"/>'
+        '<input name="specularColor" type="color3" value="0.04, 0.04, 0.04"/>'
+        '<input name="diffuseColor" type="color3" nodename="t"/>',
+        _TEX,
+    )
+    a = read(grey)
+    assert a.constants["useSpecularWorkflow"] == "0" and a.constants["ior"] == pytest.approx(1.5)

@@ -178,7 +178,7 @@ CASES = [
         0,
         "",
     ),
-    ("mtlx-usd_preview_surface_plastic/usd_preview_surface_plastic.mtlx", 2, "UsdPreviewSurface"),
+    ("mtlx-usd_preview_surface_plastic/usd_preview_surface_plastic.mtlx", 0, ""),
 ]
 
 

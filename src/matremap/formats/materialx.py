@@ -23,8 +23,11 @@ document without materials falls back to its shader nodes) and reads its surface
   for, its dielectric lobe is energy-conserving differently -- so the asset carries a warning note
   that says so and lists every input it does not remap whose value differs from the node's
   default (coat, sheen, subsurface, transmission, thin film, anisotropy, ...);
-* ``UsdPreviewSurface`` needs matremap's ``usd:preview_surface`` model; without it the material is
-  refused in one line.
+* ``UsdPreviewSurface`` (MaterialX's ``ND_UsdPreviewSurface_surfaceshader``) maps one to one onto
+  ``usd:preview_surface``, whose parameters are its input names; ``useSpecularWorkflow`` becomes the
+  model's option, and a specular-workflow material is read by the same rule as in a USD file
+  (:func:`matremap.formats.usd.specular_workflow`); ``emissiveColor``, ``opacity`` (a mask where
+  ``opacityThreshold`` > 0) and ``occlusion`` are carried.
 
 An IOR below 1 (the velvet example's ``specular_IOR = 0``) means, in MaterialX's dielectric Fresnel
 (``libraries/pbrlib/genglsl/lib/mx_microfacet_specular.glsl``, ``mx_fresnel_dielectric``: total
@@ -97,10 +100,22 @@ SHADERS: dict[str, dict[str, str]] = {
         "specular_color": "specularColor",
     },
 }
+SHADERS["UsdPreviewSurface"] = {
+    n: n for n in ("diffuseColor", "metallic", "roughness", "specularColor", "ior", "clearcoat", "clearcoatRoughness")
+}
+#: shader node category -> the matremap model its inputs are read into (gltf:metal-rough unless named here)
+MODELS = {"UsdPreviewSurface": "usd:preview_surface"}
 #: the input that multiplies base_color
 WEIGHT = {"standard_surface": "base", "open_pbr_surface": "base_weight"}
 #: the shader input carrying the (tangent-space, through normalmap) normal
-NORMAL = {"gltf_pbr": "normal", "standard_surface": "normal", "open_pbr_surface": "geometry_normal"}
+NORMAL = {
+    "gltf_pbr": "normal",
+    "standard_surface": "normal",
+    "open_pbr_surface": "geometry_normal",
+    "UsdPreviewSurface": "normal",
+}
+#: UsdPreviewSurface's carried inputs: (emission colour, opacity, its mask threshold, occlusion)
+_PREVIEW_CARRIED = ("emissiveColor", "opacity", "opacityThreshold", "occlusion")
 #: inputs that are not part of the appearance on the probe, or are read apart (normal, carried inputs)
 _NOT_LISTED = {
     "normal",
@@ -110,6 +125,8 @@ _NOT_LISTED = {
     "occlusion",
     "alpha_mode",
     "alpha_cutoff",
+    "useSpecularWorkflow",
+    *_PREVIEW_CARRIED,
     *(n for pair in EMISSION.values() for n in pair),
     *OPACITY.values(),
 }
@@ -177,6 +194,7 @@ class _ShaderReader:
     def __init__(self, ctx: _Ctx, shader: Any, doc: Any) -> None:
         self.ctx, self.shader = ctx, shader
         self.category = shader.getCategory()
+        self.model = MODELS.get(self.category, MODEL)
         self.ev = GraphEvaluator(doc, ctx.path, ctx.file, ctx.notes)
 
     def field(self, name: str, typ: str) -> _Field:
@@ -201,8 +219,8 @@ class _ShaderReader:
         return ndi.getValueString() if ndi is not None else ""
 
     def params(self) -> dict[str, _Field]:
-        """gltf:metal-rough parameter -> its field (base colour x its weight)."""
-        spec = get_model(MODEL)
+        """Model parameter -> its field (glTF's base colour x its weight)."""
+        spec = get_model(self.model)
         out = {}
         for input_name, param in SHADERS[self.category].items():
             out[param] = self.field(input_name, "color3" if spec.param(param).channels == 3 else "float")
@@ -258,6 +276,8 @@ class _ShaderReader:
     def carried(self) -> dict[str, CarriedInput]:
         """Emission, opacity and occlusion, for writers to carry over (see the module docstring)."""
         out: dict[str, CarriedInput] = {}
+        if self.category == "UsdPreviewSurface":
+            return self._preview_carried()
         colour, weight = EMISSION[self.category]
         emission = self.field(colour, "color3").times(self.field(weight, "float"))
         if emission.textured or np.any(emission.value != 0):
@@ -269,6 +289,27 @@ class _ShaderReader:
             occ = self.field("occlusion", "float")
             if occ.textured:
                 out["occlusion"] = self._carried(occ, 1)
+        if out:
+            what = ", ".join(f"{k} ({_carried_words(c)})" for k, c in out.items())
+            self.ctx.notes.append(f"carried unchanged to the written file (not remapped): {what}")
+        return out
+
+    def _preview_carried(self) -> dict[str, CarriedInput]:
+        """UsdPreviewSurface's emissiveColor, opacity (a mask where opacityThreshold > 0; UsdPreviewSurface
+        2.5, ``opacityThreshold``) and occlusion."""
+        emissive, opacity, threshold, occlusion = _PREVIEW_CARRIED
+        out: dict[str, CarriedInput] = {}
+        emission = self.field(emissive, "color3")
+        if emission.textured or np.any(emission.value != 0):
+            out["emission"] = self._carried(emission, 3)
+        alpha = self.field(opacity, "float")
+        if alpha.textured or float(np.asarray(alpha.value).reshape(-1)[0]) < 1.0:
+            cutoff = float(np.asarray(self.field(threshold, "float").value).reshape(-1)[0])
+            mode = {"mode": "mask", "cutoff": cutoff} if cutoff > 0.0 else {"mode": "blend"}
+            out["opacity"] = self._carried(alpha, 1, mode)
+        occ = self.field(occlusion, "float")
+        if occ.textured:
+            out["occlusion"] = self._carried(occ, 1)
         if out:
             what = ", ".join(f"{k} ({_carried_words(c)})" for k, c in out.items())
             self.ctx.notes.append(f"carried unchanged to the written file (not remapped): {what}")
@@ -366,32 +407,34 @@ def _same(a: str, b: str) -> bool:
 def _shader_asset(ctx: _Ctx, shader: Any, name: str, index: int, doc: Any) -> MaterialAsset:
     """The asset of surface shader node ``shader`` (material ``name``, the ``index``-th of ``doc``)."""
     cat = shader.getCategory()
-    if cat == "UsdPreviewSurface":
-        raise MatremapError(
-            f"{ctx.path}: material {name!r} uses a UsdPreviewSurface shader, which needs matremap's "
-            f"usd:preview_surface model (not in this version); convert it to gltf_pbr or standard_surface"
-        )
     if cat not in SHADERS:
         raise MatremapError(f"{ctx.path}: material {name!r} uses a {cat!r} shader; matremap reads {', '.join(SHADERS)}")
     reader = _ShaderReader(ctx, shader, doc)
     fields = reader.params()
-    _check_ior(ctx, shader, fields)
+    if reader.model == MODEL:
+        _check_ior(ctx, shader, fields)
     constants = {k: _constant(f) for k, f in fields.items() if not f.textured}
     textures = reader.textures(fields)
     normal = reader.normal()
     carried = reader.carried()
     lost = lost_look(shader)
     _note_skipped(ctx, cat, reader.skipped())
-    _clamp_colours(constants, ctx.notes)
+    if cat == "UsdPreviewSurface":
+        from matremap.formats.usd import specular_workflow
+
+        flag = int(np.asarray(reader.field("useSpecularWorkflow", "integer").value).reshape(-1)[0])
+        constants["useSpecularWorkflow"] = "1" if flag == 1 else "0"
+        specular_workflow(constants, textures, ctx.notes, f"{ctx.path}: material {name!r}")
+    _clamp_colours(constants, ctx.notes, reader.model)
     try:
-        Material.create(MODEL, constants)  # ranges, with the model's messages
+        Material.create(reader.model, {k: v for k, v in constants.items() if k not in textures})
     except MatremapError as e:
         raise MatremapError(f"{ctx.path}: material {name!r}: {e}") from None
     return MaterialAsset(
         path=ctx.path,
         format=FORMAT,
         name=name,
-        model=MODEL,
+        model=reader.model,
         constants=constants,
         textures=textures,
         normal=normal,
@@ -482,9 +525,9 @@ def _float_input(shader: Any, name: str) -> float | None:
 
 def _note_skipped(ctx: _Ctx, category: str, skipped: list[str]) -> None:
     """Note the inputs not remapped; for a translated shader, warn first that the translation is approximate."""
-    if category == "gltf_pbr":
+    if category in ("gltf_pbr", "UsdPreviewSurface"):
         if skipped:
-            ctx.notes.append(f"gltf_pbr inputs not remapped: {', '.join(skipped)}")
+            ctx.notes.append(f"{category} inputs not remapped: {', '.join(skipped)}")
         return
     what = "Standard Surface" if category == "standard_surface" else "OpenPBR Surface"
     names = ", ".join(f"{k} -> {v}" for k, v in SHADERS[category].items() if k != "base_color")
@@ -496,9 +539,9 @@ def _note_skipped(ctx: _Ctx, category: str, skipped: list[str]) -> None:
     )
 
 
-def _clamp_colours(constants: dict[str, Any], notes: list[str]) -> None:
+def _clamp_colours(constants: dict[str, Any], notes: list[str], model: str = MODEL) -> None:
     """Clamp uniform colours past the model's range (e.g. gold's base colour 1.059), with a note."""
-    spec = get_model(MODEL)
+    spec = get_model(model)
     for k, v in list(constants.items()):
         if k in spec.param_names and spec.param(k).channels == 3:
             lo, hi = spec.param(k).bounds
@@ -547,7 +590,7 @@ def _materials(p: Path, notes: list[str]) -> tuple[Any, list[tuple[str, Any]]]:
     if not found:
         raise MatremapError(
             f"{p} holds no surfacematerial or surface shader; matremap reads gltf_pbr, "
-            f"standard_surface and open_pbr_surface materials"
+            f"standard_surface, open_pbr_surface and UsdPreviewSurface materials"
         )
     return doc, found
 
@@ -555,6 +598,7 @@ def _materials(p: Path, notes: list[str]) -> tuple[Any, list[tuple[str, Any]]]:
 __all__ = [
     "FORMAT",
     "MODEL",
+    "MODELS",
     "NORMAL",
     "SHADERS",
     "WEIGHT",

@@ -523,7 +523,7 @@ def _preview_asset(ctx: _Ctx, shader: Any) -> MaterialAsset:
     _note_others(ctx, shader)
     if len(ctx.primvars) > 1:
         ctx.notes.append(f"textures read from several primvars ({', '.join(sorted(ctx.primvars))}): laid on one UV set")
-    _specular_workflow(ctx, constants, textures)
+    specular_workflow(constants, textures, ctx.notes, f"{ctx.path}: material {ctx.name}")
     _clamp(ctx, spec, constants)
     uniform = {k: v for k, v in constants.items() if k not in textures}
     try:
@@ -543,9 +543,10 @@ def _preview_asset(ctx: _Ctx, shader: Any) -> MaterialAsset:
     )
 
 
-def _specular_workflow(ctx: _Ctx, constants: dict[str, Any], textures: dict[str, TextureRef]) -> None:
-    """Read a specular-workflow material as the metalness workflow where both give the same (see the module
-    docstring); refuse a textured one that cannot be; keep a uniform one."""
+def specular_workflow(constants: dict[str, Any], textures: dict[str, TextureRef], notes: list[str], where: str) -> None:
+    """Read a specular-workflow UsdPreviewSurface as the metalness workflow where both give the same (see the
+    module docstring); refuse a textured one that cannot be; keep a uniform one. ``where`` starts a refusal
+    (the file and material); the USD and MaterialX readers share this rule."""
     if constants["useSpecularWorkflow"] != "1":
         return
     textures.pop("metallic", None)  # the specular workflow ignores metallic
@@ -555,17 +556,15 @@ def _specular_workflow(ctx: _Ctx, constants: dict[str, Any], textures: dict[str,
     ior = float(ior_from_f0(float(s[0]))) if grey and s[0] < 0.999 else math.inf
     if grey and coat == 0.0 and ior <= get_model(MODEL).param("ior").bounds[1]:
         constants.update({"useSpecularWorkflow": "0", "metallic": 0.0, "ior": ior})
-        ctx.notes.append(
+        notes.append(
             f"useSpecularWorkflow=1 with grey specularColor {s[0]:.6g} is the metalness workflow's dielectric "
             f"with ior {ior:.6g} (same F0, F90 and diffuse weight): read so"
         )
         return
     if textures:
         raise MatremapError(
-            ctx.where(
-                "uses the specular workflow with a coloured or textured specularColor (or a clearcoat); matremap "
-                "remaps textured materials in the metalness workflow (useSpecularWorkflow=0) only"
-            )
+            f"{where}: uses the specular workflow with a coloured or textured specularColor (or a clearcoat); "
+            "matremap remaps textured materials in the metalness workflow (useSpecularWorkflow=0) only"
         )
     constants["metallic"] = 0.0
 
@@ -1056,4 +1055,15 @@ def _rebased(pxr: Any, path: str, out: Path, files: AtomicFiles, copied: dict[st
     return copied[path]
 
 
-__all__ = ["FORMAT", "MATERIALX_IDS", "MODEL", "SUFFIXES", "UsdSource", "material_names", "read", "write", "write_all"]
+__all__ = [
+    "FORMAT",
+    "MATERIALX_IDS",
+    "MODEL",
+    "SUFFIXES",
+    "UsdSource",
+    "material_names",
+    "read",
+    "specular_workflow",
+    "write",
+    "write_all",
+]
