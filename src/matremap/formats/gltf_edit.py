@@ -330,22 +330,27 @@ def _drop_views(doc: dict[str, Any], gone: set[int], blob: bytearray | None) -> 
     return blob
 
 
-def _uses(node: Any, name: str) -> bool:
-    """Whether any ``extensions`` object under ``node`` holds ``name``."""
-    if isinstance(node, dict):
-        if name in as_dict(node.get("extensions")):
-            return True
-        return any(_uses(v, name) for k, v in node.items() if k not in ("extensionsUsed", "extensionsRequired"))
-    if isinstance(node, list):
-        return any(_uses(v, name) for v in node)
-    return False
+def extension_names(node: Any) -> set[str]:
+    """The names of every extension used under ``node`` (the keys of its ``extensions`` objects)."""
+    found: set[str] = set()
+    stack = [node]
+    while stack:
+        item = stack.pop()
+        if isinstance(item, dict):
+            found |= {k for k in as_dict(item.get("extensions")) if isinstance(k, str)}
+            stack += [v for k, v in item.items() if k not in ("extensionsUsed", "extensionsRequired")]
+        elif isinstance(item, list):
+            stack += item
+    return found
 
 
 def update_extension_lists(doc: dict[str, Any]) -> None:
-    """extensionsUsed / extensionsRequired as the file now uses the :data:`MANAGED` extensions."""
+    """extensionsUsed: the source's list without the :data:`MANAGED` extensions no longer used, plus every
+    extension the file now uses (§3.12: each one must be listed); extensionsRequired: a subset of it."""
+    found = extension_names(doc)
     listed = doc.get("extensionsUsed", [])
-    used = [e for e in listed if e not in MANAGED or _uses(doc, e)]
-    used += [e for e in MANAGED if e not in used and _uses(doc, e)]
+    used = [e for e in listed if e not in MANAGED or e in found]
+    used += sorted(found - set(used))
     if used:
         doc["extensionsUsed"] = used
     else:
@@ -375,6 +380,7 @@ __all__ = [
     "add_images",
     "check_writable_source",
     "drop_unused",
+    "extension_names",
     "glb_bytes",
     "material_textures",
     "rebase_uris",
