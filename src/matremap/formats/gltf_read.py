@@ -195,6 +195,11 @@ def read(
     maps = textures.read_maps(pbr, found.get(SPECULAR, {}), constants)
     normal = textures.read_normal(m)
     doc.uv_set = textures.uv_set
+    if normal is not None and not maps:
+        notes.append(
+            "normalTexture on a material with no other texture: it is converted as a uniform material, so only a "
+            "glTF output keeps the normal map"
+        )
     carried = textures.read_carried(m, pbr, found)
     notes += extension_notes(found)
     note_unknown(ext, obj, notes)
