@@ -174,6 +174,60 @@ ASSETS: list[Asset] = [
         note="grey dielectric, roughness 0",
     ),
     Asset(
+        "TTT-Rotation",
+        "gltf-TextureTransformTest/TextureTransformTest.gltf",
+        "gltf:metal-rough+transform",  # baked: the checker reads the stored texture, so no identity check
+        [GLTF, PLASTIC, CYCLES],
+        material="Rotation",
+        note="KHR_texture_transform rotation, clamp sampler (baked)",
+    ),
+    Asset(
+        "TTMT-normal",
+        "gltf-TextureTransformMultiTest/TextureTransformMultiTest.glb",
+        "gltf:metal-rough",
+        [GLTF, PLASTIC, CYCLES],
+        material="NormalTest0Mat",
+        note="transformed normal map (baked and turned)",
+    ),
+    Asset(
+        "TTMT-basecolor-uv1",
+        "gltf-TextureTransformMultiTest/TextureTransformMultiTest.glb",
+        "gltf:metal-rough+transform",  # baked: the checker reads the stored texture, so no identity check
+        [GLTF, PLASTIC, CYCLES],
+        material="BaseColorTest1Mat",
+        note="transformed base colour on TEXCOORD_1",
+    ),
+    Asset(
+        "EmissiveStrength",
+        "gltf-EmissiveStrengthTest/EmissiveStrengthTest.glb",
+        "gltf:metal-rough",
+        [GLTF, PLASTIC, CYCLES],
+        material="Emit4",
+        note="black base, emission x KHR_materials_emissive_strength 4 (carried)",
+    ),
+    Asset(
+        "Attenuation",
+        "gltf-AttenuationTest/AttenuationTest.glb",
+        "gltf:metal-rough",
+        [GLTF, PLASTIC, CYCLES],
+        note="transmission 1 + volume: kept onto glTF, refused elsewhere",
+    ),
+    Asset(
+        "MultiUV",
+        "gltf-MultiUVTest/MultiUVTest.glb",
+        "gltf:metal-rough",
+        [GLTF, PLASTIC, CYCLES],
+        note="base colour on TEXCOORD_0, emission on TEXCOORD_1",
+    ),
+    Asset(
+        "TexLinearInterp-mask",
+        "gltf-TextureLinearInterpolationTest/TextureLinearInterpolationTest.glb",
+        "gltf:metal-rough",
+        [GLTF, PLASTIC, CYCLES],
+        material="2",
+        note="alphaMode MASK over a grey+alpha texture (carried opacity)",
+    ),
+    Asset(
         "ss-copper",
         "mtlx-standard_surface_copper/standard_surface_copper.mtlx",
         "mtlx:standard_surface",  # read through a translation: no identity target

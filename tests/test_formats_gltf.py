@@ -348,7 +348,7 @@ def test_a_base_colour_texture_with_alpha_keeps_its_stored_colour(tmp_path):
     asset = read(
         make_file(tmp_path, "a.gltf", [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}], {"b": rgba})
     )
-    assert any("baseColorTexture alpha ignored" in n for n in asset.notes)
+    assert asset.carried == {}  # alphaMode OPAQUE: alpha is ignored (glTF §3.9.4)
     ms = load_map_set(asset.to_map_set(tmp_path / "maps"))
     base, _ = read_image(ms.maps["baseColor"], ms.colorspace["baseColor"])
     np.testing.assert_allclose(base, srgb_to_linear(rgba[..., :3] / 255.0), atol=1e-6)
@@ -395,7 +395,10 @@ def test_inputs_matremap_does_not_remap_are_noted(tmp_path):
         "pbrMetallicRoughness": {
             "baseColorFactor": [1, 1, 1, 0.5],
             "baseColorTexture": {"index": 0, "texCoord": 1},
-            "metallicRoughnessTexture": {"index": 0, "extensions": {"KHR_texture_transform": {"scale": [2, 2]}}},
+            "metallicRoughnessTexture": {
+                "index": 0,
+                "extensions": {"KHR_texture_transform": {"scale": [2, 2], "texCoord": 1}},
+            },
         },
         "extensions": {"KHR_materials_clearcoat": {"clearcoatFactor": 1}, "KHR_materials_sheen": {}},
     }
@@ -407,7 +410,7 @@ def test_inputs_matremap_does_not_remap_are_noted(tmp_path):
         "emissi",
         "occlusion",
         "alpha 0.5",
-        "texCoord 1",
+        "TEXCOORD_1",
         "KHR_texture_transform",
         "KHR_materials_clearcoat",
         "KHR_materials_sheen",

@@ -159,7 +159,7 @@ def test_wrong_typed_image_entries_are_refused_or_read(tmp_path, change, match):
         ({"normalTexture": {"index": 0, "scale": "x"}}, "normalTexture.scale must be a number"),
         ({"extensions": {"KHR_materials_transmission": {"transmissionFactor": "x"}}}, "transmissionFactor must be"),
         ({"extensions": {"KHR_materials_sheen": {"sheenColorFactor": 5}}}, "sheenColorFactor must be 3 numbers"),
-        ({"extensions": {"KHR_materials_ior": [1.5]}}, "malformed pbrMetallicRoughness or extensions"),
+        ({"extensions": {"KHR_materials_ior": [1.5]}}, "KHR_materials_ior is not an object"),
     ],
 )
 def test_wrong_typed_material_members_are_refused(tmp_path, material, match):

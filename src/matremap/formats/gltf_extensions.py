@@ -1,0 +1,239 @@
+"""glTF material extensions read, validated and reported: what drives the model, what only a glTF keeps.
+
+Each extension's fields, defaults and ranges are those of its Khronos README and JSON schema (glTF 2.0
+extension registry, ratified versions):
+
+* KHR_materials_ior: ``ior`` >= 1, or 0 ("full specular"), default 1.5;
+* KHR_materials_specular: ``specularFactor`` in [0, 1] (default 1) x alpha of ``specularTexture``,
+  ``specularColorFactor`` >= 0 (default 1) x sRGB RGB of ``specularColorTexture``;
+* KHR_materials_emissive_strength: ``emissiveStrength`` >= 0 (default 1) multiplies ``emissiveFactor``;
+* KHR_materials_clearcoat: ``clearcoatFactor`` (R of ``clearcoatTexture``), ``clearcoatRoughnessFactor``
+  (G of ``clearcoatRoughnessTexture``), both in [0, 1], default 0; ``clearcoatNormalTexture``;
+* KHR_materials_sheen: ``sheenColorFactor`` RGB in [0, 1] (default 0) x ``sheenColorTexture`` (sRGB),
+  ``sheenRoughnessFactor`` in [0, 1] (default 0) x alpha of ``sheenRoughnessTexture``;
+* KHR_materials_transmission: ``transmissionFactor`` in [0, 1] (default 0) x R of ``transmissionTexture``;
+* KHR_materials_volume: ``thicknessFactor`` >= 0 (default 0) x G of ``thicknessTexture``,
+  ``attenuationDistance`` > 0 (default infinity), ``attenuationColor`` RGB in [0, 1] (default 1).
+
+``ior`` and ``specular`` drive ``gltf:metal-rough``; emissive strength goes into the carried emission
+(:mod:`matremap.formats.gltf_read`). The others are layers no matremap model has yet: a glTF written over
+its source keeps them as they are (the copy leaves them alone); for any other target the reader's notes
+name exactly what is left behind, and a material whose look depends on one (mostly transmissive: glass;
+a coloured sheen: velvet) is listed in ``asset.lost`` and refused for other targets.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from matremap.errors import MatremapError
+from matremap.formats.gltf_container import is_index
+from matremap.formats.gltf_textures import TRANSFORM, as_dict, finite_numbers, transform_matrix
+
+IOR = "KHR_materials_ior"
+SPECULAR = "KHR_materials_specular"
+EMISSIVE_STRENGTH = "KHR_materials_emissive_strength"
+CLEARCOAT = "KHR_materials_clearcoat"
+SHEEN = "KHR_materials_sheen"
+TRANSMISSION = "KHR_materials_transmission"
+VOLUME = "KHR_materials_volume"
+
+
+@dataclass(frozen=True)
+class Field:
+    """One field of an extension: ``kind`` is ``unit`` ([0, 1]), ``nonneg`` (>= 0), ``positive`` (> 0),
+    ``ior`` (>= 1 or 0), ``rgb_unit``, ``rgb_nonneg`` or ``texture`` (a textureInfo)."""
+
+    kind: str
+    default: Any = None
+
+
+TEXTURE = Field("texture")
+SCHEMAS: dict[str, dict[str, Field]] = {
+    IOR: {"ior": Field("ior", 1.5)},
+    SPECULAR: {
+        "specularFactor": Field("unit", 1.0),
+        "specularTexture": TEXTURE,
+        "specularColorFactor": Field("rgb_nonneg", [1.0, 1.0, 1.0]),
+        "specularColorTexture": TEXTURE,
+    },
+    EMISSIVE_STRENGTH: {"emissiveStrength": Field("nonneg", 1.0)},
+    CLEARCOAT: {
+        "clearcoatFactor": Field("unit", 0.0),
+        "clearcoatTexture": TEXTURE,
+        "clearcoatRoughnessFactor": Field("unit", 0.0),
+        "clearcoatRoughnessTexture": TEXTURE,
+        "clearcoatNormalTexture": TEXTURE,
+    },
+    SHEEN: {
+        "sheenColorFactor": Field("rgb_unit", [0.0, 0.0, 0.0]),
+        "sheenColorTexture": TEXTURE,
+        "sheenRoughnessFactor": Field("unit", 0.0),
+        "sheenRoughnessTexture": TEXTURE,
+    },
+    TRANSMISSION: {"transmissionFactor": Field("unit", 0.0), "transmissionTexture": TEXTURE},
+    VOLUME: {
+        "thicknessFactor": Field("nonneg", 0.0),
+        "thicknessTexture": TEXTURE,
+        "attenuationDistance": Field("positive", math.inf),
+        "attenuationColor": Field("rgb_unit", [1.0, 1.0, 1.0]),
+    },
+}
+_RANGES = {
+    "unit": "a number in [0, 1]",
+    "nonneg": "a number >= 0",
+    "positive": "a number > 0",
+    "ior": "a number >= 1 (or 0)",
+    "rgb_unit": "3 numbers in [0, 1]",
+    "rgb_nonneg": "3 numbers >= 0",
+}
+
+
+def _valid(kind: str, value: Any) -> Any:
+    """``value`` as a float (or 3 floats) when it fits ``kind``, else None."""
+    vals = finite_numbers(value, 3 if kind.startswith("rgb") else 1)
+    if vals is None:
+        return None
+    low_ok = {
+        "unit": lambda v: 0.0 <= v <= 1.0,
+        "rgb_unit": lambda v: 0.0 <= v <= 1.0,
+        "nonneg": lambda v: v >= 0.0,
+        "rgb_nonneg": lambda v: v >= 0.0,
+        "positive": lambda v: v > 0.0,
+        "ior": lambda v: v >= 1.0 or v == 0.0,
+    }[kind]
+    if not all(low_ok(v) for v in vals):
+        return None
+    return vals if kind.startswith("rgb") else vals[0]
+
+
+def check_texture_info(path: Path, where: str, info: Any, n_textures: int) -> dict[str, Any]:
+    """A textureInfo (``index``, ``texCoord``, KHR_texture_transform) checked for its types and that its
+    index names one of the file's ``n_textures`` textures."""
+    if not isinstance(info, dict) or not is_index(info.get("index")):
+        raise MatremapError(f"{path}: {where} is not a textureInfo with an index; fix the file")
+    if info["index"] >= n_textures:
+        raise MatremapError(
+            f"{path}: {where} refers to textures[{info['index']}], but the file has {n_textures}; fix the file"
+        )
+    if not is_index(info.get("texCoord", 0)):
+        raise MatremapError(f"{path}: {where}.texCoord must be a UV set index, got {info['texCoord']!r}; fix the file")
+    for key in ("scale", "strength"):
+        if key in info and finite_numbers(info[key], 1) is None:
+            raise MatremapError(f"{path}: {where}.{key} must be a number, got {info[key]!r}; fix the file")
+    if TRANSFORM in as_dict(info.get("extensions")):
+        transform_matrix(path, where, info["extensions"][TRANSFORM])
+    return info
+
+
+def read_extensions(path: Path, where: str, ext: dict[str, Any], n_textures: int) -> dict[str, dict[str, Any]]:
+    """The material's known extensions (:data:`SCHEMAS`), each field checked and defaults filled in
+    (textures as their textureInfo); a malformed value is refused in one line naming the material
+    (``where``), the extension and the field."""
+    found: dict[str, dict[str, Any]] = {}
+    for name, schema in SCHEMAS.items():
+        if name not in ext:
+            continue
+        obj = ext[name]
+        if obj is None:
+            obj = {}
+        if not isinstance(obj, dict):
+            raise MatremapError(f"{path}: {where}: {name} is not an object; fix the file")
+        values: dict[str, Any] = {}
+        for key, f in schema.items():
+            if f.kind == "texture":
+                if key in obj:
+                    values[key] = check_texture_info(path, f"{where} {name}.{key}", obj[key], n_textures)
+                continue
+            value = _valid(f.kind, obj[key]) if key in obj else f.default
+            if value is None:
+                raise MatremapError(
+                    f"{path}: {where}: {name}.{key} must be {_RANGES[f.kind]}, got {obj[key]!r}; fix the file"
+                )
+            values[key] = value
+        found[name] = values
+    return found
+
+
+def _g(v: float) -> str:
+    return f"{v:.3g}"
+
+
+def _rgb(v: list[float]) -> str:
+    return "[" + ", ".join(_g(x) for x in v) + "]"
+
+
+def _textures(values: dict[str, Any]) -> str:
+    names = [k for k in values if k.endswith("Texture")]
+    return f" with {', '.join(names)}" if names else ""
+
+
+LEFT_BEHIND = "a glTF output keeps it as it is; other targets have no such layer, so it is left out"
+
+
+def lost_look(found: dict[str, dict[str, Any]]) -> list[str]:
+    """The extensions that carry the material's look and that no matremap model has: mostly transmissive
+    (transmission above 0.5, or textured: glass) or a coloured sheen (above 0.5, or textured: velvet)."""
+    lost = []
+    tr = found.get(TRANSMISSION)
+    if tr and (tr["transmissionFactor"] > 0.5 or ("transmissionTexture" in tr and tr["transmissionFactor"] > 0)):
+        lost.append(f"{TRANSMISSION} (transmissionFactor {_g(tr['transmissionFactor'])}{_textures(tr)})")
+    sh = found.get(SHEEN)
+    if sh and (max(sh["sheenColorFactor"]) > 0.5 or ("sheenColorTexture" in sh and max(sh["sheenColorFactor"]) > 0)):
+        lost.append(f"{SHEEN} (a coloured sheen: sheenColorFactor {_rgb(sh['sheenColorFactor'])}{_textures(sh)})")
+    return lost
+
+
+def extension_notes(found: dict[str, dict[str, Any]]) -> list[str]:
+    """One note per layer extension that does not make the material lost: its values, and what becomes
+    of it (kept in a glTF output, left out elsewhere)."""
+    notes = []
+    lost = " ".join(lost_look(found))
+    cc = found.get(CLEARCOAT)
+    if cc is not None:
+        if cc["clearcoatFactor"] == 0:
+            notes.append(f"{CLEARCOAT} has clearcoatFactor 0: no coat")
+        else:
+            notes.append(
+                f"{CLEARCOAT} factor {_g(cc['clearcoatFactor'])}, roughness {_g(cc['clearcoatRoughnessFactor'])}"
+                f"{_textures(cc)}: matremap's models have no coat, so the fit sees the base layer only; {LEFT_BEHIND}"
+            )
+    sh = found.get(SHEEN)
+    if sh is not None and SHEEN not in lost:
+        notes.append(
+            f"{SHEEN} colour {_rgb(sh['sheenColorFactor'])}, roughness {_g(sh['sheenRoughnessFactor'])}"
+            f"{_textures(sh)}: a faint sheen the fit does not see; {LEFT_BEHIND}"
+        )
+    tr = found.get(TRANSMISSION)
+    if tr is not None and TRANSMISSION not in lost:
+        notes.append(
+            f"{TRANSMISSION} factor {_g(tr['transmissionFactor'])}{_textures(tr)}: mostly opaque, the fit sees the "
+            f"opaque base; {LEFT_BEHIND}"
+        )
+    vol = found.get(VOLUME)
+    if vol is not None:
+        notes.append(
+            f"{VOLUME} thickness {_g(vol['thicknessFactor'])}, attenuation colour {_rgb(vol['attenuationColor'])} "
+            f"over {_g(vol['attenuationDistance'])}{_textures(vol)}: the volume under a transmissive surface; "
+            f"{LEFT_BEHIND}"
+        )
+    return notes
+
+
+__all__ = [
+    "CLEARCOAT",
+    "EMISSIVE_STRENGTH",
+    "IOR",
+    "SCHEMAS",
+    "SHEEN",
+    "SPECULAR",
+    "TRANSMISSION",
+    "VOLUME",
+    "check_texture_info",
+    "extension_notes",
+    "lost_look",
+    "read_extensions",
+]

@@ -1,0 +1,466 @@
+"""One glTF 2.0 material read as a ``gltf:metal-rough`` asset: factors, textures, extensions, carried inputs.
+
+References are to the glTF 2.0 specification (Khronos, version 2.0.1, 2021):
+
+* §3.9.2 "Metallic-Roughness Material": ``baseColorFactor`` (linear RGBA, default 1) times the
+  ``baseColorTexture`` (sRGB-encoded); ``metallicFactor`` / ``roughnessFactor`` (default 1) times
+  the blue / green channels of the linear ``metallicRoughnessTexture`` (red and alpha unused);
+* §3.9.3 "Additional Textures": ``normalTexture`` (tangent space), ``occlusionTexture`` (R channel,
+  ``strength`` in [0, 1], default 1), ``emissiveTexture`` (sRGB) times ``emissiveFactor`` (default 0);
+* §3.9.4 "Alpha Coverage": ``alphaMode`` OPAQUE (alpha ignored, the default), MASK (``alphaCutoff``,
+  default 0.5) or BLEND; alpha is ``baseColorFactor[3]`` times the base colour texture's alpha;
+* the material extensions of :mod:`matremap.formats.gltf_extensions` (ior and specular drive the model,
+  emissive strength multiplies the emission, the layers are recorded and reported).
+
+Textures are resolved by :mod:`matremap.formats.gltf_textures` (samplers, KHR_texture_transform, UV sets):
+a transformed texture is baked onto the map set's UVs. A map set has one UV set, so the remapped textures
+(base colour, metallic-roughness, specular, normal) must share one; a material whose remapped textures
+use two sets is refused, one whose textures all use another set than TEXCOORD_0 is read on that set with
+a note (every written file lays the maps on the UVs the material's own meshes use for them).
+
+Emission, occlusion and opacity are *carried* (:class:`~matremap.formats.asset.CarriedInput`): passed to
+the writer unchanged, which writes them where its format has a slot.
+"""
+
+from __future__ import annotations
+
+import os
+from glob import escape as glob_escape
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from matremap.core.material import Material
+from matremap.errors import MatremapError
+from matremap.formats.asset import CarriedInput, MaterialAsset, TextureRef
+from matremap.formats.confine import Confinement
+from matremap.formats.gltf_container import (
+    FileReader,
+    GltfDocument,
+    cache_dir,
+    cached_copy,
+    digest_matches,
+    parse_container,
+)
+from matremap.formats.gltf_extensions import (
+    EMISSIVE_STRENGTH,
+    IOR,
+    SCHEMAS,
+    SPECULAR,
+    check_texture_info,
+    extension_notes,
+    lost_look,
+    read_extensions,
+)
+from matremap.formats.gltf_textures import (
+    TRANSFORM,
+    SlotTexture,
+    as_dict,
+    baked,
+    baked_normal,
+    finite_numbers,
+    sampler_wrap,
+    transform_matrix,
+)
+
+MODEL = "gltf:metal-rough"
+DEFAULT_IOR = 1.5
+
+
+def without_alpha(path: Path) -> Path:
+    """A copy of an image with alpha, without it, in the cache folder.
+
+    PNG stores colour unassociated with alpha (§3.8.2 images are PNG or JPEG); OpenImageIO
+    premultiplies colour by alpha on read unless told otherwise, which would darken base colours
+    and packed channels wherever alpha < 1. The copy keeps the stored colour values. It lives in the
+    folder of the image's own content and carries its digest in its name, checked when reused."""
+    import tempfile
+
+    import OpenImageIO as oiio
+
+    folder = cache_dir(path.read_bytes())
+    for f in sorted(folder.glob(f"{glob_escape(path.stem)}-rgb-*.png")):
+        if digest_matches(f, f.stem.rsplit("-", 1)[-1]):
+            return f
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    inp = oiio.ImageInput.open(str(path), config)
+    if inp is None:
+        raise MatremapError(f"cannot read {path}: {oiio.geterror().strip()}; re-export it as PNG or JPEG")
+    spec = inp.spec()
+    fmt = oiio.UINT16 if str(spec.format) == "uint16" else oiio.UINT8
+    pixels = inp.read_image(0, 0, 0, spec.nchannels, fmt)
+    inp.close()
+    if pixels is None:
+        raise MatremapError(f"cannot read {path}: the image is corrupt; re-export it")
+    colour = np.ascontiguousarray(pixels[..., :3] if spec.nchannels == 4 else pixels[..., :1])
+    fd, tmp = tempfile.mkstemp(prefix=".rgb.", suffix=".png", dir=folder)
+    os.close(fd)
+    try:
+        o = oiio.ImageOutput.create(tmp)
+        if o is None or not o.open(tmp, oiio.ImageSpec(spec.width, spec.height, colour.shape[-1], fmt)):
+            raise MatremapError(f"cannot write an alpha-free copy of {path} in {folder}: {oiio.geterror().strip()}")
+        o.write_image(colour)
+        o.close()
+        data = Path(tmp).read_bytes()
+    finally:
+        os.unlink(tmp)
+    return cached_copy(folder, f"{path.stem}-rgb", ".png", data)
+
+
+def select(path: Path, materials: list[Any], material: str | int | None) -> int:
+    """The index of the material named or numbered ``material`` (the first when None)."""
+    names = [m.get("name") if isinstance(m, dict) else None for m in materials]
+    if material is None:
+        return 0
+    if isinstance(material, str) and material in names:
+        return names.index(material)
+    idx: int | None = None
+    if isinstance(material, int) and not isinstance(material, bool):
+        idx = material
+    elif isinstance(material, str) and material.strip().lstrip("-").isdigit():
+        idx = int(material)
+    if idx is not None and 0 <= idx < len(materials):
+        return idx
+    listing = ", ".join(f"{i}: {n!r}" if n else f"{i}: (unnamed)" for i, n in enumerate(names))
+    raise MatremapError(f"{path} has no material {material!r}; its materials are {listing} (pick one by name or index)")
+
+
+def number(path: Path, where: str, value: Any, default: Any, size: int = 1) -> Any:
+    """``value`` as a float (or ``size`` floats), ``default`` when None; anything else is refused."""
+    if value is None:
+        return default
+    vals = finite_numbers(value, size)
+    if vals is None:
+        raise MatremapError(
+            f"{path}: {where} must be {'a number' if size == 1 else f'{size} numbers'}, got {value!r}; fix the file"
+        )
+    return vals if size > 1 else vals[0]
+
+
+def read_materials(p: Path) -> tuple[bytes, dict[str, Any], bytes | None, list[Any]]:
+    """The file's bytes, its JSON, its binary chunk and its (non-empty) material list."""
+    if not p.is_file():
+        raise MatremapError(f"{p} not found")
+    data = p.read_bytes()
+    obj, bin_chunk = parse_container(p, data)
+    mats = obj.get("materials")
+    if not isinstance(mats, list) or not mats:
+        raise MatremapError(f"{p} has no materials; export it with its materials")
+    return data, obj, bin_chunk, mats
+
+
+def material_names(path: str | os.PathLike) -> list[str]:
+    """The names of a file's materials, in order ("material N" for an unnamed one)."""
+    mats = read_materials(Path(path))[3]
+    names = [m.get("name") if isinstance(m, dict) else None for m in mats]
+    return [n if isinstance(n, str) and n else f"material {i}" for i, n in enumerate(names)]
+
+
+def read(
+    path: str | os.PathLike, material: str | int | None = None, *, confinement: Confinement | None = None
+) -> MaterialAsset:
+    """Read one material of a ``.gltf`` / ``.glb`` file as a ``gltf:metal-rough`` asset.
+
+    ``material``: a name or an index (the first material by default). Textures become
+    :class:`TextureRef`: base colour (sRGB, RGB, times baseColorFactor), roughness and metallic
+    (green and blue of the metallicRoughnessTexture, §3.9.2), specular (alpha of specularTexture) and
+    specularColor (sRGB RGB of specularColorTexture) of KHR_materials_specular; the normal map as
+    ``asset.normal``; transformed ones baked. Emission, occlusion and opacity go into ``asset.carried``;
+    the layer extensions into ``asset.document.extensions``, ``asset.notes`` and ``asset.lost``. External
+    images and buffers must lie in the file's folder or a folder ``confinement`` allows.
+    """
+    p = Path(path)
+    data, obj, bin_chunk, mats = read_materials(p)
+    doc = GltfDocument(obj, bin_chunk, p.suffix.lower() == ".glb", p.parent)
+    idx = select(p, mats, material)
+    m = mats[idx]
+    if not isinstance(m, dict):
+        raise MatremapError(f"{p}: materials[{idx}] is not an object; the file is broken, re-export it")
+    given = m.get("name")
+    name = given if isinstance(given, str) and given else f"material {idx}"
+    notes: list[str] = []
+    if material is None and len(mats) > 1:
+        notes.append(f"{p.name} has {len(mats)} materials; using the first, {name!r} (choose another by name or index)")
+    where = f"material {name!r}"
+    pbr, ext = m.get("pbrMetallicRoughness") or {}, m.get("extensions") or {}
+    if not isinstance(pbr, dict) or not isinstance(ext, dict):
+        raise MatremapError(f"{p}: {where} has a malformed pbrMetallicRoughness or extensions; re-export the file")
+    n_textures = len(obj["textures"]) if isinstance(obj.get("textures"), list) else 0
+    found = read_extensions(p, where, ext, n_textures)
+    doc.extensions = found
+    constants = read_factors(p, where, pbr, found)
+    textures = MaterialTextures(FileReader(p, doc, data, confinement), where, notes)
+    maps = textures.read_maps(pbr, found.get(SPECULAR, {}), constants)
+    normal = textures.read_normal(m)
+    doc.uv_set = textures.uv_set
+    if normal is not None and not maps:
+        notes.append(
+            "normalTexture on a material with no other texture: it is converted as a uniform material, so only a "
+            "glTF output keeps the normal map"
+        )
+    carried = textures.read_carried(m, pbr, found)
+    notes += extension_notes(found)
+    note_unknown(ext, obj, notes)
+    return MaterialAsset(
+        path=p,
+        format="gltf",
+        name=name,
+        model=MODEL,
+        constants=constants,
+        textures=maps,
+        normal=normal,
+        notes=notes,
+        document=doc,
+        index=idx,
+        lost=lost_look(found),
+        carried=carried,
+    )
+
+
+def read_factors(path: Path, where: str, pbr: dict[str, Any], found: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """The material's uniform values: the pbrMetallicRoughness factors, KHR_materials_ior's ior and
+    KHR_materials_specular's factors (each at its default when absent), checked against the model."""
+    base = number(path, f"{where} baseColorFactor", pbr.get("baseColorFactor"), [1.0] * 4, 4)
+    constants: dict[str, Any] = {
+        "baseColor": base[:3],
+        "metallic": number(path, f"{where} metallicFactor", pbr.get("metallicFactor"), 1.0),
+        "roughness": number(path, f"{where} roughnessFactor", pbr.get("roughnessFactor"), 1.0),
+    }
+    constants["ior"] = found.get(IOR, {}).get("ior", DEFAULT_IOR)
+    if constants["ior"] == 0.0:
+        raise MatremapError(
+            f"{path}: {where} has {IOR} ior 0 (full specular), which gltf:metal-rough cannot express; "
+            f"give it an ior in [1, 5]"
+        )
+    spec = found.get(SPECULAR, {})
+    constants["specular"] = spec.get("specularFactor", 1.0)
+    constants["specularColor"] = spec.get("specularColorFactor", [1.0] * 3)
+    try:
+        Material.create(MODEL, constants)
+    except MatremapError as e:
+        raise MatremapError(f"{path}: {where}: {e}; fix the value in the file") from None
+    return constants
+
+
+def channel(c: int, nch: int) -> int:
+    """File channel of glTF colour channel c (0 R, 1 G, 2 B) in a file of ``nch`` channels: grey files replicate."""
+    return c if nch >= 3 else 0
+
+
+def alpha_channel(nch: int) -> int | None:
+    """File channel of glTF's alpha in a file of ``nch`` channels; None when it has no alpha."""
+    return {4: 3, 2: 1}.get(nch)
+
+
+class MaterialTextures:
+    """Reads the textures of one material (``where`` names it in messages) into TextureRefs, baking
+    transformed ones; keeps the UV set the remapped textures use (:attr:`uv_set`)."""
+
+    def __init__(self, reader: FileReader, where: str, notes: list[str]) -> None:
+        self.reader, self.where, self.notes = reader, where, notes
+        self.uv_sets: dict[str, int] = {}
+
+    @property
+    def uv_set(self) -> int:
+        """The UV set of the remapped textures (0 when there are none)."""
+        return next(iter(self.uv_sets.values()), 0)
+
+    def file(self, info: Any, slot: str) -> SlotTexture:
+        """The image, sampler, UV set and transform of a textureInfo."""
+        r, p, where = self.reader, self.reader.path, self.where
+        n_textures = len(r.doc.json["textures"]) if isinstance(r.doc.json.get("textures"), list) else 0
+        info = check_texture_info(p, f"{where} {slot}", info, n_textures)
+        tex = r.item("textures", info["index"], f"{where} {slot}")
+        src = tex.get("source")
+        if src is None:  # an extension may give the only source (EXT_texture_webp, KHR_texture_basisu)
+            src = next((e["source"] for e in as_dict(tex.get("extensions")).values() if "source" in as_dict(e)), None)
+        if src is None:
+            raise MatremapError(
+                f"{p}: {where} {slot} uses textures[{info['index']}], which has no image source; re-export the file"
+            )
+        f = r.image(src, f"{where} {slot}")
+        matrix, uv_override = None, None
+        if TRANSFORM in as_dict(info.get("extensions")):
+            matrix, uv_override = transform_matrix(p, f"{where} {slot}", info["extensions"][TRANSFORM])
+        wrap = sampler_wrap(p, r.doc.json, tex, f"{where} {slot}")
+        uv = uv_override if uv_override is not None else info.get("texCoord", 0)
+        from matremap.svbrdf.textures import image_info
+
+        n = image_info(f, "linear", colour=False).channels
+        return SlotTexture(slot, f, n, uv, wrap, matrix, f in r.extracted)
+
+    def remapped(self, info: Any, slot: str) -> SlotTexture:
+        """:meth:`file` of a texture the model is remapped from: its UV set must be the others'."""
+        tex = self.file(info, slot)
+        for other, uv in self.uv_sets.items():
+            if uv != tex.uv_set:
+                raise MatremapError(
+                    f"{self.reader.path}: {self.where}: {other} uses TEXCOORD_{uv} and {slot} TEXCOORD_{tex.uv_set}; "
+                    f"a map set has one UV set, so these textures cannot be converted together (re-export them on "
+                    f"one UV set)"
+                )
+        self.uv_sets[slot] = tex.uv_set
+        return tex
+
+    def ref(self, tex: SlotTexture, channels: tuple[int, ...], srgb: bool, scale: Any) -> TextureRef:
+        """A parameter's TextureRef: the file as it is, an alpha-free copy for colour channels of an
+        image with alpha, or a bake when a transform moves the lookup."""
+        colorspace = "srgb" if srgb else "linear"
+        if tex.transform is not None:
+            self.note_baked(tex)
+            return TextureRef(tex.path, channels, colorspace, scale, tex.extracted, bake=baked(tex, srgb))
+        f, extracted = tex.path, tex.extracted
+        if tex.channels in (2, 4) and max(channels) < tex.channels - 1:
+            f, extracted = without_alpha(tex.path), True
+        return TextureRef(f, channels, colorspace, scale, extracted)
+
+    def read_maps(
+        self, pbr: dict[str, Any], spec_ext: dict[str, Any], constants: dict[str, Any]
+    ) -> dict[str, TextureRef]:
+        """The parameters' textures, each scaled by its factor in ``constants``: base colour,
+        roughness and metallic (one packed texture), specular and specularColor."""
+        textures: dict[str, TextureRef] = {}
+        if "baseColorTexture" in pbr:
+            tex = self.remapped(pbr["baseColorTexture"], "baseColorTexture")
+            rgb = tuple(channel(c, tex.channels) for c in range(3))
+            textures["baseColor"] = self.ref(tex, rgb, True, tuple(constants["baseColor"]))
+        if "metallicRoughnessTexture" in pbr:
+            tex = self.remapped(pbr["metallicRoughnessTexture"], "metallicRoughnessTexture")
+            textures["roughness"] = self.ref(tex, (channel(1, tex.channels),), False, constants["roughness"])
+            textures["metallic"] = self.ref(tex, (channel(2, tex.channels),), False, constants["metallic"])
+        if "specularTexture" in spec_ext:
+            tex = self.remapped(spec_ext["specularTexture"], "specularTexture")
+            a = alpha_channel(tex.channels)
+            if a is None:
+                self.notes.append(
+                    "specularTexture has no alpha channel, so it is 1 everywhere; using specularFactor alone"
+                )
+            else:
+                textures["specular"] = self.ref(tex, (a,), False, constants["specular"])
+        if "specularColorTexture" in spec_ext:
+            tex = self.remapped(spec_ext["specularColorTexture"], "specularColorTexture")
+            rgb = tuple(channel(c, tex.channels) for c in range(3))
+            textures["specularColor"] = self.ref(tex, rgb, True, tuple(constants["specularColor"]))
+        if self.uv_set != 0:
+            self.notes.append(
+                f"the textures use TEXCOORD_{self.uv_set}: the maps are laid on that UV set (a glTF output keeps it)"
+            )
+        return textures
+
+    def read_normal(self, m: dict[str, Any]) -> TextureRef | None:
+        """The normal map (its scale is noted, not applied); a transformed one is baked and turned."""
+        if "normalTexture" not in m:
+            return None
+        tex = self.remapped(m["normalTexture"], "normalTexture")
+        scale = number(self.reader.path, f"{self.where} normalTexture.scale", m["normalTexture"].get("scale"), 1.0)
+        if scale != 1:
+            self.notes.append(f"normalTexture scale {scale:g} ignored; the normal map is used as stored (scale 1)")
+        if tex.transform is not None:
+            self.note_baked(tex)
+            return TextureRef(tex.path, None, "linear", 1.0, tex.extracted, bake=baked_normal(tex))
+        return TextureRef(tex.path, None, "linear", 1.0, tex.extracted)
+
+    def note_baked(self, tex: SlotTexture) -> None:
+        """Note (once per slot) that a transformed texture is baked onto the maps' UVs."""
+        note = f"{tex.slot}: {TRANSFORM} and the sampler's wrap ({'/'.join(tex.wrap)}) baked into the map"
+        if tex.slot.startswith("normal"):
+            note += " (its tangent-space x, y turned with the transform)"
+        if note not in self.notes:
+            self.notes.append(note)
+
+    def carried_texture(self, info: Any, slot: str, channels: tuple[int, ...] | None, srgb: bool) -> TextureRef | None:
+        """A carried input's texture on the maps' UV set (None, with a note, when it uses another set)."""
+        tex = self.file(info, slot)
+        if tex.uv_set != self.uv_set:
+            self.notes.append(
+                f"{slot} uses TEXCOORD_{tex.uv_set} and the maps TEXCOORD_{self.uv_set}: a glTF output keeps it as "
+                f"it is; other formats get its factor without the texture (a map set has one UV set)"
+            )
+            return None
+        return self.ref(tex, channels or tuple(range(tex.channels)), srgb, 1.0)
+
+    def read_carried(
+        self, m: dict[str, Any], pbr: dict[str, Any], found: dict[str, dict[str, Any]]
+    ) -> dict[str, CarriedInput]:
+        """Emission, occlusion and opacity (§3.9.3, §3.9.4), each with a note."""
+        p, where = self.reader.path, self.where
+        carried: dict[str, CarriedInput] = {}
+        factor = number(p, f"{where} emissiveFactor", m.get("emissiveFactor"), [0.0] * 3, 3)
+        strength = found.get(EMISSIVE_STRENGTH, {}).get("emissiveStrength", 1.0)
+        if min(factor) < 0:
+            raise MatremapError(f"{p}: {where} emissiveFactor must be 3 numbers >= 0, got {factor}; fix the file")
+        if max(factor) > 0 and strength > 0:
+            value = tuple(float(f * strength) for f in factor)
+            texture = None
+            if "emissiveTexture" in m:
+                texture = self.carried_texture(m["emissiveTexture"], "emissiveTexture", None, True)
+            carried["emission"] = CarriedInput(value, texture, {"factor": factor, "strength": strength})
+            self.notes.append(
+                f"emission: emissiveFactor {factor}"
+                + (f" x {EMISSIVE_STRENGTH} {strength:g}" if strength != 1 else "")
+                + (" x emissiveTexture" if texture is not None else "")
+                + " is carried over as it is (not remapped)"
+            )
+        if "occlusionTexture" in m:
+            info = m["occlusionTexture"]
+            occ_strength = number(p, f"{where} occlusionTexture.strength", as_dict(info).get("strength"), 1.0)
+            if not 0 <= occ_strength <= 1:
+                raise MatremapError(f"{p}: {where} occlusionTexture.strength must be in [0, 1]; fix the file")
+            texture = self.carried_texture(info, "occlusionTexture", (0,), False)
+            if texture is not None:
+                carried["occlusion"] = CarriedInput(occ_strength, texture)
+                self.notes.append(f"occlusion: occlusionTexture (strength {occ_strength:g}) is carried over as it is")
+        opacity = self.read_opacity(m, pbr)
+        if opacity is not None:
+            carried["opacity"] = opacity
+        return carried
+
+    def read_opacity(self, m: dict[str, Any], pbr: dict[str, Any]) -> CarriedInput | None:
+        """Alpha coverage (§3.9.4): None for OPAQUE (alpha ignored); else the alpha factor, the base colour
+        texture's alpha and the mode (and cutoff for MASK)."""
+        p, where = self.reader.path, self.where
+        mode = m.get("alphaMode", "OPAQUE")
+        if mode not in ("OPAQUE", "MASK", "BLEND"):
+            raise MatremapError(f"{p}: {where} alphaMode is {mode!r}, not OPAQUE, MASK or BLEND; fix the file")
+        alpha = number(p, f"{where} baseColorFactor", pbr.get("baseColorFactor"), [1.0] * 4, 4)[3]
+        cutoff = number(p, f"{where} alphaCutoff", m.get("alphaCutoff"), 0.5)
+        if cutoff < 0 or not 0 <= alpha <= 1:
+            raise MatremapError(f"{p}: {where} alphaCutoff must be >= 0 and alpha in [0, 1]; fix the file")
+        if mode == "OPAQUE":
+            if alpha < 1:
+                self.notes.append(f"baseColorFactor alpha {alpha:g} ignored: alphaMode is OPAQUE (glTF §3.9.4)")
+            return None
+        texture = None
+        if "baseColorTexture" in pbr:
+            tex = self.file(pbr["baseColorTexture"], "baseColorTexture")
+            a = alpha_channel(tex.channels)
+            if a is not None:
+                texture = self.ref(tex, (a,), False, 1.0)
+        settings: dict[str, Any] = {"mode": mode.lower()}
+        if mode == "MASK":
+            settings["cutoff"] = cutoff
+        self.notes.append(
+            f"opacity: alphaMode {mode}{f' (cutoff {cutoff:g})' if mode == 'MASK' else ''}, alpha {alpha:g}"
+            + (" x baseColorTexture alpha" if texture is not None else "")
+            + " is carried over as it is (matremap remaps the reflectance as opaque)"
+        )
+        return CarriedInput(alpha, texture, settings)
+
+
+def note_unknown(ext: dict[str, Any], obj: dict[str, Any], notes: list[str]) -> None:
+    """Note the material extensions matremap does not read (a written copy keeps them) and the
+    extensions the file requires."""
+    for name in sorted(set(ext) - set(SCHEMAS)):
+        notes.append(
+            f"{name} is not remapped (matremap fits the base metallic-roughness layer); a written copy keeps it"
+        )
+    listed = obj.get("extensionsRequired")
+    required = {e for e in (listed if isinstance(listed, list) else []) if isinstance(e, str)}
+    required -= {IOR, SPECULAR, TRANSFORM}
+    if required:
+        notes.append(f"the file requires {', '.join(sorted(required))}; matremap ignores them")
+
+
+__all__ = ["DEFAULT_IOR", "MODEL", "MaterialTextures", "material_names", "read", "read_materials", "select"]
