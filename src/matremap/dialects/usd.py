@@ -43,6 +43,7 @@ Parameter names are the UsdPreviewSurface input names, defaults its fallbacks.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, MutableMapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -52,6 +53,7 @@ import numpy as np
 from matremap.core.models import ModelSpec, OptionSpec, ParamSpec
 from matremap.core.optics import f0_from_ior, ior_from_f0
 from matremap.core.reflectance import Channels, Reflectance, as_floats, as_rgb
+from matremap.errors import MatremapError
 
 
 def metalness_f0_f90(diffuse: Any, metallic: Any, ior: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -190,3 +192,32 @@ MODELS = (PREVIEW_SURFACE,)
 #: UsdPreviewSurface has no exact Lambertian (its diffuse term always carries 1 - F); the family's irradiance
 #: units are the embedded renderer's, which draws glTF's white Lambertian in the same units
 WHITE_REFERENCE = ("gltf:metal-rough", {"baseColor": 1.0, "metallic": 0.0, "specular": 0.0})
+
+
+def specular_workflow(
+    constants: dict[str, Any], textures: MutableMapping[str, Any], notes: list[str], where: str
+) -> None:
+    """Read a specular-workflow UsdPreviewSurface as the metalness workflow where both give the same (see the
+    module docstring of :mod:`matremap.formats.usd`); refuse a textured one that cannot be; keep a uniform one.
+    ``textures`` maps the parameters a file textures to anything; ``where`` starts a refusal (the file and
+    material). The USD and MaterialX readers share this rule."""
+    if constants["useSpecularWorkflow"] != "1":
+        return
+    textures.pop("metallic", None)  # the specular workflow ignores metallic
+    s = np.asarray(constants.get("specularColor", [0.0] * 3), dtype=float)
+    coat = constants.get("clearcoat", 0.0)
+    grey = "specularColor" not in textures and float(np.ptp(s)) <= 1e-6 and "clearcoat" not in textures
+    ior = float(ior_from_f0(float(s[0]))) if grey and s[0] < 0.999 else math.inf
+    if grey and coat == 0.0 and ior <= PREVIEW_SURFACE.param("ior").bounds[1]:
+        constants.update({"useSpecularWorkflow": "0", "metallic": 0.0, "ior": ior})
+        notes.append(
+            f"useSpecularWorkflow=1 with grey specularColor {s[0]:.6g} is the metalness workflow's dielectric "
+            f"with ior {ior:.6g} (same F0, F90 and diffuse weight): read so"
+        )
+        return
+    if textures:
+        raise MatremapError(
+            f"{where}: uses the specular workflow with a coloured or textured specularColor (or a clearcoat); "
+            "matremap remaps textured materials in the metalness workflow (useSpecularWorkflow=0) only"
+        )
+    constants["metallic"] = 0.0

@@ -26,7 +26,7 @@ document without materials falls back to its shader nodes) and reads its surface
 * ``UsdPreviewSurface`` (MaterialX's ``ND_UsdPreviewSurface_surfaceshader``) maps one to one onto
   ``usd:preview_surface``, whose parameters are its input names; ``useSpecularWorkflow`` becomes the
   model's option, and a specular-workflow material is read by the same rule as in a USD file
-  (:func:`matremap.formats.usd.specular_workflow`); ``emissiveColor``, ``opacity`` (a mask where
+  (:func:`matremap.dialects.usd.specular_workflow`); ``emissiveColor``, ``opacity`` (a mask where
   ``opacityThreshold`` > 0) and ``occlusion`` are carried.
 
 An IOR below 1 (the velvet example's ``specular_IOR = 0``) means, in MaterialX's dielectric Fresnel
@@ -420,7 +420,7 @@ def _shader_asset(ctx: _Ctx, shader: Any, name: str, index: int, doc: Any) -> Ma
     lost = lost_look(shader)
     _note_skipped(ctx, cat, reader.skipped())
     if cat == "UsdPreviewSurface":
-        from matremap.formats.usd import specular_workflow
+        from matremap.dialects.usd import specular_workflow
 
         flag = int(np.asarray(reader.field("useSpecularWorkflow", "integer").value).reshape(-1)[0])
         constants["useSpecularWorkflow"] = "1" if flag == 1 else "0"

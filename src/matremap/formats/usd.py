@@ -65,8 +65,8 @@ import numpy as np
 from matremap.core.atomic import AtomicFiles
 from matremap.core.imageio import check_output
 from matremap.core.material import Material
-from matremap.core.optics import ior_from_f0
 from matremap.dialects import get_model
+from matremap.dialects.usd import specular_workflow
 from matremap.errors import MatremapError
 from matremap.formats.asset import CarriedInput, MaterialAsset, TextureRef
 from matremap.formats.bake import UVTransform, bake_image, rotate, scale, translate
@@ -541,32 +541,6 @@ def _preview_asset(ctx: _Ctx, shader: Any) -> MaterialAsset:
         notes=ctx.notes,
         carried=carried,
     )
-
-
-def specular_workflow(constants: dict[str, Any], textures: dict[str, TextureRef], notes: list[str], where: str) -> None:
-    """Read a specular-workflow UsdPreviewSurface as the metalness workflow where both give the same (see the
-    module docstring); refuse a textured one that cannot be; keep a uniform one. ``where`` starts a refusal
-    (the file and material); the USD and MaterialX readers share this rule."""
-    if constants["useSpecularWorkflow"] != "1":
-        return
-    textures.pop("metallic", None)  # the specular workflow ignores metallic
-    s = np.asarray(constants.get("specularColor", [0.0] * 3), dtype=float)
-    coat = constants.get("clearcoat", 0.0)
-    grey = "specularColor" not in textures and float(np.ptp(s)) <= 1e-6 and "clearcoat" not in textures
-    ior = float(ior_from_f0(float(s[0]))) if grey and s[0] < 0.999 else math.inf
-    if grey and coat == 0.0 and ior <= get_model(MODEL).param("ior").bounds[1]:
-        constants.update({"useSpecularWorkflow": "0", "metallic": 0.0, "ior": ior})
-        notes.append(
-            f"useSpecularWorkflow=1 with grey specularColor {s[0]:.6g} is the metalness workflow's dielectric "
-            f"with ior {ior:.6g} (same F0, F90 and diffuse weight): read so"
-        )
-        return
-    if textures:
-        raise MatremapError(
-            f"{where}: uses the specular workflow with a coloured or textured specularColor (or a clearcoat); "
-            "matremap remaps textured materials in the metalness workflow (useSpecularWorkflow=0) only"
-        )
-    constants["metallic"] = 0.0
 
 
 def _clamp(ctx: _Ctx, spec: Any, constants: dict[str, Any]) -> None:
@@ -1063,7 +1037,6 @@ __all__ = [
     "UsdSource",
     "material_names",
     "read",
-    "specular_workflow",
     "write",
     "write_all",
 ]
