@@ -117,25 +117,31 @@ def sample(
     img = np.asarray(image, dtype=np.float32)
     if img.ndim == 2:
         img = img[..., None]
-    h, w = img.shape[:2]
+    h, w, c = img.shape
+    flat = img.reshape(h * w, c)
     x = np.asarray(s, dtype=np.float64) * w - 0.5
     y = np.asarray(t, dtype=np.float64) * h - 0.5
+    shape = x.shape
+    x, y = x.reshape(-1), y.reshape(-1)
     x0f, y0f = np.floor(x), np.floor(y)
-    fx = (x - x0f).astype(np.float32)[..., None]
-    fy = (y - y0f).astype(np.float32)[..., None]
-    x0, y0 = x0f.astype(np.int64), y0f.astype(np.int64)
-    out = np.zeros((*x.shape, img.shape[-1]), dtype=np.float32)
-    for dy, wy in ((0, 1.0 - fy), (1, fy)):
-        yi, ymask = _wrap_index(y0 + dy, h, wrap[1])
-        for dx, wx in ((0, 1.0 - fx), (1, fx)):
-            xi, xmask = _wrap_index(x0 + dx, w, wrap[0])
-            texel = img[yi, xi]
-            masks = [m for m in (xmask, ymask) if m is not None]
-            if masks:
-                outside = masks[0] if len(masks) == 1 else masks[0] | masks[1]
-                texel = np.where(outside[..., None], np.float32(border), texel)
-            out += wx * wy * texel
-    return out
+    fx = (x - x0f).astype(np.float32)[:, None]
+    fy = (y - y0f).astype(np.float32)[:, None]
+    x0, y0 = x0f.astype(np.intp), y0f.astype(np.intp)
+    cols = [_wrap_index(x0 + d, w, wrap[0]) for d in (0, 1)]
+    rows = [_wrap_index(y0 + d, h, wrap[1]) for d in (0, 1)]
+
+    def tap(row: tuple[np.ndarray, np.ndarray | None], col: tuple[np.ndarray, np.ndarray | None]) -> np.ndarray:
+        texel = np.take(flat, row[0] * w + col[0], axis=0)
+        masks = [m for m in (row[1], col[1]) if m is not None]
+        if masks:
+            outside = masks[0] if len(masks) == 1 else masks[0] | masks[1]
+            texel[outside] = np.float32(border)
+        return texel
+
+    top = tap(rows[0], cols[0]) * (1.0 - fx) + tap(rows[0], cols[1]) * fx
+    bottom = tap(rows[1], cols[0]) * (1.0 - fx) + tap(rows[1], cols[1]) * fx
+    out = top * (1.0 - fy) + bottom * fy
+    return out.reshape(*shape, c)
 
 
 def bake_image(image: np.ndarray, transform: UVTransform, size: tuple[int, int] | None = None) -> np.ndarray:
