@@ -1,6 +1,7 @@
 """Fuzzing the material-file readers (issue #19): real files of tests/data/corpus (glTF JSON, GLB,
-MaterialX, Mitsuba XML), mutated, are read as a user's file would be. Each read must give an asset or
-raise MatremapError, nothing else. Budgets are fixed and derandomized (the same examples every run)."""
+MaterialX, Mitsuba XML, USD text layers and .usdz packages), mutated, are read as a user's file would be.
+Each read must give an asset or raise MatremapError, nothing else. Budgets are fixed and derandomized (the
+same examples every run)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -27,6 +29,12 @@ GLTF = sorted(CORPUS.glob("gltf-*/*.gltf"))
 GLB = sorted(CORPUS.glob("gltf-*/*.glb"))
 MTLX = sorted(CORPUS.glob("mtlx-*/**/*.mtlx"))  # nested: documents kept in their repository layout
 XML = sorted(CORPUS.glob("mitsuba-*/*.xml"))
+USD_TEXT = sorted(p for p in CORPUS.glob("usd-*/*.usd*") if p.read_bytes()[:8] == b"#usda 1.")
+USDZ = sorted(CORPUS.glob("usd-*/*.usdz"))
+#: USD files are slower to open (a stage, its layers): a smaller fixed budget
+FUZZ_USD = settings(
+    max_examples=120, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow], database=None
+)
 
 scalars = (
     st.none()
@@ -128,8 +136,30 @@ def mutated_xml(draw: Any, data: bytes) -> bytes:
     return data
 
 
+USD_VALUE = re.compile(rb"(= |asset |@)([^\n@]{1,60})")
+
+
+@st.composite
+def mutated_usda(draw: Any, data: bytes) -> bytes:
+    """A USD text layer with one to three values (after ``=``, in ``@asset@`` paths) replaced, or spans changed."""
+    found = list(USD_VALUE.finditer(data))
+    if not found or draw(st.booleans()):
+        return draw(mutated_bytes(data))
+    for _ in range(draw(st.integers(1, 3))):
+        m = draw(st.sampled_from(found))
+        new = draw(
+            st.sampled_from([b"", b"nan", b"inf", b"-1", b"1e400", b"(0, 0)", b"a" * 300, b"../../x.png", b"[1, 2"])
+            | st.text(max_size=12).map(lambda t: t.encode())
+        )
+        data = data[: m.start(2)] + new + data[m.end(2) :]
+        found = list(USD_VALUE.finditer(data))
+        if not found:
+            break
+    return data
+
+
 def test_corpus_reads():
-    for f in [*GLTF, *GLB, *MTLX, *XML]:
+    for f in [*GLTF, *GLB, *MTLX, *XML, *USD_TEXT, *USDZ]:
         read(f)  # refusals are fine (coat, sheen ...); tracebacks are not
 
 
@@ -183,3 +213,45 @@ def test_fuzz_materialx(path, data):
 def test_fuzz_mitsuba_xml(path, data):
     mutated = data.draw(mutated_xml(path.read_bytes()))
     in_copy(path, lambda p: p.write_bytes(mutated))
+
+
+def _usd_materials(path: Path) -> None:
+    """Read every material of a USD file (the fuzzed text may change which there are)."""
+    from matremap.formats import material_names
+
+    try:
+        names = material_names(path)
+    except MatremapError:
+        return
+    for name in names[:3]:
+        try:
+            asset = read_asset(path, name)
+            if not asset.textured:
+                asset.material()
+        except MatremapError:
+            pass
+
+
+@FUZZ_USD
+@given(st.sampled_from(USD_TEXT), st.data())
+def test_fuzz_usd_text(path, data):
+    pytest.importorskip("pxr")
+    mutated = data.draw(mutated_usda(path.read_bytes()))
+    with tempfile.TemporaryDirectory() as d:
+        folder = Path(d) / path.parent.name
+        shutil.copytree(path.parent, folder)
+        (folder / path.name).write_bytes(mutated)
+        _usd_materials(folder / path.name)
+
+
+@FUZZ_USD
+@given(st.sampled_from(USDZ), st.data())
+def test_fuzz_usdz_bytes(path, data):
+    pytest.importorskip("pxr")
+    raw = path.read_bytes()
+    head = raw[: min(len(raw), 2048)]  # the zip's first local header and the start of the root layer
+    mutated = data.draw(mutated_bytes(head)) + raw[len(head) :]
+    with tempfile.TemporaryDirectory() as d:
+        f = Path(d) / path.name
+        f.write_bytes(mutated)
+        _usd_materials(f)

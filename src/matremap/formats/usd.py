@@ -120,7 +120,12 @@ def _open_layer(pxr: Any, path: Path, where: str) -> Any:
 
 
 def _first_line(e: Exception) -> str:
-    text = str(e).strip().splitlines()
+    """The last line of a pxr error (its text may hold the file's own bytes, which need not be UTF-8: pxr's
+    ``Tf.ErrorException.__str__`` then raises UnicodeDecodeError)."""
+    try:
+        text = str(e).strip().splitlines()
+    except UnicodeError:
+        return "its text is not valid UTF-8"
     return re.sub(r"^Error in '[^']*' at line \d+ in file \S+ : ", "", text[-1] if text else type(e).__name__)[:200]
 
 
