@@ -14,8 +14,9 @@ mitsuba3:roughplastic      distribution {beckmann*, ggx}; nonlinear {false*, tru
                            alpha (scalar, 0.1); int_ior (scalar, 1.49); ext_ior (scalar, 1.000277);
                            specular_reflectance (1); diffuse_reflectance (0.5)
 mitsuba3:principled        base_color (0.5); roughness, metallic, specular (0.5), spec_tint,
-                           anisotropic, sheen, sheen_tint, clearcoat, clearcoat_gloss,
-                           spec_trans (scalars; those after specular held at 0 in fits)
+                           anisotropic, sheen, sheen_tint, flatness, clearcoat,
+                           clearcoat_gloss, spec_trans (scalars; those after specular held at
+                           0 in fits)
 =========================  ====================================================================
 """
 
@@ -102,7 +103,16 @@ CONDUCTORS = (
 DISTRIBUTIONS = ("beckmann", "ggx")
 
 #: principled parameters matremap holds at 0 in fits (they stay settable)
-PRINCIPLED_HELD = ("spec_tint", "anisotropic", "sheen", "sheen_tint", "clearcoat", "clearcoat_gloss", "spec_trans")
+PRINCIPLED_HELD = (
+    "spec_tint",
+    "anisotropic",
+    "sheen",
+    "sheen_tint",
+    "flatness",
+    "clearcoat",
+    "clearcoat_gloss",
+    "spec_trans",
+)
 
 
 def _rgb(
