@@ -1,7 +1,7 @@
 """Mitsuba 3's ``blendbsdf`` of two BSDFs of one model, read as one material blended texel by texel.
 
 Source: Mitsuba 3.9 ``src/bsdfs/blendbsdf.cpp``: ``f = (1 - weight) f_0 + weight f_1`` with ``weight`` a
-scalar texture (``eval_1``: a colour weight counts by its luminance). When both children are the same
+scalar texture (``eval_1``: a colour weight counts by the mean of its channels). When both children are the same
 ``mitsuba3:*`` model with the same options, each parameter ``p`` of the result is
 ``(1 - weight) p_0 + weight p_1``: exactly Mitsuba's blend for the parameters the BSDF is linear in
 (diffuse and specular reflectances), an approximation for the others (alpha, eta, k, IORs), which Mitsuba

@@ -60,7 +60,6 @@ from matremap.formats.mitsuba_plugins import (
 from matremap.formats.mitsuba_scene import MitsubaScene
 from matremap.formats.mitsuba_textures import (
     DEFAULT_BAKE_SIZE,
-    LUMINANCE,
     WRAP,
     TextureSource,
     bitmap_source,
@@ -107,10 +106,10 @@ class BsdfReader:
                         child,
                     )
                 tag, child = target.tag, target
-            if tag == "bsdf":
-                key = name or f"#bsdf{nested}"
+            if tag == "bsdf" or (tag == "texture" and not name):  # nested objects may go unnamed
+                key = name or f"#{tag}{nested}"
                 nested += 1
-                out[key] = Prop("bsdf", child, tag)
+                out[key] = Prop("bsdf" if tag == "bsdf" else "texture", child, tag)
                 continue
             if not name:
                 raise self.fail(f"<{tag}> inside {what} has no name attribute", child)
@@ -223,8 +222,8 @@ class BsdfReader:
             raise self.fail(f'{what} has no weight; add <float name="weight">', el)
         if w.kind == "texture":
             weight = (0.0, self.texture(w.value, "weight", scalar=True, notes=outer.notes))
-        elif w.kind in ("float", "rgb") and 0.0 <= luminance_of(w.value) <= 1.0:
-            weight = (luminance_of(w.value), None)
+        elif w.kind in ("float", "rgb") and 0.0 <= mean_of(w.value) <= 1.0:
+            weight = (mean_of(w.value), None)
         else:
             raise self.fail(f"{what}: weight must be a number in [0, 1] or a texture", el)
         first, second = (self.parts(f"{outer.label}/{i}", child) for i, child in enumerate(children))
@@ -322,6 +321,12 @@ class BsdfReader:
             parts.normal = TextureSource(src.path, src.size, src.sample, src.plain if _is_raw(src) else None)
             parts.notes.append(f"normalmap wrapper: {src.path.name} is the asset's normal map")
             return
+        if tex.value.get("type") != "bitmap":
+            raise self.fail(
+                f"{what} over a {tex.value.get('type')!r} texture: Mitsuba 3 cannot render it (only bitmap textures "
+                "have the height gradient bumpmap needs, Texture::eval_1_grad); give the height as a bitmap",
+                el,
+            )
         scale = props.get("scale")
         if scale is not None and scale.kind != "float":
             raise self.fail(f"{what}: scale must be a <float>", el)
@@ -467,9 +472,9 @@ def finish(scene: MitsubaScene, parts: Parts, index: int) -> MaterialAsset:
     )
 
 
-def luminance_of(value: Any) -> float:
-    v = np.asarray(value, dtype=float).reshape(-1)
-    return float(v[0]) if v.size == 1 else float(v[:3] @ LUMINANCE)
+def mean_of(value: Any) -> float:
+    """A number or colour as Mitsuba's constant texture answers ``eval_1``: the mean of its channels."""
+    return float(np.mean(np.asarray(value, dtype=float)))
 
 
-__all__ = ["BsdfReader", "bake_size", "finish", "luminance_of"]
+__all__ = ["BsdfReader", "bake_size", "finish", "mean_of"]

@@ -16,8 +16,10 @@ in tests/test_mitsuba_textures.py.
   parameter reads a 3-channel image's luminance (Rec. 709 Y, ``eval_1``); an alpha channel is dropped.
 * **checkerboard**: with ``(u, v)`` = ``to_uv`` of the surface uv, a texel shows ``color0`` where
   ``frac(u) > 0.5`` equals ``frac(v) > 0.5`` and ``color1`` elsewhere -- for colour parameters
-  (``eval``); Mitsuba's ``eval_1`` (scalar parameters) swaps the two, and so does the bake.
-* **bumpmap**: the shading normal of ``dp_du' = dp_du + h_u n``, ``dp_dv' = dp_dv + h_v n`` with
+  (``eval``); Mitsuba's ``eval_1`` (scalar parameters) swaps the two, and so does the bake. A colour
+  read as a scalar is the mean of its channels (``src/spectra/srgb.cpp``, ``eval_1``).
+* **bumpmap** (over a bitmap height: Mitsuba's other textures have no ``eval_1_grad``): the shading
+  normal of ``dp_du' = dp_du + h_u n``, ``dp_dv' = dp_dv + h_v n`` with
   ``(h_u, h_v) = scale * grad h`` (``BumpMap::frame``), expressed in the tangent frame
   ``(s, t = n x s, n)`` of a surface whose ``|dp/du| = |dp/dv| = 1`` and whose ``dp/du x dp/dv`` points
   into the surface (uv laid out as glTF and Mitsuba's sphere have them, v growing down the image):
@@ -202,8 +204,8 @@ def checkerboard_source(
 ) -> TextureSource:
     """Mitsuba's ``checkerboard`` (module doc): colours as 1 or 3 linear values."""
     c0, c1 = (np.asarray(c, dtype=float).reshape(-1) for c in (colour0, colour1))
-    if scalar:
-        c0, c1 = (np.array([float(c @ LUMINANCE)]) if c.size == 3 else c for c in (c0, c1))
+    if scalar:  # Mitsuba's constant colour texture answers eval_1 with the mean of its channels
+        c0, c1 = (np.array([float(c.mean())]) for c in (c0, c1))
     elif c0.size != c1.size:
         c0, c1 = (np.repeat(c, 3) if c.size == 1 else c for c in (c0, c1))
     m = np.eye(3) if matrix is None else matrix
