@@ -732,7 +732,11 @@ def remap_file(
         if name is not None:
             # every writer gets the asset: a writer of the same format copies its document, any writer
             # carries what it has a slot for (asset.carried: emission, occlusion, opacity)
+            before = len(asset.notes)
             result.file = write_asset(stage / name, produced, source=asset, force=True)
+            for note in asset.notes[before:]:  # what the writer carried over or left behind
+                log(f"note: {note}")
+                result.notes.append(note)
         write_text(stage / "verdict.json", json.dumps(result.verdict.to_dict(), indent=1) + "\n")
     if result.remap is not None:
         result.remap = result.remap.moved(stage, out)

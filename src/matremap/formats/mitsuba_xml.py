@@ -32,34 +32,21 @@ scene (:mod:`matremap.formats.mitsuba_write`).
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from matremap.core.atomic import AtomicFiles
-from matremap.core.imageio import check_output
-from matremap.core.material import Material
 from matremap.errors import MatremapError
 from matremap.formats.asset import MaterialAsset
 from matremap.formats.common import (
-    check_map_destinations,
-    map_destination,
     pick_material,
-    place_map,
-    result_parts,
 )
 from matremap.formats.confine import Confinement
 from matremap.formats.mitsuba_bsdfs import BsdfReader
 from matremap.formats.mitsuba_plugins import (
-    CONSTANT_ONLY,
     FORMAT,
     IOR_TABLE,
     MODELS,
     PLUGINS,
-    PRINCIPLED_SCALARS,
-    plugin_of,
 )
 from matremap.formats.mitsuba_scene import load_scene
 
@@ -98,161 +85,27 @@ def read(
     return asset
 
 
-# ---------------------------------------------------------------------------------------------
-# Writing
-
-
-def _num(x: float) -> str:
-    return repr(float(x))
-
-
-def _rgb(v: np.ndarray) -> str:
-    return ", ".join(_num(x) for x in np.asarray(v, dtype=float).reshape(-1))
-
-
-def _bsdf_xml(m: Material, textures: Mapping[str, ET.Element]) -> ET.Element:
-    spec = m.spec
-    plugin = plugin_of(spec.id)
-    bsdf = ET.Element("bsdf", {"type": plugin})
-
-    def value(name: str) -> None:
-        if name in textures:
-            bsdf.append(textures[name])
-            return
-        p = spec.param(name)
-        v = m.values[name]
-        if p.channels == 3:
-            ET.SubElement(bsdf, "rgb", {"name": name, "value": _rgb(v)})
-        else:
-            ET.SubElement(bsdf, "float", {"name": name, "value": _num(v[0])})
-
-    if "distribution" in m.options:
-        ET.SubElement(bsdf, "string", {"name": "distribution", "value": m.options["distribution"]})
-    if plugin == "diffuse":
-        value("reflectance")
-    elif plugin == "roughconductor":
-        value("alpha")
-        if m.options["material"] == "custom":
-            value("eta")
-            value("k")
-        else:
-            ET.SubElement(bsdf, "string", {"name": "material", "value": m.options["material"]})
-        value("specular_reflectance")
-    elif plugin == "roughplastic":
-        for name in ("alpha", "int_ior", "ext_ior"):
-            value(name)
-        ET.SubElement(bsdf, "boolean", {"name": "nonlinear", "value": m.options["nonlinear"]})
-        value("specular_reflectance")
-        value("diffuse_reflectance")
-    else:
-        for name in ("base_color", *PRINCIPLED_SCALARS, "specular"):
-            value(name)
-    return bsdf
-
-
-def _bitmap(name: str, filename: str, raw: bool) -> ET.Element:
-    t = ET.Element("texture", {"type": "bitmap", "name": name})
-    ET.SubElement(t, "string", {"name": "filename", "value": filename})
-    ET.SubElement(t, "boolean", {"name": "raw", "value": "true" if raw else "false"})
-    return t
-
-
-def _probe_scene(bsdf: ET.Element) -> ET.Element:
-    """The scene around the BSDF: probe sphere, probe camera, constant white environment."""
-    from matremap.core.scene import Scene
-
-    probe = Scene()
-    scene = ET.Element("scene", {"version": "3.0.0"})
-    for name, value in (("spp", "64"), ("resolution", "256"), ("max_depth", "3")):
-        ET.SubElement(scene, "default", {"name": name, "value": value})
-    integrator = ET.SubElement(scene, "integrator", {"type": "path"})
-    ET.SubElement(integrator, "integer", {"name": "max_depth", "value": "$max_depth"})
-    ET.SubElement(integrator, "boolean", {"name": "hide_emitters", "value": "true"})
-    sensor = ET.SubElement(scene, "sensor", {"type": "perspective"})
-    ET.SubElement(sensor, "float", {"name": "fov", "value": _num(probe.effective_fov)})
-    ET.SubElement(sensor, "string", {"name": "fov_axis", "value": "x"})
-    tw = ET.SubElement(sensor, "transform", {"name": "to_world"})
-    ET.SubElement(
-        tw, "lookat", {"origin": f"0, 0, {_num(probe.camera_distance)}", "target": "0, 0, 0", "up": "0, 1, 0"}
-    )
-    sampler = ET.SubElement(sensor, "sampler", {"type": "independent"})
-    ET.SubElement(sampler, "integer", {"name": "sample_count", "value": "$spp"})
-    film = ET.SubElement(sensor, "film", {"type": "hdrfilm"})
-    ET.SubElement(film, "integer", {"name": "width", "value": "$resolution"})
-    ET.SubElement(film, "integer", {"name": "height", "value": "$resolution"})
-    ET.SubElement(film, "string", {"name": "pixel_format", "value": "rgb"})
-    ET.SubElement(film, "rfilter", {"type": "box"})
-    scene.append(bsdf)
-    shape = ET.SubElement(scene, "shape", {"type": "sphere", "id": "probe_sphere"})
-    # Mitsuba's local sphere frame -> world so that its UVs are matremap's (see renderers/mitsuba3_svbrdf.py):
-    # local x -> -z, y -> -x, z (the pole) -> +y, scaled by the radius
-    r = float(probe.sphere_radius)
-    rows = [[0.0, -r, 0.0, 0.0], [0.0, 0.0, r, 0.0], [-r, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
-    st = ET.SubElement(shape, "transform", {"name": "to_world"})
-    ET.SubElement(st, "matrix", {"value": " ".join(_num(x) for row in rows for x in row)})
-    ET.SubElement(shape, "ref", {"id": bsdf.get("id", "material")})
-    emitter = ET.SubElement(scene, "emitter", {"type": "constant"})
-    ET.SubElement(emitter, "rgb", {"name": "radiance", "value": "1, 1, 1"})
-    return scene
-
-
 def write(out: str | Path, result: Any, source: MaterialAsset | None = None, force: bool = False) -> Path:
-    """Write ``result`` (a Material or MapSet of a ``mitsuba3:*`` model) as a Mitsuba 3 scene XML
-    that renders the material on the probe sphere; maps are copied beside it as
-    ``<stem>_<param>.png|.exr``. ``source`` is not used (the scene is written from scratch).
-    The scene and its maps are written together or not at all."""
-    out = Path(out)
-    m, maps, cs, normal = result_parts(result, "Mitsuba 3 XML", MODELS)
-    check_output(out, force, (".xml",))
-    _check_textured(m, maps)
-    check_map_destinations(out, [*maps, *(["normal"] if normal else [])], force)
-    with AtomicFiles(force) as files:
-        textures = {name: _place_texture(m, name, src, cs[name], out, files) for name, src in maps.items()}
-        bsdf = _bsdf_xml(m, textures)
-        if normal is not None:
-            dest = place_map(normal, map_destination(out, "normal"), True, "linear", 3, files)
-            wrapper = ET.Element("bsdf", {"type": "normalmap", "id": "material"})
-            wrapper.append(_bitmap("normalmap", dest.name, raw=True))
-            wrapper.append(bsdf)
-            bsdf = wrapper
-        else:
-            bsdf.set("id", "material")
-        scene = _probe_scene(bsdf)
-        ET.indent(scene, space="    ")
-        files.write_text(
-            out,
-            '<?xml version="1.0" encoding="utf-8"?>\n'
-            f"<!-- written by matremap: {m.spec.id} on the probe sphere under a white environment -->\n"
-            + ET.tostring(scene, encoding="unicode")
-            + "\n",
-        )
-    return out
+    """Write ``result`` (a Material or MapSet of a ``mitsuba3:*`` model) as a Mitsuba 3 scene XML that
+    renders the material on the probe sphere; maps are copied beside it as ``<stem>_<param>.png|.exr``.
+    From ``source`` (any format) the carried opacity is written as a ``mask`` wrapper and the carried
+    emission as an ``area`` emitter on the sphere (a note in ``source.notes`` says so). The scene and
+    its maps are written together or not at all."""
+    from matremap.formats.mitsuba_write import write_probe_scene
+
+    return write_probe_scene(Path(out), result, source, force)
 
 
-def _check_textured(m: Material, maps: Mapping[str, Path]) -> None:
-    """Refuse maps of parameters Mitsuba 3 takes as numbers only."""
-    plugin = plugin_of(m.spec.id)
-    for name in maps:
-        if name in CONSTANT_ONLY.get(plugin, ()):
-            raise MatremapError(
-                f"{m.spec.id}: Mitsuba 3 takes {name} as a number, not a texture; give it as a constant"
-            )
-        if name in ("eta", "k") and m.options.get("material") != "custom":
-            raise MatremapError(f"{m.spec.id}: a map for {name} needs material=custom")
+def write_all(out: str | Path, results: list[tuple[str, Any]], source: Path | None, force: bool = False) -> Path:
+    """Every ``(name, result)`` into one Mitsuba 3 scene: when ``source`` is a Mitsuba scene, a copy of it
+    (and of its included files) with those BSDFs replaced, ids kept, everything else kept, file names
+    rewritten to point at the source's files; else a fresh scene with each material a top-level BSDF
+    (id = its name) on a probe sphere of its own (:mod:`matremap.formats.mitsuba_write`)."""
+    from matremap.formats.mitsuba_write import write_copied_scene, write_spheres_scene
+
+    if source is not None:
+        return write_copied_scene(Path(out), results, Path(source), force)
+    return write_spheres_scene(Path(out), results, force)
 
 
-def _place_texture(m: Material, name: str, src: Path, colorspace: str, out: Path, files: AtomicFiles) -> ET.Element:
-    """Stage the map of parameter ``name`` beside ``out`` and return its ``bitmap`` element: kept as it
-    is where Mitsuba would decode it as ``colorspace`` says (non-raw: integer files sRGB, float files
-    linear; raw: as stored), else converted to linear EXR."""
-    from matremap.svbrdf.textures import image_info
-
-    p = m.spec.param(name)
-    colour = p.channels == 3 and p.role != "roughness"
-    info = image_info(src, colorspace)
-    expected = ("srgb" if info.integer else "linear") if colour else "linear"
-    dest = place_map(src, map_destination(out, name), colorspace == expected, colorspace, p.channels, files)
-    return _bitmap(name, dest.name, raw=not colour)
-
-
-__all__ = ["FORMAT", "IOR_TABLE", "MODELS", "PLUGINS", "read", "write"]
+__all__ = ["FORMAT", "IOR_TABLE", "MODELS", "PLUGINS", "material_names", "read", "write", "write_all"]
