@@ -223,9 +223,8 @@ def test_bitmaps_raw_vs_srgb_normalmap_and_bumpmap(tmp_path):
         ),
         ('<scene version="3.0.0"><bsdf type="diffuse"><rgb name="reflectance" value="$c"/></bsdf></scene>', "$c"),
         (
-            '<scene version="3.0.0"><bsdf type="roughconductor"><float name="alpha_u" value="0.1"/>'
-            '<float name="alpha_v" value="0.3"/></bsdf></scene>',
-            "anisotropic",
+            '<scene version="3.0.0"><bsdf type="roughconductor"><float name="alpha_u" value="0.1"/></bsdf></scene>',
+            "give alpha, or alpha_u and alpha_v together",
         ),
         (
             '<scene version="3.0.0"><bsdf type="roughplastic">'
@@ -474,6 +473,7 @@ def test_mitsuba_probe_lights_match_scene_conventions():
     assert mitsuba_xml.MODELS == (
         "mitsuba3:diffuse",
         "mitsuba3:roughconductor",
+        "mitsuba3:roughconductor-anisotropic",
         "mitsuba3:roughplastic",
         "mitsuba3:principled",
     )

@@ -12,7 +12,8 @@ Sources: the Mitsuba 3.9 plugin reference (``src/bsdfs/*.cpp``: ``diffuse``, ``c
   from such a source widens the highlight until the probe resolves it and carries the target's
   roughness back to the mirror limit (``core/fit.py``, "Every roughness, including 0").
 * ``roughconductor`` with ``alpha_u`` = ``alpha_v`` is isotropic ``alpha``; ``alpha_u`` != ``alpha_v``
-  is refused (matremap's roughconductor is isotropic).
+  (numbers) is ``mitsuba3:roughconductor-anisotropic``, in the tangent frame of the surface (dp/du);
+  anisotropic roughness maps are refused.
 * ``dielectric``, ``roughdielectric``, ``thindielectric`` are read (their IORs checked) and refused:
   their look is transmission, which no matremap model has yet.
 * ``int_ior`` / ``ext_ior`` given by name use :data:`IOR_TABLE` (Mitsuba 3.9 ``ior.h``, after Hecht,
@@ -255,7 +256,7 @@ class BsdfReader:
             )
         values = BsdfValues(self, plugin, what, props, parts.notes, core)
         values.read()
-        parts.model = PLUGINS[plugin]
+        parts.model = values.model
         parts.constants.update(values.constants)
         parts.textures.update(values.textures)
         uniform = {k: v for k, v in values.constants.items() if k not in values.textures}
@@ -458,6 +459,7 @@ def finish(scene: MitsubaScene, parts: Parts, index: int) -> MaterialAsset:
     if parts.normal is not None and not parts.textures:
         parts.notes.append("the material is uniform apart from its normal map")
     return MaterialAsset(
+        lost=lost_layers(parts),
         path=scene.path,
         format=FORMAT,
         name=parts.label,
@@ -470,6 +472,25 @@ def finish(scene: MitsubaScene, parts: Parts, index: int) -> MaterialAsset:
         index=index,
         carried=carried,
     )
+
+
+#: principled lobes no other matremap model has, and what they are
+LAYERS = {"clearcoat": "a clear coat", "sheen": "sheen", "spec_trans": "transmission", "anisotropic": "anisotropy"}
+
+
+def lost_layers(parts: Parts) -> list[str]:
+    """The look a ``principled`` material carries in lobes only ``mitsuba3:principled`` has (non-zero
+    clearcoat, sheen, spec_trans, anisotropic): kept onto itself, refused onto other models."""
+    if parts.model != "mitsuba3:principled":
+        return []
+    lost = []
+    for name, what in LAYERS.items():
+        value = parts.constants.get(name, 0.0)
+        if name in parts.textures or float(np.max(value)) > 0.0:
+            lost.append(
+                f"principled {name} {'(a texture)' if name in parts.textures else f'{float(np.max(value)):g}'} ({what})"
+            )
+    return lost
 
 
 def mean_of(value: Any) -> float:

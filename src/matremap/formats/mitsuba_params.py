@@ -26,6 +26,8 @@ from matremap.formats.mitsuba_plugins import (
 from matremap.formats.mitsuba_textures import TextureSource
 from matremap.formats.spectra import spectrum_to_srgb
 
+ANISOTROPIC = "mitsuba3:roughconductor-anisotropic"
+
 
 class TextureReader(Protocol):
     """What :class:`BsdfValues` needs of the scene's reader."""
@@ -42,7 +44,8 @@ class BsdfValues:
         self, reader: TextureReader, plugin: str, what: str, props: dict[str, Prop], notes: list[str], el: ET.Element
     ) -> None:
         self.reader, self.plugin, self.what, self.props, self.notes, self.el = reader, plugin, what, props, notes, el
-        self.spec = get_model(PLUGINS[plugin])
+        self.model = PLUGINS[plugin]
+        self.spec = get_model(self.model)
         self.constants: dict[str, Any] = {}
         self.textures: dict[str, TextureSource] = {}
 
@@ -129,7 +132,8 @@ class BsdfValues:
     def roughconductor(self) -> None:
         """alpha (isotropic), specular_reflectance and the conductor's Fresnel."""
         self.isotropic_alpha()
-        self.take("alpha")
+        for name in ("alpha", "alpha_u", "alpha_v"):
+            self.take(name)
         self.fresnel()
 
     def fresnel(self) -> None:
@@ -160,7 +164,8 @@ class BsdfValues:
         self.constants["material"] = material
 
     def isotropic_alpha(self) -> None:
-        """``alpha_u`` = ``alpha_v`` given together become ``alpha``; anisotropy is refused."""
+        """``alpha_u`` = ``alpha_v`` given together become ``alpha``; different numbers make the material
+        ``mitsuba3:roughconductor-anisotropic``; different textures are refused."""
         props = self.props
         if "alpha_u" not in props and "alpha_v" not in props:
             return
@@ -168,13 +173,20 @@ class BsdfValues:
         if "alpha" in props or au is None or av is None:
             raise self.fail("give alpha, or alpha_u and alpha_v together")
         same = au.kind == av.kind == "float" and au.value == av.value
-        if not same and not (au.kind == av.kind == "texture" and au.value is av.value):
+        if same or (au.kind == av.kind == "texture" and au.value is av.value):
+            props["alpha"] = au
+            del props["alpha_u"], props["alpha_v"]
+            return
+        if au.kind != "float" or av.kind != "float":
             raise self.fail(
-                "anisotropic roughness (alpha_u != alpha_v) is not supported: matremap's roughconductor is "
-                "isotropic, so the look would change; give one alpha"
+                "anisotropic roughness given by textures (alpha_u, alpha_v maps) is not supported: a map's texels "
+                "would be remapped through one roughness; give alpha_u and alpha_v as numbers"
             )
-        props["alpha"] = au
-        del props["alpha_u"], props["alpha_v"]
+        self.model = ANISOTROPIC
+        self.spec = get_model(ANISOTROPIC)
+        self.notes.append(
+            f"anisotropic roughconductor: alpha_u {au.value:g} along the surface's dp/du, alpha_v {av.value:g} across"
+        )
 
     def roughplastic(self) -> None:
         """alpha, the two IORs (numbers or names of Mitsuba's table), nonlinear, the reflectances."""

@@ -51,7 +51,15 @@ PLUGINS = {
     "conductor": "mitsuba3:roughconductor",
     "plastic": "mitsuba3:roughplastic",
 }
-MODELS = ("mitsuba3:diffuse", "mitsuba3:roughconductor", "mitsuba3:roughplastic", "mitsuba3:principled")
+MODELS = (
+    "mitsuba3:diffuse",
+    "mitsuba3:roughconductor",
+    "mitsuba3:roughconductor-anisotropic",
+    "mitsuba3:roughplastic",
+    "mitsuba3:principled",
+)
+#: models written with another plugin than their name says
+MODEL_PLUGINS = {"mitsuba3:roughconductor-anisotropic": "roughconductor"}
 WRAPPERS = ("twosided", "normalmap", "bumpmap", "mask")
 TRANSMISSIVE = ("dielectric", "roughdielectric", "thindielectric")
 #: the alpha smooth plugins are read at: Mitsuba's microfacet floor
@@ -87,7 +95,7 @@ NO_EFFECT = ("sample_visible",)  # changes sampling only, not the expected image
 
 def plugin_of(model: str) -> str:
     """The Mitsuba plugin written for a ``mitsuba3:*`` model."""
-    return model.split(":", 1)[1]
+    return MODEL_PLUGINS.get(model, model.split(":", 1)[1])
 
 
 @dataclass
@@ -121,6 +129,7 @@ __all__ = [
     "IOR_TABLE",
     "MIRROR_ALPHA",
     "MODELS",
+    "MODEL_PLUGINS",
     "NO_EFFECT",
     "PLUGINS",
     "PRINCIPLED_SCALARS",

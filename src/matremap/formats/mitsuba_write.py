@@ -73,7 +73,8 @@ def bsdf_element(m: Material, textures: Mapping[str, ET.Element]) -> ET.Element:
     if plugin == "diffuse":
         value("reflectance")
     elif plugin == "roughconductor":
-        value("alpha")
+        for name in ("alpha",) if "alpha" in m.values else ("alpha_u", "alpha_v"):
+            value(name)
         if m.options["material"] == "custom":
             value("eta")
             value("k")
