@@ -27,6 +27,9 @@ GLTF = sorted(CORPUS.glob("gltf-*/*.gltf"))
 GLB = sorted(CORPUS.glob("gltf-*/*.glb"))
 MTLX = sorted(CORPUS.glob("mtlx-*/*.mtlx"))
 XML = sorted(CORPUS.glob("mitsuba-*/*.xml"))
+#: matremap's own Mitsuba scene using every structure the reader follows (include, path, defaults, spectra,
+#: checkerboard, to_uv, bumpmap, mask, blendbsdf, anisotropy); its two files are mutated in turn
+SCENE_SEED = Path(__file__).parent / "data" / "mitsuba-fuzz-seed"
 
 scalars = (
     st.none()
@@ -183,3 +186,45 @@ def test_fuzz_materialx(path, data):
 def test_fuzz_mitsuba_xml(path, data):
     mutated = data.draw(mutated_xml(path.read_bytes()))
     in_copy(path, lambda p: p.write_bytes(mutated))
+
+
+def read_every_bsdf(path: Path) -> None:
+    """Every BSDF of a Mitsuba scene, read (and its baked textures evaluated) as ``remap`` would."""
+    from matremap.formats import material_names
+
+    try:
+        names = material_names(path)
+    except MatremapError:
+        return
+    for name in names:
+        try:
+            asset = read_asset(path, name)
+            for ref in [*asset.textures.values(), asset.normal]:
+                if ref is not None and ref.bake is not None:
+                    ref.bake()
+            if not asset.textured:
+                asset.material()
+        except MatremapError:
+            pass
+
+
+def test_the_scene_seed_reads_whole():
+    from matremap.formats import material_names
+
+    main = SCENE_SEED / "main.xml"
+    assert len(material_names(main)) == 6
+    read_every_bsdf(main)
+
+
+@settings(
+    max_examples=150, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow], database=None
+)
+@given(st.sampled_from(["main.xml", "parts/mats.xml"]), st.data())
+def test_fuzz_mitsuba_scene_structure(name, data):
+    source = SCENE_SEED / name
+    mutated = data.draw(mutated_xml(source.read_bytes()))
+    with tempfile.TemporaryDirectory() as d:
+        folder = Path(d) / "seed"
+        shutil.copytree(SCENE_SEED, folder)
+        (folder / name).write_bytes(mutated)
+        read_every_bsdf(folder / "main.xml")

@@ -19,7 +19,7 @@ import numpy as np
 
 from matremap.dialects import get_model
 from matremap.errors import MatremapError
-from matremap.formats.mitsuba_plugins import Parts
+from matremap.formats.mitsuba_plugins import CONSTANT_ONLY, Parts, plugin_of
 from matremap.formats.mitsuba_textures import TextureSource, constant_source
 
 
@@ -68,10 +68,15 @@ def blend_parts(
     nonlinear = []
     for name in sorted(names):
         (ca, ta), (cb, tb) = _value(first, name), _value(second, name)
-        if ta is None and tb is None and w_tex is None:
-            mixed = (1.0 - w_const) * ca + w_const * cb
+        if ta is None and tb is None and (w_tex is None or np.array_equal(ca, cb)):
+            mixed = (1.0 - w_const) * ca + w_const * cb if w_tex is None else ca
             out.constants[name] = float(mixed) if mixed.size == 1 else [float(x) for x in mixed]
         else:
+            if name in CONSTANT_ONLY.get(plugin_of(first.model), ()):
+                raise MatremapError(
+                    f"material {label!r} is a blendbsdf whose two BSDFs differ in {name}, which Mitsuba takes as a "
+                    "number: a texture-weighted blend of it cannot be written"
+                )
             src_a = ta or constant_source(path, ca)
             src_b = tb or constant_source(path, cb)
             w = w_tex or constant_source(path, np.array([w_const]))
