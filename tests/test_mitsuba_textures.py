@@ -276,3 +276,14 @@ def test_blendbsdf_of_one_model_is_blended_texel_by_texel(tmp_path):
     assert read_asset(p, "uniform").constants == {"reflectance": pytest.approx([0.5 * 0.75 + 0.9 * 0.25] * 3)}
     with pytest.raises(MatremapError, match="blendbsdf of a mitsuba3:diffuse and a mitsuba3:roughconductor"):
         read_asset(p, "two")
+
+
+@needs_mitsuba
+def test_a_3x3_matrix_loses_its_translation_as_in_mitsuba(tmp_path):
+    """A 9-value <matrix> fills the upper-left 3x3 of Mitsuba's 4x4; a texture keeps columns 0, 1 and 3."""
+    rng = np.random.default_rng(5)
+    img = image(tmp_path / "c.exr", rng.uniform(0.0, 1.0, (6, 6, 3)))
+    to_uv = '<transform name="to_uv"><matrix value="1.5 0.2 0.3  -0.1 1.2 0.4  0 0 1"/></transform>'
+    tex = f'<texture type="bitmap" name="reflectance"><string name="filename" value="{img}"/>{to_uv}</texture>'
+    ours = read_asset(scene(tmp_path, f'<bsdf type="diffuse">{tex}</bsdf>')).textures["reflectance"].bake()
+    assert np.abs(ours - mitsuba_texture_at(tex, (6, 6), scalar=False)).max() < 1e-5
