@@ -8,7 +8,8 @@ Sources: the Mitsuba 3.9 plugin reference (``src/bsdfs/*.cpp``: ``diffuse``, ``c
 * ``diffuse``, ``roughconductor``, ``roughplastic``, ``principled``: the model of the same name.
 * ``conductor`` and ``plastic`` (smooth): ``roughconductor`` / ``roughplastic`` at the mirror limit,
   alpha = 1e-4, the floor Mitsuba's microfacet distribution clamps every alpha to
-  (``MicrofacetDistribution``: ``max(alpha, 1e-4)``) and the lower bound of matremap's alpha. A fit
+  (``MicrofacetDistribution``: ``max(alpha, 1e-4)``) and the lower bound of matremap's alpha, with the
+  GGX distribution (a mirror has none; GGX is what most targets draw). A fit
   from such a source widens the highlight until the probe resolves it and carries the target's
   roughness back to the mirror limit (``core/fit.py``, "Every roughness, including 0").
 * ``roughconductor`` with ``alpha_u`` = ``alpha_v`` is isotropic ``alpha``; ``alpha_u`` != ``alpha_v``
@@ -294,6 +295,13 @@ class BsdfReader:
             if not inner:
                 raise self.fail(f"{what} wraps no <bsdf>; put the material inside it", el)
             if kind == "twosided":
+                glass = [b.get("type") for b in inner if b.get("type") in TRANSMISSIVE]
+                if glass:
+                    raise self.fail(
+                        f"{what} {parts.label!r} holds a {glass[0]} BSDF, which Mitsuba 3 refuses too (twosided takes "
+                        "only BSDFs without transmission); fix the scene",
+                        el,
+                    )
                 if len(inner) > 1:
                     notes.append("twosided with a different back-side BSDF: only the front side is read")
                 notes.append("twosided unwrapped: the probe sees the front side (a copied scene keeps the wrapper)")
