@@ -162,7 +162,7 @@ def test_includes_and_paths_outside_the_scene_folder_are_confined(tmp_path):
     missing = xml(scene_dir / "missing.xml", '<include filename="../elsewhere/none.xml"/>')
     messages = []
     for p in (inc, missing):
-        with pytest.raises(MatremapError, match="points outside the scene folder") as e:
+        with pytest.raises(MatremapError, match="points outside the asset folder") as e:
             read_asset(p)
         messages.append(str(e.value).split("'")[1])
     assert messages == ["../elsewhere/lib.xml", "../elsewhere/none.xml"]
@@ -172,7 +172,7 @@ def test_includes_and_paths_outside_the_scene_folder_are_confined(tmp_path):
         '<path value="../elsewhere"/><bsdf type="diffuse"><texture type="bitmap" name="reflectance">'
         '<string name="filename" value="t.exr"/></texture></bsdf>',
     )
-    with pytest.raises(MatremapError, match="points outside the scene folder"):
+    with pytest.raises(MatremapError, match="points outside the asset folder"):
         read_asset(path)
     assert read_asset(path, confinement=Confinement.of([outside])).textures["reflectance"].path == (outside / "t.exr")
 

@@ -167,7 +167,7 @@ def test_a_spectrum_file_is_read_and_confined(tmp_path):
     flat = read_asset(p).constants["reflectance"]
     assert np.allclose(flat, spectrum_to_srgb([400, 550, 700], [0.5] * 3))
     out = scene(tmp_path, '<bsdf type="diffuse"><spectrum name="reflectance" filename="../x.spd"/></bsdf>', "o.xml")
-    with pytest.raises(MatremapError, match="points outside the scene folder"):
+    with pytest.raises(MatremapError, match="points outside the asset folder"):
         read_asset(out)
 
 

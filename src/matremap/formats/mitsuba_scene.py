@@ -126,7 +126,7 @@ class MitsubaScene:
             return resolve_reference(joined, self.folder, what, self.confinement)
         except MatremapError:
             raise MatremapError(
-                f"{what} {ref!r} points outside the scene folder {self.folder}; pass --allow-path DIR to allow it"
+                f"{what} {ref!r} points outside the asset folder {self.folder}; pass --allow-path DIR to allow it"
             ) from None
 
     # -- loading ---------------------------------------------------------------------------------
