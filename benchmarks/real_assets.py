@@ -399,6 +399,62 @@ ASSETS: list[Asset] = [
         [("mitsuba3:diffuse", []), GLTF, CYCLES],
         note="normalmap over a default diffuse, bitmap",
     ),
+    Asset(
+        "mi-diffuse",
+        "mitsuba-diffuse/diffuse.xml",
+        "mitsuba3:diffuse",
+        [("mitsuba3:diffuse", []), GLTF, CYCLES],
+        note="blue diffuse, referenced by id before it is defined",
+    ),
+    Asset(
+        "mi-twosided",
+        "mitsuba-twosided_2/twosided_2.xml",
+        "mitsuba3:diffuse",
+        [GLTF],
+        note="twosided with a dielectric back side: refused (Mitsuba refuses it too)",
+    ),
+    Asset(
+        "mi-mask",
+        "mitsuba-mask/mask.xml",
+        "mitsuba3:diffuse",
+        [("mitsuba3:diffuse", []), GLTF, CYCLES],
+        note="mask opacity 0.4 (carried)",
+    ),
+    Asset(
+        "mi-aniso",
+        "mitsuba-roughconductor_anisotropic/roughconductor_anisotropic.xml",
+        "mitsuba3:roughconductor-anisotropic",
+        [("mitsuba3:roughconductor-anisotropic", []), CONDUCTOR, GLTF, CYCLES],
+        note="Ag, GGX alpha_u 0.4 / alpha_v 0.2",
+    ),
+    Asset(
+        "mi-bumpmap",
+        "mitsuba-bumpmap/bumpmap.xml",
+        "mitsuba3:diffuse",
+        [GLTF],
+        note="bumpmap over a checkerboard: refused (Mitsuba cannot render it)",
+    ),
+    Asset(
+        "mi-blendbsdf",
+        "mitsuba-blendbsdf/blendbsdf.xml",
+        "mitsuba3:diffuse",
+        [GLTF],
+        note="blend of diffuse and dielectric: refused (transmission)",
+    ),
+    Asset(
+        "mi-dielectric",
+        "mitsuba-dielectric/dielectric.xml",
+        "mitsuba3:diffuse",
+        [GLTF, CYCLES],
+        note="dielectric: refused (transmission)",
+    ),
+    Asset(
+        "mi-roughdielectric",
+        "mitsuba-roughdielectric_isotropic/roughdielectric_isotropic.xml",
+        "mitsuba3:diffuse",
+        [GLTF],
+        note="roughdielectric: refused (transmission)",
+    ),
 ]
 
 

@@ -75,7 +75,7 @@ def test_translated_dielectrics_keep_their_hue(tmp_path, name):
     "name, target, why",
     [
         ("mtlx-standard_surface_copper/*.mtlx", "gltf:metal-rough", "coat_color"),
-        ("mitsuba-conductor/*.xml", "gltf:metal-rough", "conductor"),
+        ("mitsuba-dielectric/*.xml", "gltf:metal-rough", "transmission"),
     ],
 )
 def test_what_cannot_be_converted_is_refused_in_one_line(tmp_path, capsys, name, target, why):

@@ -194,8 +194,12 @@ def test_bitmaps_raw_vs_srgb_normalmap_and_bumpmap(tmp_path):
     a = read(p, "bumpy")
     assert a.textures["alpha"].colorspace == "linear"  # raw
     assert a.textures["specular_reflectance"].colorspace == "linear"  # a float file is linear, raw or not
-    assert a.normal is not None and a.normal.path == (tmp_path / "nrm.png").resolve()
-    assert any("bumpmap" in n for n in a.notes) and any("normalmap" in n for n in a.notes)
+    # the outermost wrapper's normal is kept: the bump map baked into a normal map (flat height: a flat normal)
+    assert a.normal is not None and a.normal.path == (sub / "bump.png").resolve() and a.normal.bake is not None
+    assert np.allclose(a.normal.bake(), [0.5, 0.5, 1.0], atol=1e-6)
+    assert any("bumpmap wrapper" in n for n in a.notes) and any(
+        "second normalmap wrapper was dropped" in n for n in a.notes
+    )
     assert read(p, "painted").textures["reflectance"].colorspace == "srgb"  # 8-bit, not raw: Mitsuba decodes sRGB
     assert read(p, "srgb_alpha").textures["alpha"].colorspace == "srgb"  # for scalar parameters too
     maps = load_map_set(read(p, "painted").to_map_set(tmp_path / "ms"))
@@ -212,16 +216,15 @@ def test_bitmaps_raw_vs_srgb_normalmap_and_bumpmap(tmp_path):
         ("this is not xml <", "not valid XML"),
         ('<?xml version="1.0"?><materialx version="1.39"/>', "not a Mitsuba scene"),
         ('<scene version="3.0.0"><shape type="sphere"/></scene>', "holds no <bsdf>"),
-        ('<scene version="3.0.0"><bsdf type="dielectric"/></scene>', "'dielectric' BSDF"),
+        ('<scene version="3.0.0"><bsdf type="dielectric"/></scene>', "dielectric BSDF: its look is transmission"),
         (
             '<scene version="3.0.0"><bsdf type="diffuse"><float name="roughness" value="0.1"/></bsdf></scene>',
             "unknown parameter(s) roughness",
         ),
         ('<scene version="3.0.0"><bsdf type="diffuse"><rgb name="reflectance" value="$c"/></bsdf></scene>', "$c"),
         (
-            '<scene version="3.0.0"><bsdf type="roughconductor"><float name="alpha_u" value="0.1"/>'
-            '<float name="alpha_v" value="0.3"/></bsdf></scene>',
-            "anisotropic",
+            '<scene version="3.0.0"><bsdf type="roughconductor"><float name="alpha_u" value="0.1"/></bsdf></scene>',
+            "give alpha, or alpha_u and alpha_v together",
         ),
         (
             '<scene version="3.0.0"><bsdf type="roughplastic">'
@@ -236,12 +239,12 @@ def test_bitmaps_raw_vs_srgb_normalmap_and_bumpmap(tmp_path):
         (
             '<scene version="3.0.0"><bsdf type="diffuse"><texture type="bitmap" name="reflectance">'
             '<string name="filename" value="gone.png"/></texture></bsdf></scene>',
-            "gone.png for reflectance not found",
+            "bitmap reflectance 'gone.png' not found",
         ),
         (
-            '<scene version="3.0.0"><bsdf type="diffuse"><texture type="checkerboard" name="reflectance"/></bsdf>'
-            "</scene>",
-            "bitmap textures only",
+            '<scene version="3.0.0"><bsdf type="diffuse"><texture type="mesh_attribute" name="reflectance"/>'
+            "</bsdf></scene>",
+            "'mesh_attribute' texture; matremap reads bitmap and checkerboard textures",
         ),
         (
             '<scene version="3.0.0"><bsdf type="diffuse"><rgb name="reflectance" value="1.5"/></bsdf></scene>',
@@ -470,6 +473,7 @@ def test_mitsuba_probe_lights_match_scene_conventions():
     assert mitsuba_xml.MODELS == (
         "mitsuba3:diffuse",
         "mitsuba3:roughconductor",
+        "mitsuba3:roughconductor-anisotropic",
         "mitsuba3:roughplastic",
         "mitsuba3:principled",
     )

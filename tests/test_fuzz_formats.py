@@ -35,6 +35,9 @@ USDZ = sorted(CORPUS.glob("usd-*/*.usdz"))
 FUZZ_USD = settings(
     max_examples=120, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow], database=None
 )
+#: matremap's own Mitsuba scene using every structure the reader follows (include, path, defaults, spectra,
+#: checkerboard, to_uv, bumpmap, mask, blendbsdf, anisotropy); its two files are mutated in turn
+SCENE_SEED = Path(__file__).parent / "data" / "mitsuba-fuzz-seed"
 
 scalars = (
     st.none()
@@ -215,17 +218,21 @@ def test_fuzz_mitsuba_xml(path, data):
     in_copy(path, lambda p: p.write_bytes(mutated))
 
 
-def _usd_materials(path: Path) -> None:
-    """Read every material of a USD file (the fuzzed text may change which there are)."""
+def read_every_material(path: Path, limit: int | None = None) -> None:
+    """Every material of a file (the fuzzed text may change which there are), read and its baked textures
+    evaluated as ``remap`` would; refusals are fine."""
     from matremap.formats import material_names
 
     try:
         names = material_names(path)
     except MatremapError:
         return
-    for name in names[:3]:
+    for name in names[:limit]:
         try:
             asset = read_asset(path, name)
+            for ref in [*asset.textures.values(), asset.normal]:
+                if ref is not None and ref.bake is not None:
+                    ref.bake()
             if not asset.textured:
                 asset.material()
         except MatremapError:
@@ -241,7 +248,7 @@ def test_fuzz_usd_text(path, data):
         folder = Path(d) / path.parent.name
         shutil.copytree(path.parent, folder)
         (folder / path.name).write_bytes(mutated)
-        _usd_materials(folder / path.name)
+        read_every_material(folder / path.name, 3)
 
 
 @FUZZ_USD
@@ -254,4 +261,26 @@ def test_fuzz_usdz_bytes(path, data):
     with tempfile.TemporaryDirectory() as d:
         f = Path(d) / path.name
         f.write_bytes(mutated)
-        _usd_materials(f)
+        read_every_material(f, 3)
+
+
+def test_the_scene_seed_reads_whole():
+    from matremap.formats import material_names
+
+    main = SCENE_SEED / "main.xml"
+    assert len(material_names(main)) == 6
+    read_every_material(main)
+
+
+@settings(
+    max_examples=150, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow], database=None
+)
+@given(st.sampled_from(["main.xml", "parts/mats.xml"]), st.data())
+def test_fuzz_mitsuba_scene_structure(name, data):
+    source = SCENE_SEED / name
+    mutated = data.draw(mutated_xml(source.read_bytes()))
+    with tempfile.TemporaryDirectory() as d:
+        folder = Path(d) / "seed"
+        shutil.copytree(SCENE_SEED, folder)
+        (folder / name).write_bytes(mutated)
+        read_every_material(folder / "main.xml")

@@ -134,9 +134,11 @@ def sweep_grid(map_set: MapSet, params: Mapping[str, Any], held: Mapping[str, fl
             axes.append(f"{name}={lo!r}:{hi!r}:{SPECULAR_POINTS if axes else ALONE_POINTS}")
     dp = qty.diffuse_param(spec)
     if dp is not None and dp.name in map_set.maps and not metal:
-        _, hi = _range(params[dp.name], dp.bounds)
-        # two levels learn the diffuse mapping beside other axes; alone it needs enough points to learn from
-        axes.append(f"{dp.name}=0.0;{hi!r}" if axes else f"{dp.name}=0.0:{hi!r}:{DIFFUSE_ONLY_POINTS}")
+        lo, hi = _range(params[dp.name], dp.bounds, floor=1e-3)
+        # two levels learn the diffuse mapping beside other axes; alone it needs enough points to learn from,
+        # from the darkest texel (a diffuse-only source at 0 renders black, is refused, and the domain would
+        # start at the next point, leaving the darkest texels outside it)
+        axes.append(f"{dp.name}=0.0;{hi!r}" if axes else f"{dp.name}={lo!r}:{hi!r}:{DIFFUSE_ONLY_POINTS}")
     if not axes:
         raise MatremapError(f"the map set gives no roughness, specular or diffuse map of {spec.id} to remap")
     return ",".join(axes)
@@ -716,8 +718,10 @@ def remap_file(
         raise MatremapError(f"{out} is the input file's folder; choose another output folder")
     name = _output_name(p, target, asset.format, write, out, log)
     job = RemapJob(target, dict(fix or {}), **{k: v for k, v in options.items() if v is not None or k == "scene"})
-    kept = asset.format == "gltf" and target == asset.model and same_options(asset.constants, target, job.fix)
-    if asset.lost and not kept:  # a glTF onto itself is copied with its extensions; anything else loses them
+    job = anisotropic_probe(job, asset.model, log)
+    kept = asset.format in ("gltf", "mitsuba-xml") and target == asset.model
+    kept = kept and same_options(asset.constants, target, job.fix)
+    if asset.lost and not kept:  # a material onto its own model keeps its layers; anything else loses them
         raise MatremapError(
             f"{p}: material {asset.name!r} carries its look in {'; '.join(asset.lost)}, which matremap's models do "
             f"not have (no coat, transmission or sheen yet): converting the rest to {target} would be wrong, so it "
@@ -735,7 +739,11 @@ def remap_file(
         if name is not None:
             # every writer gets the asset: a writer of the same format copies its document, any writer
             # carries what it has a slot for (asset.carried: emission, occlusion, opacity)
+            before = len(asset.notes)
             result.file = write_asset(stage / name, produced, source=asset, force=True)
+            for note in asset.notes[before:]:  # what the writer carried over or left behind
+                log(f"note: {note}")
+                result.notes.append(note)
         write_text(stage / "verdict.json", json.dumps(result.verdict.to_dict(), indent=1) + "\n")
     if result.remap is not None:
         result.remap = result.remap.moved(stage, out)
@@ -743,6 +751,21 @@ def remap_file(
         result.file = out / result.file.relative_to(stage)
         log(f"wrote {result.file}")
     return result
+
+
+#: the probe's lights for an anisotropic source: the headlight alone sees the lobe only across the
+#: sphere's tangent (the half vector has no component along it), so an isotropic fit could trade the
+#: other roughness for a darker F0 at zero error; a light 45 degrees off the view axis shows both
+ANISOTROPIC_PROBE_LIGHTS = (0.0, 45.0)
+
+
+def anisotropic_probe(job: RemapJob, model: str, log: Callable[[str], None]) -> RemapJob:
+    """``job`` with the probe of :data:`ANISOTROPIC_PROBE_LIGHTS` when ``model`` is anisotropic (two
+    roughness parameters) and no probe was given."""
+    if job.scene is not None or sum(p.role == "roughness" for p in get_model(model).params) < 2:
+        return job
+    log(f"note: {model} is anisotropic: fitted under lights at {ANISOTROPIC_PROBE_LIGHTS} degrees (both roughnesses)")
+    return replace(job, scene=Scene.probe(ANISOTROPIC_PROBE_LIGHTS))
 
 
 def uniform_identity(source: Material, target: str, fix: Mapping[str, Any]) -> Equivalence | None:

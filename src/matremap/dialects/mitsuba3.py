@@ -10,13 +10,17 @@ mitsuba3:roughconductor    distribution {beckmann*, ggx}; material {custom*, non
                            alpha (scalar, 0.1); eta (0), k (1) (Mitsuba's default is a perfect
                            mirror, ``none``); specular_reflectance (1). eta and k are used
                            when material = custom, otherwise Mitsuba's named data are used.
+mitsuba3:roughconductor-   Mitsuba's roughconductor with alpha_u != alpha_v: alpha_u, alpha_v
+  anisotropic              (scalars, 0.1: roughness along the surface's dp/du and across it);
+                           the rest as roughconductor
 mitsuba3:roughplastic      distribution {beckmann*, ggx}; nonlinear {false*, true};
                            alpha (scalar, 0.1); int_ior (scalar, 1.49); ext_ior (scalar, 1.000277);
                            specular_reflectance (1); diffuse_reflectance (0.5)
 mitsuba3:principled        base_color (0.5); roughness, metallic, specular (0.5), spec_tint,
-                           anisotropic, sheen, sheen_tint, clearcoat, clearcoat_gloss,
-                           spec_trans (scalars; those after specular held at 0 in fits);
-                           emulated by the embedded renderer but for spec_trans, anisotropic
+                           anisotropic, sheen, sheen_tint, flatness, clearcoat,
+                           clearcoat_gloss, spec_trans (scalars; those after specular held at
+                           0 in fits); emulated by the embedded renderer but for spec_trans,
+                           anisotropic and flatness
 =========================  ====================================================================
 """
 
@@ -103,7 +107,16 @@ CONDUCTORS = (
 DISTRIBUTIONS = ("beckmann", "ggx")
 
 #: principled parameters matremap holds at 0 in fits (they stay settable)
-PRINCIPLED_HELD = ("spec_tint", "anisotropic", "sheen", "sheen_tint", "clearcoat", "clearcoat_gloss", "spec_trans")
+PRINCIPLED_HELD = (
+    "spec_tint",
+    "anisotropic",
+    "sheen",
+    "sheen_tint",
+    "flatness",
+    "clearcoat",
+    "clearcoat_gloss",
+    "spec_trans",
+)
 
 
 def _rgb(
@@ -169,6 +182,21 @@ ROUGHCONDUCTOR = ModelSpec(
     reflectance=Conductor("eta", "k"),
 )
 
+ROUGHCONDUCTOR_ANISOTROPIC = ModelSpec(
+    id="mitsuba3:roughconductor-anisotropic",
+    affine=(("specular_reflectance", {}),),
+    summary="anisotropic rough conductor (Mitsuba 3 roughconductor with alpha_u, alpha_v)",
+    params=(
+        ParamSpec("alpha_u", "roughness", 0.1, (1e-4, 1.0), doc="roughness along the tangent (dp/du)"),
+        ParamSpec("alpha_v", "roughness", 0.1, (1e-4, 1.0), doc="roughness along the bitangent"),
+        *ROUGHCONDUCTOR.params[1:],
+    ),
+    options=ROUGHCONDUCTOR.options,
+    diffuse_only=None,
+    specular_only={},
+    reflectance=Conductor("eta", "k"),
+)
+
 ROUGHPLASTIC = ModelSpec(
     id="mitsuba3:roughplastic",
     affine=(("specular_reflectance", {}), ("diffuse_reflectance", {"nonlinear": ("false",)})),
@@ -220,6 +248,7 @@ PRINCIPLED = ModelSpec(
 MODELS = (
     DIFFUSE,
     ROUGHCONDUCTOR,
+    ROUGHCONDUCTOR_ANISOTROPIC,
     ROUGHPLASTIC,
     PRINCIPLED,
 )

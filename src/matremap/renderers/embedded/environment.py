@@ -163,7 +163,10 @@ class SVBRDFRender:
             cos_g = wi @ surf.normal[sl].T
             lit = (cos_i > 0.0) & (cos_o > 0.0) & (cos_g > 0.0)
             if self.bump_alpha2 is None:
-                geo = LocalGeometry(np.where(lit, cos_i, 1.0), np.where(lit, cos_o, 1.0), np.where(lit, i_dot_o, 1.0))
+                frame = _frame(wi, wo, n, surf.tangent[sl], lit)  # the shading frame (anisotropic models)
+                geo = LocalGeometry(
+                    np.where(lit, cos_i, 1.0), np.where(lit, cos_o, 1.0), np.where(lit, i_dot_o, 1.0), frame
+                )
                 fcos = np.where(lit, self._evaluate(self.params, sl, geo, cos_i.shape), 0.0)  # [C, L, p]
             else:
                 # Cycles with a normal map: a diffuse closure is lit wherever the light is above both
@@ -203,6 +206,19 @@ class SVBRDFRender:
         fcos = np.asarray(self.evaluator(params, self.options, geo))
         channels = fcos.shape[-3] if fcos.ndim >= 3 else 1
         return np.broadcast_to(fcos, (1, channels) + shape)[0]
+
+
+def _frame(
+    wi: np.ndarray, wo: np.ndarray, n: np.ndarray, tangent: np.ndarray, lit: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(i.s, i.t, o.s, o.t) [L, p] in Mitsuba's shading frame: s = the surface tangent (dp/du) made
+    orthogonal to the shading normal ``n``, t = n x s; zero where unlit."""
+    s = tangent - n * np.sum(n * tangent, axis=-1, keepdims=True)
+    s /= np.maximum(np.linalg.norm(s, axis=-1, keepdims=True), 1e-12)
+    t = np.cross(n, s)
+    i_s, i_t = wi @ s.T, wi @ t.T
+    o_s, o_t = (np.broadcast_to(np.sum(wo * v, axis=-1), lit.shape) for v in (s, t))
+    return tuple(np.where(lit, a, 0.0) for a in (i_s, i_t, o_s, o_t))  # type: ignore[return-value]
 
 
 def ensure_valid_specular_reflection(ng: np.ndarray, view: np.ndarray, n: np.ndarray) -> np.ndarray:

@@ -2,7 +2,9 @@
 
 Conventions (as in dialects.md): ``i`` is the direction to the light, ``o`` the direction to the
 viewer, ``n`` the normal, ``H = i + o`` the unnormalised half vector and ``h = H/|H|``.
-Everything is derived from three cosines (n.i, n.o, i.o), which is all an isotropic BRDF depends on.
+Everything is derived from three cosines (n.i, n.o, i.o), which is all an isotropic BRDF depends on;
+an anisotropic one also needs the directions' components along the surface's tangent ``s`` (dp/du) and
+bitangent ``t = n x s`` (Mitsuba's shading frame), given when the scene knows them (``frame``).
 """
 
 from __future__ import annotations
@@ -19,6 +21,8 @@ class LocalGeometry:
     cos_i: np.ndarray
     cos_o: np.ndarray
     i_dot_o: np.ndarray
+    #: (i.s, i.t, o.s, o.t): light and view directions along the tangent and bitangent, or None
+    frame: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
 
     @cached_property
     def h_len2(self) -> np.ndarray:

@@ -104,3 +104,32 @@ def lambda_beckmann(tan_v: np.ndarray, alpha: np.ndarray) -> np.ndarray:
 def g_height_correlated(lam_i: np.ndarray, lam_o: np.ndarray) -> np.ndarray:
     """Height-correlated Smith G = 1 / (1 + Lambda(i) + Lambda(o))."""
     return 1.0 / (1.0 + lam_i + lam_o)
+
+
+def d_anisotropic(
+    distribution: str, hx: np.ndarray, hy: np.ndarray, hz: np.ndarray, alpha_u: np.ndarray, alpha_v: np.ndarray
+) -> np.ndarray:
+    """Mitsuba 3 ``MicrofacetDistribution::eval`` (``include/mitsuba/render/microfacet.h``) of the unit
+    half vector (hx, hy, hz) in the shading frame: Beckmann exp(-(hx^2/au^2 + hy^2/av^2)/hz^2) /
+    (pi au av hz^4), GGX 1 / (pi au av (hx^2/au^2 + hy^2/av^2 + hz^2)^2); alphas clamped to >= 1e-4,
+    values with D hz < 1e-20 flushed to zero."""
+    au, av = np.maximum(alpha_u, ALPHA_MIN), np.maximum(alpha_v, ALPHA_MIN)
+    sx, sy, hz2 = (hx / au) ** 2, (hy / av) ** 2, hz * hz
+    if distribution == "beckmann":
+        d = np.exp(-(sx + sy) / hz2) / (np.pi * au * av * hz2 * hz2)
+    elif distribution == "ggx":
+        d = 1.0 / (np.pi * au * av * (sx + sy + hz2) ** 2)
+    else:
+        raise ValueError(f"unknown distribution {distribution!r}")
+    return np.where(d * hz < 1e-20, 0.0, d)
+
+
+def g1_anisotropic(
+    distribution: str, vx: np.ndarray, vy: np.ndarray, vz: np.ndarray, alpha_u: np.ndarray, alpha_v: np.ndarray
+) -> np.ndarray:
+    """Mitsuba 3 ``smith_g1`` for direction (vx, vy, vz): the isotropic G1 at alpha tan = sqrt((au vx)^2 +
+    (av vy)^2) / vz (rational Beckmann or GGX, as :func:`g1_beckmann_rational` / :func:`g1_ggx`)."""
+    au, av = np.maximum(alpha_u, ALPHA_MIN), np.maximum(alpha_v, ALPHA_MIN)
+    b = np.sqrt((au * vx) ** 2 + (av * vy) ** 2) / vz
+    g1 = g1_ggx if distribution == "ggx" else g1_beckmann_rational
+    return g1(b, np.ones_like(b))

@@ -36,27 +36,37 @@ def scene_geometry(scene: Scene) -> SceneGeometry:
     cam = np.array([0.0, 0.0, scene.camera_distance])
     wo = cam - p
     wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
-    cos_i_rows: list[np.ndarray] = []
-    cos_o_rows: list[np.ndarray] = []
-    i_dot_o_rows: list[np.ndarray] = []
-    irr_rows: list[np.ndarray] = []
+    s, t = sphere_frame(p, n)
+    rows: dict[str, list[np.ndarray]] = {k: [] for k in ("cos_i", "cos_o", "i_dot_o", "irr", "i_s", "i_t")}
     for light in scene.lights:
         to_light = scene.light_position(light) - p
         d2 = np.sum(to_light * to_light, axis=-1)
         wi = to_light / np.sqrt(d2)[:, None]
-        cos_i_rows.append(np.sum(n * wi, axis=-1))
-        cos_o_rows.append(np.sum(n * wo, axis=-1))
-        i_dot_o_rows.append(np.sum(wi * wo, axis=-1))
-        irr_rows.append(scene.light_intensity(light) / d2)
-    cos_i, cos_o, i_dot_o, irr = (np.stack(a) for a in (cos_i_rows, cos_o_rows, i_dot_o_rows, irr_rows))
+        for key, value in (("cos_i", n), ("i_dot_o", wo), ("i_s", s), ("i_t", t)):
+            rows[key].append(np.sum(wi * value, axis=-1))
+        rows["cos_o"].append(np.sum(n * wo, axis=-1))
+        rows["irr"].append(scene.light_intensity(light) / d2)
+    cos_i, cos_o, i_dot_o, irr, i_s, i_t = (np.stack(rows[k]) for k in rows)
+    o_s, o_t = (np.broadcast_to(np.sum(wo * v, axis=-1), cos_i.shape) for v in (s, t))
     lit = (cos_i > 0.0) & (cos_o > 0.0)
-    # keep every formula finite where the point is unlit; the result is masked there anyway
-    cos_i = np.where(lit, cos_i, 1.0)
-    cos_o = np.where(lit, cos_o, 1.0)
-    i_dot_o = np.where(lit, i_dot_o, 1.0)
-    for a in (cos_i, cos_o, i_dot_o, lit):
+    # keep every formula finite where the point is unlit (light and view along the normal); the result is
+    # masked there anyway
+    cos_i, cos_o, i_dot_o = (np.where(lit, a, 1.0) for a in (cos_i, cos_o, i_dot_o))
+    frame = tuple(np.where(lit, a, 0.0) for a in (i_s, i_t, o_s, o_t))
+    for a in (cos_i, cos_o, i_dot_o, lit, *frame):
         a.flags.writeable = False
-    return SceneGeometry(LocalGeometry(cos_i, cos_o, i_dot_o), np.where(lit, irr, 0.0), lit)
+    local = LocalGeometry(cos_i, cos_o, i_dot_o, frame)  # type: ignore[arg-type]
+    return SceneGeometry(local, np.where(lit, irr, 0.0), lit)
+
+
+def sphere_frame(p: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The shading frame's tangent s and bitangent t = n x s at points ``p`` [P, 3] of the probe sphere
+    (centred at the origin, pole +z towards the camera), as Mitsuba 3's ``sphere`` gives them: s along
+    dp/du = (-y, x, 0) (src/shapes/sphere.cpp; any direction at the pole itself)."""
+    s = np.stack([-p[:, 1], p[:, 0], np.zeros(len(p))], axis=-1)
+    norm = np.linalg.norm(s, axis=-1, keepdims=True)
+    s = np.where(norm > 1e-12, s / np.maximum(norm, 1e-300), np.array([1.0, 0.0, 0.0]))
+    return s, np.cross(n, s)
 
 
 class EmbeddedRenderer:

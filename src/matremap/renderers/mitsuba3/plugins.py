@@ -48,15 +48,16 @@ def bsdf_dict(model: str, options: dict[str, str], m: Material) -> tuple[dict[st
         return {"type": "diffuse", "reflectance": rgb("reflectance")}, [
             Binding("reflectance", "reflectance.value", True)
         ]
-    if model == "mitsuba3:roughconductor":
+    if model in ("mitsuba3:roughconductor", "mitsuba3:roughconductor-anisotropic"):
+        alphas = ("alpha",) if model == "mitsuba3:roughconductor" else ("alpha_u", "alpha_v")
         d: dict[str, Any] = {
             "type": "roughconductor",
             "distribution": options["distribution"],
-            "alpha": scalar("alpha"),
+            **{a: scalar(a) for a in alphas},
             "specular_reflectance": rgb("specular_reflectance"),
         }
         b = [
-            Binding("alpha", "alpha.value", False),
+            *(Binding(a, f"{a}.value", False) for a in alphas),
             Binding("specular_reflectance", "specular_reflectance.value", True),
         ]
         if options["material"] == "custom":

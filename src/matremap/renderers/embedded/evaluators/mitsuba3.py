@@ -7,7 +7,9 @@ same rational Beckmann G1 as Mitsuba 0.6 (``include/mitsuba/render/microfacet.h`
 Mitsuba 0.6's formula at extEta = 1, which is what this module evaluates. A named ``material`` takes
 the RGB eta and k Mitsuba's rgb variants convert its spectral data to
 (:mod:`matremap.dialects.mitsuba3_conductors`); ``none`` is Mitsuba's perfect mirror (Fresnel 1).
-Checked against the real Mitsuba 3 in tests/test_mitsuba3_emulation.py.
+The anisotropic roughconductor (``alpha_u`` != ``alpha_v``) evaluates D and G in the shading frame
+(``g.frame``: the probe sphere's is Mitsuba's ``sphere`` frame, s along dp/du). Checked against the real
+Mitsuba 3 in tests/test_mitsuba3_emulation.py and tests/test_mitsuba_anisotropic.py.
 
 ``principled``: Mitsuba 3.9 ``src/bsdfs/principled.cpp`` (``Principled::eval``) and ``principledhelpers.h``,
 the reflection of the front side, in Mitsuba's own terms (its ``wi`` is the viewer, ``wo`` the light):
@@ -24,7 +26,7 @@ the reflection of the front side, in Mitsuba's own terms (its ``wi`` is the view
   cos_light, F_x = (1 - cos_x)^5, R_r = 2 roughness (h.l)^2;
 * sheen: sheen (1 - metallic) (1 - h.l)^5 lerp(1, c_tint, sheen_tint) cos_light (no 1/pi, as Burley's).
 
-Not emulated: spec_trans > 0 (transmission) and anisotropic > 0 (refused with one line; Mitsuba 3 draws
+Not emulated: spec_trans > 0 (transmission), anisotropic > 0 and flatness > 0 (refused with one line; Mitsuba 3 draws
 them with ``--target-renderer mitsuba3``). Checked against the real Mitsuba 3 in
 tests/test_mitsuba3_principled_emulation.py. ``roughplastic`` is not emulated: Mitsuba 3's roughplastic
 diffuse layer differs from Mitsuba 0.6's (2-59 % relative RMSE, see :mod:`matremap.dialects.equivalence`).
@@ -35,7 +37,7 @@ from __future__ import annotations
 import numpy as np
 
 from matremap.core.optics import fresnel_conductor, fresnel_dielectric
-from matremap.dialects.mitsuba3 import DIFFUSE, PRINCIPLED, ROUGHCONDUCTOR
+from matremap.dialects.mitsuba3 import DIFFUSE, PRINCIPLED, ROUGHCONDUCTOR, ROUGHCONDUCTOR_ANISOTROPIC
 from matremap.dialects.mitsuba3_conductors import CONDUCTOR_RGB
 from matremap.errors import MatremapError
 from matremap.renderers.embedded import microfacet as mf
@@ -48,17 +50,21 @@ def diffuse(p, opt, g):
     return p["reflectance"] * g.lambert
 
 
-def roughconductor(p, opt, g):
+def conductor_fresnel(p, opt, g):
+    """Mitsuba 3's conductor Fresnel at i.h: 1 for ``none``, else of eta + i k (custom or named)."""
     material = opt.get("material", "custom")
     if material == "none":
-        f = np.ones_like(g.i_dot_h)
+        return np.ones_like(g.i_dot_h)
+    if material == "custom":
+        eta, k = p["eta"], p["k"]
     else:
-        if material == "custom":
-            eta, k = p["eta"], p["k"]
-        else:
-            e, kk = CONDUCTOR_RGB[material]
-            eta, k = np.asarray(e)[None, :, None, None], np.asarray(kk)[None, :, None, None]
-        f = fresnel_conductor(g.i_dot_h, eta, k)
+        e, kk = CONDUCTOR_RGB[material]
+        eta, k = np.asarray(e)[None, :, None, None], np.asarray(kk)[None, :, None, None]
+    return fresnel_conductor(g.i_dot_h, eta, k)
+
+
+def roughconductor(p, opt, g):
+    f = conductor_fresnel(p, opt, g)
     distribution, alpha = opt["distribution"], p["alpha"]
     d = mf.d_mitsuba06(distribution, g, alpha)
     gg = mf.g_mitsuba06(distribution, g.tan_i, g.tan_o, alpha)
@@ -73,7 +79,7 @@ def schlick_weight(cos) -> np.ndarray:
 
 def principled(p, opt, g):
     """f * cos(theta_light) of Mitsuba 3's ``principled`` (see the module docstring)."""
-    for name in ("spec_trans", "anisotropic"):
+    for name in ("spec_trans", "anisotropic", "flatness"):
         if np.any(p[name] > 0.0):
             raise MatremapError(
                 f"mitsuba3:principled with {name} > 0 is not emulated by the embedded renderer; "
@@ -114,5 +120,27 @@ def principled(p, opt, g):
     return specular + clearcoat + diffuse + sheen
 
 
+def roughconductor_anisotropic(p, opt, g):
+    """Mitsuba 3's roughconductor with alpha_u != alpha_v: D and Smith G of the half vector and the
+    directions in the shading frame (microfacet.h), which the scene must give (``g.frame``)."""
+    if g.frame is None:
+        raise MatremapError(
+            "mitsuba3:roughconductor-anisotropic needs the surface's tangent frame, which this scene does not give"
+        )
+    i_s, i_t, o_s, o_t = g.frame
+    inv = 1.0 / np.sqrt(g.h_len2)
+    au, av, distribution = p["alpha_u"], p["alpha_v"], opt["distribution"]
+    d = mf.d_anisotropic(distribution, (i_s + o_s) * inv, (i_t + o_t) * inv, g.cos_h, au, av)
+    gg = mf.g1_anisotropic(distribution, i_s, i_t, g.cos_i, au, av) * mf.g1_anisotropic(
+        distribution, o_s, o_t, g.cos_o, au, av
+    )
+    return p["specular_reflectance"] * conductor_fresnel(p, opt, g) * (d * gg / (4.0 * g.cos_o))
+
+
 #: model id -> evaluator
-EVALUATORS = {DIFFUSE.id: diffuse, ROUGHCONDUCTOR.id: roughconductor, PRINCIPLED.id: principled}
+EVALUATORS = {
+    DIFFUSE.id: diffuse,
+    ROUGHCONDUCTOR.id: roughconductor,
+    ROUGHCONDUCTOR_ANISOTROPIC.id: roughconductor_anisotropic,
+    PRINCIPLED.id: principled,
+}
