@@ -197,3 +197,15 @@ def test_write_all_refuses_names_the_source_does_not_have(tmp_path):
     with pytest.raises(MatremapError, match="has no material 'nope' left to replace"):
         write_all(tmp_path / "x.glb", [("nope", m)], src)
     assert not (tmp_path / "x.glb").exists()
+
+
+def test_a_malformed_extensions_used_list_keeps_its_names_and_drops_the_rest():
+    """A source whose extensionsUsed holds a non-string (a list) made the writer raise TypeError."""
+    from matremap.formats.gltf_edit import update_extension_lists
+
+    doc = {"extensionsUsed": ["KHR_materials_sheen", ["x"], 3], "materials": [{"extensions": {"KHR_x": {}}}]}
+    update_extension_lists(doc)
+    assert doc["extensionsUsed"] == ["KHR_materials_sheen", "KHR_x"]
+    doc = {"extensionsUsed": {"not": "a list"}, "materials": []}
+    update_extension_lists(doc)
+    assert "extensionsUsed" not in doc

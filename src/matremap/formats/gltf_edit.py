@@ -348,7 +348,8 @@ def update_extension_lists(doc: dict[str, Any]) -> None:
     """extensionsUsed: the source's list without the :data:`MANAGED` extensions no longer used, plus every
     extension the file now uses (§3.12: each one must be listed); extensionsRequired: a subset of it."""
     found = extension_names(doc)
-    listed = doc.get("extensionsUsed", [])
+    given = doc.get("extensionsUsed", [])
+    listed = [e for e in given if isinstance(e, str)] if isinstance(given, list) else []  # a broken list: names only
     used = [e for e in listed if e not in MANAGED or e in found]
     used += sorted(found - set(used))
     if used:

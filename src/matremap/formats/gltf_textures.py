@@ -95,7 +95,7 @@ def sampler_wrap(path: Path, doc: dict[str, Any], texture: dict[str, Any], where
     modes = []
     for key in ("wrapS", "wrapT"):
         value = sampler.get(key, 10497)
-        if value not in WRAP_MODES or isinstance(value, bool):
+        if isinstance(value, bool) or not isinstance(value, int) or value not in WRAP_MODES:
             raise MatremapError(
                 f"{path}: samplers[{index}].{key} is {value!r}; glTF allows 10497 (repeat), 33648 (mirrored "
                 f"repeat) and 33071 (clamp to edge); fix the file"
