@@ -282,6 +282,7 @@ def test_every_option_says_what_it_does_and_its_default():
 
 
 def test_every_command_has_a_description_and_examples_that_parse():
+    import re
     import shlex
 
     from matremap.cli import build_parser
@@ -290,10 +291,12 @@ def test_every_command_has_a_description_and_examples_that_parse():
     for name, sub in _commands():
         assert sub.description and sub.epilog and sub.epilog.startswith("examples:"), name
         text = sub.epilog.replace("\\\n", " ")
-        examples = [line.strip() for line in text.splitlines() if line.strip().startswith("matremap ")]
+        # a command line, maybe after environment variables; up to a pipe or a comment in parentheses
+        found = [re.match(r"\s*(?:\w+=\S+\s+)*(matremap .*)", line) for line in text.splitlines()]
+        examples = [m.group(1).split(" | ")[0].split("  (")[0].strip() for m in found if m]
         assert any(e.split()[1] == name for e in examples), f"{name}: no example of the command itself"
         for example in examples:
-            argv = shlex.split(example.split("   (")[0].split("  (")[0])[1:]
+            argv = shlex.split(example)[1:]
             try:
                 parser.parse_args(argv)
             except SystemExit:

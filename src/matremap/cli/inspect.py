@@ -23,7 +23,8 @@ TRANSFORMS_EXAMPLES = """examples:
 
 RENDERERS_EXAMPLES = """examples:
   matremap renderers
-  matremap renderers --json"""
+  matremap renderers --json
+  matremap doctor          (versions, the cache, and what is missing with the command to install it)"""
 
 
 def add_models(subparsers: Subparsers) -> None:
