@@ -356,8 +356,15 @@ def cmd_remap(args: argparse.Namespace) -> int:
     from matremap.formats.confine import output_inside
     from matremap.remap import remap, remap_file
 
-    if is_batch(args.maps, args.material):
+    if is_batch(args.maps, args.material) or (
+        (args.scheduler or args.dask_local) and all(is_material_file(m) for m in args.maps)
+    ):
         return _remap_batch(args)
+    if args.scheduler or args.dask_local:
+        raise MatremapError(
+            "--scheduler and --dask-local run batches of material files on Dask; a map set's sweep runs on local "
+            "processes (--workers)"
+        )
     args.maps = args.maps[0]
     material_file = is_material_file(args.maps)
     if material_file and args.source:
@@ -445,7 +452,10 @@ def _remap_batch(args: argparse.Namespace) -> int:
     from matremap.batch import run_batch
 
     if args.source or args.write or args.light:
-        raise MatremapError("--from, --write and --light apply to one input; a batch takes each file's own model")
+        raise MatremapError(
+            "--from, --write and --light apply to one map set or one material; a batch (several files, a folder, "
+            "a glob, or a file with several materials) takes each file's own model and writes one file per input"
+        )
     options = remap_options(args)
     options["workers"] = 1  # the batch runs items in parallel; each sweeps on one core
     result = run_batch(
@@ -454,10 +464,15 @@ def _remap_batch(args: argparse.Namespace) -> int:
         args.output,
         material=args.material,
         workers=args.workers,
+        scheduler=args.scheduler,
+        dask_local=args.dask_local,
         options=options,
         allow_paths=args.allow_path,
         log=lambda m: print(m, file=sys.stderr),
     )
+    if result.interrupted:  # one line, no traceback; what finished is kept
+        print(f"matremap: {result.line()}", file=sys.stderr)
+        return result.exit_code
     if args.json:
         print((result.out / "summary.json").read_text(), end="")
     else:
