@@ -375,3 +375,54 @@ def test_size_sets_the_evaluation_renders_of_remap(capsys, tmp_path):
         assert code == 0, err
         image, _ = read_image(out / "report" / "images" / "r000_full_target.png")
         assert image.shape[:2] == (size, size)
+
+
+# -- a map set converts to a material file (issue 20) -----------------------------------------------
+
+
+def test_a_map_set_remap_writes_a_gltf_that_uses_the_converted_maps(capsys, tmp_path):
+    pygltflib = pytest.importorskip("pygltflib", reason="pip install pygltflib")
+    from matremap.svbrdf.textures import read_image
+
+    bronze = os.path.join(os.path.dirname(__file__), "..", "examples", "bronze")
+    out = tmp_path / "out"
+    argv = ["remap", bronze, "--to", "gltf:metal-rough", "-o", str(out), "--no-evaluate", "--cache", str(tmp_path)]
+    code, stdout, err = run(capsys, *argv, "--write", "bronze.gltf")
+    assert code == 0, err
+    assert f"{out / 'bronze.gltf'}" in stdout
+    gltf = pygltflib.GLTF2().load(str(out / "bronze.gltf"))
+    (material,) = gltf.materials
+    manifest = json.loads((out / "maps" / "material.json").read_text())
+    assert manifest["model"] == "gltf:metal-rough"
+
+    def texture(index):
+        uri = gltf.images[gltf.textures[index].source].uri
+        assert (out / uri).is_file() and "/" not in uri  # beside the file, inside OUT
+        return out / uri
+
+    pbr = material.pbrMetallicRoughness
+    base, _ = read_image(texture(pbr.baseColorTexture.index), "srgb")
+    converted, _ = read_image(out / "maps" / manifest["maps"]["baseColor"], "srgb")
+    np.testing.assert_allclose(base[..., :3], converted[..., :3], atol=1 / 255)
+    mr, _ = read_image(texture(pbr.metallicRoughnessTexture.index), "linear")
+    rough, _ = read_image(out / "maps" / manifest["maps"]["roughness"], "linear")
+    np.testing.assert_allclose(mr[..., 1], rough[..., 0], atol=1 / 255)  # glTF 2.0 §3.9.2: roughness in G
+    assert pbr.metallicFactor == manifest["params"]["metallic"] == 0.0
+    assert material.extensions["KHR_materials_ior"]["ior"] == pytest.approx(manifest["params"]["ior"])
+    assert material.normalTexture is not None
+
+
+@pytest.mark.parametrize(
+    "name, message",
+    [
+        ("bronze.xml", "a mitsuba-xml file holds mitsuba3:* materials, not gltf:metal-rough; write a .gltf or .glb"),
+        ("maps/bronze.gltf", "OUT/maps/ holds the remap's own files"),
+        ("../bronze.gltf", "points outside the output folder"),
+    ],
+)
+def test_a_material_file_the_target_cannot_be_written_as_is_refused_before_any_work(capsys, tmp_path, name, message):
+    bronze = os.path.join(os.path.dirname(__file__), "..", "examples", "bronze")
+    out = tmp_path / "out"
+    code, _, err = run(capsys, "remap", bronze, "--to", "gltf:metal-rough", "-o", str(out), "--write", name)
+    assert code == 2 and message in err and err.count("\n") == 1
+    assert not out.exists()

@@ -306,8 +306,9 @@ def add_remap(subparsers: Subparsers) -> None:
     p.add_argument(
         "--write",
         metavar="NAME.EXT",
-        help="the material file to write into OUT: .gltf/.glb, .mtlx, .xml (Mitsuba 3), .blend (default for a "
-        "material file: the input's name with the target format's suffix; for a map set: none, only the maps)",
+        help="the material file to write into OUT: .gltf/.glb or .mtlx (gltf:* models), .xml (mitsuba3:*), .blend "
+        "(cycles:*) (default for a material file: the input's name with the target format's suffix; for a map set: "
+        "none, only the maps)",
     )
     p.add_argument("--sweep", action="store_true", help="always sweep, even when the transform library has a route")
     add_target_option(p, "target model id (see `matremap models`)")
@@ -369,8 +370,8 @@ def cmd_remap(args: argparse.Namespace) -> int:
     material_file = is_material_file(args.maps)
     if material_file and args.source:
         raise MatremapError(f"{args.maps} names its own model; drop --from")
-    if not material_file and (args.material is not None or args.write is not None):
-        raise MatremapError("--material and --write apply to material files (.gltf, .glb, .mtlx, .xml)")
+    if not material_file and args.material is not None:
+        raise MatremapError("--material applies to material files (.gltf, .glb, .mtlx, .xml); a map set is one")
     if not material_file:
         user_map_set(args.maps, args.source, args.allow_path)  # its files lie where it may name them
     if args.write is not None:
@@ -392,12 +393,15 @@ def cmd_remap(args: argparse.Namespace) -> int:
         )
         return _verdict(fres.verdict)
     scene = Scene.probe(lights=parse_lights(args.light)) if args.light else None
-    result = remap(args.maps, args.source, args.target, args.output, scene=scene, **options)
+    result = remap(args.maps, args.source, args.target, args.output, scene=scene, write=args.write, **options)
+    file = Path(args.output) / args.write if args.write else None
     if args.json:
-        print(json.dumps({"maps": str(result.maps), "verdict": result.verdict.to_dict()}, indent=1))
+        doc = {"maps": str(result.maps), "file": str(file) if file else None, "verdict": result.verdict.to_dict()}
+        print(json.dumps(doc, indent=1))
         return _verdict(result.verdict)
     print(
         f"{'done' if result.verdict.passed else 'written'} in {result.seconds['total']:.1f} s: maps {result.maps}"
+        + (f", {file}" if file else "")
         + (f", report {result.report}" if result.report else "")
         + (f", mean 1-SSIM {result.mean_dssim:.4f}" if result.mean_dssim is not None else "")
         + f"; {result.verdict.line()}"
