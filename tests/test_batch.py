@@ -304,3 +304,28 @@ def test_on_a_terminal_one_bar_names_the_items_being_converted(tmp_path, cache):
     assert any("0/2" in b and "brass.gltf/brass" in b and "brass.gltf-2/brass" in b for b in bars), bars[:5]
     assert any("2/2" in b for b in bars)
     assert "evaluate:" not in screen  # the workers' own bars are not drawn over the batch's
+
+
+def test_the_whole_file_is_listed_in_the_summary_and_the_index(tmp_path, capsys):
+    from matremap.formats import gltf
+
+    if not hasattr(gltf, "write_all"):
+        pytest.skip("the glTF writer has no write_all on this branch (it lands with the format's work)")
+    pygltflib = pytest.importorskip("pygltflib", reason="pip install pygltflib")
+    src = tmp_path / "in"
+    scene = mitsuba_scene(src)  # a diffuse wall and a Cr conductor, onto glTF: one fresh file with both
+    out = tmp_path / "out"
+    assert main(["remap", str(scene), "--to", "gltf:metal-rough", "-o", str(out), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    wholes = {i["whole_file"] for i in doc["items"]}
+    assert len(wholes) == 1 and "" not in wholes
+    (whole,) = wholes
+    rows = list(csv.DictReader((out / "summary.csv").open()))
+    assert {r["whole_file"] for r in rows} == {whole}
+    assert f'href="{whole}"' in (out / "index.html").read_text()
+    written = pygltflib.GLTF2().load(str(out / whole))
+    assert sorted(m.name for m in written.materials) == ["steel", "wall"]
+    wall = next(m for m in written.materials if m.name == "wall")
+    item = next(i for i in doc["items"] if i["material"] == "wall")
+    fitted = json.loads((out / item["slot"] / "material.json").read_text())["params"]["baseColor"]
+    assert wall.pbrMetallicRoughness.baseColorFactor[:3] == pytest.approx(fitted, abs=1e-6)

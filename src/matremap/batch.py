@@ -567,6 +567,12 @@ def _worst_measure(row: Row) -> float:
     return float("inf") if row.verdict != "passed" else 0.0
 
 
+def _written(row: Row) -> str:
+    """Links to what an item wrote: its own output, and the input's whole file when there is one."""
+    links = [(row.output, "output"), (row.whole_file, "whole file")]
+    return "<br>".join(f'<a href="{html.escape(p)}">{label}: {html.escape(p)}</a>' for p, label in links if p)
+
+
 def index_page(rows: Iterable[Row], title_line: str) -> str:
     """The batch's page: one row per item with its thumbnails and verdict, sortable by every column
     (click a header; ``index.html?sort=error`` opens sorted by error)."""
@@ -583,6 +589,7 @@ def index_page(rows: Iterable[Row], title_line: str) -> str:
             ("seconds", "seconds"),
             ("images", "source | target"),
             ("reason", "why"),
+            ("written", "written"),
         )
     )
     body = []
@@ -597,7 +604,7 @@ def index_page(rows: Iterable[Row], title_line: str) -> str:
             f"<td>{e(r.source_model)} → {e(r.target_model)}</td><td>{e(r.route)}</td>"
             f'<td data-value="{VERDICTS.index(r.verdict)}">{e(r.verdict)}</td>'
             f'<td data-value="{err}">{"" if err == float("inf") else f"{err:.4f}"}</td>'
-            f"<td>{r.seconds:.1f}</td><td>{thumbs}</td><td>{e(r.reason)}</td></tr>"
+            f"<td>{r.seconds:.1f}</td><td>{thumbs}</td><td>{e(r.reason)}</td><td>{_written(r)}</td></tr>"
         )
     return (
         '<!doctype html><html><head><meta charset="utf-8"><title>matremap batch</title><style>'
