@@ -8,6 +8,7 @@ import csv
 import json
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -172,3 +173,159 @@ def test_the_index_page_sorts_by_error_in_a_real_browser(tmp_path):
     assert order == ["best", "middle", "worst"] and positions == sorted(positions), dom[:500]
     unsorted = page.read_text()
     assert unsorted.index("<td>worst</td>") < unsorted.index("<td>best</td>")  # the browser sorted it
+
+
+SRC = Path(__file__).resolve().parents[1] / "src"
+BRASS = Path(__file__).resolve().parents[1] / "examples" / "brass-gltf"
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory) -> Path:
+    """One cache for this module's command runs (its tables are built once, not in the user's cache)."""
+    return tmp_path_factory.mktemp("cache")
+
+
+def _env(cache: Path) -> dict[str, str]:
+    import os
+
+    return {**os.environ, "PYTHONPATH": str(SRC), "MATREMAP_CACHE": str(cache / "matremap")}
+
+
+def test_ctrl_c_stops_the_workers_keeps_what_finished_and_a_rerun_does_the_rest(tmp_path, cache):
+    import signal
+    import time
+
+    src = tmp_path / "in"
+    for i in range(4):  # four textured materials, seconds each: Ctrl-C lands while some are being converted
+        shutil.copytree(BRASS, src / f"brass{i}")
+    out = tmp_path / "out"
+    argv = [sys.executable, "-m", "matremap.cli", "remap", str(src), "--to", "mitsuba06:ward", "-o", str(out)]
+    argv += ["--rotations", "0:360:2", "--size", "64"]
+    proc = subprocess.Popen(
+        [*argv, "--workers", "2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env(cache)
+    )
+    deadline = time.monotonic() + 240
+    while not list(out.glob("*/*/item.json")) and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.2)
+    assert proc.poll() is None, proc.communicate()
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 130, stderr
+    assert "Traceback" not in stderr
+    last = stderr.strip().splitlines()[-1]
+    assert last.startswith("matremap: interrupted: ") and "rerun the same command" in last
+    assert [ln for ln in stderr.splitlines() if ln.startswith("matremap:")] == [last]  # one line says it
+    done = sorted(p.parent for p in out.glob("*/*/item.json"))
+    assert 1 <= len(done) < 4, stderr
+    for folder in done:  # what finished is whole: its material file, maps and verdict
+        assert (folder / "verdict.json").is_file() and (folder / "maps" / "material.json").is_file()
+    assert not [p for p in out.rglob("*") if ".partial-" in p.name]  # nothing half-written left behind
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["interrupted"] == 4 - len(done) and summary["exit_code"] == 130
+    assert len(summary["items"]) == len(done)
+
+    rerun = subprocess.run(argv, capture_output=True, text=True, env=_env(cache), timeout=600)
+    assert rerun.returncode == 0, rerun.stderr
+    assert rerun.stdout.strip().splitlines()[-1].startswith("4 material(s): 4 passed, 0 failed")
+    assert f"({len(done)} unchanged, not redone)" in rerun.stdout
+
+
+def test_a_batch_runs_on_a_local_dask_cluster(tmp_path, cache):
+    pytest.importorskip("distributed", reason="needs Dask: pip install 'matremap[dask]'")
+    src = tmp_path / "in"
+    mitsuba_scene(src)
+    out = tmp_path / "out"
+    result = subprocess.run(
+        [sys.executable, "-m", "matremap.cli", "remap", str(src / "scene.xml"), "--to", "mitsuba06:ward"]
+        + ["-o", str(out), "--dask-local", "1", "--json"],
+        capture_output=True,
+        text=True,
+        env=_env(cache),
+        timeout=300,
+    )
+    assert result.returncode == 0, result.stderr
+    assert "on Dask LocalCluster with 1 workers" in result.stderr
+    doc = json.loads(result.stdout)
+    assert doc["counts"]["passed"] == 2 and {i["material"] for i in doc["items"]} == {"wall", "steel"}
+    wall = json.loads((out / "scene.xml" / "000-wall" / "material.json").read_text())
+    assert wall["model"] == "mitsuba06:ward"
+    r, g, b = wall["params"]["diffuseReflectance"]
+    assert r > g > b  # the wall stays warm (0.6, 0.5, 0.4)
+
+
+def test_an_unreachable_scheduler_is_one_line(tmp_path, capsys):
+    src = tmp_path / "in"
+    mitsuba_scene(src)
+    argv = ["remap", str(src), "--to", "mitsuba06:ward", "-o", str(tmp_path / "out")]
+    code = main([*argv, "--scheduler", "tcp://127.0.0.1:9"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "cannot reach the Dask scheduler at tcp://127.0.0.1:9" in err
+
+
+def test_on_a_terminal_one_bar_names_the_items_being_converted(tmp_path, cache):
+    import fcntl
+    import os
+    import pty
+    import struct
+    import termios
+
+    src = tmp_path / "in"
+    for i in range(2):
+        shutil.copytree(BRASS, src / f"brass{i}")
+    argv = [
+        sys.executable,
+        "-m",
+        "matremap.cli",
+        "remap",
+        str(src),
+        "--to",
+        "mitsuba06:ward",
+        "-o",
+        str(tmp_path / "o"),
+    ]
+    leader, follower = pty.openpty()
+    fcntl.ioctl(follower, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 160, 0, 0))
+    proc = subprocess.Popen([*argv, "--workers", "2"], stdout=subprocess.PIPE, stderr=follower, env=_env(cache))
+    os.close(follower)
+    chunks = []
+    while True:
+        try:
+            data = os.read(leader, 65536)
+        except OSError:  # the child closed the terminal
+            break
+        if not data:
+            break
+        chunks.append(data)
+    proc.wait(timeout=300)
+    os.close(leader)
+    screen = b"".join(chunks).decode(errors="replace")
+    assert proc.returncode == 0, screen
+    bars = [s for s in screen.replace("\r", "\n").splitlines() if s.startswith("remap:")]
+    assert any("0/2" in b and "brass.gltf/brass" in b and "brass.gltf-2/brass" in b for b in bars), bars[:5]
+    assert any("2/2" in b for b in bars)
+    assert "evaluate:" not in screen  # the workers' own bars are not drawn over the batch's
+
+
+def test_the_whole_file_is_listed_in_the_summary_and_the_index(tmp_path, capsys):
+    from matremap.formats import gltf
+
+    if not hasattr(gltf, "write_all"):
+        pytest.skip("the glTF writer has no write_all on this branch (it lands with the format's work)")
+    pygltflib = pytest.importorskip("pygltflib", reason="pip install pygltflib")
+    src = tmp_path / "in"
+    scene = mitsuba_scene(src)  # a diffuse wall and a Cr conductor, onto glTF: one fresh file with both
+    out = tmp_path / "out"
+    assert main(["remap", str(scene), "--to", "gltf:metal-rough", "-o", str(out), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    wholes = {i["whole_file"] for i in doc["items"]}
+    assert len(wholes) == 1 and "" not in wholes
+    (whole,) = wholes
+    rows = list(csv.DictReader((out / "summary.csv").open()))
+    assert {r["whole_file"] for r in rows} == {whole}
+    assert f'href="{whole}"' in (out / "index.html").read_text()
+    written = pygltflib.GLTF2().load(str(out / whole))
+    assert sorted(m.name for m in written.materials) == ["steel", "wall"]
+    wall = next(m for m in written.materials if m.name == "wall")
+    item = next(i for i in doc["items"] if i["material"] == "wall")
+    fitted = json.loads((out / item["slot"] / "material.json").read_text())["params"]["baseColor"]
+    assert wall.pbrMetallicRoughness.baseColorFactor[:3] == pytest.approx(fitted, abs=1e-6)

@@ -72,7 +72,7 @@ def test_fit_json_prints_one_object(capsys, tmp_path):
         "fit",
         "--source",
         WARD,
-        "--target",
+        "--to",
         "mitsuba06:pbr",
         "--fix",
         "distribution=as",
@@ -97,7 +97,7 @@ def test_fit_reads_a_material_file_and_prints_a_table(capsys, tmp_path):
         "fit",
         "--source",
         str(f),
-        "--target",
+        "--to",
         "cycles:glossy",
         "--light",
         "0",
@@ -113,14 +113,14 @@ def test_fit_reads_a_material_file_and_prints_a_table(capsys, tmp_path):
 @pytest.mark.parametrize(
     "argv, message",
     [
-        (["fit", "--source", WARD, "--target", "mitsuba06:wart"], "unknown model 'mitsuba06:wart'; did you mean"),
-        (["fit", "--source", WARD, "--target", "mitsuba06:pbr", "--fix", "shine=1"], "has no parameter 'shine'"),
-        (["fit", "--source", WARD, "--target", "mitsuba06:pbr", "--fix", "distribution=cook"], "not one of"),
-        (["fit", "--source", "mitsuba06:ward,alpha=nan", "--target", "mitsuba06:pbr"], "not finite"),
-        (["fit", "--source", "mitsuba06:ward,alpha=7", "--target", "mitsuba06:pbr"], "outside its range"),
-        (["fit", "--source", "mitsuba06:ward,diffuseReflectance=1:2", "--target", "mitsuba06:pbr"], "RGB triple"),
-        (["fit", "--source", "missing.json", "--target", "mitsuba06:pbr"], "not found"),
-        (["fit", "--source", WARD, "--target", "mitsuba06:pbr", "--light", "east"], "--light takes an angle"),
+        (["fit", "--source", WARD, "--to", "mitsuba06:wart"], "unknown model 'mitsuba06:wart'; did you mean"),
+        (["fit", "--source", WARD, "--to", "mitsuba06:pbr", "--fix", "shine=1"], "has no parameter 'shine'"),
+        (["fit", "--source", WARD, "--to", "mitsuba06:pbr", "--fix", "distribution=cook"], "not one of"),
+        (["fit", "--source", "mitsuba06:ward,alpha=nan", "--to", "mitsuba06:pbr"], "not finite"),
+        (["fit", "--source", "mitsuba06:ward,alpha=7", "--to", "mitsuba06:pbr"], "outside its range"),
+        (["fit", "--source", "mitsuba06:ward,diffuseReflectance=1:2", "--to", "mitsuba06:pbr"], "RGB triple"),
+        (["fit", "--source", "missing.json", "--to", "mitsuba06:pbr"], "not found"),
+        (["fit", "--source", WARD, "--to", "mitsuba06:pbr", "--light", "east"], "--light takes an angle"),
         (["render", WARD, "-o", "x.jpg2"], "unknown file type"),
     ],
 )
@@ -136,7 +136,7 @@ def test_malformed_material_file(capsys, tmp_path):
     f = tmp_path / "bad.json"
     f.write_text('{"model": "mitsuba06:ward", "params": {"alpha": 0.1,}')
     out = tmp_path / "fit.json"
-    code, _, err = run(capsys, "fit", "--source", str(f), "--target", "mitsuba06:pbr", "-o", str(out))
+    code, _, err = run(capsys, "fit", "--source", str(f), "--to", "mitsuba06:pbr", "-o", str(out))
     assert code == 2 and "not valid JSON" in err and not out.exists()
 
 
@@ -152,7 +152,7 @@ def test_fit_compare_writes_source_target_difference(capsys, tmp_path):
 
     out = tmp_path / "cmp.exr"
     code, stdout, _ = run(
-        capsys, "fit", "--source", WARD, "--target", "cycles:glossy", "--size", "48", "--compare", str(out), "--json"
+        capsys, "fit", "--source", WARD, "--to", "cycles:glossy", "--size", "48", "--compare", str(out), "--json"
     )
     assert code == 0
     loss = json.loads(stdout)["loss"]
@@ -163,9 +163,7 @@ def test_fit_compare_writes_source_target_difference(capsys, tmp_path):
     np.testing.assert_allclose(diff, 10 * np.abs(target - source), rtol=1e-4, atol=1e-6)
 
     png = tmp_path / "cmp.png"  # a picture to look at: a caption band names the panels
-    assert (
-        run(capsys, "fit", "--source", WARD, "--target", "cycles:glossy", "--size", "48", "--compare", str(png))[0] == 0
-    )
+    assert run(capsys, "fit", "--source", WARD, "--to", "cycles:glossy", "--size", "48", "--compare", str(png))[0] == 0
     labelled, _ = read_image(png, "srgb")
     assert labelled.shape[0] > 48 and labelled.shape[1] == 3 * 48 + 8
     band = labelled[: labelled.shape[0] - 48]
@@ -213,10 +211,10 @@ def test_choices_come_from_the_fit_strategies_and_the_learner_table():
     from matremap.regress.learners import LEARNERS
 
     parser = build_parser()
-    fit = parser.parse_args(["fit", "--source", WARD, "--target", "mitsuba06:pbr"])
+    fit = parser.parse_args(["fit", "--source", WARD, "--to", "mitsuba06:pbr"])
     assert fit.strategy == "two-stage" and fit.source_renderer is None and fit.target_renderer is None
     with pytest.raises(SystemExit):
-        parser.parse_args(["fit", "--source", WARD, "--target", "mitsuba06:pbr", "--strategy", "four-stage"])
+        parser.parse_args(["fit", "--source", WARD, "--to", "mitsuba06:pbr", "--strategy", "four-stage"])
     for strategy in STRATEGIES:
         assert parser.parse_args(["remap", "m", "--to", "x", "-o", "o", "--strategy", strategy]).strategy == strategy
     for method in LEARNERS:
@@ -233,12 +231,198 @@ def test_fit_and_sweep_draw_a_model_with_its_own_renderer_by_default(capsys, tmp
         pytest.skip(str(e))
     # Mitsuba 3's rough plastic has no emulation (its conductor has): Mitsuba 3 draws it
     source = "mitsuba3:roughplastic,alpha=0.2,int_ior=1.5"
-    code, out, _ = run(capsys, "fit", "--source", source, "--target", "gltf:metal-rough", "--size", "32", "--json")
+    code, out, _ = run(capsys, "fit", "--source", source, "--to", "gltf:metal-rough", "--size", "32", "--json")
     assert code == 0 and json.loads(out)["renderers"] == {"source": "mitsuba3", "target": "embedded"}
     db = tmp_path / "m.sqlite"
-    argv = ["sweep", "--source", source, "--target", "gltf:metal-rough", "--fix", "metallic=0"]
+    argv = ["sweep", "--source", source, "--to", "gltf:metal-rough", "--fix", "metallic=0"]
     argv += ["--grid", "alpha=0.1:0.2:2", "--db", str(db), "--workers", "1", "--no-progress", "--size", "32"]
     assert run(capsys, *argv)[0] == 0
     with SweepStore.open(db) as store:  # the database names the renderers, as before
         assert store.config["renderers"] == {"source": "mitsuba3", "target": "embedded"}
         assert len(store.rows("ok")) == 2
+
+
+# -- a CLI that explains itself (issue 20, must-have 4) ---------------------------------------------
+
+
+def _commands():
+    """(name, parser) of every command."""
+    import argparse
+
+    from matremap.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    return list(sub.choices.items())
+
+
+def _visible(action):
+    """The spellings of an option ``--help`` shows (not the old ones of a renamed option)."""
+    return [o for o in action.option_strings if o not in getattr(action, "old", ())]
+
+
+def test_every_option_says_what_it_does_and_its_default():
+    import argparse
+
+    missing, no_default = [], []
+    for name, parser in _commands():
+        for action in parser._actions:
+            if isinstance(action, argparse._HelpAction) or action.help == argparse.SUPPRESS:
+                continue
+            where = f"{name} {'/'.join(action.option_strings) or action.dest}"
+            if not (action.help or "").strip():
+                missing.append(where)
+                continue
+            default = action.default
+            if default not in (None, False, [], argparse.SUPPRESS):
+                shown = action.help % {"default": default, "prog": name, "dest": action.dest}
+                if f"default {default}" not in shown and f"default: {default}" not in shown:
+                    no_default.append(f"{where} (default {default!r})")
+    assert not missing, f"options without help text: {missing}"
+    assert not no_default, f"options whose help does not give the default: {no_default}"
+
+
+def test_every_command_has_a_description_and_examples_that_parse():
+    import re
+    import shlex
+
+    from matremap.cli import build_parser
+
+    parser = build_parser()
+    for name, sub in _commands():
+        assert sub.description and sub.epilog and sub.epilog.startswith("examples:"), name
+        text = sub.epilog.replace("\\\n", " ")
+        # a command line, maybe after environment variables; up to a pipe or a comment in parentheses
+        found = [re.match(r"\s*(?:\w+=\S+\s+)*(matremap .*)", line) for line in text.splitlines()]
+        examples = [m.group(1).split(" | ")[0].split("  (")[0].strip() for m in found if m]
+        assert any(e.split()[1] == name for e in examples), f"{name}: no example of the command itself"
+        for example in examples:
+            argv = shlex.split(example)[1:]
+            try:
+                parser.parse_args(argv)
+            except SystemExit:
+                pytest.fail(f"{name}'s example does not parse: {example}")
+
+
+#: names that mean the same thing: two of a group offered by the CLI would be two names for one concept
+SYNONYMS = [
+    {"light", "lights", "probe-light", "light-angle"},
+    {"size", "resolution", "res", "image-size"},
+    {"to", "target", "target-model-id"},
+    {"from", "model", "source-model-id"},
+    {"workers", "jobs", "processes", "procs", "cores"},
+    {"output", "out", "output-dir"},
+    {"force", "overwrite"},
+    {"envmap", "environment", "env", "hdri"},
+    {"env-lights", "env-samples", "samples"},
+]
+
+
+def test_one_name_per_concept():
+    import argparse
+
+    spellings: dict[str, set[str]] = {}  # option -> the dests it stores into, over all commands
+    for name, parser in _commands():
+        for action in parser._actions:
+            if isinstance(action, argparse._HelpAction) or action.help == argparse.SUPPRESS:
+                continue
+            longs = [o for o in _visible(action) if o.startswith("--")]
+            assert len(longs) <= 1, f"{name}: one option shown under several names {longs}"
+            for o in longs:
+                spellings.setdefault(o[2:], set()).add(action.dest)
+    # the same spelling means the same thing everywhere
+    assert all(len(d) == 1 for d in spellings.values()), {o: d for o, d in spellings.items() if len(d) > 1}
+    # no two spellings that differ by a plural or a separator (--light / --lights)
+    norm: dict[str, list[str]] = {}
+    for o in spellings:
+        norm.setdefault(o.replace("-", "").replace("_", "").rstrip("s"), []).append(o)
+    assert all(len(v) == 1 for v in norm.values()), [v for v in norm.values() if len(v) > 1]
+    for group in SYNONYMS:
+        offered = sorted(group & set(spellings))
+        assert len(offered) <= 1, f"two names for one concept: {offered}"
+
+
+def test_old_spellings_work_for_a_release_with_a_note(capsys):
+    from matremap.cli import build_parser
+    from matremap.cli.common import OLD_NAMES_REMOVED_IN
+
+    parser = build_parser()
+    args = parser.parse_args(["evaluate", "a", "b", "-o", "o", "--lights", "32"])
+    err = capsys.readouterr().err
+    assert args.env_lights == 32
+    assert (
+        err.strip() == f"matremap: note: --lights is deprecated (removed in {OLD_NAMES_REMOVED_IN}); use --env-lights"
+    )
+    assert parser.parse_args(["fit", "--source", WARD, "--target", "cycles:glossy"]).target == "cycles:glossy"
+    assert parser.parse_args(["convert", "m", "--model", "mitsuba06:ward", "-o", "o"]).source == "mitsuba06:ward"
+    err = capsys.readouterr().err
+    assert "--target is deprecated" in err and "use --to" in err and "use --from" in err
+    assert parser.parse_args(["fit", "--source", WARD, "--to", "cycles:glossy"]).target == "cycles:glossy"
+    assert capsys.readouterr().err == ""  # the current spelling says nothing
+    with pytest.raises(SystemExit):
+        main(["evaluate", "--help"])
+    shown = capsys.readouterr().out
+    assert "--env-lights N" in shown and "--lights" not in shown
+
+
+def test_size_sets_the_evaluation_renders_of_remap(capsys, tmp_path):
+    from matremap.svbrdf.textures import read_image
+
+    examples = os.path.join(os.path.dirname(__file__), "..", "examples", "bronze")
+    for size in (24, 40):
+        out = tmp_path / f"s{size}"
+        argv = ["remap", examples, "--to", "mitsuba06:ward", "-o", str(out), "--rotations", "0"]
+        code, _, err = run(capsys, *argv, "--size", str(size), "--env-lights", "16")
+        assert code == 0, err
+        image, _ = read_image(out / "report" / "images" / "r000_full_target.png")
+        assert image.shape[:2] == (size, size)
+
+
+# -- a map set converts to a material file (issue 20) -----------------------------------------------
+
+
+def test_a_map_set_remap_writes_a_gltf_that_uses_the_converted_maps(capsys, tmp_path):
+    pygltflib = pytest.importorskip("pygltflib", reason="pip install pygltflib")
+    from matremap.svbrdf.textures import read_image
+
+    bronze = os.path.join(os.path.dirname(__file__), "..", "examples", "bronze")
+    out = tmp_path / "out"
+    argv = ["remap", bronze, "--to", "gltf:metal-rough", "-o", str(out), "--no-evaluate", "--cache", str(tmp_path)]
+    code, stdout, err = run(capsys, *argv, "--write", "bronze.gltf")
+    assert code == 0, err
+    assert f"{out / 'bronze.gltf'}" in stdout
+    gltf = pygltflib.GLTF2().load(str(out / "bronze.gltf"))
+    (material,) = gltf.materials
+    manifest = json.loads((out / "maps" / "material.json").read_text())
+    assert manifest["model"] == "gltf:metal-rough"
+
+    def texture(index):
+        uri = gltf.images[gltf.textures[index].source].uri
+        assert (out / uri).is_file() and "/" not in uri  # beside the file, inside OUT
+        return out / uri
+
+    pbr = material.pbrMetallicRoughness
+    base, _ = read_image(texture(pbr.baseColorTexture.index), "srgb")
+    converted, _ = read_image(out / "maps" / manifest["maps"]["baseColor"], "srgb")
+    np.testing.assert_allclose(base[..., :3], converted[..., :3], atol=1 / 255)
+    mr, _ = read_image(texture(pbr.metallicRoughnessTexture.index), "linear")
+    rough, _ = read_image(out / "maps" / manifest["maps"]["roughness"], "linear")
+    np.testing.assert_allclose(mr[..., 1], rough[..., 0], atol=1 / 255)  # glTF 2.0 §3.9.2: roughness in G
+    assert pbr.metallicFactor == manifest["params"]["metallic"] == 0.0
+    assert material.extensions["KHR_materials_ior"]["ior"] == pytest.approx(manifest["params"]["ior"])
+    assert material.normalTexture is not None
+
+
+@pytest.mark.parametrize(
+    "name, message",
+    [
+        ("bronze.xml", "a mitsuba-xml file holds mitsuba3:* materials, not gltf:metal-rough; write a .gltf or .glb"),
+        ("maps/bronze.gltf", "OUT/maps/ holds the remap's own files"),
+        ("../bronze.gltf", "points outside the output folder"),
+    ],
+)
+def test_a_material_file_the_target_cannot_be_written_as_is_refused_before_any_work(capsys, tmp_path, name, message):
+    bronze = os.path.join(os.path.dirname(__file__), "..", "examples", "bronze")
+    out = tmp_path / "out"
+    code, _, err = run(capsys, "remap", bronze, "--to", "gltf:metal-rough", "-o", str(out), "--write", name)
+    assert code == 2 and message in err and err.count("\n") == 1
+    assert not out.exists()

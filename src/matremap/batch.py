@@ -20,19 +20,23 @@ import csv
 import glob
 import hashlib
 import html
+import itertools
 import json
 import os
 import re
+import signal
 import time
-from collections.abc import Callable, Iterable, Mapping, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 from matremap import __version__
 from matremap.core.imageio import write_text
-from matremap.errors import EXIT_QUALITY, MatremapError
+from matremap.errors import EXIT_INTERRUPTED, EXIT_QUALITY, MatremapError
 
 #: the exit status of bad input (MatremapError's)
 EXIT_INPUT = MatremapError.exit_code
@@ -79,20 +83,33 @@ class Row:
 
 @dataclass
 class BatchResult:
+    """The rows of the items that finished; ``interrupted``: how many did not (Ctrl-C)."""
+
     rows: list[Row]
     skipped: int
     out: Path
+    interrupted: int = 0
 
     def counts(self) -> dict[str, int]:
         return {v: sum(r.verdict == v for r in self.rows) for v in VERDICTS}
 
     @property
     def exit_code(self) -> int:
-        """0 when every item passed, else the highest exit status among the items."""
+        """130 when interrupted; else 0 when every item passed, else the highest exit status among them."""
+        if self.interrupted:
+            return EXIT_INTERRUPTED
         return max((r.exit_code for r in self.rows), default=0)
 
     def line(self) -> str:
+        """The batch in one line: how many passed, failed and were refused (and the worst one's reason)."""
         c = self.counts()
+        if self.interrupted:
+            total = len(self.rows) + self.interrupted
+            return (
+                f"interrupted: {len(self.rows)} of {total} material(s) finished and kept ({c['passed']} passed, "
+                f"{c['failed']} failed, {c['refused']} refused, {c['error']} error(s)); rerun the same command "
+                f"to do the other {self.interrupted}"
+            )
         worst = max((r for r in self.rows if r.verdict != "passed"), key=lambda r: r.exit_code, default=None)
         tail = f"; worst: {worst.file} [{worst.material}]: {worst.reason}" if worst else ""
         return (
@@ -182,19 +199,21 @@ def run_batch(
     *,
     material: str | None = None,
     workers: int | None = None,
+    scheduler: str | None = None,
+    dask_local: int | None = None,
     options: Mapping[str, Any] | None = None,
     allow_paths: Sequence[str | os.PathLike] | None = None,
     log: Callable[[str], None] = print,
     progress: bool = True,
 ) -> BatchResult:
-    """Long: planning, resuming, the parallel loop and its clean stop read best in one place.
-
-    Remap every material of the files ``paths`` name onto ``target`` into ``out`` (see the module
+    """Remap every material of the files ``paths`` name onto ``target`` into ``out`` (see the module
     docstring). ``options``: keyword arguments of :func:`matremap.remap.remap_file` (no ``log``: each
-    item logs to ``OUT/<item>/log.txt``). ``workers``: processes (default: the cores). ``allow_paths``:
-    folders outside each file's own that its references may point into (``--allow-path``)."""
-    from tqdm import tqdm
-
+    item logs to ``OUT/<item>/log.txt``). ``workers``: local processes (default: the cores); ``scheduler``
+    (a Dask scheduler address) or ``dask_local`` (a local Dask cluster of that many workers) run the items
+    on Dask instead. ``allow_paths``: folders outside each file's own that its references may point into
+    (``--allow-path``). Ctrl-C stops the workers: finished items are kept, the others leave nothing behind
+    and are redone by a rerun; the result then says how many were left (``interrupted``, exit status 130)
+    and no whole-file outputs are assembled."""
     from matremap.dialects import get_model
 
     target = get_model(target).id
@@ -212,29 +231,21 @@ def run_batch(
             rows[item] = done
         else:
             todo.append((item, key))
-    log(f"batch: {len(items)} material(s) in {len(set(i.file for i in items))} file(s); {len(rows)} unchanged")
-    workers = max(1, min(workers or os.cpu_count() or 1, len(todo) or 1))
-    bar = tqdm(total=len(todo), unit="material", desc="remap", disable=None if progress else True)
-    pool = ProcessPoolExecutor(max_workers=workers)
-    try:
-        pending: dict[Future[dict[str, Any]], Item] = {
-            pool.submit(remap_item, item, key, target, str(out), options, allow): item for item, key in todo
-        }
-        while pending:
-            finished, _ = wait(pending, return_when=FIRST_COMPLETED)
-            for fut in finished:
-                item = pending.pop(fut)
-                rows[item] = _row_of(fut, item)
-                bar.update(1)
-                r = rows[item]
-                bar.clear()
-                log(f"{r.verdict:>7}  {item.file.name} [{item.name}] {r.reason}")
-    except KeyboardInterrupt:
-        pool.shutdown(wait=True, cancel_futures=True)  # items finish or roll back; nothing half-written
-        raise
-    finally:
-        bar.close()
-        pool.shutdown(wait=True)
+    files = len(set(i.file for i in items))
+    with item_executor(workers, scheduler, dask_local, len(todo)) as (executor, desc):
+        log(f"batch: {len(items)} material(s) in {files} file(s); {len(rows)} unchanged, {len(todo)} to do on {desc}")
+        work = partial(remap_item, target=target, out=str(out), options=options, allow=allow)
+        stopped = run_items(executor, work, todo, rows, log, progress)
+    if stopped:  # what is on disk decides: an item that wrote its item.json as it was stopped is done
+        discard_partial(out, stopped)
+        for item, key in todo:
+            done = None if item in rows else _finished(out, item, key)
+            if done is not None:
+                rows[item] = done
+        result = BatchResult([rows[i] for i in items if i in rows], len(items) - len(todo), out)
+        result.interrupted = len(items) - len(result.rows)
+        write_summary(result)
+        return result
     result = BatchResult([rows[i] for i in items], len(items) - len(todo), out)
     from matremap.formats import allowed_paths
 
@@ -246,6 +257,139 @@ def run_batch(
             rows[i].whole_file = whole
     write_summary(result)
     return result
+
+
+class _NotATerminal:
+    """A worker's stderr as progress bars see it: not a terminal (they draw nothing); text still goes through."""
+
+    def __init__(self, stream: Any) -> None:
+        self._stream = stream
+
+    def isatty(self) -> bool:
+        return False
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._stream, name)
+
+
+def _worker_init() -> None:
+    """A local worker leaves Ctrl-C to the batch, which stops the workers itself, and draws no progress
+    bars of its own (the batch's is the one on the terminal)."""
+    import sys
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    sys.stderr = _NotATerminal(sys.stderr)
+
+
+@contextmanager
+def item_executor(
+    workers: int | None, scheduler: str | None, dask_local: int | None, todo: int
+) -> Iterator[tuple[Executor, str]]:
+    """Where the items run: Dask (:func:`matremap.sweep.executors.make_executor`) when a scheduler or a
+    local Dask cluster is asked for, else local worker processes (at most one per item; a process even
+    for one worker, so that a renderer crashing takes down one item, not the batch)."""
+    if scheduler or dask_local:
+        from matremap.sweep.executors import make_executor
+
+        with make_executor(None, scheduler, dask_local) as (executor, desc):
+            yield executor, desc
+        return
+    if workers is not None and workers < 1:
+        raise MatremapError(f"--workers must be at least 1, got {workers}")
+    n = max(1, min(workers or os.cpu_count() or 1, todo or 1))
+    pool = ProcessPoolExecutor(max_workers=n, initializer=_worker_init)
+    pool.slots = n  # type: ignore[attr-defined]
+    try:
+        yield pool, f"{n} local worker process{'es' if n > 1 else ''}"
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def run_items(
+    executor: Executor,
+    work: Callable[[Item, str], dict[str, Any]],
+    todo: Sequence[tuple[Item, str]],
+    rows: dict[Item, Row],
+    log: Callable[[str], None],
+    progress: bool,
+) -> list[Item]:
+    """Long: the loop, its progress bar and its clean stop on Ctrl-C belong together.
+
+    Run ``work(item, key)`` for every item on ``executor``, a few in flight at a time, filling ``rows`` as
+    items finish (one log line each) with a progress bar over the batch (on a terminal; its status names
+    the items running and is refreshed every second). On Ctrl-C: nothing more starts, the local workers
+    are killed (:func:`stop_local_workers`), items that finished are kept. Returns the items whose result
+    did not come back (empty when all did)."""
+    from tqdm import tqdm
+
+    slots = max(1, int(getattr(executor, "slots", 1)))
+    queue = iter(todo)
+    pending: dict[Future[dict[str, Any]], Item] = {}
+    bar = tqdm(total=len(todo), unit="material", desc="remap", disable=None if progress else True, dynamic_ncols=True)
+
+    def collect(finished: Iterable[Future[dict[str, Any]]], stopping: bool = False) -> None:
+        for fut in finished:
+            item = pending.pop(fut)
+            if fut.cancelled() or (stopping and fut.exception() is not None):
+                continue  # stopped before it finished (interrupted, or its worker was stopped): not a result
+            r = rows[item] = _row_of(fut, item)
+            bar.update(1)
+            bar.clear()
+            log(f"{r.verdict:>7}  {item.file.name} [{item.name}] {r.reason}")
+
+    try:
+        while True:
+            for item, key in itertools.islice(queue, max(2 * slots - len(pending), 0)):
+                pending[executor.submit(work, item, key)] = item
+            if not pending:
+                return []
+            finished, _ = wait(list(pending), timeout=1.0, return_when=FIRST_COMPLETED)
+            collect(finished)
+            running = [i.slot for f, i in pending.items() if f.running()][:slots]  # the pool queues one more
+            bar.set_postfix_str(", ".join(running[:3]) + (" ..." if len(running) > 3 else ""), refresh=True)
+    except KeyboardInterrupt:
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C must not cut the clean-up
+        try:
+            if isinstance(executor, ProcessPoolExecutor):
+                stop_local_workers(executor)  # the pool then fails every pending future (not cancelled first:
+            else:  # Python 3.11's pool raises in its own thread when it fails a cancelled one)
+                for fut in pending:
+                    fut.cancel()
+            finished, _ = wait(list(pending), timeout=5)  # killed workers answer at once; Dask tasks are left
+            collect(finished, stopping=True)
+        finally:
+            signal.signal(signal.SIGINT, previous)
+        return [item for item, _ in todo if item not in rows]
+    finally:
+        bar.close()
+
+
+def stop_local_workers(executor: Executor) -> None:
+    """Kill the worker processes of this process's pool (SIGKILL: a renderer or an image library can
+    neither delay it nor half finish a file). What they were converting is in staging folders
+    (:func:`discard_partial` removes them) and has no ``item.json``. (Dask's workers are stopped by
+    closing their client and cluster.)"""
+    import multiprocessing
+
+    for child in multiprocessing.active_children():
+        if child.pid:
+            try:
+                os.kill(child.pid, signal.SIGKILL)
+            except OSError:
+                continue
+
+
+def discard_partial(out: Path, items: Iterable[Item]) -> None:
+    """Remove what stopped items left: the staging folders (``.<slot>.partial-*``, and ``.<slot>.old-*`` of a
+    replacement cut short, see :func:`matremap.core.atomic.staged_folder`) of workers that were killed."""
+    import shutil
+
+    for item in items:
+        folder = out / item.slot
+        for stage in [*folder.parent.glob(f".{folder.name}.partial-*"), *folder.parent.glob(f".{folder.name}.old-*")]:
+            shutil.rmtree(stage, ignore_errors=True)
+        if folder.parent != out and folder.parent.is_dir() and not any(folder.parent.iterdir()):
+            folder.parent.rmdir()  # the file's folder, made for this item alone
 
 
 def assemble(out: Path, source: Path, done: Sequence[tuple[Item, Row]], target: str, log: Callable[[str], None]) -> str:
@@ -299,9 +443,10 @@ def _row_of(fut: Future[dict[str, Any]], item: Item) -> Row:
 
 
 def remap_item(
-    item: Item, key: str, target: str, out: str, options: Mapping[str, Any], allow: Sequence[str] = ()
+    item: Item, key: str, *, target: str, out: str, options: Mapping[str, Any], allow: Sequence[str] = ()
 ) -> dict[str, Any]:
-    """One item, in a worker process: ``remap_file`` into ``OUT/<slot>``, its row and ``item.json``."""
+    """One item, in a worker: ``remap_file`` into ``OUT/<slot>`` (staged, moved in whole when done), then
+    ``item.json`` with its row. A worker killed on the way leaves no ``item.json``, so a rerun redoes it."""
     from matremap.formats import allowed_paths
     from matremap.remap import remap_file
     from matremap.sweep.executors import limit_blas_threads
@@ -396,7 +541,12 @@ def write_summary(result: BatchResult) -> None:
     buf = io.StringIO()
     csv.writer(buf).writerows(lines)
     write_text(out / "summary.csv", buf.getvalue())
-    doc = {"counts": result.counts(), "exit_code": result.exit_code, "items": [r.to_dict() for r in result.rows]}
+    doc = {
+        "counts": result.counts(),
+        "interrupted": result.interrupted,
+        "exit_code": result.exit_code,
+        "items": [r.to_dict() for r in result.rows],
+    }
     write_text(out / "summary.json", json.dumps(doc, indent=1) + "\n")
     write_text(out / "index.html", index_page(result.rows, result.line()))
 
@@ -428,6 +578,12 @@ def _worst_measure(row: Row) -> float:
     return float("inf") if row.verdict != "passed" else 0.0
 
 
+def _written(row: Row) -> str:
+    """Links to what an item wrote: its own output, and the input's whole file when there is one."""
+    links = [(row.output, "output"), (row.whole_file, "whole file")]
+    return "<br>".join(f'<a href="{html.escape(p)}">{label}: {html.escape(p)}</a>' for p, label in links if p)
+
+
 def index_page(rows: Iterable[Row], title_line: str) -> str:
     """The batch's page: one row per item with its thumbnails and verdict, sortable by every column
     (click a header; ``index.html?sort=error`` opens sorted by error)."""
@@ -444,6 +600,7 @@ def index_page(rows: Iterable[Row], title_line: str) -> str:
             ("seconds", "seconds"),
             ("images", "source | target"),
             ("reason", "why"),
+            ("written", "written"),
         )
     )
     body = []
@@ -458,7 +615,7 @@ def index_page(rows: Iterable[Row], title_line: str) -> str:
             f"<td>{e(r.source_model)} → {e(r.target_model)}</td><td>{e(r.route)}</td>"
             f'<td data-value="{VERDICTS.index(r.verdict)}">{e(r.verdict)}</td>'
             f'<td data-value="{err}">{"" if err == float("inf") else f"{err:.4f}"}</td>'
-            f"<td>{r.seconds:.1f}</td><td>{thumbs}</td><td>{e(r.reason)}</td></tr>"
+            f"<td>{r.seconds:.1f}</td><td>{thumbs}</td><td>{e(r.reason)}</td><td>{_written(r)}</td></tr>"
         )
     return (
         '<!doctype html><html><head><meta charset="utf-8"><title>matremap batch</title><style>'

@@ -394,11 +394,14 @@ def remap(
     out: str | Path,
     *,
     force: bool = False,
+    write: str | None = None,
     log: Callable[[str], None] = print,
     **options: Any,
 ) -> RemapResult:
     """Remap the map set ``maps`` onto ``target_model``; write ``OUT/maps``, ``OUT/report``,
-    ``OUT/transform.json`` and ``OUT/verdict.json``, all or nothing.
+    ``OUT/transform.json``, ``OUT/verdict.json`` and, when ``write`` names one (``NAME.gltf``, ``.glb``,
+    ``.mtlx``, ``.xml``, ...), a material file ``OUT/NAME`` holding the converted maps
+    (:func:`matremap.formats.write_asset`), all or nothing.
 
     ``options`` are the fields of :class:`RemapJob`: ``fix``, ``strategy``, ``envmap``, ``rotations``,
     ``resolution``, ``lights``, ``workers``, ``cache``, ``evaluate``, ``scene`` (the sweep's probe; default
@@ -412,9 +415,43 @@ def remap(
     if out.resolve() == root or root in out.resolve().parents:
         raise MatremapError(f"{out} is inside the input folder {root}; choose another output folder")
     job = RemapJob(get_model(target_model).id, **{k: v for k, v in options.items() if v is not None or k == "scene"})
+    if write is not None:
+        check_material_file_name(write, job.target)
     with staged_folder(out, force) as stage:
         result = remap_into(stage, map_set, job, log, title=f"{map_set.model} -> {job.target}: {Path(maps).name}")
+        if write is not None:
+            from matremap.formats import write_asset
+
+            write_asset(stage / write, load_map_set(stage / "maps"), force=True)
+    if write is not None:
+        log(f"wrote {out / write}")
     return result.moved(stage, out)
+
+
+#: format -> the family of models its writer takes (a format not listed is left to its writer to check)
+WRITTEN_FAMILIES = {"gltf": "gltf", "mtlx": "gltf", "mitsuba-xml": "mitsuba3", "blend": "cycles"}
+
+
+def check_material_file_name(name: str, target: str) -> None:
+    """Refuse, before any work, a material file name for a map set's remap (``--write``) that no writer
+    takes, that the target's model cannot be written as, or that lies in the folders the remap fills."""
+    from matremap.formats import WRITERS, format_for
+    from matremap.formats.confine import output_inside
+
+    output_inside(Path("."), name)
+    fmt = format_for(name)
+    family = WRITTEN_FAMILIES.get(fmt)
+    if family is not None and target.split(":", 1)[0] != family:
+        fams = WRITTEN_FAMILIES.items()
+        suffixes = [x for f, fam in fams if fam == target.split(":", 1)[0] for x in WRITERS[f][1]]
+        raise MatremapError(
+            f"--write {name}: a {fmt} file holds {family}:* materials, not {target}"
+            + (f"; write a {' or '.join(suffixes)} file instead" if suffixes else "; remap to a model it holds")
+        )
+    if Path(name).parts[0] in ("maps", "report", "source"):
+        raise MatremapError(
+            f"--write {name}: OUT/{Path(name).parts[0]}/ holds the remap's own files; choose another name"
+        )
 
 
 def remap_into(

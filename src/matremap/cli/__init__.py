@@ -8,8 +8,9 @@ prints its traceback.
 
 Each command group is a module that adds its commands' parsers and holds their handlers:
 :mod:`.inspect` (models, renderers, transforms), :mod:`.fit` (render, fit, apply), :mod:`.sweep`
-(sweep, sweep-report, export), :mod:`.learn` (learn, chain) and :mod:`.maps` (convert, evaluate,
-remap); :mod:`.common` holds what they share. This module assembles the parser and runs a command.
+(sweep, sweep-report, export), :mod:`.learn` (learn, chain), :mod:`.maps` (convert, evaluate,
+remap) and :mod:`.doctor` (doctor); :mod:`.common` holds what they share. This module assembles the
+parser and runs a command.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from collections.abc import Callable, Sequence
 from typing import NoReturn
 
 from matremap import __version__
-from matremap.cli import fit, inspect, learn, maps, sweep
+from matremap.cli import doctor, fit, inspect, learn, maps, sweep
 from matremap.cli.common import Subparsers
 from matremap.errors import EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_QUALITY, MatremapError
 
@@ -42,6 +43,7 @@ COMMANDS = (
     "transforms",
     "evaluate",
     "remap",
+    "doctor",
 )
 #: command name -> the function (in its group's module) adding its parser
 PARSERS: dict[str, Callable[[Subparsers], None]] = {
@@ -50,6 +52,7 @@ PARSERS: dict[str, Callable[[Subparsers], None]] = {
     **sweep.PARSERS,
     **learn.PARSERS,
     **maps.PARSERS,
+    **doctor.PARSERS,
 }
 
 

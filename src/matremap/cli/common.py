@@ -21,11 +21,51 @@ class Subparsers(Protocol):
     def add_parser(self, name: str, **kwargs: Any) -> argparse.ArgumentParser: ...
 
 
-def add_command(subparsers: Subparsers, name: str, help: str, examples: str | None = None) -> argparse.ArgumentParser:
-    """A subcommand's parser, with its examples (kept as written) below the options."""
-    if examples is None:
-        return subparsers.add_parser(name, help=help)
-    return subparsers.add_parser(name, help=help, epilog=examples, formatter_class=argparse.RawDescriptionHelpFormatter)
+def add_command(subparsers: Subparsers, name: str, help: str, examples: str) -> argparse.ArgumentParser:
+    """A subcommand's parser: ``help`` is its line in ``matremap --help`` and the description of its own
+    ``--help``, ``examples`` (kept as written) come below the options."""
+    return subparsers.add_parser(name, help=help, description=help, epilog=examples, formatter_class=HelpFormatter)
+
+
+#: the release after which the old spellings of renamed options (:func:`add_renamed`) are no longer accepted
+OLD_NAMES_REMOVED_IN = "0.3"
+
+
+class Renamed(argparse.Action):
+    """Stores an option's value; given under one of its ``old`` spellings (hidden from ``--help``), it says
+    on stderr that the spelling is deprecated and which one to use."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str, old: Sequence[str] = (), **kwargs: Any) -> None:
+        self.old = tuple(old)
+        super().__init__(option_strings, dest, **kwargs)
+
+    def __call__(
+        self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any, option: str | None = None
+    ) -> None:
+        if option in self.old:
+            import sys
+
+            note = f"{option} is deprecated (removed in {OLD_NAMES_REMOVED_IN}); use {self.option_strings[0]}"
+            print(f"matremap: note: {note}", file=sys.stderr)
+        setattr(namespace, self.dest, values)
+
+
+def add_renamed(p: argparse.ArgumentParser, *flags: str, old: Sequence[str], **kwargs: Any) -> None:
+    """An option whose earlier spellings ``old`` still work for a release (hidden, with a note)."""
+    p.add_argument(*flags, *old, action=Renamed, old=old, **kwargs)
+
+
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """argparse's, with examples kept as written and the old spellings of renamed options left out."""
+
+    def _format_action_invocation(self, action: argparse.Action) -> str:
+        old = getattr(action, "old", ())
+        if old:
+            import copy
+
+            action = copy.copy(action)
+            action.option_strings = [o for o in action.option_strings if o not in old]
+        return super()._format_action_invocation(action)
 
 
 def load_material(arg: str) -> Material:
@@ -66,8 +106,24 @@ def make_scene(args: argparse.Namespace) -> Scene:
 
 def add_scene_args(p: argparse.ArgumentParser) -> None:
     """``--light`` and ``--size``: the probe scene (read back with :func:`make_scene`)."""
-    p.add_argument("--light", nargs="+", metavar="DEG", help="light angles from the view axis (default 0: headlight)")
-    p.add_argument("--size", type=int, default=128, metavar="N", help="image resolution (default 128)")
+    add_light_option(p, "point lights of the probe scene, each at DEG degrees from the view axis")
+    p.add_argument(
+        "--size",
+        type=int,
+        default=128,
+        metavar="N",
+        help="probe image side in pixels, N x N (default %(default)s; the paper used 512)",
+    )
+
+
+def add_light_option(p: argparse.ArgumentParser, help: str) -> None:
+    """``--light DEG [DEG ...]``: the probe scene's point lights (angles in degrees)."""
+    p.add_argument("--light", nargs="+", metavar="DEG", help=f"{help} (default: one at 0, a headlight)")
+
+
+def add_target_option(p: argparse.ArgumentParser, help: str = "target model id (see `matremap models`)") -> None:
+    """``--to MODEL`` (``args.target``): the model to remap onto; ``--target`` is its old spelling."""
+    add_renamed(p, "--to", old=["--target"], dest="target", required=True, metavar="MODEL", help=help)
 
 
 def add_fix_option(p: argparse.ArgumentParser, help: str) -> None:
@@ -82,7 +138,14 @@ def add_free_option(p: argparse.ArgumentParser, help: str) -> None:
 
 def add_strategy_option(p: argparse.ArgumentParser) -> None:
     """``--strategy``: one of the fit strategies of :mod:`matremap.core.fit`."""
-    p.add_argument("--strategy", choices=STRATEGIES, default="two-stage")
+    p.add_argument(
+        "--strategy",
+        choices=STRATEGIES,
+        default="two-stage",
+        help="how the fit splits the parameters: two-stage fits the diffuse ones to the diffuse-only render and the "
+        "specular ones to the specular-only render, simple all at once, three-stage refines two-stage jointly, "
+        "separable solves the linear ones in closed form (default %(default)s; docs/fitting.md)",
+    )
 
 
 def add_renderer_options(p: argparse.ArgumentParser) -> None:
@@ -91,8 +154,34 @@ def add_renderer_options(p: argparse.ArgumentParser) -> None:
         p.add_argument(
             f"--{side}-renderer",
             metavar="NAME",
-            help="default: the model's own renderer, see `matremap renderers`",
+            help=f"renderer that draws the {side} material: embedded, mitsuba3 or cycles (default: the model's "
+            "own renderer, or the embedded one where it emulates it; see `matremap renderers`)",
         )
+
+
+def add_executor_options(p: argparse.ArgumentParser, unit: str) -> None:
+    """``--workers``, ``--scheduler`` and ``--dask-local``: where the ``unit``s (fits, materials) run
+    (read with :func:`matremap.sweep.executors.make_executor`)."""
+    p.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help=f"local worker processes, one {unit} each at a time (default: every core; 1 runs in this process)",
+    )
+    p.add_argument(
+        "--scheduler", metavar="ADDRESS", help="run on a running Dask scheduler instead, e.g. tcp://host:8786"
+    )
+    p.add_argument(
+        "--dask-local",
+        type=int,
+        metavar="N",
+        help="run on a Dask cluster of N worker processes started here (needs pip install 'matremap[dask]')",
+    )
+
+
+def add_json_option(p: argparse.ArgumentParser, what: str = "the listing") -> None:
+    """``--json``: print ``what`` as JSON on stdout instead of text."""
+    p.add_argument("--json", action="store_true", help=f"print {what} as JSON on stdout (for scripts)")
 
 
 def add_force_option(p: argparse.ArgumentParser, help: str) -> None:

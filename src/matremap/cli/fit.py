@@ -20,6 +20,7 @@ from matremap.cli.common import (
     add_renderer_options,
     add_scene_args,
     add_strategy_option,
+    add_target_option,
     load_material,
     make_scene,
     parse_assignments,
@@ -30,13 +31,15 @@ from matremap.errors import MatremapError
 
 RENDER_EXAMPLES = """examples:
   matremap render 'mitsuba06:ward,alpha=0.2,specularReflectance=0.1' -o ward.exr
-  matremap render material.json -o sphere.png --light 45 --size 256 --part specular"""
+  matremap render material.json -o sphere.png --light 45 --size 256 --part specular
+  matremap render 'mitsuba3:roughplastic,alpha=0.1' --renderer mitsuba3 -o plastic.exr"""
 
 FIT_EXAMPLES = """examples:
-  matremap fit --source '{"model": "mitsuba06:ward", "params": {"variant": "ward", "alpha": 0.3,
-      "specularReflectance": 0.12, "diffuseReflectance": 0}}' --target mitsuba06:pbr --fix distribution=as
-  matremap fit --source ward.json --target cycles:glossy --strategy three-stage --light 0 45 --json
-  matremap fit --source mitsuba06:roughconductor,distribution=as,alpha=0.2 --target mitsuba06:ward"""
+  matremap fit --source mitsuba06:ward,variant=ward,alpha=0.3,specularReflectance=0.12,diffuseReflectance=0 \\
+      --to mitsuba06:pbr --fix distribution=as
+  matremap fit --source ward.json --to cycles:glossy --strategy three-stage --light 0 45 --json
+  matremap fit --source mitsuba06:roughconductor,distribution=as,alpha=0.2 --to mitsuba06:ward \\
+      --compare strip.png     (source | target | difference x10, labelled)"""
 
 APPLY_EXAMPLES = """examples:
   matremap apply ward2as.json --source mitsuba06:ward,variant=ward,alpha=0.3,specularReflectance=0.12"""
@@ -48,10 +51,26 @@ COMPARE_SUFFIXES = (".png", ".exr", ".tif", ".tiff")
 def add_render(subparsers: Subparsers) -> None:
     """The ``render`` command."""
     p = add_command(subparsers, "render", "render a material on the probe sphere", RENDER_EXAMPLES)
-    p.add_argument("material", help="JSON file, inline JSON, or MODEL,name=value,...")
-    p.add_argument("-o", "--output", required=True, help="image file: .exr, .png (sRGB), .npy, .tif, .hdr")
-    p.add_argument("--part", choices=("full", "diffuse", "specular"), default="full")
-    p.add_argument("--renderer", default="embedded")
+    p.add_argument("material", metavar="MATERIAL", help="JSON file, inline JSON, or MODEL,name=value,...")
+    p.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        metavar="FILE",
+        help="image file: .exr (linear float), .png (sRGB 8-bit), .npy, .tif, .hdr",
+    )
+    p.add_argument(
+        "--part",
+        choices=("full", "diffuse", "specular"),
+        default="full",
+        help="draw the whole material or only its diffuse or specular lobe (default %(default)s)",
+    )
+    p.add_argument(
+        "--renderer",
+        default="embedded",
+        metavar="NAME",
+        help="embedded, mitsuba3 or cycles (default %(default)s; see `matremap renderers`)",
+    )
     add_force_option(p, "overwrite an existing output file")
     add_scene_args(p)
     p.set_defaults(func=cmd_render)
@@ -82,17 +101,18 @@ def add_fit(subparsers: Subparsers) -> None:
     p.add_argument(
         "--source", required=True, metavar="MATERIAL", help="JSON file, inline JSON, or MODEL,name=value,..."
     )
-    p.add_argument("--target", required=True, metavar="MODEL", help="target model id (see `matremap models`)")
+    add_target_option(p)
     add_fix_option(p, "set a target option or hold a parameter (repeatable), e.g. distribution=as")
     add_free_option(p, "also fit a parameter that is held by default (repeatable)")
     add_strategy_option(p)
     add_renderer_options(p)
-    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--json", action="store_true", help="print the result as one JSON object on stdout")
     p.add_argument("-o", "--output", metavar="FILE.json", help="also save the result as JSON")
     p.add_argument(
         "--compare",
         metavar="FILE.png",
-        help="write source | target | difference renders side by side (.png sRGB, .exr linear)",
+        help="write the probe renders source | target | difference x10 side by side: .png (sRGB, labelled), "
+        ".exr (linear, unlabelled)",
     )
     add_force_option(p, "overwrite existing output files")
     add_scene_args(p)
@@ -167,9 +187,11 @@ def print_fit(r: dict[str, Any]) -> None:
 def add_apply(subparsers: Subparsers) -> None:
     """The ``apply`` command."""
     p = add_command(subparsers, "apply", "apply a transform to a uniform material", APPLY_EXAMPLES)
-    p.add_argument("transform", metavar="T.json")
-    p.add_argument("--source", required=True, metavar="MATERIAL")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("transform", metavar="T.json", help="a transform file (from `matremap learn` or `chain`)")
+    p.add_argument(
+        "--source", required=True, metavar="MATERIAL", help="JSON file, inline JSON, or MODEL,name=value,..."
+    )
+    p.add_argument("--json", action="store_true", help="print the target material as one JSON object")
     p.set_defaults(func=cmd_apply)
 
 

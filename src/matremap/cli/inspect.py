@@ -7,7 +7,7 @@ import argparse
 import json
 from typing import Any
 
-from matremap.cli.common import Subparsers, add_command, add_fix_option, parse_assignments
+from matremap.cli.common import Subparsers, add_command, add_fix_option, add_json_option, parse_assignments
 from matremap.dialects import get_model, list_models
 from matremap.errors import MatremapError
 
@@ -18,14 +18,20 @@ MODELS_EXAMPLES = """examples:
 
 TRANSFORMS_EXAMPLES = """examples:
   matremap transforms
-  matremap transforms --route blender27:ward cycles:glossy --fix distribution=ggx"""
+  matremap transforms --route blender27:ward cycles:glossy --fix distribution=ggx
+  matremap transforms --route mitsuba06:ward mitsuba06:pbr --source-option variant=ward --fix distribution=as"""
+
+RENDERERS_EXAMPLES = """examples:
+  matremap renderers
+  matremap renderers --json
+  matremap doctor          (versions, the cache, and what is missing with the command to install it)"""
 
 
 def add_models(subparsers: Subparsers) -> None:
     """The ``models`` command."""
     p = add_command(subparsers, "models", "list reflectance models", MODELS_EXAMPLES)
-    p.add_argument("model", nargs="?", help="show one model's parameters")
-    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.add_argument("model", nargs="?", metavar="MODEL", help="show one model's options and parameters")
+    add_json_option(p)
     p.set_defaults(func=cmd_models)
 
 
@@ -59,8 +65,13 @@ def cmd_models(args: argparse.Namespace) -> int:
 
 def add_renderers(subparsers: Subparsers) -> None:
     """The ``renderers`` command."""
-    p = add_command(subparsers, "renderers", "list renderer backends, whether they are installed, and their models")
-    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p = add_command(
+        subparsers,
+        "renderers",
+        "list renderer backends, whether they are installed, and their models",
+        RENDERERS_EXAMPLES,
+    )
+    add_json_option(p)
     p.set_defaults(func=cmd_renderers)
 
 
@@ -98,12 +109,16 @@ def add_transforms(subparsers: Subparsers) -> None:
         "list the shipped transform library, or find a route through it",
         TRANSFORMS_EXAMPLES,
     )
-    p.add_argument("--route", nargs=2, metavar=("FROM", "TO"), help="show the route between two models")
-    add_fix_option(p, "with --route: target values")
+    p.add_argument("--route", nargs=2, metavar=("FROM", "TO"), help="show the route between two model ids")
+    add_fix_option(p, "with --route: a target option or held value the route must have (repeatable)")
     p.add_argument(
-        "--source-option", action="append", default=[], metavar="NAME=VALUE", help="with --route: source options"
+        "--source-option",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="with --route: an option of the source, e.g. variant=ward (repeatable; default: the model's defaults)",
     )
-    p.add_argument("--json", action="store_true")
+    add_json_option(p)
     p.set_defaults(func=cmd_transforms)
 
 

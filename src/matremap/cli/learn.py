@@ -21,11 +21,23 @@ CHAIN_EXAMPLES = """examples:
 def add_learn(subparsers: Subparsers) -> None:
     """The ``learn`` command."""
     p = add_command(subparsers, "learn", "learn a transform from a sweep database", LEARN_EXAMPLES)
-    p.add_argument("db", metavar="DB")
-    p.add_argument("--method", choices=tuple(LEARNERS), default="parametric")
-    p.add_argument("-o", "--output", required=True, metavar="T.json")
+    p.add_argument("db", metavar="DB", help="a sweep database (.sqlite, from `matremap sweep`)")
+    p.add_argument(
+        "--method",
+        choices=tuple(LEARNERS),
+        default="parametric",
+        help="parametric: a closed form per quantity, picked on the held-out points; svr: support vector "
+        "regression, needs scikit-learn (default %(default)s; docs/regression.md)",
+    )
+    p.add_argument("-o", "--output", required=True, metavar="T.json", help="the transform file to write")
     p.add_argument("--reverse", action="store_true", help="learn the target -> source direction")
-    p.add_argument("--holdout", type=float, default=0.2, help="fraction of points held out to pick forms (0.2)")
+    p.add_argument(
+        "--holdout",
+        type=float,
+        default=0.2,
+        metavar="FRACTION",
+        help="fraction of the points held out to pick the forms and measure the error, 0 to 1 (default %(default)s)",
+    )
     p.add_argument("--keep-flagged", action="store_true", help="also train on points the stability analysis flags")
     add_force_option(p, "overwrite an existing file")
     p.set_defaults(func=cmd_learn)
@@ -57,8 +69,8 @@ def cmd_learn(args: argparse.Namespace) -> int:
 def add_chain(subparsers: Subparsers) -> None:
     """The ``chain`` command."""
     p = add_command(subparsers, "chain", "compose transforms A -> B -> C", CHAIN_EXAMPLES)
-    p.add_argument("transforms", nargs="+", metavar="T.json")
-    p.add_argument("-o", "--output", required=True, metavar="AC.json")
+    p.add_argument("transforms", nargs="+", metavar="T.json", help="transforms A -> B, B -> C, ... in order")
+    p.add_argument("-o", "--output", required=True, metavar="AC.json", help="the composed transform file to write")
     add_force_option(p, "overwrite an existing file")
     p.set_defaults(func=cmd_chain)
 

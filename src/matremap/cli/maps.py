@@ -14,15 +14,21 @@ from matremap.cli.common import (
     Subparsers,
     add_allow_path_option,
     add_command,
+    add_executor_options,
     add_fix_option,
     add_force_option,
+    add_json_option,
+    add_light_option,
+    add_renamed,
     add_strategy_option,
+    add_target_option,
     parse_assignments,
 )
 from matremap.core.scene import Scene, parse_lights
 from matremap.dialects import get_model
 from matremap.errors import MatremapError, QualityGateFailed
 from matremap.svbrdf.quality import Thresholds
+from matremap.svbrdf.textures import OUT_FORMATS
 
 if TYPE_CHECKING:
     from matremap.regress.transform import Transform
@@ -31,15 +37,19 @@ if TYPE_CHECKING:
 CONVERT_EXAMPLES = """examples:
   matremap convert examples/bronze --transform ward2as.json -o out/bronze-as
   matremap convert maps/ --model mitsuba06:ward --transform a.json --transform b.json -o out/
-  matremap convert examples/bronze --to cycles:glossy --fix distribution=ggx -o out/  (fails: bronze is
-      variant=ward, the library's Ward transforms are trained on variant=balanced)"""
+  matremap convert examples/bronze --to mitsuba06:pbr --fix distribution=as -o out/bronze-as
+      (a route through the shipped library: `matremap transforms` lists it)"""
 
 EVALUATE_EXAMPLES = """examples:
-  matremap evaluate examples/bronze out/bronze-as --envmap builtin --rotations 0:360:12 -o out/eval"""
+  matremap evaluate examples/bronze out/bronze-as/maps -o out/eval
+  matremap evaluate src/ dst/ --envmap studio.exr --rotations 0,90,180 --size 512 --env-lights 512 -o out/eval"""
 
 REMAP_EXAMPLES = """examples:
+  matremap remap examples/bronze --to mitsuba06:pbr --fix distribution=as -o out/bronze
   matremap remap examples/blue-plastic --from mitsuba06:ward --to mitsuba06:pbr --fix distribution=as -o out/plastic
   (a second run reuses the cached transform)
+  matremap remap examples/bronze --to gltf:metal-rough -o out/bronze-gltf --write bronze.gltf
+      (the converted maps, and a glTF material that uses them)
   matremap remap helmet.glb --to mitsuba3:roughconductor -o out/helmet      (writes out/helmet/helmet.xml)
   matremap remap scene.xml --material gold --to gltf:metal-rough -o out/gold  (writes out/gold/scene.gltf)"""
 
@@ -67,9 +77,24 @@ def add_convert(subparsers: Subparsers) -> None:
     )
     add_fix_option(p, "with --to: target options/held values the route must have")
     p.add_argument("-o", "--output", required=True, metavar="OUT", help="output folder")
-    p.add_argument("--model", "--from", dest="model", help="source model, when the folder has no manifest")
-    p.add_argument("--format", help="output format instead of the inputs' (e.g. exr, png16)")
-    p.add_argument("--workers", type=int, default=2, metavar="N")
+    add_renamed(
+        p,
+        "--from",
+        old=["--model"],
+        dest="source",
+        metavar="MODEL",
+        help="source model, when the folder has no manifest",
+    )
+    p.add_argument(
+        "--format",
+        choices=tuple(OUT_FORMATS),
+        metavar="FORMAT",
+        help=f"write the maps in this format instead of the inputs': {', '.join(OUT_FORMATS)} "
+        "(default: each input map's own format)",
+    )
+    p.add_argument(
+        "--workers", type=int, default=2, metavar="N", help="processes converting tiles of texels (default %(default)s)"
+    )
     add_allow_path_option(p)
     add_force_option(p, "overwrite existing outputs")
     p.set_defaults(func=cmd_convert)
@@ -106,7 +131,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
     from matremap.regress.transform import Transform
     from matremap.svbrdf.convert import convert
 
-    map_set = user_map_set(args.maps, args.model, args.allow_path)
+    map_set = user_map_set(args.maps, args.source, args.allow_path)
     if args.transform:
         if args.target:
             raise MatremapError("give either --transform files or --to MODEL (a route through the library), not both")
@@ -143,20 +168,57 @@ def add_evaluate(subparsers: Subparsers) -> None:
         "compare two map sets under an environment map (SSIM, HTML report)",
         EVALUATE_EXAMPLES,
     )
-    p.add_argument("source_maps", metavar="SOURCE_MAPS")
-    p.add_argument("target_maps", metavar="TARGET_MAPS")
-    p.add_argument("--source-model", help="source model, when its folder has no manifest")
-    p.add_argument("--target-model", help="target model, when its folder has no manifest")
-    p.add_argument("--envmap", default="builtin", help="EXR/HDR file, or 'builtin' (default)")
-    p.add_argument("--rotations", default="0:360:12", help="START:STOP:COUNT in degrees (default 0:360:12)")
-    p.add_argument("--geometry", choices=("sphere", "plane"), default="sphere")
-    p.add_argument("--size", type=int, default=256, metavar="N", help="render resolution (default 256)")
-    p.add_argument("--lights", type=int, default=256, help="directional lights sampled from the map (256)")
-    p.add_argument("-o", "--output", required=True, metavar="DIR")
+    p.add_argument("source_maps", metavar="SOURCE_MAPS", help="the source map set folder")
+    p.add_argument("target_maps", metavar="TARGET_MAPS", help="the converted map set folder (e.g. OUT/maps of remap)")
+    p.add_argument("--source-model", metavar="MODEL", help="model of SOURCE_MAPS, when its folder has no manifest")
+    p.add_argument("--target-model", metavar="MODEL", help="model of TARGET_MAPS, when its folder has no manifest")
+    add_environment_options(p, rotations="0:360:12", size=256, lights=256)
+    p.add_argument(
+        "--geometry",
+        choices=("sphere", "plane"),
+        default="sphere",
+        help="what the maps are drawn on: a UV sphere or a plane facing the camera (default %(default)s)",
+    )
+    p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder of the HTML report and its images")
     add_allow_path_option(p)
     add_force_option(p, "overwrite an existing report")
     _max_error(p)
     p.set_defaults(func=cmd_evaluate)
+
+
+def add_environment_options(p: argparse.ArgumentParser, rotations: str, size: int, lights: int) -> None:
+    """``--envmap``, ``--rotations``, ``--size`` and ``--env-lights``: the evaluation under an environment."""
+    p.add_argument(
+        "--envmap",
+        default="builtin",
+        metavar="FILE",
+        help="environment map of the evaluation: an .exr/.hdr (equirectangular, linear), 'builtin' (a procedural "
+        "studio) or 'constant' (default %(default)s)",
+    )
+    p.add_argument(
+        "--rotations",
+        default=rotations,
+        metavar="START:STOP:COUNT",
+        help="environment rotations about the vertical axis, in degrees: COUNT evenly spaced from START up to STOP "
+        "(excluded), or angles 0,90,180 (default %(default)s)",
+    )
+    p.add_argument(
+        "--size",
+        type=int,
+        default=size,
+        metavar="N",
+        help="side of each evaluation render in pixels, N x N (default %(default)s)",
+    )
+    add_renamed(
+        p,
+        "--env-lights",
+        old=["--lights"],
+        type=int,
+        default=lights,
+        metavar="N",
+        help="directional lights importance-sampled from the environment map by the embedded renderer; more is "
+        "smoother and slower (default %(default)s)",
+    )
 
 
 def _max_error(p: argparse.ArgumentParser) -> None:
@@ -201,7 +263,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         args.output,
         geometry=args.geometry,
         resolution=args.size,
-        lights=args.lights,
+        lights=args.env_lights,
         force=args.force,
         thresholds=Thresholds.parse(args.max_error),
     )
@@ -214,7 +276,13 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 def add_remap(subparsers: Subparsers) -> None:
     """The ``remap`` command."""
-    p = add_command(subparsers, "remap", "the main job: sweep, learn, convert and evaluate a map set", REMAP_EXAMPLES)
+    p = add_command(
+        subparsers,
+        "remap",
+        "the main job: convert map sets or every material of files onto a model "
+        "(library route or sweep, convert the maps, evaluate, write the target's file)",
+        REMAP_EXAMPLES,
+    )
     p.add_argument(
         "maps",
         nargs="+",
@@ -222,30 +290,51 @@ def add_remap(subparsers: Subparsers) -> None:
         help="a map set folder, or a .gltf/.glb/.mtlx/Mitsuba .xml file; several files, folders of them or glob "
         "patterns convert every material of every file (OUT/summary.csv, summary.json, index.html)",
     )
-    p.add_argument("--from", dest="source", metavar="MODEL", help="source model (default: the manifest's)")
-    p.add_argument("--material", metavar="NAME|INDEX", help="which material of the file (default: the first)")
+    p.add_argument(
+        "--from",
+        dest="source",
+        metavar="MODEL",
+        help="source model of a map set folder without a manifest (default: the manifest's; a material file names "
+        "its own)",
+    )
+    p.add_argument(
+        "--material",
+        metavar="NAME|INDEX",
+        help="convert only this material of each file, by name or 0-based index (default: every material; a file "
+        "with several is a batch, OUT/<file>/<material>/)",
+    )
     p.add_argument(
         "--write",
         metavar="NAME.EXT",
-        help="the file to write into OUT (default: the input's name with "
-        "the target format's suffix: .gltf/.glb/.mtlx for gltf:*, .xml for mitsuba3:*, .blend for cycles:*)",
+        help="the material file to write into OUT: .gltf/.glb or .mtlx (gltf:* models), .xml (mitsuba3:*), .blend "
+        "(cycles:*) (default for a material file: the input's name with the target format's suffix; for a map set: "
+        "none, only the maps)",
     )
     p.add_argument("--sweep", action="store_true", help="always sweep, even when the transform library has a route")
-    p.add_argument("--to", dest="target", required=True, metavar="MODEL", help="target model")
-    add_fix_option(p, "target options/held values")
+    add_target_option(p, "target model id (see `matremap models`)")
+    add_fix_option(p, "set a target option or hold a target parameter at a value (repeatable), e.g. distribution=as")
     add_strategy_option(p)
-    p.add_argument("-o", "--output", required=True, metavar="OUT", help="output folder (maps/ and report/)")
-    p.add_argument("--envmap", default="builtin", help="environment map of the evaluation: builtin, or an .exr/.hdr")
-    p.add_argument("--rotations", default="0:360:6", help="environment rotations START:STOP:COUNT or angles (0:360:6)")
-    p.add_argument("--size", type=int, default=160, metavar="N", help="evaluation render resolution (160)")
     p.add_argument(
-        "--lights", type=int, default=128, help="directional lights sampled from the environment (embedded, 128)"
+        "-o",
+        "--output",
+        required=True,
+        metavar="OUT",
+        help="output folder: maps/, report/, verdict.json (a batch: one folder per file and material, summary.csv, "
+        "summary.json, index.html)",
     )
+    add_environment_options(p, rotations="0:360:6", size=160, lights=128)
     _max_error(p)
-    p.add_argument("--workers", type=int, metavar="N")
-    p.add_argument("--cache", metavar="DIR", help="transform cache (default ~/.cache/matremap/transforms)")
+    add_executor_options(p, "material (a batch) or fit (the sweep of one input)")
     p.add_argument(
-        "--light", nargs="+", metavar="DEG", help="light angles of the sweep's probe scene (default 0: headlight)"
+        "--cache",
+        metavar="DIR",
+        help="folder of the learned transforms a rerun reuses (default: transforms/ in $MATREMAP_CACHE, else "
+        "~/.cache/matremap)",
+    )
+    add_light_option(
+        p,
+        "point lights of the sweep's probe scene at DEG degrees from the view axis (any other than the "
+        "default skips the library, whose transforms were learned with the headlight)",
     )
     p.add_argument(
         "--target-renderer",
@@ -253,8 +342,10 @@ def add_remap(subparsers: Subparsers) -> None:
         help="renderer of the target model in the sweep (embedded, mitsuba3, cycles; default: embedded "
         "where it emulates the model, else the model's own renderer)",
     )
-    p.add_argument("--no-evaluate", action="store_true", help="skip the evaluation renders")
-    p.add_argument("--json", action="store_true", help="print the result (a batch's summary) as JSON on stdout")
+    p.add_argument(
+        "--no-evaluate", action="store_true", help="skip the renders under the environment (and their 1-SSIM check)"
+    )
+    add_json_option(p, "the result (a batch: summary.json)")
     add_allow_path_option(p)
     add_force_option(p, "write into an existing output folder")
     p.set_defaults(func=cmd_remap)
@@ -266,14 +357,21 @@ def cmd_remap(args: argparse.Namespace) -> int:
     from matremap.formats.confine import output_inside
     from matremap.remap import remap, remap_file
 
-    if is_batch(args.maps):
+    if is_batch(args.maps, args.material) or (
+        (args.scheduler or args.dask_local) and all(is_material_file(m) for m in args.maps)
+    ):
         return _remap_batch(args)
+    if args.scheduler or args.dask_local:
+        raise MatremapError(
+            "--scheduler and --dask-local run batches of material files on Dask; a map set's sweep runs on local "
+            "processes (--workers)"
+        )
     args.maps = args.maps[0]
     material_file = is_material_file(args.maps)
     if material_file and args.source:
         raise MatremapError(f"{args.maps} names its own model; drop --from")
-    if not material_file and (args.material is not None or args.write is not None):
-        raise MatremapError("--material and --write apply to material files (.gltf, .glb, .mtlx, .xml)")
+    if not material_file and args.material is not None:
+        raise MatremapError("--material applies to material files (.gltf, .glb, .mtlx, .xml); a map set is one")
     if not material_file:
         user_map_set(args.maps, args.source, args.allow_path)  # its files lie where it may name them
     if args.write is not None:
@@ -295,12 +393,15 @@ def cmd_remap(args: argparse.Namespace) -> int:
         )
         return _verdict(fres.verdict)
     scene = Scene.probe(lights=parse_lights(args.light)) if args.light else None
-    result = remap(args.maps, args.source, args.target, args.output, scene=scene, **options)
+    result = remap(args.maps, args.source, args.target, args.output, scene=scene, write=args.write, **options)
+    file = Path(args.output) / args.write if args.write else None
     if args.json:
-        print(json.dumps({"maps": str(result.maps), "verdict": result.verdict.to_dict()}, indent=1))
+        doc = {"maps": str(result.maps), "file": str(file) if file else None, "verdict": result.verdict.to_dict()}
+        print(json.dumps(doc, indent=1))
         return _verdict(result.verdict)
     print(
         f"{'done' if result.verdict.passed else 'written'} in {result.seconds['total']:.1f} s: maps {result.maps}"
+        + (f", {file}" if file else "")
         + (f", report {result.report}" if result.report else "")
         + (f", mean 1-SSIM {result.mean_dssim:.4f}" if result.mean_dssim is not None else "")
         + f"; {result.verdict.line()}"
@@ -317,17 +418,20 @@ def user_map_set(path: str, model: str | None, allow: list[str] | None) -> Any:
         return load_map_set(path, model, confine=True)
 
 
-def is_batch(paths: list[str]) -> bool:
-    """Whether ``remap`` was given a batch: several paths, a glob pattern, or a folder of material files
-    (a folder with a ``material.json`` manifest, or maps named by suffix, is one map set)."""
-    from matremap.formats import is_material_file
+def is_batch(paths: list[str], material: str | None = None) -> bool:
+    """Whether ``remap`` was given a batch: several paths, a glob pattern, a folder of material files (a
+    folder with a ``material.json`` manifest, or maps named by suffix, is one map set), or one material file
+    with several materials and no ``--material`` (every material of a file is converted by default)."""
+    from matremap.formats import is_material_file, material_names
 
     if len(paths) > 1 or any(ch in paths[0] for ch in "*?["):
         return True
-    folder = Path(paths[0])
-    if not folder.is_dir() or (folder / "material.json").is_file():
+    path = Path(paths[0])
+    if is_material_file(path):
+        return material is None and len(material_names(path)) > 1
+    if not path.is_dir() or (path / "material.json").is_file():
         return False
-    return any(p.is_file() and is_material_file(p) for p in folder.rglob("*"))
+    return any(p.is_file() and is_material_file(p) for p in path.rglob("*"))
 
 
 def remap_options(args: argparse.Namespace) -> dict[str, Any]:
@@ -338,7 +442,7 @@ def remap_options(args: argparse.Namespace) -> dict[str, Any]:
         "envmap": args.envmap,
         "rotations": args.rotations,
         "resolution": args.size,
-        "lights": args.lights,
+        "lights": args.env_lights,
         "cache": Path(args.cache) if args.cache else None,
         "evaluate": not args.no_evaluate,
         "target_renderer": args.target_renderer,
@@ -352,7 +456,10 @@ def _remap_batch(args: argparse.Namespace) -> int:
     from matremap.batch import run_batch
 
     if args.source or args.write or args.light:
-        raise MatremapError("--from, --write and --light apply to one input; a batch takes each file's own model")
+        raise MatremapError(
+            "--from, --write and --light apply to one map set or one material; a batch (several files, a folder, "
+            "a glob, or a file with several materials) takes each file's own model and writes one file per input"
+        )
     options = remap_options(args)
     options["workers"] = 1  # the batch runs items in parallel; each sweeps on one core
     result = run_batch(
@@ -361,10 +468,15 @@ def _remap_batch(args: argparse.Namespace) -> int:
         args.output,
         material=args.material,
         workers=args.workers,
+        scheduler=args.scheduler,
+        dask_local=args.dask_local,
         options=options,
         allow_paths=args.allow_path,
         log=lambda m: print(m, file=sys.stderr),
     )
+    if result.interrupted:  # one line, no traceback; what finished is kept
+        print(f"matremap: {result.line()}", file=sys.stderr)
+        return result.exit_code
     if args.json:
         print((result.out / "summary.json").read_text(), end="")
     else:

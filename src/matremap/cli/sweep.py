@@ -10,12 +10,14 @@ from pathlib import Path
 from matremap.cli.common import (
     Subparsers,
     add_command,
+    add_executor_options,
     add_fix_option,
     add_force_option,
     add_free_option,
     add_renderer_options,
     add_scene_args,
     add_strategy_option,
+    add_target_option,
     load_material,
     make_scene,
     parse_assignments,
@@ -24,9 +26,9 @@ from matremap.dialects import get_model
 from matremap.errors import MatremapError
 
 SWEEP_EXAMPLES = """examples:
-  matremap sweep --source mitsuba06:ward,variant=ward,diffuseReflectance=0 --target mitsuba06:pbr \\
+  matremap sweep --source mitsuba06:ward,variant=ward,diffuseReflectance=0 --to mitsuba06:pbr \\
       --fix distribution=as --grid "alpha=0.005:0.99:35,specularReflectance=0.02:0.232:23" --db ward2as.sqlite
-  matremap sweep --source mitsuba06:roughconductor,distribution=as --target mitsuba06:ward \\
+  matremap sweep --source mitsuba06:roughconductor,distribution=as --to mitsuba06:ward \\
       --grid grid.toml --db as2ward.sqlite --round-trip --dask-local 2
   (run the same command again to resume; Ctrl-C stops cleanly)"""
 
@@ -50,25 +52,27 @@ def add_sweep(subparsers: Subparsers) -> None:
         metavar="MATERIAL",
         help="the base source material; grid values replace its parameters",
     )
-    p.add_argument("--target", required=True, metavar="MODEL", help="target model id")
+    add_target_option(p)
     p.add_argument(
-        "--grid", required=True, help="NAME=LO:HI:COUNT[:log] or NAME=V1;V2;..., comma-separated, or a .toml file"
+        "--grid",
+        required=True,
+        metavar="GRID",
+        help="source parameters to vary: NAME=LO:HI:COUNT[:log] (COUNT values from LO to HI, log-spaced with :log) "
+        "or NAME=V1;V2;..., comma-separated, or a .toml file; docs/sweeps.md",
     )
-    p.add_argument("--db", required=True, metavar="FILE.sqlite", help="database (created, or resumed)")
-    add_fix_option(p, "as for fit")
-    add_free_option(p, "as for fit")
+    p.add_argument("--db", required=True, metavar="FILE.sqlite", help="the database: created, or resumed if it exists")
+    add_fix_option(p, "set a target option or hold a target parameter at a value (repeatable), e.g. distribution=as")
+    add_free_option(p, "also fit a target parameter the model holds by default (repeatable)")
     add_strategy_option(p)
     add_renderer_options(p)
-    p.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: all cores)")
-    p.add_argument("--scheduler", metavar="ADDRESS", help="run on a Dask cluster (tcp://host:port)")
-    p.add_argument("--dask-local", type=int, metavar="N", help="start a local Dask cluster of N workers")
+    add_executor_options(p, "fit")
     p.add_argument(
         "--continuation",
         action="store_true",
         help="start each fit from its finished neighbour along the last grid axis",
     )
     p.add_argument("--round-trip", action="store_true", help="also fit each result back onto the source model")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar (it is shown only on a terminal)")
     add_scene_args(p)
     p.set_defaults(func=cmd_sweep)
 
@@ -131,8 +135,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 def add_sweep_report(subparsers: Subparsers) -> None:
     """The ``sweep-report`` command."""
     p = add_command(subparsers, "sweep-report", "summarise a sweep database and plot it", SWEEP_REPORT_EXAMPLES)
-    p.add_argument("db", metavar="DB")
-    p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the PNG plots")
+    p.add_argument("db", metavar="DB", help="a sweep database (.sqlite)")
+    p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the summary and the PNG plots")
     add_force_option(p, "overwrite existing plots in DIR")
     p.set_defaults(func=cmd_sweep_report)
 
@@ -151,8 +155,8 @@ def cmd_sweep_report(args: argparse.Namespace) -> int:
 def add_export(subparsers: Subparsers) -> None:
     """The ``export`` command."""
     p = add_command(subparsers, "export", "export a sweep database as a table", EXPORT_EXAMPLES)
-    p.add_argument("db", metavar="DB")
-    p.add_argument("-o", "--output", required=True, metavar="FILE", help=".csv or .parquet")
+    p.add_argument("db", metavar="DB", help="a sweep database (.sqlite)")
+    p.add_argument("-o", "--output", required=True, metavar="FILE", help="a .csv, or a .parquet (needs pyarrow)")
     add_force_option(p, "overwrite an existing file")
     p.set_defaults(func=cmd_export)
 
