@@ -106,7 +106,8 @@ def write_all(
 ) -> Path:
     """Write every ``(material name, result)`` into one file of the format ``out``'s suffix names: a copy
     of ``source`` with those materials replaced when it is of that format, else a fresh file holding all
-    of them (see each module's ``write_all``)."""
+    of them (see each module's ``write_all``); either way the source's materials as read go along
+    (``assets``), so a writer carries their emission, opacity and occlusion into a fresh file."""
     fmt = format_for(out)
     module = _module(WRITERS[fmt][0])
     if not hasattr(module, "write_all"):
@@ -114,8 +115,23 @@ def write_all(
     same = (
         source is not None and Path(source).suffix.lower() in READERS and READERS[Path(source).suffix.lower()][0] == fmt
     )
-    path: Path = module.write_all(Path(out), results, Path(source) if same and source else None, force=force)
+    assets = source_assets(source, [name for name, _ in results]) if source is not None else {}
+    path: Path = module.write_all(
+        Path(out), results, Path(source) if same and source else None, force=force, assets=assets
+    )
     return path
+
+
+def source_assets(source: str | os.PathLike, names: list[str]) -> dict[str, MaterialAsset]:
+    """The materials ``names`` of ``source`` as read (any format), for a writer to carry their emission,
+    opacity and occlusion (:attr:`MaterialAsset.carried`); one that no longer reads is left out."""
+    out: dict[str, MaterialAsset] = {}
+    for name in names:
+        try:
+            out[name] = read_asset(source, name)
+        except MatremapError:
+            continue
+    return out
 
 
 __all__ = [
@@ -130,6 +146,7 @@ __all__ = [
     "is_material_file",
     "material_names",
     "read_asset",
+    "source_assets",
     "write_all",
     "write_asset",
 ]

@@ -11,10 +11,12 @@ per material, side by side (:mod:`matremap.formats.gltf_mesh`).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from matremap.errors import MatremapError
+from matremap.formats.asset import MaterialAsset
 from matremap.formats.gltf_container import GltfDocument
 from matremap.formats.gltf_edit import Replacement, Target
 from matremap.formats.gltf_read import material_names, read
@@ -37,10 +39,18 @@ def _indices(source: Path, names: list[str]) -> list[int]:
     return found
 
 
-def write_all(out: Path, results: list[tuple[str, Any]], source: Path | None, force: bool = False) -> Path:
+def write_all(
+    out: Path,
+    results: list[tuple[str, Any]],
+    source: Path | None,
+    force: bool = False,
+    assets: Mapping[str, MaterialAsset] | None = None,
+) -> Path:
     """Write every ``(material name, result)`` (``gltf:metal-rough`` Materials or MapSets) into ``out``
     (.gltf or .glb): a copy of the glTF ``source`` with those materials replaced, or, without one, a
-    new file with one sphere per material. All files or none; inputs are never overwritten."""
+    new file with one sphere per material carrying the emission, opacity and occlusion of ``assets``
+    (the materials as read from a source of another format). All files or none; inputs are never
+    overwritten."""
     out = Path(out)
     if out.suffix.lower() not in (".gltf", ".glb"):
         raise MatremapError(f"cannot write {out} as glTF: name it .gltf or .glb")
@@ -50,15 +60,16 @@ def write_all(out: Path, results: list[tuple[str, Any]], source: Path | None, fo
     inputs = [f for v in values for f in v[3]]
     if source is None:
         target = Target.spheres([name for name, _ in results])
-        reps = [Replacement(i, c, m, n, {}, False, None) for i, (c, m, n, _) in enumerate(values)]
+        carried = [dict(assets[name].carried) if assets and name in assets else {} for name, _ in results]
+        reps = [Replacement(i, c, m, n, carried[i], False, None) for i, (c, m, n, _) in enumerate(values)]
         return commit(out, target, reps, inputs, force)
     indices = _indices(source, [name for name, _ in results])
-    assets = [read(source, i) for i in indices]
-    gdoc = assets[0].document
+    own = [read(source, i) for i in indices]
+    gdoc = own[0].document
     assert isinstance(gdoc, GltfDocument)
-    target = Target.copy_of(source, gdoc, [t.path for a in assets for t in a.textures.values()])
+    target = Target.copy_of(source, gdoc, [t.path for a in own for t in a.textures.values()])
     reps = []
-    for asset, (consts, maps, normal, _) in zip(assets, values, strict=True):
+    for asset, (consts, maps, normal, _) in zip(own, values, strict=True):
         adoc = asset.document
         uv_set = adoc.uv_set if isinstance(adoc, GltfDocument) else 0
         reps.append(Replacement(asset.index, consts, maps, normal, dict(asset.carried), True, asset.normal, uv_set))

@@ -302,22 +302,31 @@ def unique_ids(names: list[str]) -> list[str]:
     return out
 
 
-def write_spheres_scene(out: Path, results: list[tuple[str, Any]], force: bool) -> Path:
-    """Every material a top-level BSDF on a probe sphere of its own (module doc)."""
+def write_spheres_scene(
+    out: Path, results: list[tuple[str, Any]], force: bool, assets: Mapping[str, MaterialAsset] | None = None
+) -> Path:
+    """Every material a top-level BSDF on a probe sphere of its own (module doc), with the opacity (a
+    ``mask`` wrapper) and emission (an ``area`` emitter) ``assets`` carry for it."""
     if not results:
         raise MatremapError("no materials to write")
     check_output(out, force, (".xml",))
     ids = unique_ids([n for n, _ in results])
     convs = [Converted(r, out, f"{i}_") for i, (_, r) in zip(ids, results, strict=True)]
-    check_map_destinations(out, [n for c in convs for n in c.map_names()], force)
+    carried = [dict(assets[n].carried) if assets and n in assets else {} for n, _ in results]
+    extra = [f"{i}_{k}" for i, c in zip(ids, carried, strict=True) for k in ("opacity", "emission") if k in c]
+    check_map_destinations(out, [*(n for c in convs for n in c.map_names()), *extra], force)
     with AtomicFiles(force) as files:
-        bsdfs = []
-        for i, conv in zip(ids, convs, strict=True):
+        bsdfs: list[ET.Element] = []
+        emitters: list[ET.Element | None] = []
+        for i, conv, c in zip(ids, convs, carried, strict=True):
             bsdf = conv.stage(files)
+            if "opacity" in c:
+                bsdf = mask_wrapper(c["opacity"], out, f"{i}_", files, bsdf)
             bsdf.set("id", i)
             bsdfs.append(bsdf)
+            emitters.append(area_emitter(c["emission"], out, f"{i}_", files) if "emission" in c else None)
         comment = f"written by matremap: {len(bsdfs)} material(s), each on a probe sphere of its own"
-        files.write_text(out, document(probe_scene(bsdfs, [None] * len(bsdfs)), comment))
+        files.write_text(out, document(probe_scene(bsdfs, emitters), comment))
     return out
 
 

@@ -32,6 +32,7 @@ scene (:mod:`matremap.formats.mitsuba_write`).
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -96,16 +97,24 @@ def write(out: str | Path, result: Any, source: MaterialAsset | None = None, for
     return write_probe_scene(Path(out), result, source, force)
 
 
-def write_all(out: str | Path, results: list[tuple[str, Any]], source: Path | None, force: bool = False) -> Path:
+def write_all(
+    out: str | Path,
+    results: list[tuple[str, Any]],
+    source: Path | None,
+    force: bool = False,
+    assets: Mapping[str, MaterialAsset] | None = None,
+) -> Path:
     """Every ``(name, result)`` into one Mitsuba 3 scene: when ``source`` is a Mitsuba scene, a copy of it
     (and of its included files) with those BSDFs replaced, ids kept, everything else kept, file names
     rewritten to point at the source's files; else a fresh scene with each material a top-level BSDF
-    (id = its name) on a probe sphere of its own (:mod:`matremap.formats.mitsuba_write`)."""
+    (id = its name) on a probe sphere of its own, with the opacity (a ``mask``) and emission (an ``area``
+    emitter) of ``assets``, the materials as read from a source of another format
+    (:mod:`matremap.formats.mitsuba_write`)."""
     from matremap.formats.mitsuba_write import write_copied_scene, write_spheres_scene
 
     if source is not None:
         return write_copied_scene(Path(out), results, Path(source), force)
-    return write_spheres_scene(Path(out), results, force)
+    return write_spheres_scene(Path(out), results, force, assets)
 
 
 __all__ = ["FORMAT", "IOR_TABLE", "MODELS", "PLUGINS", "material_names", "read", "write", "write_all"]

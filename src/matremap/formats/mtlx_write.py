@@ -28,6 +28,7 @@ else a fresh document holding all of them.
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -259,11 +260,19 @@ def _texture_file(
 # Every material of a file in one document
 
 
-def write_all(out: Path, results: list[tuple[str, Any]], source: Path | None, force: bool = False) -> Path:
+def write_all(
+    out: Path,
+    results: list[tuple[str, Any]],
+    source: Path | None,
+    force: bool = False,
+    assets: Mapping[str, MaterialAsset] | None = None,
+) -> Path:
     """Write every ``(material name, gltf:metal-rough result)`` into one MaterialX document ``out``: a copy
     of MaterialX document ``source`` with those materials' shaders replaced, else a fresh document
     holding all of them (see the module docstring). Maps go beside it as ``<stem>_<material>_<param>``;
-    the files the copy still references (the other materials' textures) are copied into ``<stem>_files/``."""
+    the files the copy still references (the other materials' textures) are copied into ``<stem>_files/``.
+    A fresh document carries the emission, opacity and occlusion of ``assets`` (the materials as read from a
+    source of another format)."""
     out = Path(out)
     check_output(out, force, (".mtlx",))
     if not results:
@@ -276,6 +285,8 @@ def write_all(out: Path, results: list[tuple[str, Any]], source: Path | None, fo
                 mname = doc.createValidChildName(_name(name))
                 m, maps, spaces, nfile = _place_maps(result, out, f"{mname}_", files)
                 shader = add_material(doc, m, maps, spaces, nfile, mname)
+                if assets and name in assets:
+                    add_carried(doc, shader, dict(assets[name].carried), out, mname, f"{mname}_", files)
                 mat = doc.addNode("surfacematerial", mname, "material")
                 mat.addInput("surfaceshader", "surfaceshader").setNodeName(shader.getName())
         else:

@@ -55,7 +55,7 @@ import posixpath
 import re
 import tempfile
 import zipfile
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -923,15 +923,27 @@ def write(out: str | os.PathLike, result: Any, source: MaterialAsset | None = No
     return _write_stage(Path(out), [(name, result)], src_path, force, source)
 
 
-def write_all(out: Path, results: list[tuple[str, Any]], source: Path | None, force: bool) -> Path:
+def write_all(
+    out: Path,
+    results: list[tuple[str, Any]],
+    source: Path | None,
+    force: bool,
+    assets: Mapping[str, MaterialAsset] | None = None,
+) -> Path:
     """Every converted material of one input file into one stage: a copy of a USD ``source`` with those
     materials' surfaces replaced (everything else kept; bound materials keep their prim paths), else a fresh
-    stage with every material under ``/Root/Materials``, each bound to a sphere."""
-    return _write_stage(Path(out), results, source, force, None)
+    stage with every material under ``/Root/Materials``, each bound to a sphere and carrying the opacity,
+    emission and occlusion of ``assets`` (the materials as read from a source of another format)."""
+    return _write_stage(Path(out), results, source, force, None, assets if source is None else None)
 
 
 def _write_stage(
-    out: Path, results: list[tuple[str, Any]], source: Path | None, force: bool, asset: MaterialAsset | None
+    out: Path,
+    results: list[tuple[str, Any]],
+    source: Path | None,
+    force: bool,
+    asset: MaterialAsset | None,
+    assets: Mapping[str, MaterialAsset] | None = None,
 ) -> Path:
     """Author ``results`` into a stage and write it as ``out`` with its maps, all or nothing; a ``.usdz`` is
     built in a hidden folder inside ``out``'s and packaged with UsdUtils (its maps go inside it)."""
@@ -945,13 +957,13 @@ def _write_stage(
     check_output(out, force)
     if out.suffix.lower() != ".usdz":
         with AtomicFiles(force) as files:
-            stage = _build(pxr, out, results, source, asset, files)
+            stage = _build(pxr, out, results, source, asset, files, assets)
             _export(stage.GetRootLayer(), out, files.stage(out))
         return out
     with tempfile.TemporaryDirectory(prefix=".matremap-usdz-", dir=out.parent) as tmp:
         inner = Path(tmp) / f"{out.stem}.usdc"
         with AtomicFiles(True) as work:
-            stage = _build(pxr, inner, results, source, asset, work)
+            stage = _build(pxr, inner, results, source, asset, work, assets)
             _export(stage.GetRootLayer(), inner, work.stage(inner))
         with AtomicFiles(force) as files:
             if not pxr.UsdUtils.CreateNewUsdzPackage(str(inner), str(files.stage(out))):
@@ -966,13 +978,15 @@ def _build(
     source: Path | None,
     asset: MaterialAsset | None,
     files: AtomicFiles,
+    assets: Mapping[str, MaterialAsset] | None = None,
 ) -> Any:
-    """The stage to write as ``out``: every result authored into its material; maps staged in ``files``."""
+    """The stage to write as ``out``: every result authored into its material (carrying the inputs of
+    ``asset``, or of ``assets[name]``); maps staged in ``files``."""
     stage, materials = _target_stage(pxr, out, results, source, files)
     used: set[str] = set()
     for k, ((name, result), material) in enumerate(zip(results, materials, strict=True)):
         stem = _sdf_name(name, used)
-        plan = _plan(out, name, result, files, stem, asset)
+        plan = _plan(out, name, result, files, stem, (assets or {}).get(name, asset))
         _author_material(pxr, stage, material, plan)
         if source is None:
             _bind_on_sphere(pxr, stage, material, f"Sphere_{stem}", k)
