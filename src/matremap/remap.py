@@ -47,7 +47,7 @@ from matremap.errors import MatremapError, TransformChecksumError
 from matremap.regress import quantities as qty
 from matremap.regress.transform import Transform
 from matremap.renderers import renderer_for
-from matremap.svbrdf.convert import MASK_NAME, convert
+from matremap.svbrdf.convert import MASK_NAME, convert, source_reference
 from matremap.svbrdf.evaluate import evaluate as evaluate_pair
 from matremap.svbrdf.evaluate import parse_rotations
 from matremap.svbrdf.mapstats import (
@@ -617,7 +617,8 @@ def copy_map_set(map_set: MapSet, dest: Path, eq: Equivalence) -> None:
     }
     if map_set.normal:
         doc["normal"] = names[map_set.normal]
-    doc["provenance"] = {"source": str(map_set.root), "source_model": map_set.model, "transform": "identity"}
+    source = source_reference(map_set.root, dest)
+    doc["provenance"] = {"source": source, "source_model": map_set.model, "transform": "identity"}
     write_text(dest / "material.json", json.dumps(doc, indent=1) + "\n")
 
 

@@ -37,7 +37,7 @@ from matremap.core.models import ModelSpec
 from matremap.dialects import get_model, list_models
 from matremap.errors import MatremapError
 from matremap.regress import quantities as qty
-from matremap.svbrdf.convert import MANIFEST_NAME, MASK_NAME
+from matremap.svbrdf.convert import MANIFEST_NAME, MASK_NAME, source_reference
 from matremap.svbrdf.mapstats import TOLERANCE, MapSummary, Specialisation, band_rows, bands, weight
 from matremap.svbrdf.textures import ImageInfo, MapReader, MapSet, MapWriter, load_map_set, map_values
 
@@ -290,7 +290,7 @@ def blend(metal: MapSet, dielectric: MapSet, mixed: Mixed, dest: Path, source: M
             doc["normal"] = metal.normal.name
         doc["params"] = constants
         doc["colorspace"] = {b.file: b.info.colorspace for b in plan}
-        doc["provenance"] = _provenance(metal, dielectric, mixed, source, outside)
+        doc["provenance"] = _provenance(metal, dielectric, mixed, source, outside, dest)
         write_text(dest / MANIFEST_NAME, json.dumps(doc, indent=1) + "\n")
     except BaseException:
         shutil.rmtree(dest, ignore_errors=True)
@@ -354,8 +354,10 @@ def _blend_bands(plan: list[_Blended], mixed: Mixed, dest: Path, source: MapSet,
     return outside
 
 
-def _provenance(metal: MapSet, dielectric: MapSet, mixed: Mixed, source: MapSet, outside: int) -> dict[str, Any]:
-    """The blended result's provenance: the source and both transforms."""
+def _provenance(
+    metal: MapSet, dielectric: MapSet, mixed: Mixed, source: MapSet, outside: int, dest: Path
+) -> dict[str, Any]:
+    """The blended result's provenance (in ``dest``): the source and both transforms."""
 
     def described(ms: MapSet) -> str:
         doc = json.loads((ms.root / MANIFEST_NAME).read_text())
@@ -363,7 +365,7 @@ def _provenance(metal: MapSet, dielectric: MapSet, mixed: Mixed, source: MapSet,
 
     m, d = described(metal), described(dielectric)
     return {
-        "source": str(source.root),
+        "source": source_reference(source.root, dest),
         "source_model": source.model,
         "transform": (
             f"per texel by {mixed.name}: {m} where {mixed.name} is {mixed.metal:g}, {d} where it is "
