@@ -24,7 +24,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import matremap
+
 ROOT = Path(__file__).resolve().parents[1]
+#: the matremap the tests import: the child processes run the same one
+SRC = str(Path(matremap.__file__).resolve().parents[1])
 BRONZE = ROOT / "examples" / "bronze"
 BRASS = ROOT / "examples" / "brass-gltf" / "brass.gltf"
 FAST = ["--rotations", "0:360:2", "--size", "48", "--lights", "32"]
@@ -48,7 +52,7 @@ pytestmark = pytest.mark.slow
 
 
 def env_for(folder: Path) -> dict[str, str]:
-    return {**os.environ, "MATREMAP_CACHE": str(folder / "cache"), "PYTHONPATH": str(ROOT / "src")}
+    return {**os.environ, "MATREMAP_CACHE": str(folder / "cache"), "PYTHONPATH": SRC}
 
 
 def cli(args: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:

@@ -19,12 +19,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import matremap
 from matremap.cli import main
-from matremap.svbrdf.mapstats import summarise, with_medians
 from matremap.svbrdf.quality import sample
 from matremap.svbrdf.textures import load_map_set, map_values, read_image
 
 ROOT = Path(__file__).resolve().parents[1]
+#: the matremap the tests import: the child processes run the same one
+SRC = str(Path(matremap.__file__).resolve().parents[1])
 BRONZE = ROOT / "examples" / "bronze"
 
 
@@ -75,6 +77,8 @@ def block_means(a: np.ndarray, k: int) -> np.ndarray:
 
 
 def test_streamed_statistics_are_those_of_the_whole_maps(tmp_path):
+    from matremap.svbrdf.mapstats import summarise, with_medians
+
     ms = load_map_set(gltf_map_set(tmp_path / "maps", 301, 257))
     summary = with_medians(ms, summarise(ms, limits=(64, 100), render_side=60))
     for name in ms.maps:
@@ -102,6 +106,8 @@ def test_streamed_statistics_are_those_of_the_whole_maps(tmp_path):
 
 def test_the_median_of_a_float_map_is_within_a_half_float_bin(tmp_path):
     import OpenImageIO as oiio
+
+    from matremap.svbrdf.mapstats import summarise, with_medians
 
     rng = np.random.default_rng(3)
     folder = tmp_path / "maps"
@@ -146,7 +152,7 @@ def read_codes(path: Path) -> np.ndarray:
 
 def run_measured(args: list[str], cwd: Path) -> tuple[int, str, float]:
     """``python -m matremap ARGS`` in its own process: exit code, stderr and its peak resident set (MB)."""
-    env = {**os.environ, "MATREMAP_CACHE": str(cwd / "cache"), "PYTHONPATH": str(ROOT / "src")}
+    env = {**os.environ, "MATREMAP_CACHE": str(cwd / "cache"), "PYTHONPATH": SRC}
     proc = subprocess.Popen(
         [sys.executable, "-m", "matremap", *args], cwd=cwd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
     )
