@@ -303,9 +303,10 @@ def cached_transform(
     log: Callable[[str], None],
     scene: Scene | None = None,
     target_renderer: str = "embedded",
-) -> tuple[Transform, Path, bool]:
+) -> tuple[Transform, Path | None, bool]:
     """The transform for these maps (``summary``: their statistics) and models: from the cache, or swept
-    and learned now."""
+    and learned now (and cached, unless some of the sweep's fits failed: then the next run fits those
+    again, from the sweep's database, instead of reusing a transform learned without them)."""
     from matremap.regress.transform import learn_transform
     from matremap.sweep.executors import make_executor
     from matremap.sweep.grid import parse_grid
@@ -358,11 +359,14 @@ def cached_transform(
         )
     log(f"sweep: {describe(swept)}")
     transform = learn_transform(db)
-    transform.save(path, force=True)
     log(
         f"learn: {transform.describe()}, held-out RMSE "
         + ", ".join(f"{k} {v['heldout_rmse']:.3g}" for k, v in transform.errors.items() if "heldout_rmse" in v)
     )
+    if swept.failed:  # learned without them: used for this run, not kept (the next run fits them again)
+        log(f"note: {swept.failed} sweep point(s) failed; the transform is not cached, so the next run retries them")
+        return transform, None, False
+    transform.save(path, force=True)
     return transform, path, False
 
 
