@@ -143,8 +143,23 @@ def close(a: dict[str, object], b: dict[str, object]) -> bool:
     return True
 
 
+def group_left(pgid: int, seconds: float = 10.0) -> bool:
+    """Whether a process of the group ``pgid`` (the command and its workers) still runs after ``seconds``;
+    any that does is killed (no test leaves processes behind)."""
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        try:
+            os.killpg(pgid, 0)
+        except ProcessLookupError:
+            return False
+        time.sleep(0.05)
+    os.killpg(pgid, signal.SIGKILL)
+    return True
+
+
 def signalled(args: list[str], cwd: Path, sig: int, when: Callable[[Path], bool]) -> tuple[int, str]:
-    """Run ``matremap ARGS`` in ``cwd``, send ``sig`` when ``when(cwd)`` holds; its exit code and stderr."""
+    """Run ``matremap ARGS`` in ``cwd``, send ``sig`` when ``when(cwd)`` holds; its exit code and stderr.
+    No process of the run may outlive it (a SIGKILLed sweep's workers waited for work for ever)."""
     log = cwd / "stderr.txt"
     with open(log, "w") as err:  # a file, not a pipe (nothing may hold it open after the kill)
         proc = subprocess.Popen(
@@ -164,6 +179,7 @@ def signalled(args: list[str], cwd: Path, sig: int, when: Callable[[Path], bool]
             else:
                 proc.kill()
         proc.wait(timeout=300)
+    assert not group_left(proc.pid), f"processes of the {args[0]} outlived it"
     return proc.returncode, log.read_text()
 
 
