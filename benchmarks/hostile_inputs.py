@@ -11,7 +11,14 @@ fresh cache folder, and classifies the outcome:
 * ``WRONG``      exit 0 where the input should have been refused;
 * ``LEFTOVER``   temporary files remained after the run.
 
-    python benchmarks/hostile_inputs.py
+    python benchmarks/hostile_inputs.py            # every case
+    python benchmarks/hostile_inputs.py killed     # the cases whose name has "killed"
+
+The interruption cases run the command once uninterrupted, then again with a signal sent when a staging
+folder appears (or a file in it has bytes, "mid-write"; for a sweep, when a point is in the database),
+then a third time, the same command without ``--force``: ``handled`` when the third run exits 0, leaves no
+hidden file behind and writes what the uninterrupted run wrote (and, for SIGINT, the interrupted run
+exited 130 with ``matremap: interrupted`` last and no traceback).
 
 Run it on two checkouts to compare (the issue's "probe, before, after" table).
 """
@@ -230,21 +237,170 @@ def rgb_base_metal_uniform_rough(tmp: Path) -> str:
     return "handled" if p.returncode in (0, 3) else f"exit {p.returncode}: {p.stderr.strip().splitlines()[-1][:60]}"
 
 
+# -- interruption (finding 8, must-have 6): kill or interrupt a run, then run the same command again ----------
+
+FAST = ["--rotations", "0:360:2", "--size", "48", "--lights", "32"]
+SWEEP_SOURCE = json.dumps({"model": "mitsuba06:ward", "params": {"alpha": 0.2, "specularReflectance": 0.05}})
+
+
+def bronze_tiled(folder: Path, size: int = 1024) -> Path:
+    """``examples/bronze`` tiled to ``size`` x ``size``: big enough to be caught while it is written."""
+    import OpenImageIO as oiio
+
+    shutil.copytree(ROOT / "examples" / "bronze", folder, ignore=shutil.ignore_patterns("*.png"))
+    for f in sorted((ROOT / "examples" / "bronze").glob("*.png")):
+        inp = oiio.ImageInput.open(str(f))
+        spec = inp.spec()
+        tile = np.asarray(inp.read_image(0, 0, 0, spec.nchannels, "uint8")).reshape(spec.height, spec.width, -1)
+        inp.close()
+        reps = size // spec.width
+        png_out = oiio.ImageOutput.create(str(folder / f.name))
+        png_out.open(str(folder / f.name), oiio.ImageSpec(size, size, spec.nchannels, "uint8"))
+        png_out.write_image(np.ascontiguousarray(np.tile(tile, (reps, reps, 1))))
+        png_out.close()
+    return folder
+
+
+def hidden(tmp: Path) -> list[Path]:
+    """Hidden files and folders (staging, temporary files) anywhere under ``tmp``, the cache aside."""
+    return [f for f in tmp.rglob(".*") if "cache" not in f.relative_to(tmp).parts]
+
+
+def staging_started(tmp: Path) -> bool:
+    return bool(hidden(tmp))
+
+
+def mid_write(tmp: Path) -> bool:
+    """A file being written inside a hidden (staging) folder or under a hidden name, with bytes in it."""
+    return any(f.is_file() and f.stat().st_size > 0 for h in hidden(tmp) for f in [h, *h.rglob("*")])
+
+
+def db_started(tmp: Path) -> bool:
+    import sqlite3
+
+    db = tmp / "s.sqlite"
+    if not db.is_file():
+        return False
+    try:
+        with sqlite3.connect(db, timeout=0.1) as con:
+            return con.execute("select count(*) from points").fetchone()[0] >= 1
+    except sqlite3.Error:
+        return False
+
+
+def tree(folder: Path) -> dict[str, object]:
+    """Every visible file under ``folder``: relative name -> its pixels (images: their headers carry the
+    time of writing) or bytes; the report's HTML and JSON aside (they carry timings)."""
+    import OpenImageIO as oiio
+
+    if not folder.is_dir():
+        return {}
+    out: dict[str, object] = {}
+    for f in sorted(folder.rglob("*")):
+        rel = f.relative_to(folder)
+        if not f.is_file() or any(p.startswith(".") for p in rel.parts) or f.suffix in (".html", ".json"):
+            continue
+        if f.suffix.lower() in (".exr", ".png", ".tif", ".jpg"):
+            out[str(rel)] = oiio.ImageBuf(str(f)).get_pixels().tobytes()
+        else:
+            out[str(rel)] = f.read_bytes()
+    return out
+
+
+def interrupted(tmp: Path, args: list[str], sig: int, point: Callable[[Path], bool], out: str) -> str:
+    """Run ``matremap ARGS`` in ``tmp``, send ``sig`` (SIGINT to the process group, as Ctrl-C does) when
+    ``point`` holds, then run the same command again; compare with an uninterrupted run. ``out``: the
+    output (folder or database) that the command writes, relative to ``tmp``."""
+    ref = tmp / "ref"
+    ref.mkdir()
+    if (p := cli(args, ref)).returncode != 0:
+        return f"setup failed: {p.stderr.strip()[-80:]}"
+    run = tmp / "run"
+    run.mkdir()
+    env = {**os.environ, "MATREMAP_CACHE_DIR": str(run / "cache"), "MATREMAP_CACHE": str(run / "cache")}
+    with open(tmp / "stderr.txt", "w+") as log:  # a file, not a pipe: workers a kill orphans may hold it open
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "matremap", *args],
+            cwd=run,
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=log,
+            text=True,
+            start_new_session=True,
+        )
+        deadline = time.time() + 120
+        while time.time() < deadline and proc.poll() is None and not point(run):
+            time.sleep(0.005)
+        if proc.poll() is not None:
+            return "finished before the signal"
+        os.killpg(proc.pid, sig) if sig == signal.SIGINT else proc.send_signal(sig)
+        proc.wait(timeout=120)
+        log.seek(0)
+        err = log.read()
+    if sig == signal.SIGINT:
+        if "Traceback" in err:
+            return "TRACEBACK on SIGINT"
+        if proc.returncode != 130 or err.strip().splitlines()[-1:] != ["matremap: interrupted"]:
+            return f"SIGINT: exit {proc.returncode}, {err.strip().splitlines()[-1:]}"
+    again = cli(args, run)
+    if again.returncode != 0:
+        return f"rerun exit {again.returncode}: {again.stderr.strip().splitlines()[-1][:70]}"
+    left = hidden(run)
+    if left:
+        return f"LEFTOVER ({', '.join(sorted({f.name.split('-')[0] + '-...' for f in left})[:2])})"
+    if out.endswith(".sqlite"):
+        rows = cli(["export", out, "-o", "t.csv"], run), cli(["export", out, "-o", "t.csv"], ref)
+        same = (run / "t.csv").read_text().count("\n") == (ref / "t.csv").read_text().count("\n")
+        return "handled" if all(r.returncode == 0 for r in rows) and same else "WRONG (rows differ)"
+    return "handled" if tree(run / out) == tree(ref / out) else "WRONG (result differs from a clean run)"
+
+
 def convert_killed_leftovers(tmp: Path) -> str:
-    env = {**os.environ, "MATREMAP_CACHE_DIR": str(tmp / "cache")}
-    args = [sys.executable, "-m", "matremap", "convert", str(ROOT / "examples" / "bronze"), "--to", "mitsuba06:pbr"]
-    args += ["--fix", "distribution=as", "-o", "out"]
-    proc = subprocess.Popen(args, cwd=tmp, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    deadline = time.time() + 60
-    while time.time() < deadline and not any(tmp.glob("out/.*")) and not any(tmp.glob(".*out*")):
-        time.sleep(0.02)
-    proc.send_signal(signal.SIGKILL)
-    proc.wait()
-    p = cli(args[3:], tmp)
-    hidden = [f.name for f in tmp.rglob(".*") if "cache" not in f.parts]
-    if p.returncode != 0:
-        return f"rerun exit {p.returncode}"
-    return "LEFTOVER" if hidden else "handled"
+    src = str(bronze_tiled(tmp / "maps"))
+    args = ["convert", src, "--to", "mitsuba06:pbr", "--fix", "distribution=as", "-o", "out"]
+    return interrupted(tmp, args, signal.SIGKILL, staging_started, "out")
+
+
+def convert_killed_mid_write(tmp: Path) -> str:
+    src = str(bronze_tiled(tmp / "maps"))
+    args = ["convert", src, "--to", "mitsuba06:pbr", "--fix", "distribution=as", "-o", "out"]
+    return interrupted(tmp, args, signal.SIGKILL, mid_write, "out")
+
+
+def convert_sigint(tmp: Path) -> str:
+    src = str(bronze_tiled(tmp / "maps"))
+    args = ["convert", src, "--to", "mitsuba06:pbr", "--fix", "distribution=as", "-o", "out"]
+    return interrupted(tmp, args, signal.SIGINT, mid_write, "out")
+
+
+def remap_maps_killed(tmp: Path) -> str:
+    src = str(bronze_tiled(tmp / "maps"))
+    args = ["remap", src, "--to", "mitsuba06:pbr", "--fix", "distribution=as", "-o", "out", *FAST]
+    return interrupted(tmp, args, signal.SIGKILL, mid_write, "out")
+
+
+def remap_maps_sigint(tmp: Path) -> str:
+    src = str(bronze_tiled(tmp / "maps"))
+    args = ["remap", src, "--to", "mitsuba06:pbr", "--fix", "distribution=as", "-o", "out", *FAST]
+    return interrupted(tmp, args, signal.SIGINT, mid_write, "out")
+
+
+def remap_file_killed(tmp: Path) -> str:
+    src = str(ROOT / "examples" / "brass-gltf" / "brass.gltf")
+    args = ["remap", src, "--to", "mitsuba3:roughconductor", "--fix", "distribution=ggx", "-o", "out", *FAST]
+    return interrupted(tmp, args, signal.SIGKILL, mid_write, "out")
+
+
+def sweep_killed(tmp: Path) -> str:
+    args = ["sweep", "--source", SWEEP_SOURCE, "--target", "mitsuba06:pbr", "--grid", "alpha=0.1:0.3:6"]
+    args += ["--db", "s.sqlite", "--workers", "2", "--no-progress"]
+    return interrupted(tmp, args, signal.SIGKILL, db_started, "s.sqlite")
+
+
+def sweep_sigint(tmp: Path) -> str:
+    args = ["sweep", "--source", SWEEP_SOURCE, "--target", "mitsuba06:pbr", "--grid", "alpha=0.1:0.3:6"]
+    args += ["--db", "s.sqlite", "--workers", "2", "--no-progress"]
+    return interrupted(tmp, args, signal.SIGINT, db_started, "s.sqlite")
 
 
 CASES: list[tuple[str, str, Callable[[Path], str]]] = [
@@ -264,12 +420,22 @@ CASES: list[tuple[str, str, Callable[[Path], str]]] = [
     ("sweep database with text for numbers", "6 tracebacks", sweep_db_text_numbers),
     ("RGB base colour, metallic 1, uniform roughness", "7 crash", rgb_base_metal_uniform_rough),
     ("convert killed (SIGKILL), then rerun", "8 leftovers", convert_killed_leftovers),
+    ("convert killed (SIGKILL) mid-write, then rerun", "8 leftovers", convert_killed_mid_write),
+    ("convert interrupted (SIGINT), then rerun", "8 leftovers", convert_sigint),
+    ("remap MAPS killed (SIGKILL) mid-write, rerun", "8 leftovers", remap_maps_killed),
+    ("remap MAPS interrupted (SIGINT), then rerun", "8 leftovers", remap_maps_sigint),
+    ("remap FILE killed (SIGKILL) mid-write, rerun", "8 leftovers", remap_file_killed),
+    ("sweep killed (SIGKILL), then rerun", "8 leftovers", sweep_killed),
+    ("sweep interrupted (SIGINT), then rerun", "8 leftovers", sweep_sigint),
 ]
 
 
 def main() -> None:
+    only = sys.argv[1:]  # words a case's name must contain (e.g. "killed"), to run a few
     print(f"{'case':<48} {'finding':<20} outcome")
     for name, finding, fn in CASES:
+        if only and not all(w in name for w in only):
+            continue
         with tempfile.TemporaryDirectory() as t:
             try:
                 outcome = fn(Path(t))

@@ -47,12 +47,21 @@ from matremap.errors import MatremapError, TransformChecksumError
 from matremap.regress import quantities as qty
 from matremap.regress.transform import Transform
 from matremap.renderers import renderer_for
-from matremap.svbrdf.convert import MASK_NAME, convert
+from matremap.svbrdf.convert import MASK_NAME, convert, source_reference
 from matremap.svbrdf.evaluate import evaluate as evaluate_pair
 from matremap.svbrdf.evaluate import parse_rotations
+from matremap.svbrdf.mapstats import (
+    LIBRARY_LIMIT,
+    SAMPLE_LIMIT,
+    TOLERANCE,
+    MapSummary,
+    render_side,
+    summarise,
+    with_medians,
+)
 from matremap.svbrdf.mixed import mixed_parameter, remap_mixed
 from matremap.svbrdf.quality import Check, Thresholds, Verdict, image_checks, map_checks, sample
-from matremap.svbrdf.textures import MapSet, load_map_set, map_values, read_image
+from matremap.svbrdf.textures import MapSet, load_map_set, map_values, read_image, texel_limit
 
 #: grid points along the roughness and the specular axes of the sweep, and the diffuse levels
 ROUGHNESS_POINTS, SPECULAR_POINTS, DIFFUSE_ONLY_POINTS = 10, 6, 8
@@ -96,7 +105,8 @@ def default_cache() -> Path:
 def load_arrays(map_set: MapSet, only: Collection[str] | None = None) -> tuple[dict[str, Any], np.ndarray | None]:
     """Every map of a set as parameter arrays (model units), constants as they are, and the
     normal map decoded to [-1, 1] (or None). ``only``: read just these parameters' maps (and no
-    normal map)."""
+    normal map). Whole maps in memory: :func:`remap` itself reads maps in bands
+    (:func:`matremap.svbrdf.mapstats.summarise`)."""
     spec = map_set.spec
     params: dict[str, Any] = {k: v for k, v in map_set.constants.items() if k in spec.param_names}
     for name, path in map_set.maps.items():
@@ -112,15 +122,17 @@ def load_arrays(map_set: MapSet, only: Collection[str] | None = None) -> tuple[d
     return params, normal
 
 
-def sweep_grid(map_set: MapSet, params: Mapping[str, Any], held: Mapping[str, float] | None = None) -> str:
+def sweep_grid(map_set: MapSet, summary: MapSummary, held: Mapping[str, float] | None = None) -> str:
     """A grid over the values the maps hold: the roughness and specular maps' ranges (grey; roughness
     down to its mirror limit when the maps reach it) and the diffuse level from 0 to the brightest texel,
-    so that every texel lies inside the learned domain. ``held``: mapped parameters that are uniform."""
+    so that every texel lies inside the learned domain. ``summary``: the maps' exact ranges and samples
+    (:func:`~matremap.svbrdf.mapstats.summarise`); ``held``: mapped parameters that are uniform."""
     spec = map_set.spec
+    params, ranges = summary.sample(), summary.ranges()
     axes = []
     rp = qty.roughness_param(spec)
     if rp is not None and rp.name in map_set.maps:
-        lo, hi = _range(params[rp.name], rp.bounds, floor=rp.bounds[0])
+        lo, hi = _range(ranges[rp.name], rp.bounds, floor=rp.bounds[0])
         axes.append(f"{rp.name}={lo!r}:{hi!r}:{ROUGHNESS_POINTS}")
     metal = spec.specialise({**map_set.constants, **params, **(held or {})}).diffuse_only is None
     if spec.reflectance is not None:
@@ -128,13 +140,13 @@ def sweep_grid(map_set: MapSet, params: Mapping[str, Any], held: Mapping[str, fl
         # dielectric's specular colour; its range is the one that covers the maps' F0 (which other maps,
         # such as a glTF specular strength, may scale)
         name = spec.reflectance.driven_param(metal)
-        f0_range = _f0_axis(map_set, params, held or {}, name)
+        f0_range = _f0_axis(map_set, summary, held or {}, name)
         if f0_range is not None:
             lo, hi = f0_range
             axes.append(f"{name}={lo!r}:{hi!r}:{SPECULAR_POINTS if axes else ALONE_POINTS}")
     dp = qty.diffuse_param(spec)
     if dp is not None and dp.name in map_set.maps and not metal:
-        lo, hi = _range(params[dp.name], dp.bounds, floor=1e-3)
+        lo, hi = _range(ranges[dp.name], dp.bounds, floor=1e-3)
         # two levels learn the diffuse mapping beside other axes; alone it needs enough points to learn from,
         # from the darkest texel (a diffuse-only source at 0 renders black, is refused, and the domain would
         # start at the next point, leaving the darkest texels outside it)
@@ -144,18 +156,18 @@ def sweep_grid(map_set: MapSet, params: Mapping[str, Any], held: Mapping[str, fl
     return ",".join(axes)
 
 
-def base_values(map_set: MapSet, params: Mapping[str, Any], held: Mapping[str, float]) -> dict[str, Any]:
+def base_values(map_set: MapSet, summary: MapSummary, held: Mapping[str, float]) -> dict[str, Any]:
     """The values a sweep's source starts from: the constants, the held values, and for each other map its
-    median (per channel), so that a map no axis sweeps is represented by its typical texel, not the
-    model's default."""
+    median (per channel, from ``summary``), so that a map no axis sweeps is represented by its typical
+    texel, not the model's default."""
     spec = map_set.spec
+    summary = with_medians(map_set, summary)
     out: dict[str, Any] = {k: v for k, v in map_set.constants.items() if k not in map_set.maps}
     for name in map_set.maps:
         if name in held:
             continue
-        a = np.asarray(params[name], dtype=float)
         p = spec.param(name)
-        med = np.median(a.reshape(-1, a.shape[-1]) if a.ndim == 3 else a.reshape(-1), axis=0)
+        med = summary.stats[name].median
         lo, hi = p.bounds
         out[name] = (
             np.clip(med, lo, hi).tolist() if p.channels == 3 and np.ndim(med) else float(np.clip(np.mean(med), lo, hi))
@@ -163,26 +175,26 @@ def base_values(map_set: MapSet, params: Mapping[str, Any], held: Mapping[str, f
     return {**out, **held}
 
 
-def _f0_axis(
-    map_set: MapSet, params: Mapping[str, Any], held: Mapping[str, float], name: str
-) -> tuple[float, float] | None:
+def _f0_axis(map_set: MapSet, summary: MapSummary, held: Mapping[str, float], name: str) -> tuple[float, float] | None:
     """The range of the parameter ``name`` that, with the sweep's base values for the others, spans the
-    F0 the maps hold; None when F0 does not vary over the maps. Falls back to ``name``'s own map range."""
+    F0 the maps hold (their sample); None when F0 does not vary over the maps. Falls back to ``name``'s own
+    map range."""
     spec = map_set.spec
+    params = summary.sample()
     probe = next((np.asarray(v) for v in params.values() if np.ndim(v) >= 2), None)
     if probe is None:
         return None
     f0 = _quantity_sample(spec, {**map_set.constants, **params, **held}, sample(probe).shape[:2]).get("reflectance")
     bounds = spec.param(name).bounds
     if f0 is None or np.ptp(f0) <= 1e-6:
-        return _range(params[name], bounds) if name in map_set.maps else None
+        return _range(summary.stats[name].range, bounds) if name in map_set.maps else None
     grey = np.asarray(f0, dtype=float).reshape(-1)  # every channel: the domain is checked per channel
     ends = np.array([[grey.min()] * 3, [grey.max()] * 3])
     try:
-        base = Material.create(spec.id, base_values(map_set, params, held))
+        base = Material.create(spec.id, base_values(map_set, summary, held))
         written = qty.write(spec, {"reflectance": ends}, {k: v for k, v in base.values.items()})
     except (MatremapError, ValueError):
-        return _range(params[name], bounds) if name in map_set.maps else None
+        return _range(summary.stats[name].range, bounds) if name in map_set.maps else None
     values = np.asarray(written[name], dtype=float).reshape(2, -1).mean(axis=-1)
     return _range(values, bounds)
 
@@ -199,10 +211,10 @@ def _range(values: Any, bounds: tuple[float, float], floor: float = 1e-4) -> tup
 
 
 #: a map counts as uniform when all its texels are within this of one value (an 8-bit step is 1/255)
-UNIFORM_TOLERANCE = 0.5 / 255
+UNIFORM_TOLERANCE = TOLERANCE
 
 
-def held_values(map_set: MapSet, params: Mapping[str, Any], target: str) -> dict[str, float]:
+def held_values(map_set: MapSet, summary: MapSummary, target: str) -> dict[str, float]:
     """The mapped parameters that change what the model's other parameters mean (a glTF ``metallic``),
     each held at its one value. Maps that mix values (metal and dielectric texels) cannot be remapped
     through one transform: refused, with the share of each (:func:`remap_into` converts such maps per
@@ -212,12 +224,13 @@ def held_values(map_set: MapSet, params: Mapping[str, Any], target: str) -> dict
     for name, value, _ in spec.specialisations:
         if name not in map_set.maps:
             continue
-        a = np.asarray(params[name], dtype=float)
-        lo, hi = float(a.min()), float(a.max())
+        stats = summary.stats[name]
+        lo, hi = stats.lo, stats.hi
         if hi - lo <= 2 * UNIFORM_TOLERANCE:
             held[name] = round(0.5 * (lo + hi), 6)
             continue
-        share = float(np.mean(np.abs(a - value) <= UNIFORM_TOLERANCE))
+        counts = stats.specialisation
+        share = counts.at_value / max(counts.texels, 1) if counts is not None else 0.0
         raise MatremapError(
             f"the {name} map of {map_set.root.name} mixes values ({name} {value:g} on {100 * share:.0f}% of the "
             f"texels, other values on the rest): {target} is remapped from one kind of material at a time; split "
@@ -253,7 +266,9 @@ LIBRARY_MAX_OUTSIDE = 0.01
 def library_transform(
     map_set: MapSet, params: Mapping[str, Any], target: str, fix: Mapping[str, Any], log: Callable[[str], None]
 ) -> Transform | None:
-    """A transform from the shipped library (direct or chained) that covers these maps, or None."""
+    """A transform from the shipped library (direct or chained) that covers these maps, or None.
+    ``params``: the maps' parameters, whole or a sample (strided here to at most
+    :data:`~matremap.svbrdf.mapstats.LIBRARY_LIMIT` texels a side for the domain check)."""
     from matremap.regress.library import describe_node, find_route, nearest_routes, node_key
 
     spec = map_set.spec
@@ -269,10 +284,8 @@ def library_transform(
         )
         return None
     transform = found.transform
-    sample = {
-        k: (np.asarray(v)[::4, ::4] if np.ndim(v) >= 2 else v) for k, v in params.items() if k in spec.param_names
-    }
-    _, outside = transform.apply(sample)
+    texels = {k: sample(v, LIBRARY_LIMIT) for k, v in params.items() if k in spec.param_names}
+    _, outside = transform.apply(texels)
     share = float(np.mean(outside)) if np.size(outside) else 0.0
     if share > LIBRARY_MAX_OUTSIDE:
         log(f"library: {found.describe()} covers only {100 * (1 - share):.1f}% of the texels; sweeping instead")
@@ -283,7 +296,7 @@ def library_transform(
 
 def cached_transform(
     map_set: MapSet,
-    params: Mapping[str, Any],
+    summary: MapSummary,
     target: str,
     fix: Mapping[str, Any],
     strategy: str,
@@ -292,17 +305,19 @@ def cached_transform(
     log: Callable[[str], None],
     scene: Scene | None = None,
     target_renderer: str = "embedded",
-) -> tuple[Transform, Path, bool]:
-    """The transform for these maps and models: from the cache, or swept and learned now."""
+) -> tuple[Transform, Path | None, bool]:
+    """The transform for these maps (``summary``: their statistics) and models: from the cache, or swept
+    and learned now (and cached, unless some of the sweep's fits failed: then the next run fits those
+    again, from the sweep's database, instead of reusing a transform learned without them)."""
     from matremap.regress.transform import learn_transform
     from matremap.sweep.executors import make_executor
     from matremap.sweep.grid import parse_grid
     from matremap.sweep.run import SweepConfig, describe, run_sweep
 
     spec = map_set.spec
-    held = held_values(map_set, params, target)
-    base = Material.create(spec.id, base_values(map_set, params, held))
-    grid_text = sweep_grid(map_set, params, held)
+    held = held_values(map_set, summary, target)
+    base = Material.create(spec.id, base_values(map_set, summary, held))
+    grid_text = sweep_grid(map_set, summary, held)
     from matremap.renderers import renderer_for
 
     config = SweepConfig(
@@ -336,7 +351,7 @@ def cached_transform(
         make_executor(workers) as (executor, desc),
         tqdm(total=len(grid), unit="fit", desc="sweep", disable=None, leave=False) as bar,
     ):
-        summary = run_sweep(
+        swept = run_sweep(
             config,
             grid,
             str(db),
@@ -346,13 +361,16 @@ def cached_transform(
             on_start=bar.update,
             in_flight=2 * getattr(executor, "slots", 1),
         )
-    log(f"sweep: {describe(summary)}")
+    log(f"sweep: {describe(swept)}")
     transform = learn_transform(db)
-    transform.save(path, force=True)
     log(
         f"learn: {transform.describe()}, held-out RMSE "
         + ", ".join(f"{k} {v['heldout_rmse']:.3g}" for k, v in transform.errors.items() if "heldout_rmse" in v)
     )
+    if swept.failed:  # learned without them: used for this run, not kept (the next run fits them again)
+        log(f"note: {swept.failed} sweep point(s) failed; the transform is not cached, so the next run retries them")
+        return transform, None, False
+    transform.save(path, force=True)
     return transform, path, False
 
 
@@ -374,6 +392,8 @@ class RemapJob:
     target_renderer: str | None = None
     library: bool = True
     thresholds: Thresholds = field(default_factory=Thresholds)
+    #: the largest map (width x height) read; None: :data:`~matremap.svbrdf.textures.DEFAULT_MAX_TEXELS`
+    max_texels: int | None = None
 
 
 def staged_strategy(job: RemapJob, log: Callable[[str], None]) -> RemapJob:
@@ -408,21 +428,25 @@ def remap(
     the paper's headlight), ``target_renderer`` (e.g. "mitsuba3", "cycles"), ``library`` (first look for a
     route through the shipped transform library, used with the default probe, two-stage fits and default
     renderers when it covers the maps; otherwise sweep and learn, cached) and ``thresholds`` (the quality
-    gate's). The result carries the gate's verdict; it is not raised here."""
-    map_set = load_map_set(maps, source_model)
-    out = Path(out)
-    root = Path(map_set.root).resolve()
-    if out.resolve() == root or root in out.resolve().parents:
-        raise MatremapError(f"{out} is inside the input folder {root}; choose another output folder")
+    gate's), ``max_texels`` (the largest map read, checked on each file's header before any texel is
+    decoded). The maps are read in bands (:func:`matremap.svbrdf.mapstats.summarise`,
+    :func:`matremap.svbrdf.convert.convert`): memory does not grow with the map size. The result carries
+    the gate's verdict; it is not raised here."""
     job = RemapJob(get_model(target_model).id, **{k: v for k, v in options.items() if v is not None or k == "scene"})
     if write is not None:
         check_material_file_name(write, job.target)
-    with staged_folder(out, force) as stage:
-        result = remap_into(stage, map_set, job, log, title=f"{map_set.model} -> {job.target}: {Path(maps).name}")
-        if write is not None:
-            from matremap.formats import write_asset
+    with texel_limit(job.max_texels):
+        map_set = load_map_set(maps, source_model)
+        out = Path(out)
+        root = Path(map_set.root).resolve()
+        if out.resolve() == root or root in out.resolve().parents:
+            raise MatremapError(f"{out} is inside the input folder {root}; choose another output folder")
+        with staged_folder(out, force) as stage:
+            result = remap_into(stage, map_set, job, log, title=f"{map_set.model} -> {job.target}: {Path(maps).name}")
+            if write is not None:
+                from matremap.formats import write_asset
 
-            write_asset(stage / write, load_map_set(stage / "maps"), force=True)
+                write_asset(stage / write, load_map_set(stage / "maps"), force=True)
     if write is not None:
         log(f"wrote {out / write}")
     return result.moved(stage, out)
@@ -465,15 +489,16 @@ def remap_into(
     target_renderer = job.target_renderer or renderer_for(target)
     angles = parse_rotations(job.rotations) if job.evaluate else []
     env = resolve_envmap(job.envmap) if job.evaluate else None
-    params, normal = load_arrays(map_set)
+    side = render_side(job.resolution) if job.evaluate else None  # the renders read the maps downsampled
+    summary = summarise(map_set, render_side=side)
     seconds["load"] = time.perf_counter() - t0
     t = time.perf_counter()
     identity = identity_route(map_set, target, job.fix)
-    conversion = _convert_maps(folder, map_set, params, job, target_renderer, identity, log, seconds)
+    conversion = _convert_maps(folder, map_set, summary, job, target_renderer, identity, log, seconds)
     texels, outside, clipped, tpath, cached = conversion
     seconds["convert"] = time.perf_counter() - t
     result_set = load_map_set(folder / "maps")
-    target_params, target_normal = load_arrays(result_set)
+    result_summary = summarise(result_set, limits=(SAMPLE_LIMIT,), render_side=side)
     checks = [
         Check(
             "outside",
@@ -488,14 +513,16 @@ def remap_into(
             f"values clipped to the target's bounds or the files' range: {clipped}",
         ),
     ]
-    checks += map_quality(map_set, params, result_set, target_params, job.thresholds)
+    checks += map_quality(map_set, summary.sample(), result_set, result_summary.sample(), job.thresholds)
     verdict, mean, html = Verdict(checks), None, None
     if job.evaluate:
-        assert env is not None
+        assert env is not None and summary.render is not None and result_summary.render is not None
         t = time.perf_counter()
+        for note in summary.notes:
+            log(f"note: {note}")
         evaluation = evaluate_pair(
-            SVMaterial(map_set.model, params, map_set.options, normal),
-            SVMaterial(result_set.model, target_params, result_set.options, target_normal),
+            SVMaterial(map_set.model, summary.render, map_set.options, summary.render_normal),
+            SVMaterial(result_set.model, result_summary.render, result_set.options, result_summary.render_normal),
             env,
             angles,
             folder / "report",
@@ -522,7 +549,7 @@ def remap_into(
 def _convert_maps(
     folder: Path,
     map_set: MapSet,
-    params: Mapping[str, Any],
+    summary: MapSummary,
     job: RemapJob,
     target_renderer: str,
     identity: Equivalence | None,
@@ -538,7 +565,8 @@ def _convert_maps(
         log(f"identity: {_identity_words(identity)}: the maps are copied, nothing is fitted")
         copy_map_set(map_set, folder / "maps", identity)
         return int(np.prod(map_set.size)), 0, 0, None, True
-    mixed = mixed_parameter(map_set, params)
+    mixed = mixed_parameter(map_set, summary)
+    params = summary.sample()
     if mixed is not None:  # metal and dielectric texels: blended per texel
         texels, outside = remap_mixed(
             folder,
@@ -552,11 +580,12 @@ def _convert_maps(
             log,
         )
         return texels, outside, 0, None, False
-    held = held_values(map_set, params, target)
-    fix = complete_fix(map_set.model, {**map_set.constants, **params, **held}, target, job.fix)
+    held = held_values(map_set, summary, target)
+    # the maps' ranges stand for them where only their extremes matter (is any texel diffuse?)
+    fix = complete_fix(map_set.model, {**map_set.constants, **summary.ranges(), **held}, target, job.fix)
     check_before_rendering(map_set, params, held, target, target_renderer)
     t0 = time.perf_counter()
-    transform, tpath, cached = _transform_for(map_set, params, fix, target_renderer, job, log)
+    transform, tpath, cached = _transform_for(map_set, summary, fix, target_renderer, job, log)
     seconds["transform"] = time.perf_counter() - t0
     with warnings.catch_warnings():  # the outside-domain count is logged below
         warnings.simplefilter("ignore", UserWarning)
@@ -574,7 +603,7 @@ def _convert_maps(
 
 def _transform_for(
     map_set: MapSet,
-    params: Mapping[str, Any],
+    summary: MapSummary,
     fix: Mapping[str, Any],
     target_renderer: str,
     job: RemapJob,
@@ -583,7 +612,7 @@ def _transform_for(
     """A library route that covers the maps, else the cached (or newly swept and learned) transform."""
     target = job.target
     if job.library and job.scene is None and target_renderer == renderer_for(target) and job.strategy == "two-stage":
-        transform = library_transform(map_set, params, target, fix, log)
+        transform = library_transform(map_set, summary.sample(LIBRARY_LIMIT), target, fix, log)
         if transform is not None:
             return transform, None, True
     elif job.library:
@@ -593,7 +622,7 @@ def _transform_for(
         )
     return cached_transform(
         map_set,
-        params,
+        summary,
         target,
         fix,
         job.strategy,
@@ -633,7 +662,8 @@ def copy_map_set(map_set: MapSet, dest: Path, eq: Equivalence) -> None:
     }
     if map_set.normal:
         doc["normal"] = names[map_set.normal]
-    doc["provenance"] = {"source": str(map_set.root), "source_model": map_set.model, "transform": "identity"}
+    source = source_reference(map_set.root, dest)
+    doc["provenance"] = {"source": source, "source_model": map_set.model, "transform": "identity"}
     write_text(dest / "material.json", json.dumps(doc, indent=1) + "\n")
 
 
@@ -743,6 +773,22 @@ def remap_file(
     :func:`remap_into` (``out/source`` holds its maps as matremap reads them, ``out/maps`` the converted
     ones); a uniform one is fitted directly (copied when it is the identity). ``options`` are the fields
     of :class:`RemapJob`. The result carries the quality gate's verdict."""
+    with texel_limit(options.get("max_texels")):  # checked on every header the readers open
+        return _remap_file(path, target_model, out, material, fix, write, force, log, options)
+
+
+def _remap_file(
+    path: str | Path,
+    target_model: str,
+    out: str | Path,
+    material: str | int | None,
+    fix: Mapping[str, Any] | None,
+    write: str | None,
+    force: bool,
+    log: Callable[[str], None],
+    options: Mapping[str, Any],
+) -> FileRemapResult:
+    """:func:`remap_file`, inside its texel limit."""
     from matremap.formats import read_asset, write_asset
 
     p = Path(path)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -96,8 +96,9 @@ def add_convert(subparsers: Subparsers) -> None:
         "--workers", type=int, default=2, metavar="N", help="processes converting tiles of texels (default %(default)s)"
     )
     add_allow_path_option(p)
+    _max_texels(p)
     add_force_option(p, "overwrite existing outputs")
-    p.set_defaults(func=cmd_convert)
+    p.set_defaults(func=_limited(cmd_convert))
 
 
 def library_transform(map_set: MapSet, target_model: str, fix_items: Sequence[str]) -> Transform:
@@ -105,15 +106,19 @@ def library_transform(map_set: MapSet, target_model: str, fix_items: Sequence[st
     ``fix_items``; raises when the library has none."""
     from matremap.regress.library import find_route
     from matremap.regress.quantities import diffuse_param
-    from matremap.remap import complete_fix, load_arrays
+    from matremap.remap import complete_fix
+    from matremap.svbrdf.mapstats import summarise
 
     target = get_model(target_model).id
-    # what decides the route: whether the source has a diffuse part, and its held values (metallic)
+    # what decides the route: whether the source has a diffuse part, and its held values (metallic), read
+    # in bands (a map's range stands for it: whether every texel is metal, whether any is diffuse)
     spec = map_set.spec
     dp = diffuse_param(spec)
-    params, _ = load_arrays(map_set, only={n for n, _, _ in spec.specialisations} | ({dp.name} if dp else set()))
-    fix = complete_fix(map_set.model, {**map_set.constants, **params}, target, parse_assignments(fix_items, "--fix"))
-    held = {n: params[n] for n, _, _ in map_set.spec.specialisations if n in params}
+    names = {n for n, _, _ in spec.specialisations} | ({dp.name} if dp else set())
+    stats = summarise(map_set, limits=(), names=names).stats
+    values = {**map_set.constants, **{n: s.range for n, s in stats.items()}}
+    fix = complete_fix(map_set.model, values, target, parse_assignments(fix_items, "--fix"))
+    held = {n: stats[n].mean for n, _, _ in map_set.spec.specialisations if n in stats}
     found = find_route(map_set.model, map_set.options, target, fix, source_values=held)
     if found is None:
         raise MatremapError(
@@ -181,9 +186,34 @@ def add_evaluate(subparsers: Subparsers) -> None:
     )
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder of the HTML report and its images")
     add_allow_path_option(p)
+    _max_texels(p)
     add_force_option(p, "overwrite an existing report")
     _max_error(p)
-    p.set_defaults(func=cmd_evaluate)
+    p.set_defaults(func=_limited(cmd_evaluate))
+
+
+def _max_texels(p: argparse.ArgumentParser) -> None:
+    from matremap.svbrdf.textures import DEFAULT_MAX_TEXELS
+
+    p.add_argument(
+        "--max-texels",
+        type=int,
+        metavar="N",
+        help=f"refuse any map of more than N texels (width x height), from its header, before reading it "
+        f"(default {DEFAULT_MAX_TEXELS}, a 32768 x 32768 map)",
+    )
+
+
+def _limited(command: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
+    """``command`` run with ``--max-texels`` in effect for every image it opens."""
+
+    def run(args: argparse.Namespace) -> int:
+        from matremap.svbrdf.textures import texel_limit
+
+        with texel_limit(args.max_texels):
+            return command(args)
+
+    return run
 
 
 def add_environment_options(p: argparse.ArgumentParser, rotations: str, size: int, lights: int) -> None:
@@ -347,8 +377,9 @@ def add_remap(subparsers: Subparsers) -> None:
     )
     add_json_option(p, "the result (a batch: summary.json)")
     add_allow_path_option(p)
+    _max_texels(p)
     add_force_option(p, "write into an existing output folder")
-    p.set_defaults(func=cmd_remap)
+    p.set_defaults(func=_limited(cmd_remap))
 
 
 def cmd_remap(args: argparse.Namespace) -> int:
@@ -448,6 +479,7 @@ def remap_options(args: argparse.Namespace) -> dict[str, Any]:
         "target_renderer": args.target_renderer,
         "library": not args.sweep,
         "thresholds": Thresholds.parse(args.max_error),
+        "max_texels": args.max_texels,
     }
 
 

@@ -1,4 +1,4 @@
-"""Writing several files all or nothing.
+"""Writing several files all or nothing, even when the process is killed.
 
 A material file often comes with files beside it (a glTF's textures and ``.bin``, the maps of a
 Mitsuba scene or a MaterialX document, the maps of a converted map set). :class:`AtomicFiles`
@@ -10,21 +10,39 @@ writes such a group so that a reader never sees half of it::
 
 Each destination is refused up front if it already exists (unless ``force``) or its folder is
 missing (unless ``make_folders``). Files are written under their own names into a hidden staging
-folder beside their destination (``.matremap-staging-*``, same file system, so a rename moves them)
-and moved into place, in the order they were staged, only when the ``with`` block ends without an
-error. If the block fails, or a move fails, every staged file is removed, files already moved are
-taken back (a file that ``force`` replaced is restored) and folders created for the group are
-removed again: the destination looks as it did before. A file moved into place gets the
-permissions a new file would get (``0o666`` less the umask).
+folder beside their destination (same file system, so a rename moves them) and moved into place only
+when the ``with`` block ends without an error. A destination folder that does not exist yet is staged
+whole and appears with one rename. If the block fails, or a move fails, every staged file is removed,
+files already moved are taken back (a file that ``force`` replaced is restored) and folders created
+for the group are removed again: the destination looks as it did before. A file moved into place gets
+the permissions a new file would get (``0o666`` less the umask). SIGINT is held back while the files
+are moved (it is acted on once they are all in place).
 
-:func:`matremap.core.imageio.atomic_output` is the one-file version of the same idea.
+**Killed processes.** Everything matremap writes beside an output before it is complete is named
+``.matremap-<kind>-<owner>-...``, ``<owner>`` the writing process's id (and its start time, where the
+system tells it, so that a reused id is not mistaken for it). Before the moves, each staging folder gets
+a journal of what it will move (:data:`JOURNAL`); once every move is done, the first staging folder gets
+a ``committed`` mark. Whoever next writes into that folder (:func:`clean_stale`) finds what a dead owner
+left and puts it right: a staging folder without a journal, an unpublished whole folder or a temporary
+file is removed; a group whose moves began but were not all done is taken back, from the journal, to
+the state before it (the moves are undone one by one, in a way that a second interruption cannot spoil);
+a folder :func:`staged_folder` was swapping in is restored or finished. So a SIGKILL at any moment leaves
+the previous state or the complete result as soon as the next run starts, and that run needs no
+``--force``. A process still alive is never touched.
+
+:func:`matremap.core.imageio.atomic_output` is the one-file version of the same idea (its temporary
+names carry the same mark).
 """
 
 from __future__ import annotations
 
+import contextlib
+import json
 import os
 import shutil
+import signal
 import tempfile
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -32,10 +50,183 @@ from types import TracebackType
 
 from matremap.errors import MatremapError
 
-#: prefix of the hidden staging folders
-STAGING_PREFIX = ".matremap-staging-"
+#: every temporary name matremap writes beside an output starts with this
+MARK = ".matremap-"
+#: prefix of the hidden staging folders of :class:`AtomicFiles`
+STAGING_PREFIX = MARK + "staging-"
 #: what the "already exists" error tells the user to do
 FORCE_HINT = "pass --force to overwrite it"
+#: the journal a staging folder holds while its files are moved
+JOURNAL = "journal.json"
+#: the mark the first staging folder of a group gets once every file is in place
+COMMITTED = "committed"
+
+
+# ---------------------------------------------------------------------------------------------
+# owners
+
+
+def _start_time(pid: int) -> str:
+    """The process's start time in clock ticks since boot (Linux), or "" where the system does not say."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return ""
+    fields = stat[stat.rfind(")") + 2 :].split()
+    return fields[19] if len(fields) > 19 else ""
+
+
+def owner_token(pid: int | None = None) -> str:
+    """This process's mark in temporary names: ``<pid>`` or ``<pid>x<start time>``."""
+    pid = os.getpid() if pid is None else pid
+    start = _start_time(pid)
+    return f"{pid}x{start}" if start else str(pid)
+
+
+def temp_prefix(kind: str, stem: str = "") -> str:
+    """The prefix of a temporary name of ``kind`` (staging, partial, old, tmp) owned by this process."""
+    return f"{MARK}{kind}-{owner_token()}-" + (f"{stem}-" if stem else "")
+
+
+def _alive(token: str) -> bool:
+    """Whether the process a token names still runs (the same process: the same start time, where known)."""
+    pid_text, _, start = token.partition("x")
+    try:
+        pid = int(pid_text)
+    except ValueError:
+        return True  # not a mark matremap wrote: leave it alone
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return not start or _start_time(pid) in ("", start)
+
+
+def _owner(name: str) -> tuple[str, str] | None:
+    """(kind, owner token) of a marked name, or None."""
+    if not name.startswith(MARK):
+        return None
+    parts = name[len(MARK) :].split("-", 2)
+    return (parts[0], parts[1]) if len(parts) >= 2 else None
+
+
+# ---------------------------------------------------------------------------------------------
+# cleaning up after a dead owner
+
+
+def clean_stale(folder: str | os.PathLike[str]) -> list[Path]:
+    """Put right what dead matremap processes left in ``folder`` (see the module doc); returns what was
+    handled. Never raises: what cannot be handled now is left for the next run."""
+    handled: list[Path] = []
+    try:
+        entries = sorted(Path(folder).iterdir())
+    except OSError:
+        return handled
+    for entry in entries:
+        found = _owner(entry.name)
+        if found is None or _alive(found[1]):
+            continue
+        with contextlib.suppress(OSError, ValueError):
+            _clean(entry, found[0])
+            handled.append(entry)
+    return handled
+
+
+def _clean(entry: Path, kind: str) -> None:
+    if kind == "staging" and entry.is_dir():
+        _recover_staging(entry)
+    elif kind == "old" and entry.is_dir():
+        _recover_old(entry)
+    elif entry.is_dir() and not entry.is_symlink():
+        shutil.rmtree(entry)
+    elif entry.exists() or entry.is_symlink():
+        entry.unlink()
+
+
+def _recover_staging(staging: Path) -> None:
+    """A dead group's staging folder: nothing moved yet (no journal) -> removed; moves begun -> the whole
+    group taken back (every folder of it, from the first staging folder's journal), unless it was
+    marked committed, then its staging folders are removed."""
+    journal = _read_journal(staging)
+    if journal is None:
+        shutil.rmtree(staging)
+        return
+    primary = Path(journal["primary"])
+    if primary != staging:
+        if primary.is_dir():
+            _recover_staging(primary)  # it handles this folder too
+        if staging.exists():  # the group was decided and its first folder removed: nothing to take back
+            _remove(staging)
+        return
+    committed = (staging / COMMITTED).exists()
+    for folder in reversed([Path(p) for p in journal["stagings"]]):
+        if folder.is_dir():
+            if not committed:
+                _take_back(folder)
+            _remove(folder)
+
+
+def _read_journal(staging: Path) -> dict | None:
+    try:
+        doc = json.loads((staging / JOURNAL).read_text())
+    except FileNotFoundError:
+        return None
+    if not isinstance(doc, dict) or not {"primary", "stagings", "moves"} <= set(doc):
+        raise ValueError(f"{staging / JOURNAL} is not a journal matremap wrote")
+    return doc
+
+
+def _take_back(staging: Path) -> None:
+    """Undo the moves a staging folder's journal lists, each in two renames that a repeat undoes no
+    further: the new file back into the staging folder, then the previous one (if any) into place."""
+    journal = _read_journal(staging)
+    if journal is None:
+        return
+    for dest_text, new_text, old_text in reversed(journal["moves"]):
+        dest, new, old = Path(dest_text), Path(new_text), Path(old_text)
+        if not (new.exists() or new.is_symlink()) and (dest.exists() or dest.is_symlink()):
+            os.replace(dest, new)
+        if old.exists() or old.is_symlink():
+            os.replace(old, dest)
+
+
+def _remove(staging: Path) -> None:
+    """A staging folder removed, its journal first (so that no later run undoes a finished group)."""
+    (staging / JOURNAL).unlink(missing_ok=True)
+    shutil.rmtree(staging, ignore_errors=True)
+
+
+def _recover_old(old: Path) -> None:
+    """A folder :func:`staged_folder` moved aside to put a new one in its place: put back when the new
+    one never arrived, else removed."""
+    inside = [p for p in old.iterdir()]
+    if len(inside) == 1 and not (old.parent / inside[0].name).exists():
+        os.replace(inside[0], old.parent / inside[0].name)
+    shutil.rmtree(old)
+
+
+# ---------------------------------------------------------------------------------------------
+# signals
+
+
+@contextmanager
+def _sigint_held() -> Iterator[None]:
+    """SIGINT (and SIGTERM) held back while the block runs, then acted on (main thread, POSIX only)."""
+    if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held = {signal.SIGINT, signal.SIGTERM}
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+# ---------------------------------------------------------------------------------------------
+# a group of files
 
 
 class AtomicFiles:
@@ -52,7 +243,9 @@ class AtomicFiles:
         self.exists_hint = exists_hint
         self._staged: dict[Path, Path] = {}  # destination -> staged file, in staging order
         self._staging: dict[Path, Path] = {}  # destination folder -> its staging folder
+        self._whole: set[Path] = set()  # destination folders staged whole (they did not exist)
         self._created: list[Path] = []  # folders made for the group, outermost first
+        self._cleaned: set[Path] = set()
         self._open = False
 
     # -- the context -------------------------------------------------------------------------
@@ -81,8 +274,10 @@ class AtomicFiles:
 
     def check(self, path: str | os.PathLike[str]) -> Path:
         """Refuse ``path`` as a destination now, before any work: it exists (without ``force``), or its
-        folder is missing (without ``make_folders``). Returns it as a Path."""
+        folder is missing (without ``make_folders``). Returns it as a Path. What dead runs left in its
+        folder (or the nearest existing one) is put right first (:func:`clean_stale`)."""
         p = Path(path)
+        self._clean_once(next((f for f in p.parents if f.is_dir()), p.parent))
         if p in self._staged:
             raise MatremapError(f"two outputs would be written to {p}; give them different names")
         if not self.make_folders and not p.parent.is_dir():
@@ -92,6 +287,11 @@ class AtomicFiles:
         if p.is_dir():
             raise MatremapError(f"cannot write {p}: it is a folder")
         return p
+
+    def _clean_once(self, folder: Path) -> None:
+        if folder not in self._cleaned:
+            self._cleaned.add(folder)
+            clean_stale(folder)
 
     def stage(self, path: str | os.PathLike[str]) -> Path:
         """The file to write ``path``'s content to (same name, in the staging folder); nothing is
@@ -119,10 +319,14 @@ class AtomicFiles:
         return Path(path)
 
     def _staging_folder(self, folder: Path) -> Path:
+        """The staging folder of a destination folder: inside it, or beside it when it does not exist yet
+        (then it is staged whole, as ``new``, and renamed into place in one step)."""
         if folder not in self._staging:
-            if not folder.is_dir():
-                self._make_folder(folder)
-            staging = Path(tempfile.mkdtemp(prefix=STAGING_PREFIX, dir=folder))
+            whole = not folder.exists()
+            if whole:
+                self._make_folder(folder.parent)
+                self._whole.add(folder)
+            staging = Path(tempfile.mkdtemp(prefix=temp_prefix("staging"), dir=folder.parent if whole else folder))
             self._staging[folder] = staging
             (staging / "new").mkdir()
             (staging / "old").mkdir()
@@ -144,32 +348,52 @@ class AtomicFiles:
                 raise MatremapError(f"{dest} already exists; {self.exists_hint}")
         umask = os.umask(0)
         os.umask(umask)
-        moved: list[tuple[Path, Path | None]] = []  # (destination, where its previous file went)
-        try:
-            for dest, tmp in self._staged.items():
-                backup = None
-                if dest.exists() or dest.is_symlink():
-                    backup = self._staging[dest.parent] / "old" / dest.name
-                    os.replace(dest, backup)
-                moved.append((dest, backup))
-                os.chmod(tmp, 0o666 & ~umask)
-                os.replace(tmp, dest)
-        except BaseException:
-            self._take_back(moved)
-            self._remove_created_folders()
-            raise
+        for tmp in self._staged.values():
+            os.chmod(tmp, 0o666 & ~umask)
+        with _sigint_held():
+            self._write_journals()
+            try:
+                for folder, staging in self._staging.items():
+                    if folder in self._whole:
+                        os.chmod(staging / "new", 0o777 & ~umask)
+                        os.replace(staging / "new", folder)
+                        continue
+                    for dest, tmp in self._staged.items():
+                        if dest.parent != folder:
+                            continue
+                        if dest.exists() or dest.is_symlink():
+                            os.replace(dest, staging / "old" / dest.name)
+                        os.replace(tmp, dest)
+                if self._staging:
+                    (next(iter(self._staging.values())) / COMMITTED).touch()
+            except BaseException:
+                for staging in reversed(self._staging.values()):
+                    _take_back(staging)
+                self._remove_created_folders()
+                raise
 
-    @staticmethod
-    def _take_back(moved: list[tuple[Path, Path | None]]) -> None:
-        for dest, backup in reversed(moved):
-            if backup is not None and (backup.exists() or backup.is_symlink()):
-                os.replace(backup, dest)
-            elif backup is None:
-                dest.unlink(missing_ok=True)
+    def _moves(self, folder: Path, staging: Path) -> list[tuple[str, str, str]]:
+        """(destination, staged, previous-file place) of every move into ``folder``."""
+        if folder in self._whole:
+            return [(str(folder), str(staging / "new"), str(staging / "old" / folder.name))]
+        return [
+            (str(dest), str(tmp), str(staging / "old" / dest.name))
+            for dest, tmp in self._staged.items()
+            if dest.parent == folder
+        ]
+
+    def _write_journals(self) -> None:
+        """Each staging folder's journal, written before the first move (see the module doc)."""
+        stagings = [str(s) for s in self._staging.values()]
+        for folder, staging in self._staging.items():
+            doc = {"primary": stagings[0], "stagings": stagings, "moves": self._moves(folder, staging)}
+            tmp = staging / (JOURNAL + ".tmp")
+            tmp.write_text(json.dumps(doc))
+            os.replace(tmp, staging / JOURNAL)
 
     def _remove_staging(self) -> None:
-        for staging in self._staging.values():
-            shutil.rmtree(staging, ignore_errors=True)
+        for staging in reversed(self._staging.values()):  # the first one, holding the group's mark, last
+            _remove(staging)
         self._staging.clear()
 
     def _remove_created_folders(self) -> None:
@@ -182,40 +406,49 @@ class AtomicFiles:
         self._created.clear()
 
 
+# ---------------------------------------------------------------------------------------------
+# a whole folder
+
+
 @contextmanager
 def staged_folder(out: str | os.PathLike[str], force: bool = False) -> Iterator[Path]:
     """A whole output folder written all or nothing: the block writes into a hidden folder beside
-    ``out`` (``.<name>.partial-*``), which replaces ``out`` when the block ends without an error and is
-    removed when it fails, so a failed run leaves nothing behind and a retry needs no ``--force``. An
-    existing ``out`` that is not empty is refused unless ``force``; with ``force`` it is replaced whole.
-    Only ``out``'s parent folders may be created (they are left in place)."""
+    ``out`` (``.matremap-partial-<owner>-<name>-*``), which replaces ``out`` when the block ends without
+    an error and is removed when it fails, so a failed run leaves nothing behind and a retry needs no
+    ``--force``. An existing ``out`` that is not empty is refused unless ``force``; with ``force`` it is
+    replaced whole (moved aside into ``.matremap-old-*`` for the moment of the swap). What dead runs
+    left beside ``out`` is put right first (:func:`clean_stale`). Only ``out``'s parent folders may be
+    created (they are left in place)."""
     out = Path(out)
+    if out.parent.is_dir():
+        clean_stale(out.parent)
     if out.exists() and not out.is_dir():
         raise MatremapError(f"{out} exists and is not a folder; choose an output folder")
     if out.is_dir() and any(out.iterdir()) and not force:
         raise MatremapError(f"{out} exists and is not empty; pass --force to replace it")
     out.parent.mkdir(parents=True, exist_ok=True)
-    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
+    stage = Path(tempfile.mkdtemp(prefix=temp_prefix("partial", out.name), dir=out.parent))
     try:
         yield stage
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
         raise
     os.chmod(stage, 0o777 & ~_umask())
-    old = None
-    if out.exists():
-        old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
-        os.replace(out, old / out.name)
-    try:
-        os.replace(stage, out)
-    except OSError:
-        if old is not None:
-            os.replace(old / out.name, out)
-        shutil.rmtree(stage, ignore_errors=True)
-        raise
-    finally:
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
+    with _sigint_held():
+        old = None
+        if out.exists():
+            old = Path(tempfile.mkdtemp(prefix=temp_prefix("old", out.name), dir=out.parent))
+            os.replace(out, old / out.name)
+        try:
+            os.replace(stage, out)
+        except OSError:
+            if old is not None:
+                os.replace(old / out.name, out)
+            shutil.rmtree(stage, ignore_errors=True)
+            raise
+        finally:
+            if old is not None:
+                shutil.rmtree(old, ignore_errors=True)
 
 
 def _umask() -> int:
@@ -224,4 +457,13 @@ def _umask() -> int:
     return mask
 
 
-__all__ = ["FORCE_HINT", "STAGING_PREFIX", "AtomicFiles", "staged_folder"]
+__all__ = [
+    "FORCE_HINT",
+    "MARK",
+    "STAGING_PREFIX",
+    "AtomicFiles",
+    "clean_stale",
+    "owner_token",
+    "staged_folder",
+    "temp_prefix",
+]

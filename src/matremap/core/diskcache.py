@@ -9,7 +9,9 @@ extracted images) gets a one-line error otherwise; optional tables skip caching 
 
 Tables are ``.npz`` files named with a digest of what decides them, written atomically; a failure to
 write is ignored (the table is rebuilt next time), and files of other versions of the same table are
-removed.
+removed. Temporary files carry their writer's mark (:func:`matremap.core.atomic.temp_prefix`): a run
+that finds one left by a killed process removes it (:func:`~matremap.core.atomic.clean_stale`, on every
+folder :func:`private_cache_dir` hands out).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from matremap.core.atomic import clean_stale, temp_prefix
 from matremap.errors import MatremapError
 
 #: the environment variables naming the cache folder, first found wins
@@ -75,6 +78,7 @@ def private_cache_dir(*parts: str) -> Path:
     folder = ensure_private(cache_dir())
     for part in parts:
         folder = ensure_private(folder / part)
+    clean_stale(folder)  # what killed runs left
     return folder
 
 
@@ -112,7 +116,8 @@ def save_tables(path: Path, stale: str, **arrays: np.ndarray) -> None:
     tmp = None
     try:
         ensure_private(path.parent)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.stem + ".", suffix=".tmp")
+        clean_stale(path.parent)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=temp_prefix("tmp", path.stem), suffix=".tmp")
         with os.fdopen(fd, "wb") as f:
             np.savez(f, **arrays)  # type: ignore[arg-type]  # numpy's stub: a key could be allow_pickle
         os.chmod(tmp, 0o644)

@@ -54,8 +54,11 @@ def check_output(path: str | os.PathLike, force: bool, suffixes: tuple[str, ...]
 @contextmanager
 def atomic_output(path: Path) -> Iterator[str]:
     """Yield a temporary file name beside ``path``; on success it replaces ``path`` (with the
-    permissions a new file would get), on failure it is removed."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    permissions a new file would get), on failure it is removed. The name carries this process's mark
+    (:func:`matremap.core.atomic.temp_prefix`), so that a run after a SIGKILL removes it."""
+    from matremap.core.atomic import temp_prefix
+
+    fd, tmp = tempfile.mkstemp(prefix=temp_prefix("tmp", path.stem), suffix=path.suffix, dir=path.parent)
     os.close(fd)
     try:
         yield tmp

@@ -161,10 +161,12 @@ class MaterialAsset:
     def _map_file(self, p: ParamSpec, ref: TextureRef, out: Path) -> tuple[str, str, tuple[int, int]]:
         """(the manifest's file, its colour space, (height, width)) of the map of parameter ``p``:
         the texture's own file when it can be used as it is, else its values (channels picked, the
-        factor multiplied in, clipped to the parameter's bounds) written to ``out`` as linear EXR."""
-        from matremap.svbrdf.textures import ImageInfo, image_info, read_image, write_image_like
+        factor multiplied in, clipped to the parameter's bounds) written to ``out`` as linear EXR (a file
+        band by band: memory does not grow with its size)."""
+        from matremap.svbrdf.textures import ImageInfo, image_info, transform_image, write_image_like
 
         name = p.name
+        fname = f"{name.replace(' ', '_')}.exr"
         if ref.bake is None and not ref.path.is_file():
             raise MatremapError(
                 f"{self.path}: texture {ref.path} for {name} not found; put it beside the file or fix its uri"
@@ -174,12 +176,21 @@ class MaterialAsset:
             whole = ref.channels is None or tuple(ref.channels) == tuple(range(header.channels))
             if ref.plain_factor and whole and (p.channels == 3 or header.channels == 1):
                 return self._kept_file(ref, name, out), ref.colorspace, (header.height, header.width)
-            image, _ = read_image(ref.path, ref.colorspace, colour=True)
-        else:
-            image = np.asarray(ref.bake(), dtype=np.float32)
-            if not np.all(np.isfinite(image)):
-                raise MatremapError(f"{self.path}: the texture baked for {name} has non-finite values")
-        image = self._picked_channels(p, ref, np.atleast_3d(image))
+            size = transform_image(ref.path, ref.colorspace, out / fname, lambda band: self._factored(p, ref, band))
+            return fname, "linear", size
+        image = np.asarray(ref.bake(), dtype=np.float32)
+        if not np.all(np.isfinite(image)):
+            raise MatremapError(f"{self.path}: the texture baked for {name} has non-finite values")
+        image = self._factored(p, ref, np.atleast_3d(image))
+        h, w, c = image.shape
+        write_image_like(out / fname, image, ImageInfo("exr", "float", c, w, h, "linear"), force=True)
+        return fname, "linear", image.shape[:2]
+
+    def _factored(self, p: ParamSpec, ref: TextureRef, image: np.ndarray) -> np.ndarray:
+        """The values of ``p`` in ``image`` ([H, W, C], or a band of rows): channels picked, the factor
+        multiplied in, clipped to the parameter's bounds."""
+        name = p.name
+        image = self._picked_channels(p, ref, image)
         scale = np.asarray(ref.scale, dtype=np.float32).reshape(-1)
         if scale.size not in (1, image.shape[-1]):  # an RGB factor on picked channels: their factors
             if ref.channels is None or max(ref.channels) >= scale.size:
@@ -188,11 +199,7 @@ class MaterialAsset:
                     f"texture of {image.shape[-1]} channel(s)"
                 )
             scale = scale[list(ref.channels)]
-        image = np.clip((image * scale).astype(np.float32), *p.bounds)
-        fname = f"{name.replace(' ', '_')}.exr"
-        h, w, c = image.shape
-        write_image_like(out / fname, image, ImageInfo("exr", "float", c, w, h, "linear"), force=True)
-        return fname, "linear", image.shape[:2]
+        return np.clip((image * scale).astype(np.float32), *p.bounds)
 
     @staticmethod
     def _kept_file(ref: TextureRef, name: str, out: Path) -> str:

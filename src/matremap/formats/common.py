@@ -155,7 +155,7 @@ def place_map(
     is a PNG or EXR with the right channel count; a file already at its destination stays), else
     converted to a linear float EXR (decoded with ``colorspace``; ``channels`` 1 keeps the first
     channel, 3 makes grey RGB). Returns the destination."""
-    from matremap.svbrdf.textures import image_info, read_image, write_image_like
+    from matremap.svbrdf.textures import image_info, transform_image
 
     info = image_info(src, colorspace)
     if keep and info.format in ("png", "exr") and (channels is None or info.channels == channels):
@@ -163,21 +163,16 @@ def place_map(
         if dest.resolve() != src.resolve():
             files.copy(src, dest)
         return dest
-    image, info = read_image(src, colorspace)
-    image = np.atleast_3d(image)
-    if channels == 1:
-        image = image[..., :1]
-    elif channels == 3 and image.shape[-1] == 1:
-        image = np.repeat(image, 3, axis=-1)
-    elif channels == 3:
-        image = image[..., :3]
+
+    def picked(band: np.ndarray) -> np.ndarray:
+        if channels == 1:
+            return band[..., :1]
+        if channels == 3:
+            return np.repeat(band, 3, axis=-1) if band.shape[-1] == 1 else band[..., :3]
+        return band
+
     dest = dest_stem.with_suffix(".exr")
-    write_image_like(
-        files.stage(dest),
-        image,
-        info.like(format="exr", pixel_type="float", colorspace="linear", compression=None),
-        force=True,
-    )
+    transform_image(src, colorspace, files.stage(dest), picked)  # band by band: any map size
     return dest
 
 

@@ -18,12 +18,13 @@ is complete; a failure (a NaN in the last band, a truncated file) leaves nothing
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import sys
 import time
 import warnings
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -407,17 +408,29 @@ def _manifest(
             v = first.get(p.name, last.template.get(p.name))
             constants[p.name] = v if np.ndim(v) == 0 or p.channels == 3 else float(np.ravel(v)[0])
     doc: dict[str, Any] = {"model": tgt.id, "maps": {k: v.name for k, v in maps.items()}}
+    out_dir = next(iter(maps.values())).parent if maps else outputs[0].path.parent
     if final_normal:
         doc["normal"] = final_normal.name
     doc["params"] = constants
     doc["colorspace"] = {o.path.name: o.info.colorspace for o in outputs if o.param}
     doc["provenance"] = {
-        "source": str(map_set.root),
+        "source": source_reference(map_set.root, out_dir),
         "source_model": map_set.model,
         "transform": t.describe(),
         "outside_domain": {"file": MASK_NAME, "texels": outside},
     }
     return doc
+
+
+def source_reference(root: Path, out_dir: Path) -> str:
+    """How a converted map set's provenance names its source folder: relative to the map set's own folder
+    when the source lies beside it (a material file's maps unpacked into the same output, which is
+    written in a staging folder and moved: an absolute path would point into the staging folder), else
+    absolute."""
+    root, out_dir = Path(root).resolve(), Path(out_dir).resolve()
+    if out_dir.parent == root or out_dir.parent in root.parents:
+        return os.path.relpath(root, out_dir)
+    return str(root)
 
 
 def _constants(map_set: MapSet, t: Transform) -> dict[str, Any]:
@@ -443,6 +456,21 @@ def _check_out_dir(map_set: MapSet, out: Path) -> None:
 PARALLEL_MIN_TEXELS = 8_000_000
 
 
+def _worker_init(parent: int) -> None:
+    """A worker process: Ctrl-C is its parent's to handle (which ends the workers), and it dies with its
+    parent (Linux: PR_SET_PDEATHSIG), so a killed convert leaves no process writing into its staging."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        with contextlib.suppress(OSError, AttributeError):
+            ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # 1: PR_SET_PDEATHSIG
+    if os.getppid() != parent:  # the parent died before that took effect
+        os._exit(1)
+
+
 def _execute(plan: _Plan, outputs: list[_Output], workers: int, progress) -> list[dict[str, Any]]:
     if plan.size[0] * plan.size[1] < PARALLEL_MIN_TEXELS:
         workers = 1
@@ -453,10 +481,17 @@ def _execute(plan: _Plan, outputs: list[_Output], workers: int, progress) -> lis
 
     # spawn, not fork: OpenImageIO keeps a thread pool that a forked child would inherit broken
     ctx = mp.get_context("spawn")
-    with ProcessPoolExecutor(len(groups), mp_context=ctx) as pool:
+    pool = ctx.Pool(len(groups), initializer=_worker_init, initargs=(os.getpid(),))
+    try:
         # the group that writes the mask reports first; progress is reported when workers finish
-        futures = [pool.submit(_run, plan, g) for g in groups]
-        results = [f.result() for f in futures]
+        pending = [pool.apply_async(_run, (plan, g)) for g in groups]
+        results = [r.get() for r in pending]
+    except BaseException:
+        pool.terminate()  # an error or Ctrl-C: the workers stop now, not when their files are done
+        pool.join()
+        raise
+    pool.close()
+    pool.join()
     if progress is not None:
         progress(plan.size[0], plan.size[0])
     mask_group = next(i for i, g in enumerate(groups) if any(o.param is None for o in g))

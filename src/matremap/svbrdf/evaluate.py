@@ -158,6 +158,30 @@ def _exposure(image: np.ndarray, mask: np.ndarray) -> float:
     return 0.9 / p if p > 0.0 else 1.0
 
 
+#: the report shows the outside-domain map at most this many texels a side
+DOMAIN_MAP_SIDE = 1024
+
+
+def _domain_png(path: Path) -> bytes:
+    """The outside-domain map for the report: the file as it is, or, when it is larger than
+    :data:`DOMAIN_MAP_SIDE`, a block white wherever one of its texels is (read in bands)."""
+    from matremap.svbrdf.textures import MapReader
+
+    with MapReader(path, "linear", colour=False) as r:
+        h, w = r.info.height, r.info.width
+        k = math.ceil(max(h, w) / DOMAIN_MAP_SIDE)
+        if k == 1:
+            return path.read_bytes()
+        rows: list[np.ndarray] = []
+        step = k * max(1, (1 << 20) // (w * k))
+        for y0 in range(0, h, step):
+            band = r.read_rows(y0, min(h, y0 + step))[..., 0] > 0.5
+            pad = (-band.shape[0] % k, -w % k)
+            band = np.pad(band, ((0, pad[0]), (0, pad[1])))
+            rows.append(np.asarray(band.reshape(band.shape[0] // k, k, -1, k).any(axis=(1, 3))))
+    return _png_bytes(np.where(np.concatenate(rows), 255, 0).astype(np.uint8)[..., None])
+
+
 def _colormap(values: np.ndarray, vmax: float = SSIM_MAP_MAX) -> np.ndarray:
     from matplotlib import colormaps
 
@@ -292,7 +316,7 @@ def evaluate(
     verdict = comparison.verdict(checks, thresholds or Thresholds())
     images.emit("colorbar.png", _colorbar())
     if domain_map is not None and domain_map.is_file():
-        images.emit("outside_domain.png", domain_map.read_bytes())
+        images.emit("outside_domain.png", _domain_png(domain_map))
 
     result = EvaluationResult(
         rotations=rotations,

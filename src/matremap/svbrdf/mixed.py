@@ -15,7 +15,9 @@ takes that kind's value everywhere. The texels outside the training domain are t
 a transform that contributes to them (the union over the kinds with a non-zero weight).
 
 The target must express both kinds: one without a diffuse parameter (a conductor) cannot draw the
-dielectric texels and is refused before any sweep. The blend holds every map in memory at once.
+dielectric texels and is refused before any sweep. The blend reads and writes the maps in bands of
+rows: memory does not grow with the map size; the shares of each kind come from counts taken while the
+maps were summarised (:class:`~matremap.svbrdf.mapstats.Specialisation`).
 """
 
 from __future__ import annotations
@@ -35,11 +37,10 @@ from matremap.core.models import ModelSpec
 from matremap.dialects import get_model, list_models
 from matremap.errors import MatremapError
 from matremap.regress import quantities as qty
-from matremap.svbrdf.convert import MANIFEST_NAME, MASK_NAME
-from matremap.svbrdf.textures import ImageInfo, MapSet, load_map_set, map_values, read_image, write_image_like
+from matremap.svbrdf.convert import MANIFEST_NAME, MASK_NAME, source_reference
+from matremap.svbrdf.mapstats import TOLERANCE, MapSummary, Specialisation, band_rows, bands, weight
+from matremap.svbrdf.textures import ImageInfo, MapReader, MapSet, MapWriter, load_map_set, map_values
 
-#: a map counts as uniform when all its texels are within this of one value (an 8-bit step is 1/255)
-TOLERANCE = 0.5 / 255
 #: the hidden folder inside the staging folder that holds the two kinds while they are converted
 KINDS = ".kinds"
 
@@ -52,39 +53,41 @@ CheckKind = Callable[[MapSet, Mapping[str, Any]], None]
 @dataclass(frozen=True)
 class Mixed:
     """A specialisation parameter whose map mixes values: ``metal`` is the value that specialises the
-    model (no diffuse part), ``dielectric`` the other end of its range; ``weight`` the metal's share
-    per texel, in [0, 1]."""
+    model (no diffuse part), ``dielectric`` the other end of its range; ``counts``: its texels by kind.
+    The metal's share of a texel is :meth:`weight` of its value."""
 
     name: str
     metal: float
     dielectric: float
-    weight: np.ndarray
+    counts: Specialisation
+
+    def weight(self, values: np.ndarray) -> np.ndarray:
+        """The metal's share per texel of the mixed parameter's ``values``, in [0, 1]."""
+        return weight(values, self.metal, self.dielectric)
 
     def share(self, kind: str) -> float:
         """The fraction of texels that hold some of ``kind`` ("metal" or "dielectric")."""
-        w = self.weight if kind == "metal" else 1.0 - self.weight
-        return float(np.mean(w > TOLERANCE))
+        n = self.counts.some_value if kind == "metal" else self.counts.some_other
+        return n / max(self.counts.texels, 1)
 
     def pure(self, kind: str) -> bool:
         """Whether every texel holding some of ``kind`` holds it whole (no intermediate values)."""
-        w = self.weight if kind == "metal" else 1.0 - self.weight
-        return bool(np.all((w <= TOLERANCE) | (w >= 1.0 - TOLERANCE)))
+        return self.counts.between == 0
 
 
-def mixed_parameter(map_set: MapSet, params: Mapping[str, Any]) -> Mixed | None:
+def mixed_parameter(map_set: MapSet, summary: MapSummary) -> Mixed | None:
     """The first specialisation parameter (a glTF ``metallic``) given as a map that is not uniform, or
-    None: such maps are remapped per texel (:func:`remap_mixed`)."""
+    None: such maps are remapped per texel (:func:`remap_mixed`). ``summary``: the maps' statistics
+    (:func:`~matremap.svbrdf.mapstats.summarise`)."""
     spec = map_set.spec
-    for name, value, _ in spec.specialisations:
+    for name, _, _ in spec.specialisations:
         if name not in map_set.maps:
             continue
-        a = np.asarray(params[name], dtype=float)
-        if float(a.max()) - float(a.min()) <= 2 * TOLERANCE:
+        stats = summary.stats[name]
+        if stats.hi - stats.lo <= 2 * TOLERANCE or stats.specialisation is None:
             continue
-        lo, hi = spec.param(name).bounds
-        other = lo if value == hi else hi
-        weight = np.clip((a - other) / (value - other), 0.0, 1.0)
-        return Mixed(name, float(value), float(other), weight)
+        counts = stats.specialisation
+        return Mixed(name, float(counts.value), float(counts.other), counts)
     return None
 
 
@@ -178,17 +181,25 @@ def remap_mixed(
     return texels, outside
 
 
-def _arrays(ms: MapSet) -> dict[str, Any]:
-    """A converted map set's parameters: maps as arrays, constants as they are."""
+#: where a blended parameter's values come from on one side: a map (the converted set and the
+#: parameter) or a constant
+_Source = Any
+
+
+def _sources(ms: MapSet) -> dict[str, _Source]:
+    """A converted map set's parameters: each map as (map set, name), each constant as it is."""
     spec = ms.spec
-    out: dict[str, Any] = {k: v for k, v in ms.constants.items() if k in spec.param_names}
-    for name, path in ms.maps.items():
-        out[name] = map_values(spec, name, read_image(path, ms.colorspace.get(name))[0], path, 0)
+    out: dict[str, _Source] = {k: v for k, v in ms.constants.items() if k in spec.param_names}
+    out.update({name: (ms, name) for name in ms.maps})
     return out
 
 
+def _is_map(v: _Source) -> bool:
+    return isinstance(v, tuple) and len(v) == 2 and isinstance(v[0], MapSet)
+
+
 def _full(value: Any, channels: int, shape: tuple[int, int]) -> np.ndarray:
-    """A parameter value (map or constant) as an array ``[H, W]`` or ``[H, W, 3]``."""
+    """A parameter value (a band of a map, or a constant) as an array ``[rows, W]`` or ``[rows, W, 3]``."""
     a = np.asarray(value, dtype=np.float32)
     if channels == 1:
         return np.broadcast_to(a if a.ndim == 2 else a.reshape(-1)[0], shape)
@@ -197,9 +208,10 @@ def _full(value: Any, channels: int, shape: tuple[int, int]) -> np.ndarray:
     return np.broadcast_to(a if a.ndim == 3 else a.reshape(-1)[:3], (*shape, 3))
 
 
-def _info(spec: ModelSpec, name: str, sides: list[MapSet], values: np.ndarray) -> ImageInfo:
+def _info(spec: ModelSpec, name: str, sides: list[MapSet], constants: list[Any]) -> ImageInfo:
     """The file format of a blended map: the converted maps' own (a float one if either side's is), else
-    one like the other maps (sRGB for colours in 8/16-bit files; float EXR for values above 1)."""
+    one like the other maps (sRGB for colours in 8/16-bit files; float EXR when either side's constant,
+    and so the blend between them, lies outside [0, 1])."""
     infos = [ms.info[name] for ms in sides if name in ms.info]
     if infos:
         return next((i for i in infos if not i.integer), infos[0])
@@ -207,6 +219,7 @@ def _info(spec: ModelSpec, name: str, sides: list[MapSet], values: np.ndarray) -
     base = next(i for ms in sides for i in ms.info.values())
     colour = p.channels == 3 and p.role in ("diffuse", "specular", "fresnel")
     info = base.like(channels=p.channels, colorspace="srgb" if colour and base.integer else "linear", path="")
+    values = np.concatenate([np.asarray(c, dtype=float).reshape(-1) for c in constants])
     if info.integer and (float(values.min()) < 0.0 or float(values.max()) > 1.0):
         info = info.like(format="exr", pixel_type="float", colorspace="linear", compression=None)
     return info
@@ -221,26 +234,32 @@ def _file_name(name: str, sides: list[MapSet], info: ImageInfo) -> str:
     return f"{stem.rsplit('_', 1)[0] if '_' in stem else 'material'}_{name}{info.suffix}"
 
 
-def blend(metal: MapSet, dielectric: MapSet, mixed: Mixed, dest: Path, source: MapSet) -> int:
-    """Write the per-texel blend of the two converted map sets into ``dest`` (maps, the union of their
-    outside-domain masks where they contribute, the normal map, ``material.json``); returns the number
-    of texels outside the training domain."""
+@dataclass
+class _Blended:
+    """One blended map: its parameter, where each side's values come from, its file and format."""
+
+    name: str
+    channels: int
+    metal: _Source
+    dielectric: _Source
+    file: str
+    info: ImageInfo
+
+
+def _plan(metal: MapSet, dielectric: MapSet) -> tuple[list[_Blended], dict[str, Any]]:
+    """The maps to blend and the parameters that stay constants (options included)."""
     spec = metal.spec
-    dest.mkdir(parents=True, exist_ok=False)
-    shape = source.size
-    w = mixed.weight.astype(np.float32)
     sides = [metal, dielectric]
-    a, b = _arrays(metal), _arrays(dielectric)
+    a, b = _sources(metal), _sources(dielectric)
     for option in spec.option_names:
         if str(metal.constants.get(option)) != str(dielectric.constants.get(option)):
             raise MatremapError(
                 f"the metal and the dielectric texels were converted with different {option} ("
                 f"{metal.constants.get(option)} and {dielectric.constants.get(option)}); fix it: --fix {option}=..."
             )
-    maps: dict[str, str] = {}
-    colorspace: dict[str, str] = {}
     constants: dict[str, Any] = {k: v for k, v in metal.constants.items() if k in spec.option_names}
     roles = [spec.specialise(ms.constants) for ms in sides]  # a parameter one kind does not use takes the other's
+    plan = []
     for p in spec.params:
         if p.name not in a and p.name not in b:
             continue
@@ -248,41 +267,97 @@ def blend(metal: MapSet, dielectric: MapSet, mixed: Mixed, dest: Path, source: M
         vb = b[p.name] if p.name in b else va
         used = [r.param(p.name).role != "other" for r in roles]
         va, vb = (vb, vb) if used == [False, True] else (va, va) if used == [True, False] else (va, vb)
-        if np.ndim(va) < 2 and np.ndim(vb) < 2 and np.allclose(va, vb):
+        if not _is_map(va) and not _is_map(vb) and np.allclose(va, vb):
             constants[p.name] = va
             continue
-        fa, fb = _full(va, p.channels, shape), _full(vb, p.channels, shape)
-        ww = w if p.channels == 1 else w[..., None]
-        values = ww * fa + (1.0 - ww) * fb
-        info = _info(spec, p.name, sides, values)
-        fname = _file_name(p.name, sides, info)
-        write_image_like(dest / fname, values, info)
-        maps[p.name], colorspace[fname] = fname, info.colorspace
-    outside = _outside(metal, dielectric, mixed)
-    write_image_like(dest / MASK_NAME, outside.astype(np.float32), ImageInfo("png", "uint8", 1, 0, 0, "linear"))
-    doc: dict[str, Any] = {"model": spec.id, "maps": maps}
-    if metal.normal is not None:
-        shutil.copyfile(metal.normal, dest / metal.normal.name)
-        doc["normal"] = metal.normal.name
-    doc["params"] = constants
-    doc["colorspace"] = colorspace
-    doc["provenance"] = _provenance(metal, dielectric, mixed, source, int(outside.sum()))
-    write_text(dest / MANIFEST_NAME, json.dumps(doc, indent=1) + "\n")
-    return int(outside.sum())
+        info = _info(spec, p.name, sides, [v for v in (va, vb) if not _is_map(v)])
+        plan.append(_Blended(p.name, p.channels, va, vb, _file_name(p.name, sides, info), info))
+    return plan, constants
 
 
-def _outside(metal: MapSet, dielectric: MapSet, mixed: Mixed) -> np.ndarray:
-    """Texels outside the domain of a transform that contributes to them."""
-    masks = []
-    for ms, w in ((metal, mixed.weight), (dielectric, 1.0 - mixed.weight)):
-        mask = ms.root / MASK_NAME
-        off = read_image(mask, "linear", colour=False)[0][..., 0] > 0.5 if mask.is_file() else np.zeros(w.shape, bool)
-        masks.append(off & (w > TOLERANCE))
-    return masks[0] | masks[1]
+def blend(metal: MapSet, dielectric: MapSet, mixed: Mixed, dest: Path, source: MapSet) -> int:
+    """Write the per-texel blend of the two converted map sets into ``dest`` (maps, the union of their
+    outside-domain masks where they contribute, the normal map, ``material.json``), band by band; returns
+    the number of texels outside the training domain. A failure leaves no ``dest``."""
+    spec = metal.spec
+    plan, constants = _plan(metal, dielectric)
+    dest.mkdir(parents=True, exist_ok=False)
+    try:
+        outside = _blend_bands(plan, mixed, dest, source, [metal, dielectric])
+        doc: dict[str, Any] = {"model": spec.id, "maps": {b.name: b.file for b in plan}}
+        if metal.normal is not None:
+            shutil.copyfile(metal.normal, dest / metal.normal.name)
+            doc["normal"] = metal.normal.name
+        doc["params"] = constants
+        doc["colorspace"] = {b.file: b.info.colorspace for b in plan}
+        doc["provenance"] = _provenance(metal, dielectric, mixed, source, outside, dest)
+        write_text(dest / MANIFEST_NAME, json.dumps(doc, indent=1) + "\n")
+    except BaseException:
+        shutil.rmtree(dest, ignore_errors=True)
+        raise
+    return outside
 
 
-def _provenance(metal: MapSet, dielectric: MapSet, mixed: Mixed, source: MapSet, outside: int) -> dict[str, Any]:
-    """The blended result's provenance: the source and both transforms."""
+def _key(v: _Source) -> tuple[int, str]:
+    return id(v[0]), v[1]
+
+
+def _band(v: _Source, read: dict[tuple[int, str], np.ndarray], channels: int, shape: tuple[int, int]) -> np.ndarray:
+    """One side's values of a blended map over a band: its map's band, or its constant broadcast."""
+    return _full(read[_key(v)] if _is_map(v) else v, channels, shape)
+
+
+def _blend_bands(plan: list[_Blended], mixed: Mixed, dest: Path, source: MapSet, sides: list[MapSet]) -> int:
+    """Stream the blend of every planned map and the outside-domain mask into ``dest``; the mask's count."""
+    height, width = source.size
+    spec = sides[0].spec
+    readers: dict[tuple[int, str], MapReader] = {}
+    weights: MapReader | None = None
+    masks: list[MapReader | None] = []
+    writers: list[MapWriter] = []
+    outside = 0
+    try:
+        for v in (v for b in plan for v in (b.metal, b.dielectric) if _is_map(v)):
+            if _key(v) not in readers:
+                readers[_key(v)] = MapReader(v[0].maps[v[1]], v[0].colorspace.get(v[1]))
+        weights = MapReader(source.maps[mixed.name], source.colorspace.get(mixed.name))
+        masks = [
+            MapReader(ms.root / MASK_NAME, "linear", colour=False) if (ms.root / MASK_NAME).is_file() else None
+            for ms in sides
+        ]
+        writers = [MapWriter(dest / b.file, b.info.like(width=width, height=height)) for b in plan]
+        writers.append(MapWriter(dest / MASK_NAME, ImageInfo("png", "uint8", 1, width, height, "linear")))
+        for y0, y1 in bands(height, band_rows(width)):
+            w = mixed.weight(map_values(source.spec, mixed.name, weights.read_rows(y0, y1), weights.path, y0))
+            read = {k: map_values(spec, k[1], r.read_rows(y0, y1), r.path, y0) for k, r in readers.items()}
+            for b, writer in zip(plan, writers, strict=False):
+                ww = w if b.channels == 1 else w[..., None]
+                fa, fb = (_band(v, read, b.channels, w.shape) for v in (b.metal, b.dielectric))
+                writer.write_rows(y0, ww * fa + (1.0 - ww) * fb)
+            off = np.zeros(w.shape, dtype=bool)
+            for mask, share in zip(masks, (w, 1.0 - w), strict=True):
+                if mask is not None:
+                    off |= (mask.read_rows(y0, y1)[..., 0] > 0.5) & (share > TOLERANCE)
+            writers[-1].write_rows(y0, off.astype(np.float32))
+            outside += int(np.count_nonzero(off))
+        for writer in writers:
+            writer.close()
+    finally:
+        for r in (*readers.values(), weights, *masks):
+            if r is not None:
+                r.close()
+        for writer in writers:
+            try:
+                writer.close()
+            except MatremapError:  # the first error is the one to report
+                pass
+    return outside
+
+
+def _provenance(
+    metal: MapSet, dielectric: MapSet, mixed: Mixed, source: MapSet, outside: int, dest: Path
+) -> dict[str, Any]:
+    """The blended result's provenance (in ``dest``): the source and both transforms."""
 
     def described(ms: MapSet) -> str:
         doc = json.loads((ms.root / MANIFEST_NAME).read_text())
@@ -290,7 +365,7 @@ def _provenance(metal: MapSet, dielectric: MapSet, mixed: Mixed, source: MapSet,
 
     m, d = described(metal), described(dielectric)
     return {
-        "source": str(source.root),
+        "source": source_reference(source.root, dest),
         "source_model": source.model,
         "transform": (
             f"per texel by {mixed.name}: {m} where {mixed.name} is {mixed.metal:g}, {d} where it is "

@@ -8,7 +8,9 @@ Pixel values are handed to the rest of matremap as linear float32 arrays ``[H, W
 * float files (EXR, float TIFF) are linear as stored.
 
 :class:`MapReader` and :class:`MapWriter` stream bands of rows (OIIO ``read_scanlines`` /
-``write_scanlines``), so a 16K x 16K map never has to be in memory whole.
+``write_scanlines``), so a 16K x 16K map never has to be in memory whole. Every image is refused,
+from its header and before any texel is decoded, when it holds more texels than the limit in effect
+(:func:`texel_limit`, ``--max-texels``; :data:`DEFAULT_MAX_TEXELS` by default).
 
 A *map set* (:class:`MapSet`) binds files to the parameters of a model, either through a manifest
 (``material.json`` or ``material.toml`` in the folder)::
@@ -34,7 +36,9 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -74,6 +78,39 @@ OUT_FORMATS = {
     "exr": ("exr", "float"),
     "exr16": ("exr", "half"),
 }
+
+
+#: the largest image (width x height) read unless ``--max-texels`` says otherwise: 2^30 texels, a
+#: 32768 x 32768 map. Memory does not grow with the map size (maps are read in bands), but the time
+#: and the output files do (a 16K x 16K remap takes minutes and writes gigabytes); a header beyond this
+#: is far more likely a corrupt or hostile file than a texture
+DEFAULT_MAX_TEXELS = 1 << 30
+_TEXEL_LIMIT: ContextVar[int] = ContextVar("matremap_texel_limit", default=DEFAULT_MAX_TEXELS)
+
+
+@contextmanager
+def texel_limit(texels: int | None) -> Iterator[int]:
+    """While the block runs, refuse every image whose header declares more than ``texels`` texels
+    (width x height), before any of its pixels is decoded. None keeps the limit in effect."""
+    if texels is None:
+        yield _TEXEL_LIMIT.get()
+        return
+    if int(texels) < 1:
+        raise MatremapError(f"--max-texels {texels}: give a positive number of texels (width x height)")
+    token = _TEXEL_LIMIT.set(int(texels))
+    try:
+        yield int(texels)
+    finally:
+        _TEXEL_LIMIT.reset(token)
+
+
+def _check_texels(path: str | os.PathLike, width: int, height: int) -> None:
+    limit = _TEXEL_LIMIT.get()
+    if width * height > limit:
+        raise MatremapError(
+            f"{path} is {width} x {height} = {width * height:,} texels, more than the limit of {limit:,}; "
+            f"pass --max-texels {width * height} to read it anyway, or downsample it"
+        )
 
 
 def _oiio():
@@ -178,6 +215,7 @@ def image_info(path: str | os.PathLike, colorspace: str | None = None, colour: b
 
 def _info_from(inp, path, colorspace, colour) -> ImageInfo:
     spec = inp.spec()
+    _check_texels(path, spec.width, spec.height)
     fmt = _FORMATS.get(inp.format_name())
     if fmt is None:
         raise MatremapError(f"{path}: {inp.format_name()} images are not supported; use PNG, JPEG, TIFF or EXR")
@@ -343,6 +381,29 @@ def write_image_like(path: str | os.PathLike, array: np.ndarray, info: ImageInfo
         finally:
             w.close()
     return p
+
+
+def transform_image(
+    src: str | os.PathLike, colorspace: str, dest: str | os.PathLike, values: Callable[[np.ndarray], np.ndarray]
+) -> tuple[int, int]:
+    """``src`` read band by band (linear float32 ``[rows, W, C]``, decoded as ``colorspace`` says), each band
+    through ``values`` (to ``[rows, W, C']``), written to ``dest`` as linear float EXR, atomically; returns
+    (height, width). Memory: a band (about a million texels), whatever the image size."""
+    dest = Path(dest)
+    with MapReader(src, colorspace, colour=True) as r, atomic_output(dest) as tmp:
+        height, width = r.info.height, r.info.width
+        rows = max(8, min(512, (1 << 20) // max(width, 1)))
+        writer: MapWriter | None = None
+        try:
+            for y0 in range(0, height, rows):
+                band = np.atleast_3d(np.asarray(values(r.read_rows(y0, min(height, y0 + rows))), dtype=np.float32))
+                if writer is None:
+                    writer = MapWriter(tmp, ImageInfo("exr", "float", band.shape[-1], width, height, "linear"))
+                writer.write_rows(y0, band)
+        finally:
+            if writer is not None:
+                writer.close()
+    return height, width
 
 
 def output_info(info: ImageInfo, out_format: str | None) -> ImageInfo:

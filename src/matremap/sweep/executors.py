@@ -7,8 +7,10 @@ when asked for.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
+import sys
 from collections.abc import Callable, Iterator
 from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from contextlib import contextmanager
@@ -47,10 +49,18 @@ class InlineExecutor(Executor):
         return f
 
 
-def _ignore_sigint() -> None:
-    """Pool workers leave Ctrl-C to the parent, which stops the sweep cleanly."""
+def _ignore_sigint(parent: int | None = None) -> None:
+    """Pool workers leave Ctrl-C to the parent, which stops the sweep cleanly, and die with it (Linux:
+    PR_SET_PDEATHSIG; a SIGKILLed sweep's workers otherwise waited for work for ever)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
+    if parent is not None and sys.platform.startswith("linux"):
+        import ctypes
+
+        with contextlib.suppress(OSError, AttributeError):
+            ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # 1: PR_SET_PDEATHSIG
+        if os.getppid() != parent:  # the parent died before that took effect
+            os._exit(1)
 
 
 @contextmanager
@@ -75,7 +85,7 @@ def make_executor(
     if n == 1:
         yield InlineExecutor(), "1 worker (in process)"
         return
-    pool = ProcessPoolExecutor(max_workers=n, initializer=_ignore_sigint)
+    pool = ProcessPoolExecutor(max_workers=n, initializer=_ignore_sigint, initargs=(os.getpid(),))
     pool.slots = n  # type: ignore[attr-defined]  # how many tasks run at once
     try:
         yield pool, f"{n} local worker processes"
