@@ -125,3 +125,23 @@ def test_a_materialx_usd_preview_surface_onto_gltf_keeps_its_blue(tmp_path):
     cin, cout = cc.material_colour(src), cc.material_colour(out)
     assert cc.hue_difference(cc.mean_hue(cin), cc.mean_hue(cout)) < 5
     assert 0.9 < cc.mean_luminance(cout) / cc.mean_luminance(cin) < 1.1
+
+
+def test_a_uniform_material_with_a_normal_map_keeps_it_in_another_format(tmp_path):
+    """Khronos TextureTransformMultiTest (CC-BY 4.0), NormalTest0Mat: factors only, plus a (transformed) normal
+    map. It went down the uniform path and the normal map was dropped, exit 0, for every target but glTF."""
+    pytest.importorskip("mitsuba")
+    src = one("gltf-TextureTransformMultiTest/*.glb")
+    code, _ = remap(
+        src, "mitsuba3:roughplastic", tmp_path / "out", "--material", "NormalTest0Mat", "--fix", "distribution=ggx"
+    )
+    assert code == 0
+    out = cc.find_output_file(tmp_path / "out")
+    assert out is not None and cc.mitsuba_loads(out)[0]
+    text = out.read_text()
+    assert 'type="normalmap"' in text
+    import re
+
+    normal = tmp_path / "out" / re.search(r'name="filename" value="([^"]+)"', text).group(1)
+    img = cc.read_image(normal, srgb=False)
+    assert cc.varies(img)  # the map itself, not a flat (0.5, 0.5, 1)

@@ -819,6 +819,8 @@ def _remap_file(
             produced: Any = load_map_set(stage / "maps")
         else:
             produced = _remap_uniform(asset.material(), job, stage, result, log)
+            if asset.normal is not None:
+                produced = keep_normal(produced, asset, stage / "source", name is not None, log)
         if name is not None:
             # every writer gets the asset: a writer of the same format copies its document, any writer
             # carries what it has a slot for (asset.carried: emission, occlusion, opacity)
@@ -834,6 +836,18 @@ def _remap_file(
         result.file = out / result.file.relative_to(stage)
         log(f"wrote {result.file}")
     return result
+
+
+def keep_normal(material: Material, asset: Any, folder: Path, written: bool, log: Callable[[str], None]) -> Any:
+    """A uniform result and the source's normal map (a uniform material has no place for it) as a map set of
+    no maps, so that the written file keeps the normal map (it was dropped, with exit 0, for any target but
+    the source's own format)."""
+    if not written:
+        log("note: the source's normal map is not kept: no material file is written for this target")
+        return material
+    normal = asset.normal_file(folder)
+    log("note: the source's normal map is carried into the written file unchanged")
+    return MapSet(material.model, {}, folder, normal=normal, constants=material.to_dict()["params"])
 
 
 #: the probe's lights for an anisotropic source: the headlight alone sees the lobe only across the

@@ -158,6 +158,15 @@ class MaterialAsset:
         (out / "material.json").write_text(json.dumps(manifest, indent=1))
         return out
 
+    def normal_file(self, workdir: str | os.PathLike) -> Path | None:
+        """The asset's normal map as a file a writer can use: the texture itself, or (extracted or baked)
+        a copy written into ``workdir``; None without one."""
+        if self.normal is None:
+            return None
+        out = Path(workdir)
+        out.mkdir(parents=True, exist_ok=True)
+        return out / self._kept_file(self.normal, "normal", out)
+
     def _map_file(self, p: ParamSpec, ref: TextureRef, out: Path) -> tuple[str, str, tuple[int, int]]:
         """(the manifest's file, its colour space, (height, width)) of the map of parameter ``p``:
         the texture's own file when it can be used as it is, else its values (channels picked, the
