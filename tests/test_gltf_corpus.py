@@ -28,7 +28,8 @@ def remap(src: Path, out: Path, *args: str) -> int:
 
 @pytest.mark.parametrize("target", [PLASTIC, ["cycles:principled"]], ids=["mitsuba3", "cycles"])
 def test_a_transmissive_material_is_refused_naming_the_extension(tmp_path, capsys, target):
-    code = remap(CORPUS / "gltf-AttenuationTest" / "AttenuationTest.glb", tmp_path / "o", "--to", *target)
+    src = CORPUS / "gltf-AttenuationTest" / "AttenuationTest.glb"
+    code = remap(src, tmp_path / "o", "--material", "R2_and_R4_ThicknessFac_1.0", "--to", *target)
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and "KHR_materials_transmission (transmissionFactor 1)" in err[-1]
     assert "Traceback" not in "\n".join(err) and not (tmp_path / "o").exists()

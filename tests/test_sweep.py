@@ -344,3 +344,28 @@ def test_rows_come_back_in_one_order_whatever_order_lines_finish(tmp_path):
     with SweepStore.create_or_open(reversed_db, config().to_dict()) as other:
         other.add(list(reversed(rows)))
         assert [r["key"] for r in other.rows()] == [r["key"] for r in rows]
+
+
+#: set by the test in this process only: a forked worker inherits the new value, a spawned one imports afresh
+_STATE = {"mark": "imported"}
+
+
+def _mark(_: object = None) -> str:
+    return _STATE["mark"]
+
+
+def test_worker_pools_are_spawned_not_forked():
+    """A forked worker inherits the locks the parent's threads held (OpenImageIO's pool, BLAS): a batch run
+    from a long-lived process (the test suite) hung in OpenImageIO's write_scanlines. A spawned worker starts
+    from a fresh import, so it does not see what this process changed after importing."""
+    from matremap.batch import item_executor
+    from matremap.sweep.executors import make_executor
+
+    _STATE["mark"] = "changed in the parent"
+    try:
+        with make_executor(2) as (ex, _):
+            assert ex.submit(_mark).result() == "imported"
+        with item_executor(2, None, None, 2) as (ex, _):
+            assert ex.submit(_mark).result() == "imported"
+    finally:
+        _STATE["mark"] = "imported"

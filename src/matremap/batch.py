@@ -279,6 +279,9 @@ def _worker_init() -> None:
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     sys.stderr = _NotATerminal(sys.stderr)
+    from matremap.sweep.executors import quiet_progress_lock
+
+    quiet_progress_lock()
 
 
 @contextmanager
@@ -297,7 +300,9 @@ def item_executor(
     if workers is not None and workers < 1:
         raise MatremapError(f"--workers must be at least 1, got {workers}")
     n = max(1, min(workers or os.cpu_count() or 1, todo or 1))
-    pool = ProcessPoolExecutor(max_workers=n, initializer=_worker_init)
+    from matremap.sweep.executors import process_pool
+
+    pool = process_pool(n, _worker_init)
     pool.slots = n  # type: ignore[attr-defined]
     try:
         yield pool, f"{n} local worker process{'es' if n > 1 else ''}"

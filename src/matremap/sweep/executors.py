@@ -54,6 +54,7 @@ def _ignore_sigint(parent: int | None = None) -> None:
     PR_SET_PDEATHSIG; a SIGKILLed sweep's workers otherwise waited for work for ever)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
+    quiet_progress_lock()
     if parent is not None and sys.platform.startswith("linux"):
         import ctypes
 
@@ -85,12 +86,35 @@ def make_executor(
     if n == 1:
         yield InlineExecutor(), "1 worker (in process)"
         return
-    pool = ProcessPoolExecutor(max_workers=n, initializer=_ignore_sigint, initargs=(os.getpid(),))
+    pool = process_pool(n, _ignore_sigint, (os.getpid(),))
     pool.slots = n  # type: ignore[attr-defined]  # how many tasks run at once
     try:
         yield pool, f"{n} local worker processes"
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+def quiet_progress_lock() -> None:
+    """Give tqdm a thread lock in a worker: its default lock is a multiprocessing semaphore, which a worker
+    killed on Ctrl-C never releases, and the spawn start method's resource tracker then warns of it on the
+    user's terminal after the one line that says the batch was interrupted."""
+    import threading
+
+    from tqdm import tqdm
+
+    tqdm.set_lock(threading.RLock())
+
+
+def process_pool(n: int, initializer: Callable[..., Any], initargs: tuple[Any, ...] = ()) -> ProcessPoolExecutor:
+    """A pool of ``n`` worker processes *spawned*, not forked: a process that has used OpenImageIO, BLAS or
+    a renderer holds threads and their locks, and a forked child inherits a lock another thread held, for
+    ever (a batch run from a long-lived process hung in OpenImageIO's ``write_scanlines``). Python's own
+    documentation warns against forking a multi-threaded process; ``convert`` spawns for the same reason."""
+    import multiprocessing as mp
+
+    return ProcessPoolExecutor(
+        max_workers=n, mp_context=mp.get_context("spawn"), initializer=initializer, initargs=initargs
+    )
 
 
 def _check_reachable(address: str) -> None:
