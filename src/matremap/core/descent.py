@@ -13,7 +13,8 @@ theory", Numerical Analysis, LNM 630, 1978) on the normal equations, with
   step with rho > 3/4, times 2 for rho < 1/4, times 10 after a step that does not reduce the cost;
 * a step limit per variable (``limit(x)``, e.g. a fraction of the parameter's value): a longer step is
   shortened along its direction, so the first Gauss-Newton step of a curved problem cannot leap across
-  the box (a trust region of box shape);
+  the box (a trust region of box shape, doubled after a shortened step that went well, halved after a
+  rejected one);
 * bounds by projection: a variable on its bound whose gradient points outwards is held for the step, and a
   step is clipped into the box (the model's predicted reduction is taken for the clipped step);
 * MINPACK's stopping rules: the relative reduction of the cost below ``tol`` (``ftol``), a step below
@@ -69,7 +70,7 @@ def descend(
     if np.sqrt(2.0 * cost) < exact:
         return Descent(x, cost, evaluations, "the start matches exactly")
     scale = np.zeros_like(x)
-    lam = 1e-3
+    lam, radius = 1e-3, 1.0
     while True:
         jac = yield from jacobian(x)
         g = jac.T @ r
@@ -87,8 +88,10 @@ def descend(
                 step[free] = np.linalg.solve(hf, -g[free])
             except np.linalg.LinAlgError:
                 step[free] = -g[free] / (lam * d[free] ** 2)
+            shortened = 1.0
             if limit is not None:
-                step *= min(1.0, float(np.min(limit(x) / np.maximum(np.abs(step), 1e-300))))
+                shortened = min(1.0, float(np.min(radius * limit(x) / np.maximum(np.abs(step), 1e-300))))
+                step *= shortened
             x_new = np.clip(x + step, lower, upper)
             step = x_new - x
             small_step = np.linalg.norm(step) <= tol * (tol + np.linalg.norm(x))
@@ -103,6 +106,7 @@ def descend(
             if actual > 0 and rho > 1e-4:
                 x, r, cost_old, cost = x_new, r_new, cost, cost_new
                 lam = max(lam / 10.0, 1e-12) if rho > 0.75 else lam * 2.0 if rho < 0.25 else lam
+                radius = radius * 2.0 if (rho > 0.75 and shortened < 1.0) else radius
                 if np.sqrt(2.0 * cost) < exact:
                     return Descent(x, cost, evaluations, "the images match exactly")
                 if actual <= tol * cost_old:
@@ -113,6 +117,7 @@ def descend(
             if small_step:
                 return Descent(x, cost, evaluations, "xtol: the step vanishes")
             lam *= 10.0
+            radius *= 0.5
             if evaluations >= max_evaluations:
                 return Descent(x, cost, evaluations, "the evaluation limit is reached")
         if evaluations >= max_evaluations:
