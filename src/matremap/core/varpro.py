@@ -146,6 +146,8 @@ def box_lsq(g: np.ndarray, h: np.ndarray, lower: np.ndarray, upper: np.ndarray) 
             return t
     except np.linalg.LinAlgError:
         pass
+    if k == 2:  # the unconstrained minimum is outside: one unknown sits on a bound, the other is clipped
+        return _box_lsq_2(g, h, lower, upper)
     best, best_value = np.clip(np.zeros(k), lower, upper), np.inf
     for state in np.ndindex(*([3] * k)):
         s = np.array(state, dtype=int)
@@ -160,6 +162,23 @@ def box_lsq(g: np.ndarray, h: np.ndarray, lower: np.ndarray, upper: np.ndarray) 
         value = 0.5 * t @ g @ t - h @ t
         if value < best_value:
             best, best_value = np.clip(t, lower, upper), value
+    return best
+
+
+def _box_lsq_2(g: np.ndarray, h: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """:func:`box_lsq` for two unknowns whose unconstrained minimum is outside the box: the minimum has an
+    unknown on a bound, and given it the other's minimum is its 1-D minimum clipped (a convex quadratic)."""
+    best, best_value = np.clip(np.zeros(2), lower, upper), np.inf
+    for i in (0, 1):
+        j = 1 - i
+        for bound in (lower[i], upper[i]):
+            t = np.empty(2)
+            t[i] = bound
+            t[j] = (h[j] - g[j, i] * bound) / g[j, j] if g[j, j] > 0 else lower[j]
+            t[j] = min(max(t[j], lower[j]), upper[j])
+            value = 0.5 * t @ g @ t - h @ t
+            if value < best_value:
+                best, best_value = t, value
     return best
 
 
