@@ -14,12 +14,14 @@ Jobs (each prints one JSON line when run as ``--job NAME``):
               [0.4, 0.3, 0.2]) onto ``mitsuba06:roughplastic`` GGX, per strategy: median ms per fit (best of 3),
               renders, render calls, loss;
 ``grid``      the authors' Ward -> AS grid (35 x 23 = 805 points, a superset of their 721 rows) on 2 worker
-              processes: seconds; and its first 4 columns (140 points) in one process, counting renders and
-              render calls per sweep;
+              processes: seconds; and its first 4 columns (140 points) in one process, counting renders, render
+              calls per sweep and CPU time per point (on a shared machine the wall time depends on the others'
+              load; 805 x CPU per point / 2 is what two free cores would take);
 ``mitsuba``   uniform fits onto real Mitsuba 3 (warm renderer): 10 Ward sources onto ``roughconductor`` GGX,
               and the issue's coloured Ward onto ``roughplastic`` GGX;
 ``mitsuba-sweep``  a sweep of ``--mitsuba-points`` Ward points onto Mitsuba 3's ``roughconductor`` GGX, 2 workers;
-``cycles-sweep``   a sweep of ``--cycles-points`` coloured Ward points onto real Cycles ``principled``, 2 workers;
+``cycles-sweep``   a sweep of ``--cycles-points`` coloured Ward points onto real Cycles ``principled`` in one process
+              (Cycles renders with every core), CPU time of both processes (Cycles' threads included);
 ``cycles-frame``   Cycles' time for one 1-spp frame of a sphere at 128^2, 256^2 and 512^2 (the bpy venv): a frame
               of k probe objects costs k frames when the time is per pixel;
 ``readme``    the README main job (``matremap remap examples/bronze --to mitsuba06:pbr --fix distribution=as``),
@@ -48,6 +50,8 @@ COLOURED_WARD = {
     "specularReflectance": 0.06,
     "diffuseReflectance": [0.4, 0.3, 0.2],
 }
+#: CPU seconds of the last sweep, all processes (wall time on a shared machine says little)
+CPU = [0.0]
 JOBS = ("fit", "grid", "mitsuba", "mitsuba-sweep", "cycles-sweep", "cycles-frame", "readme")
 
 #: Cycles' cost of one frame by its size (bpy venv): whether several probe objects per frame could pay
@@ -158,8 +162,14 @@ def job_fit() -> dict[str, Any]:
     return out
 
 
+def cpu_seconds() -> float:
+    """CPU seconds used so far by this process (all its threads)."""
+    return time.process_time()
+
+
 def sweep_seconds(source, target, fix, grid_text, workers, scene, target_renderer=None) -> tuple[float, list]:
-    """Seconds of a fresh sweep and its rows."""
+    """Seconds of a fresh sweep and its rows (and, in ``CPU[0]``, the CPU seconds this process used: all of the
+    sweep's with one worker, which runs in this process)."""
     from matremap.sweep.executors import make_executor
     from matremap.sweep.grid import parse_grid
     from matremap.sweep.run import SweepConfig, run_sweep
@@ -169,10 +179,11 @@ def sweep_seconds(source, target, fix, grid_text, workers, scene, target_rendere
     grid = parse_grid(grid_text, source.spec)
     with tempfile.TemporaryDirectory() as tmp:
         db = Path(tmp) / "s.sqlite"
-        t = time.perf_counter()
+        t, c = time.perf_counter(), cpu_seconds()
         with make_executor(workers=workers) as (ex, _):
             summary = run_sweep(config, grid, str(db), ex, in_flight=2 * workers)
         seconds = time.perf_counter() - t
+        CPU[0] = cpu_seconds() - c
         assert summary.failed == 0, summary
         return seconds, SweepStore.open(db).rows()
 
@@ -193,6 +204,8 @@ def job_grid() -> dict[str, Any]:
         "authors' grid (805 points), 2 workers": {"s": seconds, "ms/point": 1000 * seconds / len(rows)},
         "its first 4 columns (140 points), 1 process": {
             "s": inline,
+            "cpu ms/point": 1000 * CPU[0] / len(small_rows),
+            "805 points on 2 free cores s": len(rows) * CPU[0] / len(small_rows) / 2,
             "renders/fit": sum(r["renders"] for r in small_rows) / len(small_rows),
             "render calls": stats["calls"],
             "images drawn": stats["images"],
@@ -235,10 +248,22 @@ def job_real_sweep(kind: str, points: int) -> dict[str, Any]:
     columns = max(1, points // 40) if points >= 40 else 1
     rows_n = points // columns
     grid = f"alpha=0.02:0.9:{rows_n},specularReflectance=0.02:0.25:{columns}"
-    seconds, rows = sweep_seconds(source, target, fix, grid, 2, Scene(resolution=128), renderer)
+    # Cycles renders with both cores in one worker process: one sweep process, its bpy worker's CPU counted
+    workers = 2 if kind == "mitsuba" else 1
+    c = cpu_seconds()
+    seconds, rows = sweep_seconds(source, target, fix, grid, workers, Scene(resolution=128), renderer)
+    cpu = {}
+    if kind == "cycles":  # this process and its bpy worker (Cycles' threads included)
+        import psutil
+
+        from matremap.renderers import get_renderer
+
+        worker = psutil.Process(get_renderer("cycles").pid).cpu_times()
+        cpu = {"cpu s (with bpy)": cpu_seconds() - c + worker.user + worker.system}
     return {
-        f"{kind} sweep ({len(rows)} points), 2 workers": {
+        f"{kind} sweep ({len(rows)} points), {workers} worker(s)": {
             "s": seconds,
+            **cpu,
             "s/point": seconds / len(rows),
             "1,000 points s": 1000 * seconds / len(rows),
             "renders/fit": sum(r["renders"] for r in rows) / len(rows),

@@ -362,6 +362,7 @@ class _Projected(_Problem):
         ch = self.goal.shape[1]
         self.lo = np.array([p.bounds[0] for p in self.linear], dtype=float)
         self.hi = np.array([min(1.0, p.bounds[1]) for p in self.linear], dtype=float)
+        self.hi = np.where(self.hi > self.lo, self.hi, self.lo + 1.0)  # a basis step of 1 above the lower bound
         self.unit_span = bool(np.all(self.hi - self.lo == 1.0))
         self.theta_lower = np.array([p.bounds[0] for p in self.linear], dtype=float)
         self.theta_upper = np.array([p.bounds[1] for p in self.linear], dtype=float)

@@ -158,7 +158,11 @@ def _answer(
         for i in members:  # find whose request fails, render the others
             out.update(_answer([i], waiting, stats, render))
         return out
-    return {i: pixels[rows] for i, rows in where.items()}
+    out = {}
+    for i, rows in where.items():  # a view when a request's images are consecutive (no copy)
+        consecutive = rows == list(range(rows[0], rows[0] + len(rows))) if rows else True
+        out[i] = pixels[rows[0] : rows[0] + len(rows)] if (rows and consecutive) else pixels[rows]
+    return out
 
 
 __all__ = ["RenderRequest", "Stats", "Steps", "lockstep", "material_key", "run"]
