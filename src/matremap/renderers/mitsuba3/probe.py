@@ -32,7 +32,7 @@ faster here (centre rays; 8x at 256 spp).
 Batches (:meth:`Mitsuba3Renderer.render_pixels`, what fits call): in a JIT variant no image is rendered;
 Mitsuba's own probe rays, intersections and light samples are made once per scene and light, and each
 material's BSDF is evaluated over all of them with ``BSDF.eval`` by one reused compiled kernel: equal to
-the rendered pixels, ~0.2-2 ms per material at 128^2 instead of ~20 ms. ``roughplastic`` is the exception
+the rendered pixels, ~0.2 ms per material at 128^2 instead of 6-20 ms. ``roughplastic`` is the exception
 in cost: Mitsuba rebuilds its rough-transmittance table whenever ``alpha`` or ``eta`` changes (~25-35 ms).
 
 The models and their parameters are in :mod:`matremap.dialects.mitsuba3`.
