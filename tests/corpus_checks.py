@@ -431,6 +431,8 @@ def mitsuba_loads(path: str | os.PathLike) -> tuple[bool, str]:
 
 def _mi_value(v: Any) -> np.ndarray:
     a = np.array(v, dtype=np.float64)
+    if a.ndim == 2 and a.shape[1] == 1:  # a JIT variant's Color3f of width 1 is [3, 1]
+        a = a[:, 0]
     if a.ndim == 0:
         a = np.full(3, float(a))
     if a.ndim == 1:

@@ -117,3 +117,21 @@ def test_separable_reaches_the_joint_optimum_at_about_two_stage_cost(source, tar
     for p in separable.target.spec.params:  # every value inside the renderer's bounds
         v = separable.target.values[p.name]
         assert np.all(v >= p.bounds[0]) and np.all(v <= p.bounds[1])
+
+
+@pytest.mark.parametrize("k", [1, 2, 3])
+def test_the_small_box_constrained_solve_is_exact(k):
+    """varpro.box_lsq (the per-channel affine solve) against SciPy's bounded least squares, most optima
+    on a bound."""
+    from scipy.optimize import lsq_linear
+
+    from matremap.core.varpro import box_lsq
+
+    rng = np.random.default_rng(k)
+    lower, upper = np.zeros(k), np.ones(k)
+    for _ in range(200):
+        a, b = rng.normal(size=(12, k)), 2.0 * rng.normal(size=12)
+        ours = box_lsq(a.T @ a, a.T @ b, lower, upper)
+        theirs = lsq_linear(a, b, bounds=(lower, upper), method="bvls", tol=1e-12).x
+        assert np.linalg.norm(a @ ours - b) <= np.linalg.norm(a @ theirs - b) + 1e-9
+        np.testing.assert_allclose(ours, theirs, atol=1e-6)

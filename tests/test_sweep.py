@@ -153,7 +153,7 @@ def test_a_failing_point_is_recorded_and_the_sweep_goes_on(tmp_path):
     import matremap.sweep.run as sweep_mod
 
     grid = parse_grid("alpha=0.1:0.2:2", SOURCE.spec)
-    real_fit = sweep_mod.fit
+    real_fit = sweep_mod.fit_steps
     calls = []
 
     def flaky(*a, **kw):
@@ -162,11 +162,11 @@ def test_a_failing_point_is_recorded_and_the_sweep_goes_on(tmp_path):
             raise RuntimeError("renderer crashed")
         return real_fit(*a, **kw)
 
-    sweep_mod.fit = flaky
+    sweep_mod.fit_steps = flaky
     try:
         s = run_sweep(config(), grid, str(tmp_path / "f.sqlite"), InlineExecutor())
     finally:
-        sweep_mod.fit = real_fit
+        sweep_mod.fit_steps = real_fit
     assert (s.done, s.failed) == (2, 1)
     failed = SweepStore.open(tmp_path / "f.sqlite").rows("failed")
     assert "renderer crashed" in failed[0]["message"]
@@ -303,13 +303,13 @@ def test_failed_points_are_retried_and_environment_failures_never_stored(tmp_pat
 
     grid = parse_grid("alpha=0.1:0.2:2", SOURCE.spec)
     db = str(tmp_path / "f.sqlite")
-    real_fit = sweep_mod.fit
-    sweep_mod.fit = lambda *a, **kw: (_ for _ in ()).throw(RendererUnavailable("Mitsuba 3 is not installed"))
+    real_fit = sweep_mod.fit_steps
+    sweep_mod.fit_steps = lambda *a, **kw: (_ for _ in ()).throw(RendererUnavailable("Mitsuba 3 is not installed"))
     try:
         with pytest.raises(RendererUnavailable, match="not installed"):
             run_sweep(config(), grid, db, InlineExecutor())
     finally:
-        sweep_mod.fit = real_fit
+        sweep_mod.fit_steps = real_fit
     assert SweepStore.open(db).rows() == []  # nothing cached for the points it could not fit
     calls = []
 
@@ -319,11 +319,11 @@ def test_failed_points_are_retried_and_environment_failures_never_stored(tmp_pat
             raise RuntimeError("a numerical failure")
         return real_fit(*a, **kw)
 
-    sweep_mod.fit = flaky
+    sweep_mod.fit_steps = flaky
     try:
         first = run_sweep(config(), grid, db, InlineExecutor())
     finally:
-        sweep_mod.fit = real_fit
+        sweep_mod.fit_steps = real_fit
     assert (first.done, first.failed) == (2, 1)
     again = run_sweep(config(), grid, db, InlineExecutor())  # the retry fits the failed point only
     assert (again.done, again.failed) == (1, 0)

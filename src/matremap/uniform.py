@@ -4,6 +4,7 @@
 handed and never looks one up. This façade is where names become renderers: ``None`` means the
 model's own renderer (:func:`~matremap.renderers.registry.renderer_for`), so
 ``fit(mitsuba3_material, "mitsuba06:ward")`` renders the source in Mitsuba 3 without being told.
+:func:`fit_steps` is the same fit in ask/tell form (for fits in lockstep), and
 :func:`comparison_strip` draws the source | target | difference picture of a result.
 """
 
@@ -15,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from matremap.core import fit as core_fit
+from matremap.core.lockstep import Steps
 from matremap.core.material import Material
 from matremap.core.models import ModelSpec
 from matremap.core.scene import Scene
@@ -55,6 +57,38 @@ def fit(
     return result
 
 
+def fit_steps(
+    source: Material,
+    target_model: str | ModelSpec,
+    strategy: str = "two-stage",
+    scene: Scene | None = None,
+    source_renderer: str | Renderer | None = None,
+    target_renderer: str | Renderer | None = None,
+    *,
+    fix: Mapping[str, Any] | None = None,
+    free: Sequence[str] = (),
+    start: Mapping[str, Any] | None = None,
+    coarse: bool | None = None,
+) -> Steps[core_fit.FitResult]:
+    """:func:`fit` in ask/tell form (:func:`matremap.core.fit.fit_steps`): a generator of render requests for
+    :func:`~matremap.core.lockstep.lockstep`. Renderer names are resolved when it starts."""
+    spec = target_model if isinstance(target_model, ModelSpec) else get_model(target_model)
+    return (
+        yield from core_fit.fit_steps(
+            source,
+            spec,
+            strategy,
+            scene,
+            resolve_renderer(source_renderer, source.model),
+            resolve_renderer(target_renderer, spec.id),
+            fix=fix,
+            free=free,
+            start=start,
+            coarse=coarse,
+        )
+    )
+
+
 def comparison_strip(result: core_fit.FitResult, gap: int = 4, labels: bool = True) -> np.ndarray:
     """[H (+ a caption band), 3W + 2 gap, 3] linear image of a fit: source (irradiance-matched), target,
     and |target - source| scaled so that 10 % of the source's peak reads as the peak; exposure puts the
@@ -91,4 +125,4 @@ def caption_band(width: int, captions: list[tuple[int, int, str]], height: int =
     return (rgba**2.2).astype(np.float32)  # linear, as the strip; written sRGB-encoded
 
 
-__all__ = ["caption_band", "comparison_strip", "fit"]
+__all__ = ["caption_band", "comparison_strip", "fit", "fit_steps"]

@@ -1,17 +1,22 @@
 """Uniform remapping: fit a target model's parameters so that its render matches a source render.
 
 Sztrajman et al. 2019, §3: render the probe scene with the source material, then minimise the
-L2 difference of linear HDR images over the target's parameters with SciPy's trust-region
-reflective least squares (``least_squares(method="trf")``) inside the parameter bounds. The
-target renderer is a black box; the Jacobian is taken by forward differences, all columns in one
-batched render.
+L2 difference of linear HDR images over the target's parameters inside their bounds. The paper used
+SciPy's trust-region reflective least squares; here a bounded Levenberg-Marquardt in ask/tell form
+(:mod:`matremap.core.descent`) reaches the same minima (the authors' table reproduces to the same
+0.056 %) without an SVD of the Jacobian per iteration, and lets a fit be suspended between renders:
+:func:`fit_steps` is a fit as a generator of render requests, so that a sweep runs many fits in lockstep
+(:mod:`matremap.core.lockstep`); :func:`fit` drives one. The target renderer is a black box; the Jacobian
+is taken by forward differences, all columns in one batched render. The parameters the image is affine in
+(:attr:`~matremap.core.models.ModelSpec.affine`) are solved in closed form for every trial of the others
+(variable projection, :mod:`matremap.core.varpro`) in every stage of every strategy but ``simple``.
 
 Strategies:
 
 ``simple``       all free parameters at once against the full render;
 ``two-stage``    diffuse parameters against the diffuse-only render and specular parameters
                  (roles specular, roughness, fresnel) against the specular-only render, merged
-                 (the robust default);
+                 (the robust default: it never trades a lobe for the other, so sweeps stay smooth);
 ``three-stage``  two-stage, then all parameters jointly from that start.
 ``separable``    all free parameters against the full render, the ones the image is affine in
                  (:attr:`~matremap.core.models.ModelSpec.affine`) solved in closed form for each trial
@@ -31,13 +36,15 @@ from typing import Any, cast
 import numpy as np
 
 from matremap.core import varpro
-from matremap.core.calibrate import irradiance_scale
-from matremap.core.material import Material
+from matremap.core.calibrate import irradiance_ratio, same_units
+from matremap.core.descent import Descent, descend
+from matremap.core.lockstep import RenderRequest, Steps, run
+from matremap.core.material import Material, white_reference
 from matremap.core.models import SPECULAR_ROLES, ModelSpec, ParamSpec
 from matremap.core.scene import Scene
 from matremap.dialects import get_model
 from matremap.errors import MatremapError
-from matremap.renderers.base import Renderer, render_pixels
+from matremap.renderers.base import Renderer
 
 STRATEGIES = ("simple", "two-stage", "three-stage", "separable")
 DIFFUSE, SPECULAR, FULL = "diffuse", "specular", "full"
@@ -52,8 +59,10 @@ ABSENT = 1e-9
 EXACT = 1e-6
 #: cap on residual evaluations per stage (a converging fit needs 3-10; more means it is lost)
 MAX_EVALUATIONS = 50
-#: least_squares ftol / xtol / gtol
+#: the descent's ftol / xtol / gtol (:func:`matremap.core.descent.descend`)
 FIT_TOL = 1e-4
+#: the longest step of a variable in one descent step, as a fraction of its scale
+STEP_LIMIT = 0.5
 
 
 @dataclass
@@ -109,23 +118,20 @@ class FitResult:
 
 
 class _Counter:
-    """Renders through a renderer and counts every image made."""
+    """Asks for renders (a :class:`~matremap.core.lockstep.RenderRequest` per batch) and counts every image."""
 
     def __init__(self, scene: Scene) -> None:
         self.scene = scene
         self.indices = scene.pixel_indices()
         self.images = 0
 
-    def pixels(self, renderer: Renderer, materials: Sequence[Material]) -> np.ndarray:
-        """Sphere pixels [N, P, 3] as float64."""
+    def pixels(self, renderer: Renderer, materials: Sequence[Material]) -> Steps[np.ndarray]:
+        """Sphere pixels [N, P, 3] as float64 (a generator: ``yield from``)."""
         if not materials:
             return np.zeros((0, self.indices.size, 3))
         self.images += len(materials)
-        return render_pixels(renderer, list(materials), self.scene).astype(np.float64)
-
-    def images_of(self, renderer: Renderer, materials: Sequence[Material]) -> np.ndarray:
-        self.images += len(materials)
-        return renderer.render(list(materials), self.scene)
+        pix = yield RenderRequest(renderer, tuple(materials), self.scene)
+        return np.asarray(pix, dtype=np.float64)
 
 
 def part(material: Material, which: str) -> Material | None:
@@ -141,12 +147,22 @@ def part(material: Material, which: str) -> Material | None:
     return Material(material.model, values, material.options)
 
 
+def fd_step(p: ParamSpec, x: np.ndarray) -> np.ndarray:
+    """The forward-difference step of a parameter at ``x`` (its encoded value): :data:`FD_STEP` relative,
+    and never below :data:`FD_STEP` of the parameter's scale (1 for a log-encoded one, else its range
+    capped at 1, so an albedo at 0 or a roughness at 0.001 still moves the image above float32 noise)."""
+    lo, hi = p.bounds
+    scale = 1.0 if p.log else min(hi - lo, 1.0)
+    return FD_STEP * np.maximum(np.abs(x), 1e-2 * scale if not p.log else scale)
+
+
 class _Problem:
     """Least-squares problem over the free parameters of a target template.
 
     In ``grey`` mode (the source image has equal RGB channels and every target value is grey)
     each RGB parameter is one grey variable and only the first image channel is compared: the
-    same optimum at a fraction of the cost.
+    same optimum at a fraction of the cost. ``residual``, ``jacobian`` and ``solve`` are generators
+    of render requests (:mod:`matremap.core.lockstep`).
     """
 
     def __init__(
@@ -191,7 +207,7 @@ class _Problem:
             v = m.values[p.name]
             v = np.array([v.mean()]) if w < p.channels else v
             parts.append(np.log(np.maximum(v, 1e-300)) if p.log else v)
-        return np.clip(np.concatenate(parts), self.lower, self.upper)
+        return np.clip(np.concatenate(parts), self.lower, self.upper) if parts else np.zeros(0)
 
     def decode(self, x: np.ndarray) -> Material:
         values = dict(self.template.values)
@@ -200,50 +216,58 @@ class _Problem:
             values[p.name] = np.broadcast_to(np.clip(v, *p.bounds), (p.channels,)).copy()
         return Material(self.template.model, values, self.template.options)
 
-    def _pixels(self, xs: Sequence[np.ndarray]) -> np.ndarray:
+    def _pixels(self, xs: Sequence[np.ndarray]) -> Steps[np.ndarray]:
         # a stage only fits a part the target has, so no part is None here
         mats = cast("list[Material]", [part(self.decode(x), self.which) for x in xs])
-        pix = self.counter.pixels(self.renderer, mats)
+        pix = yield from self.counter.pixels(self.renderer, mats)
         return pix[:, :, :1] if self.grey else pix
 
-    def residual(self, x: np.ndarray) -> np.ndarray:
+    def residual(self, x: np.ndarray) -> Steps[np.ndarray]:
         if self._last is not None and np.array_equal(self._last[0], x):
             return self._last[1]
         self.evaluations += 1
-        r = ((self._pixels([x])[0] - self.goal) / self.norm).ravel()
+        img = yield from self._pixels([x])
+        r = ((img[0] - self.goal) / self.norm).ravel()
         self._last = (x.copy(), r)
         return r
 
-    def jacobian(self, x: np.ndarray) -> np.ndarray:
-        if self._last is not None and np.array_equal(self._last[0], x):
-            r0 = self._last[1]
-        else:
-            r0 = self.residual(x)
-        # one perturbed render per scalar variable; one per RGB parameter when the model's
-        # channels are independent (channel c of the image depends on channel c only)
+    def perturbations(self, x: np.ndarray) -> list[tuple[np.ndarray, list[int], np.ndarray]]:
+        """The points of a forward-difference Jacobian at ``x``: (point, variables moved, their steps).
+        One per scalar variable; one per RGB parameter when the model's channels are independent
+        (channel c of the image depends on channel c only)."""
         separable = self.template.spec.channel_separable
         columns: list[tuple[np.ndarray, list[int], np.ndarray]] = []
         for p, s in zip(self.free, self.slices, strict=True):
             idx = list(range(s.start, s.stop))
             groups = [idx] if (separable and len(idx) == 3) else [[i] for i in idx]
             for g in groups:
-                h = FD_STEP * np.maximum(np.abs(x[g]), 1.0 if p.log else 1e-2)
+                h = fd_step(p, x[g])
                 h = np.where(x[g] + h > self.upper[g], -h, h)
                 xp = x.copy()
                 xp[g] += h
                 columns.append((xp, g, h))
-        pix = self._pixels([c[0] for c in columns])
-        jac = np.zeros((r0.size, self.size))
-        for (_, g, h), img in zip(columns, pix, strict=True):
-            diff = ((img - self.goal) / self.norm).ravel() - r0
+        return columns
+
+    def columns(self, r0: np.ndarray, columns: list, images: np.ndarray) -> np.ndarray:
+        """The Jacobian [residuals, variables] from the renders of :meth:`perturbations` (built by
+        columns, returned as a Fortran-ordered view)."""
+        jac_t = np.zeros((self.size, r0.size))
+        diffs = (images - self.goal).reshape(len(columns), -1) * (1.0 / self.norm) - r0
+        for (_, g, h), diff in zip(columns, diffs, strict=True):
             if len(g) == 1:
-                jac[:, g[0]] = diff / h[0]
+                jac_t[g[0]] = diff / h[0]
             else:  # an RGB parameter perturbed at once: channel k of the image is its column k
                 for k, var in enumerate(g):
-                    jac[k::3, var] = diff[k::3] / h[k]
-        return jac
+                    jac_t[var, k::3] = diff[k::3] / h[k]
+        return jac_t.T
 
-    def initial_guess(self, x0: np.ndarray) -> np.ndarray:
+    def jacobian(self, x: np.ndarray) -> Steps[np.ndarray]:
+        r0 = yield from self.residual(x)
+        columns = self.perturbations(x)
+        images = yield from self._pixels([c[0] for c in columns])
+        return self.columns(r0, columns, images)
+
+    def initial_guess(self, x0: np.ndarray) -> Steps[np.ndarray]:
         """A start near the optimum, from one batched render: a few values of the first roughness
         parameter are tried, and the parameters the image scales with (albedos, F0) are multiplied
         by the least-squares intensity ratio of the best candidate."""
@@ -259,7 +283,8 @@ class _Problem:
         if rough is None and not linear:
             return x0
         best, best_err, best_k = x0, np.inf, 1.0
-        for xc, img in zip(candidates, self._pixels(candidates), strict=True):
+        images = yield from self._pixels(candidates)
+        for xc, img in zip(candidates, images, strict=True):
             tt = float(np.sum(img * img))
             k = float(np.sum(img * self.goal)) / tt if (linear and tt > 0) else 1.0
             k = k if k > 0 else 1.0
@@ -272,46 +297,54 @@ class _Problem:
             x[sl] = x[sl] + np.log(best_k) if p.log else x[sl] * best_k
         return np.clip(x, self.lower, self.upper)
 
-    def solve(self, start: Material, coarse: bool = True) -> tuple[Material, Any]:
+    def solve(self, start: Material, coarse: bool = True) -> Steps[tuple[Material, Descent]]:
         x0 = self.encode(start)
-        # a start on a bound (e.g. a diffuse albedo of 0) stalls the trust region: move inside
+        # a start on a bound (e.g. a diffuse albedo of 0) stalls the descent: move inside
         span = np.minimum(self.upper - self.lower, 1.0)
         x0 = np.where((x0 <= self.lower) | (x0 >= self.upper), self.lower + 0.5 * span, x0)
         if coarse:
-            x0 = self.initial_guess(x0)
+            x0 = yield from self.initial_guess(x0)
             x0 = np.where((x0 <= self.lower) | (x0 >= self.upper), self.lower + 0.5 * span, x0)
-            # the start may already match to float32 precision (e.g. one Lambertian onto another):
-            # nothing left to descend
-            r0 = self.residual(x0)
-            if float(np.sqrt(r0 @ r0)) < EXACT:
-                return self.result(x0), _Solved(x0, 0.5 * float(r0 @ r0), "the start matches the source exactly")
-        from scipy.optimize import least_squares  # on first use: ~0.8 s the command line need not pay
-
-        sol = least_squares(
+        sol = yield from descend(
             self.residual,
+            self.jacobian,
             x0,
-            jac=self.jacobian,
-            bounds=(self.lower, self.upper),
-            method="trf",
-            x_scale="jac",
-            ftol=FIT_TOL,
-            xtol=FIT_TOL,
-            gtol=FIT_TOL,
-            max_nfev=MAX_EVALUATIONS,
+            self.lower,
+            self.upper,
+            tol=FIT_TOL,
+            max_evaluations=MAX_EVALUATIONS,
+            exact=EXACT,
+            limit=self.step_limit,
         )
-        return self.result(sol.x), sol
+        result = yield from self.result(sol.x)
+        return result, sol
 
-    def result(self, x: np.ndarray) -> Material:
+    def step_limit(self, x: np.ndarray) -> np.ndarray:
+        """The longest step of each variable at ``x`` in one descent step: :data:`STEP_LIMIT` of its value,
+        and at least that fraction of a tenth of its scale (its range capped at 1; 1 for a log-encoded
+        variable, which then moves by at most a factor e^0.5)."""
+        out = np.empty(self.size)
+        for p, s in zip(self.free, self.slices, strict=True):
+            lo, hi = p.bounds
+            out[s] = STEP_LIMIT * (1.0 if p.log else np.maximum(np.abs(x[s]), 0.1 * min(hi - lo, 1.0)))
+        return out
+
+    def result(self, x: np.ndarray) -> Steps[Material]:
         """The material of a solution ``x``."""
         return self.decode(x)
+        yield  # a generator, as the projected problem's (which may render)
 
 
 class _Projected(_Problem):
     """A stage over the nonlinear parameters with the affine ones solved in closed form at every trial
-    (variable projection, :mod:`matremap.core.varpro`): each evaluation renders the basis (the affine
-    parameters at their lower bounds, and each one at 1), solves them in the box (and the model's sum
-    limit) and returns the residual of that optimum; the Jacobian is Kaufman's, one render per
-    nonlinear variable at the solved values."""
+    (variable projection, :mod:`matremap.core.varpro`).
+
+    Each trial renders the basis: the image with the affine parameters at their lower bounds and with
+    each one at 1. When the model's channels are independent and every other value is grey, the basis
+    images are grey too, so they are *packed* into the channels of one RGB render (affine parameter j at 1
+    in channel j + 1 only, everything at its lower bound in channel 0): one render per trial instead of
+    1 + L. The Jacobian is Kaufman's (the derivative at the solved values, projected off the free affine
+    directions), one render per nonlinear variable (packed as well)."""
 
     def __init__(
         self,
@@ -327,74 +360,136 @@ class _Projected(_Problem):
         super().__init__(template, nonlinear, which, goal, renderer, counter, grey)
         self.linear = list(linear)
         ch = self.goal.shape[1]
+        self.lo = np.array([p.bounds[0] for p in self.linear], dtype=float)
+        self.hi = np.array([min(1.0, p.bounds[1]) for p in self.linear], dtype=float)
+        self.hi = np.where(self.hi > self.lo, self.hi, self.lo + 1.0)  # a basis step of 1 above the lower bound
+        self.unit_span = bool(np.all(self.hi - self.lo == 1.0))
+        self.theta_lower = np.array([p.bounds[0] for p in self.linear], dtype=float)
+        self.theta_upper = np.array([p.bounds[1] for p in self.linear], dtype=float)
+        spec = template.spec
+        limit = spec.affine_sum_limit
+        # channel by channel: every affine parameter has a value per image channel, no sum across them
+        self.by_channel = spec.channel_separable and limit is None and all(ch == 1 or p.channels == 3 for p in linear)
+        self.packed = self.by_channel and self._grey_basis() and 1 + len(linear) <= 3
         self.layout = varpro.unknowns([p.channels for p in self.linear], ch)
-        self.theta_lower = np.array([self.linear[u.param].bounds[0] for u in self.layout])
-        self.theta_upper = np.array([self.linear[u.param].bounds[1] for u in self.layout])
-        limit = template.spec.affine_sum_limit
         self.sums = varpro.sum_rows(self.layout, ch) if limit is not None else None
         self.limit = limit
-        self._solved: tuple[np.ndarray, np.ndarray, varpro.AffineSolution] | None = None
+        self._solved: tuple[np.ndarray, np.ndarray, Any] | None = None
 
-    def with_theta(self, m: Material, theta: np.ndarray) -> Material:
-        """``m`` with the affine parameters at ``theta`` (in the layout of :mod:`varpro`)."""
+    def _grey_basis(self) -> bool:
+        """Whether every basis image is grey: each value other than the affine ones grey, and the
+        nonlinear parameters staying grey (scalars, or one grey variable in grey mode)."""
+        low = part(self._at(self.template, list(self.lo)), self.which)
+        if low is None:
+            return False
+        names = {p.name for p in self.linear}
+        grey_values = all(np.all(v == v[0]) for k, v in low.values.items() if k not in names)
+        return grey_values and all(p.channels == 1 or self.grey for p in self.free)
+
+    def with_theta(self, m: Material, theta: Any) -> Material:
+        """``m`` with the affine parameters at ``theta`` (a [L, channels] array, or the layout of
+        :mod:`varpro`)."""
         values = dict(m.values)
         for j, p in enumerate(self.linear):
-            parts = [theta[k] for k, u in enumerate(self.layout) if u.param == j]
-            values[p.name] = np.broadcast_to(np.array(parts, dtype=float), (p.channels,)).copy()
+            if isinstance(theta, np.ndarray) and theta.ndim == 2:
+                parts = theta[j]
+            else:
+                parts = np.array([theta[k] for k, u in enumerate(self.layout) if u.param == j], dtype=float)
+            values[p.name] = np.broadcast_to(np.clip(parts, *p.bounds), (p.channels,)).copy()
         return Material(m.model, values, m.options)
 
-    def _at(self, m: Material, values: Sequence[float]) -> Material:
+    def _at(self, m: Material, values: Sequence[Any]) -> Material:
         v = dict(m.values)
         for p, x in zip(self.linear, values, strict=True):
-            v[p.name] = np.full(p.channels, x)
+            v[p.name] = np.broadcast_to(np.asarray(x, dtype=float), (p.channels,)).copy()
         return Material(m.model, v, m.options)
 
-    def _render(self, materials: Sequence[Material]) -> np.ndarray:
+    def basis_materials(self, m: Material) -> list[Material]:
+        """The renders of the basis at ``m``'s nonlinear values (see the class docstring)."""
+        lo, hi, n = self.lo, self.hi, len(self.linear)
+        if self.packed:
+            values = [np.array([lo[j]] * 3) for j in range(n)]
+            for j in range(n):
+                values[j][j + 1] = hi[j]
+            return [self._at(m, values)]
+        return [self._at(m, list(lo))] + [self._at(m, [hi[j] if i == j else lo[i] for i in range(n)]) for j in range(n)]
+
+    def _render(self, materials: Sequence[Material]) -> Steps[np.ndarray]:
         mats = cast("list[Material]", [part(m, self.which) for m in materials])
-        pix = self.counter.pixels(self.renderer, mats)
-        return pix[:, :, :1] if self.grey else pix
+        pix = yield from self.counter.pixels(self.renderer, mats)
+        return pix[:, :, :1] if (self.grey and not self.packed) else pix
 
-    def solve_theta(self, xs: Sequence[np.ndarray]) -> list[tuple[np.ndarray, varpro.AffineSolution]]:
-        """For each trial ``x``: the residual at the affine optimum, and that optimum (one batched render
-        of 1 + L images per trial)."""
-        lo = [p.bounds[0] for p in self.linear]
-        hi = [min(1.0, p.bounds[1]) for p in self.linear]
-        mats = []
-        for x in xs:
-            m = self.decode(x)
-            mats.append(self._at(m, lo))
-            mats += [self._at(m, [hi[j] if i == j else lo[i] for i in range(len(lo))]) for j in range(len(lo))]
-        pix = self._render(mats).reshape(len(xs), 1 + len(lo), *self.goal.shape)
-        out = []
-        for img in pix:
-            basis = np.stack([(img[1 + j] - img[0]) / (hi[j] - lo[j]) for j in range(len(lo))])
-            offset = img[0] - np.tensordot(np.array(lo), basis, axes=1)
-            a = varpro.design(basis, self.layout)
-            b = (self.goal - offset).ravel()
-            sol = varpro.solve(a, b, self.theta_lower, self.theta_upper, self.sums, self.limit)
-            out.append((((a @ sol.theta) - b) / self.norm, sol))
-        return out
+    def basis(self, images: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The offset (all affine at their lower bounds) [P, ch] and the basis [L, P, ch] of one trial's
+        renders ([L, P, 1] when packed: grey, the same in every channel)."""
+        n = len(self.linear)
+        if self.packed:  # the offset [P, 1] broadcasts over the channels
+            img = images[0]
+            base = img[:, :1]
+            b = (img[:, 1 : 1 + n] - base).T[:, :, None]
+        else:
+            base = images[0]
+            b = images[1 : 1 + n] - base
+        if self.unit_span:
+            return base, b
+        return base, b / (self.hi - self.lo)[:, None, None]
 
-    def residual(self, x: np.ndarray) -> np.ndarray:
+    def offset(self, base: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """The image with every affine parameter at 0, from a trial's offset and basis."""
+        return base - varpro.combine_channels(np.repeat(self.lo[:, None], base.shape[1], axis=1), b)
+
+    def affine_fit(self, base: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, Any]:
+        """The residual at the affine optimum of one trial, and that optimum."""
+        offset = self.offset(base, b) if np.any(self.lo) else base
+        target = self.goal - offset
+        if self.by_channel:
+            by_channel = varpro.solve_channels(b, target, self.theta_lower, self.theta_upper)
+            image = offset + varpro.combine_channels(by_channel.theta, b)
+            return ((image - self.goal) * (1.0 / self.norm)).ravel(), by_channel
+        a = varpro.design(b, self.layout)
+        rhs = target.ravel()
+        lower = np.array([self.theta_lower[u.param] for u in self.layout])
+        upper = np.array([self.theta_upper[u.param] for u in self.layout])
+        sol = varpro.solve(a, rhs, lower, upper, self.sums, self.limit)
+        return ((a @ sol.theta) - rhs) / self.norm, sol
+
+    def solve_theta(self, xs: Sequence[np.ndarray]) -> Steps[list[tuple[np.ndarray, Any]]]:
+        """For each trial ``x``: the residual at the affine optimum, and that optimum (one batched render)."""
+        per = len(self.basis_materials(self.template))
+        mats = [m for x in xs for m in self.basis_materials(self.decode(x))]
+        pix = yield from self._render(mats)
+        return [self.affine_fit(*self.basis(pix[i * per : (i + 1) * per])) for i in range(len(xs))]
+
+    def residual(self, x: np.ndarray) -> Steps[np.ndarray]:
         if self._solved is not None and np.array_equal(self._solved[0], x):
             return self._solved[1]
         self.evaluations += 1
-        r, sol = self.solve_theta([x])[0]
+        solved = yield from self.solve_theta([x])
+        r, sol = solved[0]
         self._solved = (x.copy(), r, sol)
         return r
 
-    def jacobian(self, x: np.ndarray) -> np.ndarray:
-        self.residual(x)
+    def jacobian(self, x: np.ndarray) -> Steps[np.ndarray]:
+        yield from self.residual(x)
         assert self._solved is not None
         _, r0, sol = self._solved
-        self.template = self.with_theta(self.template, sol.theta)  # perturb at the solved values
-        try:
-            jac = super().jacobian(x)
-        finally:
-            self._last = None
+        if not self.packed:  # perturbed renders at the solved affine values
+            self.template = self.with_theta(self.template, sol.theta)
+            jac = yield from super().jacobian(x)
+        else:  # perturbed bases, combined with the solved values
+            columns = self.perturbations(x)
+            pix = yield from self._render([m for c in columns for m in self.basis_materials(self.decode(c[0]))])
+            images = []
+            for i in range(len(columns)):
+                base, b = self.basis(pix[i : i + 1])
+                offset = self.offset(base, b) if np.any(self.lo) else base
+                images.append(offset + varpro.combine_channels(sol.theta, b))
+            jac = self.columns(r0, columns, np.stack(images))
+        if self.by_channel:
+            return varpro.project_channels(jac, sol)
         return varpro.project_out(jac, sol.free_basis)
 
-    def initial_guess(self, x0: np.ndarray) -> np.ndarray:
+    def initial_guess(self, x0: np.ndarray) -> Steps[np.ndarray]:
         """The best of a few roughness values, each with its affine optimum (one batched render)."""
         rough = next((i for i, p in enumerate(self.free) if p.role == "roughness"), None)
         if rough is None:
@@ -405,22 +500,14 @@ class _Projected(_Problem):
             xc = x0.copy()
             xc[sl] = np.log(v) if p.log else v
             candidates.append(xc)
-        errors = [float(r @ r) for r, _ in self.solve_theta(candidates)]
+        solved = yield from self.solve_theta(candidates)
+        errors = [float(r @ r) for r, _ in solved]
         return candidates[int(np.argmin(errors))]
 
-    def result(self, x: np.ndarray) -> Material:
-        self.residual(x)
+    def result(self, x: np.ndarray) -> Steps[Material]:
+        yield from self.residual(x)
         assert self._solved is not None
         return self.with_theta(self.decode(x), self._solved[2].theta)
-
-
-@dataclass
-class _Solved:
-    """The part of scipy's OptimizeResult a stage reads, for a stage finished without descent."""
-
-    x: np.ndarray
-    cost: float
-    message: str
 
 
 def roughness_candidates(p: ParamSpec, count: int = 5) -> np.ndarray:
@@ -474,8 +561,40 @@ def fit(
     ``fix`` sets target options or holds parameters at given values; ``free`` also fits parameters
     that are held by default (e.g. ``eta`` of a conductor); ``start`` gives starting values (a warm
     start). ``coarse`` (default: only without ``start``) tries a few roughness values and an
-    intensity ratio in one batched render before the descent.
+    intensity ratio in one batched render before the descent. The fit's renders are made as it asks
+    for them (:func:`fit_steps` is the same fit in ask/tell form, for :func:`~matremap.core.lockstep.lockstep`).
     """
+    return run(
+        fit_steps(
+            source,
+            target_model,
+            strategy,
+            scene,
+            source_renderer,
+            target_renderer,
+            fix=fix,
+            free=free,
+            start=start,
+            coarse=coarse,
+        )
+    )
+
+
+def fit_steps(
+    source: Material,
+    target_model: str | ModelSpec,
+    strategy: str = "two-stage",
+    scene: Scene | None = None,
+    source_renderer: Renderer | None = None,
+    target_renderer: Renderer | None = None,
+    *,
+    fix: Mapping[str, Any] | None = None,
+    free: Sequence[str] = (),
+    start: Mapping[str, Any] | None = None,
+    coarse: bool | None = None,
+) -> Steps[FitResult]:
+    """:func:`fit` as a generator of render requests (:mod:`matremap.core.lockstep`); returns the
+    :class:`FitResult`. The arguments are checked before the first request."""
     t0 = time.perf_counter()
     if strategy not in STRATEGIES:
         raise MatremapError(f"unknown strategy {strategy!r}; choose one of {', '.join(STRATEGIES)}")
@@ -495,20 +614,40 @@ def fit(
     spec, template, free_params = _fit_setup(spec, fix, free, start)
     if coarse is None:
         coarse = not start
+    return (yield from _fit_body(source, spec, strategy, scene, src_r, tgt_r, template, free_params, coarse, t0))
 
+
+def _fit_body(
+    source: Material,
+    spec: ModelSpec,
+    strategy: str,
+    scene: Scene,
+    src_r: Renderer,
+    tgt_r: Renderer,
+    template: Material,
+    free_params: list[ParamSpec],
+    coarse: bool,
+    t0: float,
+) -> Steps[FitResult]:
+    """The renders of a checked fit: irradiance, source goals, the strategy's stages, the final loss."""
     counter = _Counter(scene)
-    scale = irradiance_scale(source, src_r, spec.id, tgt_r, scene, render=lambda r, ms: counter.images_of(r, ms))
+    scale = 1.0
+    if not same_units(source.model, spec.id):
+        white_s, white_t = white_reference(source.spec.family), white_reference(spec.family)
+        src = yield from counter.pixels(src_r, [white_s])
+        tgt = yield from counter.pixels(tgt_r, [white_t])
+        scale = irradiance_ratio(src[0], tgt[0], f"{source.spec.family} in {src_r.name}")
 
-    goals, sharpened, warnings = _resolved_goals(source, strategy, scale, src_r, counter)
+    goals, sharpened, warnings = yield from _resolved_goals(source, strategy, scale, src_r, counter)
     stages: list[StageReport] = []
-    current = _descend(strategy, template, free_params, goals, tgt_r, counter, stages, coarse)
+    current = yield from _descend(strategy, template, free_params, goals, tgt_r, counter, stages, coarse)
 
     # the loss is measured where the fit was made (at the resolvable width for a too-narrow highlight)
-    final = counter.pixels(tgt_r, [current])[0]
+    final = (yield from counter.pixels(tgt_r, [current]))[0]
     goal = goals[FULL]
     loss = float(np.linalg.norm(final - goal) / np.linalg.norm(goal))
     if sharpened is not None:
-        current = _towards_mirror(
+        current = yield from _towards_mirror(
             source, sharpened, current, strategy, scale, src_r, tgt_r, free_params, counter, stages
         )
     return FitResult(
@@ -529,18 +668,18 @@ def fit(
 
 def _resolved_goals(
     source: Material, strategy: str, scale: float, renderer: Renderer, counter: _Counter
-) -> tuple[dict[str, np.ndarray], tuple[Material, float] | None, list[str]]:
+) -> Steps[tuple[dict[str, np.ndarray], tuple[Material, float] | None, list[str]]]:
     """The source goals the fit matches, where the probe resolves them: for a highlight narrower than
     it resolves, those of the widened source (:func:`_below_resolution`, returned too); and the warnings.
     A source that renders black everywhere is refused."""
     scene = counter.scene
-    goals = _source_goals(source, strategy, scale, renderer, counter)
+    goals = yield from _source_goals(source, strategy, scale, renderer, counter)
     which = FULL if strategy in JOINT else SPECULAR
     warnings: list[str] = []
-    sharpened = _below_resolution(source, goals[which], which, renderer, counter)
+    sharpened = yield from _below_resolution(source, goals[which], which, renderer, counter)
     if sharpened is not None:
         warnings.append(_sharpened_note(source, sharpened, scene))
-        goals = _source_goals(sharpened[0], strategy, scale, renderer, counter)
+        goals = yield from _source_goals(sharpened[0], strategy, scale, renderer, counter)
     else:
         warnings += _check_resolution(goals[which], scene)
     if not np.any(goals[FULL] > 0):
@@ -572,12 +711,12 @@ def _fit_setup(
 
 def _source_goals(
     source: Material, strategy: str, scale: float, renderer: Renderer, counter: _Counter
-) -> dict[str, np.ndarray]:
+) -> Steps[dict[str, np.ndarray]]:
     """The irradiance-matched source pixels each stage fits: full, and for the staged strategies the
     diffuse-only and specular-only parts (zero where the source has no such part)."""
     which = [FULL] if strategy in JOINT else [DIFFUSE, SPECULAR, FULL]
     src_parts = [part(source, w) for w in which]
-    rendered = counter.pixels(renderer, [m for m in src_parts if m is not None])
+    rendered = yield from counter.pixels(renderer, [m for m in src_parts if m is not None])
     goals: dict[str, np.ndarray] = {}
     it = iter(rendered)
     for w, m in zip(which, src_parts, strict=True):
@@ -595,7 +734,7 @@ def _descend(
     counter: _Counter,
     stages: list[StageReport],
     coarse: bool,
-) -> Material:
+) -> Steps[Material]:
     """Run the strategy's stages from ``template``: diffuse then specular (two-stage), everything at
     once (simple), or both and then everything (three-stage); each stage appends its report."""
     current = template
@@ -604,26 +743,37 @@ def _descend(
         diffuse_free = [p for p in free_params if p.role == "diffuse"]
         specular_free = [p for p in free_params if p.role in SPECULAR_ROLES]
         for which_part, params in ((DIFFUSE, diffuse_free), (SPECULAR, specular_free)):
-            current = _run_stage(
-                which_part, params, current, goals[which_part], total, renderer, counter, stages, coarse=coarse
+            current = yield from _run_stage(
+                which_part,
+                params,
+                current,
+                goals[which_part],
+                total,
+                renderer,
+                counter,
+                stages,
+                coarse=coarse,
+                project=True,
             )
     if strategy == "separable":
-        return _run_stage(
-            FULL,
-            free_params,
-            current,
-            goals[FULL],
-            1.0,
-            renderer,
-            counter,
-            stages,
-            name="separable",
-            coarse=coarse,
-            project=True,
+        return (
+            yield from _run_stage(
+                FULL,
+                free_params,
+                current,
+                goals[FULL],
+                1.0,
+                renderer,
+                counter,
+                stages,
+                name="separable",
+                coarse=coarse,
+                project=True,
+            )
         )
     if strategy in ("simple", "three-stage"):
         name = "joint" if strategy == "three-stage" else FULL
-        current = _run_stage(
+        current = yield from _run_stage(
             FULL,
             free_params,
             current,
@@ -662,7 +812,7 @@ def highlight_pixels(image: np.ndarray) -> int:
 
 def _below_resolution(
     source: Material, goal: np.ndarray, which: str, renderer: Renderer, counter: _Counter
-) -> tuple[Material, float] | None:
+) -> Steps[tuple[Material, float] | None]:
     """When the source's highlight covers fewer than :data:`MIN_HIGHLIGHT_PIXELS` (a mirror under point
     lights shows none), the source with its lobe widened until the probe resolves it, and the factor by
     which its roughness was raised; None when it is resolved, or when no widening shows a lobe (the
@@ -691,7 +841,7 @@ def _below_resolution(
     parts = [part(m, which) for m in candidates]
     if any(m is None for m in parts):  # no such part to widen (a model without a specular-only render)
         return None
-    images = counter.pixels(renderer, [m for m in parts if m is not None])
+    images = yield from counter.pixels(renderer, [m for m in parts if m is not None])
     for m, w, image in zip(candidates, widths, images, strict=False):
         if highlight_pixels(image) >= MIN_HIGHLIGHT_PIXELS:
             ratio = (value / w) if not rp.log else (w / value) ** 0.5 if value > 0 else 0.0
@@ -710,7 +860,7 @@ def _towards_mirror(
     free_params: list[ParamSpec],
     counter: _Counter,
     stages: list[StageReport],
-) -> Material:
+) -> Steps[Material]:
     """The target fitted at the widened source lobe, extrapolated to the source's own (narrower) lobe.
 
     A second fit, one widening step further, gives the local power law target roughness ~ source
@@ -725,8 +875,8 @@ def _towards_mirror(
     w1 = float(widened.values[rp_s.name][0])
     w2 = w1 / SHARPEN_STEP**2 if rp_s.log else min(w1 * SHARPEN_STEP, rp_s.bounds[1])
     further = widened.with_params({rp_s.name: w2})
-    goals = _source_goals(further, strategy, scale, src_r, counter)
-    second = _descend(strategy, fitted, free_params, goals, tgt_r, counter, stages, coarse=False)
+    goals = yield from _source_goals(further, strategy, scale, src_r, counter)
+    second = yield from _descend(strategy, fitted, free_params, goals, tgt_r, counter, stages, coarse=False)
 
     def width(v: float, log: bool) -> float:  # a roughness-like measure of a lobe's width
         return v**-0.5 if log else v
@@ -780,7 +930,7 @@ def _run_stage(
     name: str | None = None,
     coarse: bool = True,
     project: bool = False,
-) -> Material:
+) -> Steps[Material]:
     """Long: one stage's set-up, its two degenerate cases and its report are read best together.
 
     Fit ``params`` of ``current`` to ``goal`` (the ``which`` part); ``project``: solve the parameters the
@@ -825,11 +975,12 @@ def _run_stage(
         nonlinear = [p for p in params if p.name not in affine]
         problem: _Problem = _Projected(current, nonlinear, linear, which, goal, renderer, counter, grey=grey)
         if not nonlinear:  # nothing to descend on: the closed form is the fit
-            result = problem.result(np.zeros(0))
-            report(result, float(np.linalg.norm(problem.residual(np.zeros(0)))), 1, "solved in closed form")
+            result = yield from problem.result(np.zeros(0))
+            r = yield from problem.residual(np.zeros(0))
+            report(result, float(np.linalg.norm(r)), 1, "solved in closed form")
             return result
     else:
         problem = _Problem(current, params, which, goal, renderer, counter, grey=grey)
-    result, sol = problem.solve(current, coarse=coarse)
+    result, sol = yield from problem.solve(current, coarse=coarse)
     report(result, float(np.sqrt(2.0 * sol.cost)), problem.evaluations, str(sol.message))
     return result

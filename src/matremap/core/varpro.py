@@ -120,6 +120,126 @@ def _limited(
     return np.clip(res.x, lower, upper)
 
 
+@dataclass
+class ChannelSolution:
+    """The affine optimum of a problem whose channels are independent (:func:`solve_channels`)."""
+
+    #: [L, channels] the optimal value of each affine parameter in each image channel
+    theta: np.ndarray
+    #: [L, channels] whether the value is off its bounds (its column is projected out of the Jacobian)
+    free: np.ndarray
+    #: [L, P, channels] the basis images ([L, P, 1]: the same in every channel)
+    basis: np.ndarray
+
+
+def box_lsq(g: np.ndarray, h: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """argmin 0.5 t^T g t - h^T t with lower <= t <= upper, for a small positive semi-definite ``g`` (K <= 4):
+    the unconstrained minimum when it is inside the box, else every split of the unknowns into free / at the
+    lower bound / at the upper bound is tried and the feasible stationary points compared (3^K small
+    solves; exact, no iteration)."""
+    k = len(h)
+    if k == 1:
+        return np.clip(h / g[0, 0] if g[0, 0] > 0 else lower, lower, upper)
+    try:
+        t = np.linalg.solve(g, h)
+        if np.all(t >= lower) and np.all(t <= upper):
+            return t
+    except np.linalg.LinAlgError:
+        pass
+    if k == 2:  # the unconstrained minimum is outside: one unknown sits on a bound, the other is clipped
+        return _box_lsq_2(g, h, lower, upper)
+    best, best_value = np.clip(np.zeros(k), lower, upper), np.inf
+    for state in np.ndindex(*([3] * k)):
+        s = np.array(state, dtype=int)
+        t = np.where(s == 1, lower, upper).astype(float)
+        free = s == 0
+        if np.any(free):
+            rhs = h[free] - g[np.ix_(free, ~free)] @ t[~free]
+            gf = g[np.ix_(free, free)]
+            t[free] = np.linalg.lstsq(gf, rhs, rcond=None)[0]
+            if np.any(t[free] < lower[free] - 1e-12) or np.any(t[free] > upper[free] + 1e-12):
+                continue
+        value = 0.5 * t @ g @ t - h @ t
+        if value < best_value:
+            best, best_value = np.clip(t, lower, upper), value
+    return best
+
+
+def _box_lsq_2(g: np.ndarray, h: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """:func:`box_lsq` for two unknowns whose unconstrained minimum is outside the box: the minimum has an
+    unknown on a bound, and given it the other's minimum is its 1-D minimum clipped (a convex quadratic)."""
+    best, best_value = np.clip(np.zeros(2), lower, upper), np.inf
+    for i in (0, 1):
+        j = 1 - i
+        for bound in (lower[i], upper[i]):
+            t = np.empty(2)
+            t[i] = bound
+            t[j] = (h[j] - g[j, i] * bound) / g[j, j] if g[j, j] > 0 else lower[j]
+            t[j] = min(max(t[j], lower[j]), upper[j])
+            value = 0.5 * t @ g @ t - h @ t
+            if value < best_value:
+                best, best_value = t, value
+    return best
+
+
+def solve_channels(basis: np.ndarray, b: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> ChannelSolution:
+    """argmin over theta of sum_c ||sum_j theta[j, c] basis[j, :, c] - b[:, c]||^2 in the box, channel by
+    channel (a model whose image channel c depends on channel c of its parameters only): per channel an
+    L x L Gram matrix (:func:`box_lsq`), no decomposition of the tall design. ``basis`` [L, P, 1] is the
+    same in every channel of ``b`` [P, channels]."""
+    n_aff, ch = basis.shape[0], b.shape[1]
+    theta = np.zeros((n_aff, ch))
+    if basis.shape[2] == 1:
+        m = basis[..., 0]
+        g, h = m @ m.T, m @ b  # [L, L], [L, channels]
+        try:
+            theta = np.linalg.solve(g, h)
+            inside = np.all((theta >= lower[:, None]) & (theta <= upper[:, None]), axis=0)
+        except np.linalg.LinAlgError:
+            inside = np.zeros(ch, dtype=bool)
+        for k in np.flatnonzero(~inside):
+            theta[:, k] = box_lsq(g, h[:, k], lower, upper)
+    else:
+        for c in range(ch):
+            m = basis[..., c]
+            theta[:, c] = box_lsq(m @ m.T, m @ b[:, c], lower, upper)
+    free = (theta > lower[:, None] + 1e-9) & (theta < upper[:, None] - 1e-9)
+    return ChannelSolution(theta, free, basis)
+
+
+def combine_channels(theta: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """sum_j theta[j, c] basis[j, :, c] -> [P, channels] (``basis`` [L, P, 1] or [L, P, channels])."""
+    if basis.shape[2] == 1:
+        return basis[..., 0].T @ theta
+    return np.einsum("jc,jpc->pc", theta, basis)
+
+
+def project_channels(jac: np.ndarray, solution: ChannelSolution) -> np.ndarray:
+    """Kaufman's reduced Jacobian for :func:`solve_channels`: the rows of channel c ([P * channels, n], pixel
+    major) with their component in the span of that channel's free basis images removed."""
+    basis, free = solution.basis, solution.free
+    ch = free.shape[1]
+    n = jac.shape[1]
+    out = np.array(jac, order="C").reshape(-1, ch, n)  # [P, channels, n]
+    if basis.shape[2] == 1 and all(np.array_equal(free[:, 0], free[:, c]) for c in range(ch)):
+        f = free[:, 0]
+        if np.any(f):
+            bf = basis[f, :, 0]  # [F, P]
+            flat = out.reshape(out.shape[0], ch * n)
+            coef = np.linalg.solve(bf @ bf.T, bf @ flat)
+            flat -= bf.T @ coef
+        return out.reshape(-1, n)
+    for c in range(ch):
+        f = free[:, c]
+        if not np.any(f):
+            continue
+        bf = basis[f, :, c if basis.shape[2] > 1 else 0]  # [F, P]
+        rows = out[:, c, :]
+        coef = np.linalg.lstsq(bf @ bf.T, bf @ rows, rcond=None)[0]
+        out[:, c, :] = rows - bf.T @ coef
+    return out.reshape(-1, n)
+
+
 def project_out(jac: np.ndarray, free_basis: np.ndarray) -> np.ndarray:
     """Kaufman's reduced Jacobian: ``jac`` with its component in the span of ``free_basis`` removed."""
     if free_basis.shape[1] == 0:

@@ -1,7 +1,9 @@
 """Parameter sweeps: one uniform fit per grid point, into a remapping database (paper §4-5).
 
-Work is cut into lines of the grid (the last axis varies along a line) and submitted to an
-executor (:mod:`matremap.sweep.executors`); rows are stored as lines finish (:mod:`matremap.sweep.store`).
+Work is cut into lines of the grid (the last axis varies along a line), lines into tasks submitted to
+an executor (:mod:`matremap.sweep.executors`); a task's fits run in lockstep, one batched render call per
+step for all of them (:func:`~matremap.core.lockstep.lockstep`); rows are stored as tasks finish
+(:mod:`matremap.sweep.store`).
 Running the same sweep again resumes it: finished points are skipped.
 
 Continuation (an option, beyond the paper) fits the points of a line in order and starts each
@@ -16,13 +18,14 @@ from __future__ import annotations
 
 import itertools
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, wait
 from dataclasses import dataclass, field
 from typing import Any
 
 from matremap import __version__
 from matremap.core.fit import STRATEGIES
+from matremap.core.lockstep import Steps, lockstep
 from matremap.core.material import Material
 from matremap.core.scene import Scene
 from matremap.dialects import get_model
@@ -31,7 +34,7 @@ from matremap.renderers.registry import can_draw, get_renderer, renderer_for
 from matremap.sweep.executors import limit_blas_threads
 from matremap.sweep.grid import Grid
 from matremap.sweep.store import SweepStore, point_key
-from matremap.uniform import fit
+from matremap.uniform import fit_steps
 
 
 @dataclass(frozen=True)
@@ -97,13 +100,12 @@ class SweepConfig:
 # Work (runs in workers: plain data in, plain data out)
 
 
-def fit_line(
-    config: dict[str, Any], points: list[tuple[str, dict[str, Any], dict[str, Any]]], warm: dict[str, Any] | None
-) -> list[dict[str, Any]]:
-    """Fit the points of one grid line in order; ``points`` are (key, swept values, source params).
-    With continuation each point starts from the previous result (``warm`` for the first)."""
-    limit_blas_threads()
-    cfg = SweepConfig.from_dict(config)
+def fit_chain(
+    cfg: SweepConfig, points: list[tuple[str, dict[str, Any], dict[str, Any]]], warm: dict[str, Any] | None
+) -> Steps[list[dict[str, Any]]]:
+    """Fit ``points`` (key, swept values, source params) in order, as a generator of render requests
+    (:mod:`matremap.core.lockstep`); returns their rows. With continuation each point starts from the
+    previous result (``warm`` for the first)."""
     rows = []
     for key, swept, source_params in points:
         t0 = time.perf_counter()
@@ -111,7 +113,7 @@ def fit_line(
         try:
             source = Material.create(cfg.source.model, source_params)
             start = warm if cfg.continuation else None
-            result = fit(
+            result = yield from fit_steps(
                 source,
                 cfg.target,
                 cfg.strategy,
@@ -133,7 +135,7 @@ def fit_line(
                 warm=int(start is not None),
             )
             if cfg.round_trip:
-                back = fit(
+                back = yield from fit_steps(
                     result.target,
                     cfg.source.model,
                     cfg.strategy,
@@ -153,6 +155,41 @@ def fit_line(
         row["finished"] = time.time()
         rows.append(row)
     return rows
+
+
+def fit_lines(
+    config: dict[str, Any],
+    lines: list[list[tuple[str, dict[str, Any], dict[str, Any]]]],
+    warms: list[dict[str, Any] | None],
+) -> list[dict[str, Any]]:
+    """Fit several grid lines in lockstep (:func:`~matremap.core.lockstep.lockstep`): every step renders
+    the requests of all live fits in one batched call per renderer. Without continuation every point is
+    fitted independently (all at once); with it each line is a chain fitted in order. A point's
+    ``seconds`` is its share of the task's time (the fits run interleaved)."""
+    limit_blas_threads()
+    t0 = time.perf_counter()
+    cfg = SweepConfig.from_dict(config)
+    if cfg.continuation:
+        chains = [(line, warm) for line, warm in zip(lines, warms, strict=True)]
+    else:
+        chains = [([point], None) for line in lines for point in line]
+    results = lockstep([fit_chain(cfg, points, warm) for points, warm in chains])
+    rows: list[dict[str, Any]] = []
+    for value in results:
+        if isinstance(value, BaseException):  # only an unexpected error escapes a chain
+            raise value
+        rows += value
+    share = (time.perf_counter() - t0) / max(len(rows), 1)
+    for row in rows:
+        row["seconds"] = share
+    return rows
+
+
+def fit_line(
+    config: dict[str, Any], points: list[tuple[str, dict[str, Any], dict[str, Any]]], warm: dict[str, Any] | None
+) -> list[dict[str, Any]]:
+    """Fit the points of one grid line (:func:`fit_lines` with one line)."""
+    return fit_lines(config, [points], [warm])
 
 
 # --------------------------------------------------------------------------------------------
@@ -216,9 +253,13 @@ def run_sweep(
     executor_name: str = "",
     on_start: Callable[[int], None] | None = None,
     in_flight: int = 4,
+    lockstep_width: int | None = None,
 ) -> SweepSummary:
-    """Run (or resume) a sweep; rows are committed as lines finish. Ctrl-C stops it cleanly:
-    lines in flight are finished and saved, the rest is left for the next run."""
+    """Run (or resume) a sweep; rows are committed as tasks finish. Ctrl-C stops it cleanly:
+    tasks in flight are finished and saved, the rest is left for the next run.
+
+    A task is a few grid lines whose fits run in lockstep (:func:`fit_lines`); ``lockstep_width`` caps
+    the fits of one task (default :data:`LOCKSTEP_WIDTH`; 1 fits one point after another)."""
     t0 = time.perf_counter()
     check_renderers(config)
     cfg = config.to_dict()
@@ -234,7 +275,7 @@ def run_sweep(
             on_start(total - todo)
         done = failed = 0
         interrupted = False
-        work = iter(zip(lines, warms, strict=True))
+        work = iter(tasks(lines, warms, config.continuation, getattr(executor, "slots", 1), lockstep_width))
         pending: set[Future] = set()
 
         def save(fut: Future) -> None:
@@ -249,8 +290,8 @@ def run_sweep(
         try:
             while True:
                 # keep a few lines in flight: rows are stored as lines finish, whatever the executor
-                for line, warm in itertools.islice(work, max(in_flight - len(pending), 0)):
-                    pending.add(executor.submit(fit_line, cfg, line, warm))
+                for task_lines, task_warms in itertools.islice(work, max(in_flight - len(pending), 0)):
+                    pending.add(executor.submit(fit_lines, cfg, task_lines, task_warms))
                 if not pending:
                     break
                 finished_now, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
@@ -264,6 +305,33 @@ def run_sweep(
                 if fut.exception() is None:
                     save(fut)
     return SweepSummary(total, total - todo, done, failed, time.perf_counter() - t0, interrupted, executor_name)
+
+
+#: the most fits one task runs in lockstep (each holds a few probe images: ~1 MB at 128^2)
+LOCKSTEP_WIDTH = 64
+
+
+def tasks(
+    lines: list[list[tuple]], warms: list[dict | None], continuation: bool, slots: int, width: int | None = None
+) -> Iterator[tuple[list[list[tuple]], list[dict | None]]]:
+    """Cut the lines into tasks (lines, their warm starts) of at most ``width`` fits in lockstep (points;
+    with continuation, lines), about two tasks per executor slot when the sweep is small. Without
+    continuation a long line is cut into pieces (its points are independent)."""
+    width = max(1, width or LOCKSTEP_WIDTH)
+    units: list[tuple[list[tuple], dict | None]] = []
+    if continuation:
+        units = list(zip(lines, warms, strict=True))
+        size = len(units)
+    else:
+        units = [([p], None) for line in lines for p in line]
+        size = len(units)
+    per = max(1, min(width, -(-size // max(2 * slots, 1))))
+    for i in range(0, len(units), per):
+        chunk = units[i : i + per]
+        if continuation:
+            yield [u[0] for u in chunk], [u[1] for u in chunk]
+        else:
+            yield [[u[0][0] for u in chunk]], [None]
 
 
 def _warm_starts(store: SweepStore, config: SweepConfig, grid: Grid, lines: list[list[tuple]]) -> list[dict | None]:
@@ -292,7 +360,18 @@ def check_grid_for(config: SweepConfig, grid: Grid) -> None:
         grid.material(config.source, index)
 
 
-__all__ = ["SweepConfig", "SweepSummary", "check_grid_for", "fit_line", "plan", "run_sweep"]
+__all__ = [
+    "LOCKSTEP_WIDTH",
+    "SweepConfig",
+    "SweepSummary",
+    "check_grid_for",
+    "fit_chain",
+    "fit_line",
+    "fit_lines",
+    "plan",
+    "run_sweep",
+    "tasks",
+]
 
 
 def describe(summary: SweepSummary) -> str:

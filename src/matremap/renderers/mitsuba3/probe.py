@@ -16,23 +16,31 @@ The probe scene is built exactly as the embedded renderer sees it (see :mod:`mat
   which would make multi-light renders noisy; with one light per scene the point light is
   sampled deterministically. Each point light has ``intensity`` = the scene's radiant intensity.
 
-A loaded scene is cached per (scene, light, model, options); a batch of materials is a loop that
-changes the BSDF's parameters with ``mi.traverse`` and renders again (``spp`` and ``seed`` are
+A loaded scene is cached per (scene, light, model, options); a batch of images (:meth:`Mitsuba3Renderer.render`)
+is a loop that changes the BSDF's parameters with ``mi.traverse`` and renders again (``spp`` and ``seed`` are
 always passed to ``mi.render``: Mitsuba otherwise keeps the last call's sample count).
 
-Variants: ``scalar_rgb`` by default (works from the wheel alone). Any ``*_rgb`` variant may be
-chosen with ``Mitsuba3Renderer(variant=...)`` or the environment variable
-``MATREMAP_MITSUBA_VARIANT``; ``llvm_ad_rgb`` needs a libLLVM >= 17 (Debian ``libllvm19``, which
-Mitsuba finds without any environment variable even next to LLVM 14/15; LLVM 15 and 16 crash
-inside Mitsuba on the first render, which cannot be caught), so ``variant="auto"`` picks it only
-when such a library is found and a tiny render in a child process succeeds (:func:`llvm_renders`).
-It agrees with ``scalar_rgb`` to 2e-6 and renders ~2x faster here (centre rays; 8x at 256 spp).
+Variants: ``auto`` by default, as for the environment renders: ``llvm_ad_rgb`` when it works here, else
+``scalar_rgb`` (which works from the wheel alone). Any ``*_rgb`` variant may be chosen with
+``Mitsuba3Renderer(variant=...)`` or the environment variable ``MATREMAP_MITSUBA_VARIANT``; ``llvm_ad_rgb``
+needs a libLLVM >= 17 (Debian ``libllvm19``, which Mitsuba finds without any environment variable even next
+to LLVM 14/15; LLVM 15 and 16 crash inside Mitsuba on the first render, which cannot be caught), so
+``auto`` picks it only when such a library is found and a tiny render in a child process succeeds
+(:func:`llvm_renders`, ~2 s once per process). It agrees with ``scalar_rgb`` to 2e-6 and renders ~2x
+faster here (centre rays; 8x at 256 spp).
+
+Batches (:meth:`Mitsuba3Renderer.render_pixels`, what fits call): in a JIT variant no image is rendered;
+Mitsuba's own probe rays, intersections and light samples are made once per scene and light, and each
+material's BSDF is evaluated over all of them with ``BSDF.eval`` by one reused compiled kernel: equal to
+the rendered pixels, ~0.2 ms per material at 128^2 instead of 6-20 ms. ``roughplastic`` is the exception
+in cost: Mitsuba rebuilds its rough-transmittance table whenever ``alpha`` or ``eta`` changes (~25-35 ms).
 
 The models and their parameters are in :mod:`matremap.dialects.mitsuba3`.
 """
 
 from __future__ import annotations
 
+import os
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -102,6 +110,67 @@ class _Loaded:
             mitsuba_call(mi, "update the material", self.params.update)
 
 
+class _ProbeSamples:
+    """The probe's shading points as Mitsuba sees them, for one light: the centre ray of each sphere pixel
+    (``scene.pixel_indices()`` order) through the probe's sensor, its intersection with the sphere and the
+    light's sample there (``Scene.sample_emitter_direction``, visibility tested), as Dr.Jit arrays."""
+
+    def __init__(self, mi, loaded: _Loaded, scene: Scene) -> None:
+        import drjit as dr
+
+        res = scene.resolution
+        pix = scene.pixel_indices()
+        iy, ix = pix // res, pix % res
+        position = mi.Point2f(mi.Float((ix + 0.5) / res), mi.Float((iy + 0.5) / res))
+        sensor = loaded.scene.sensors()[0]
+        ray, _ = sensor.sample_ray(0.0, 0.5, position, mi.Point2f(0.5, 0.5))
+        self.si = loaded.scene.ray_intersect(ray)
+        ds, weight = loaded.scene.sample_emitter_direction(self.si, mi.Point2f(0.5, 0.5), True)
+        self.wo = self.si.to_local(ds.d)
+        self.weight = dr.select(self.si.is_valid(), weight, 0.0)
+        self.context = mi.BSDFContext()
+        dr.eval(self.si, self.wo, self.weight)
+
+
+class _Bsdf:
+    """One BSDF object of a (model, options) and its traversed parameters, re-set per material."""
+
+    def __init__(self, mi, m: Material) -> None:
+        bsdf, self.bindings = bsdf_dict(m.model, dict(m.options), m)
+        self.mi = mi
+        self.model = m.model
+        self.bsdf = mitsuba_call(mi, "load the BSDF", mi.load_dict, bsdf)
+        self.params = mi.traverse(self.bsdf)
+        self.current: dict[str, np.ndarray] = {b.param: m.values[b.param].copy() for b in self.bindings}
+        if m.model == "mitsuba3:roughplastic":
+            self.current["eta"] = m.values["int_ior"] / m.values["ext_ior"]
+
+    def set(self, m: Material) -> None:
+        """Write the material's values into the BSDF (only those that changed)."""
+        mi, changed = self.mi, False
+        for b in self.bindings:
+            v = m.values[b.param]
+            if np.array_equal(self.current[b.param], v):
+                continue
+            self.params[b.key] = mi.Color3f(*(float(x) for x in v)) if b.rgb else mi.Float(float(v[0]))
+            self.current[b.param] = v.copy()
+            changed = True
+        if self.model == "mitsuba3:roughplastic":
+            eta = m.values["int_ior"] / m.values["ext_ior"]
+            if not np.array_equal(self.current["eta"], eta):
+                self.params["eta"] = mi.Float(float(eta[0]))
+                self.current["eta"] = eta
+                changed = True
+        if changed:
+            mitsuba_call(mi, "update the material", self.params.update)
+
+    def shade(self, probe: _ProbeSamples) -> np.ndarray:
+        """float32 [P, 3]: the BSDF (cosine included) times the light's weight at every probe point, which is
+        what the ``direct`` integrator adds per pixel for a point light (its MIS weight is 1)."""
+        value = self.bsdf.eval(probe.context, probe.si, probe.wo) * probe.weight
+        return np.asarray(value, dtype=np.float32).T
+
+
 class Mitsuba3Renderer:
     """The probe scene rendered by Mitsuba 3 (``mitsuba3:*`` models).
 
@@ -118,13 +187,16 @@ class Mitsuba3Renderer:
     def _configure(self, variant: str | None, spp: int, seed: int, cache_size: int) -> None:
         """Set up a renderer with an empty scene cache (``__init__``, and ``__setstate__`` in a process pool)."""
         self.mi = import_mitsuba()
-        self.variant = choose_variant(self.mi, variant)
+        # as the environment renders: the JIT variant when it works here (vectorised probe renders)
+        self.variant = choose_variant(self.mi, variant or os.environ.get("MATREMAP_MITSUBA_VARIANT") or "auto")
         if not (isinstance(spp, int) and spp >= 1):
             raise MatremapError(f"spp must be a positive integer, got {spp!r}")
         self.spp = spp
         self.seed = int(seed)
         self.cache_size = cache_size
         self._cache: OrderedDict[tuple, _Loaded] = OrderedDict()
+        self._probe_samples: dict[tuple[Scene, int], _ProbeSamples] = {}
+        self._bsdfs: dict[tuple, _Bsdf] = {}
         self.renders = 0  # images rendered by Mitsuba (one per material and light)
         self._activate()
 
@@ -141,6 +213,8 @@ class Mitsuba3Renderer:
         if self.mi.variant() != self.variant:
             self.mi.set_variant(self.variant)
             self._cache.clear()  # scenes of another variant are unusable
+            self._probe_samples.clear()
+            self._bsdfs.clear()
 
     # -- protocol ----------------------------------------------------------------------------
     @classmethod
@@ -178,10 +252,55 @@ class Mitsuba3Renderer:
                 out[i] += self._render_one(m, scene, light)
         return out
 
+    #: materials per render call a caller should batch (:func:`matremap.core.lockstep.lockstep`)
+    batch_size = 512
+
+    @property
+    def vectorised(self) -> bool:
+        """Whether the variant is a JIT one (llvm, cuda): the BSDF is then evaluated over all the probe's
+        shading points at once (:meth:`render_pixels`) instead of rendering an image per material."""
+        return self.spp == 1 and not self.variant.startswith("scalar_")
+
     def render_pixels(self, materials: Sequence[Material], scene: Scene) -> np.ndarray:
-        """The sphere pixels of :meth:`render`, float32 [N, P, 3] in ``scene.pixel_indices()`` order."""
-        images = self.render(materials, scene)
-        return np.take(images.reshape(len(images), -1, 3), scene.pixel_indices(), axis=1)
+        """The sphere pixels of :meth:`render`, float32 [N, P, 3] in ``scene.pixel_indices()`` order.
+
+        In a JIT variant (:attr:`vectorised`) no image is rendered: per light, Mitsuba's own centre rays,
+        intersections and light samples of the probe are made once (cached with the scene) and each
+        material's BSDF is evaluated over all of them with ``BSDF.eval`` -- the sum the ``direct``
+        integrator makes, equal to the rendered pixels (tests/test_lockstep.py). A BSDF object per
+        (model, options) is re-set per material through ``mi.traverse`` and evaluated by the same compiled
+        kernel every time (Dr.Jit reuses a kernel whose trace is unchanged; the values are not baked in),
+        so a batch of N materials costs N kernel launches and no compilation after the first."""
+        materials = list(materials)
+        if not self.vectorised:
+            images = self.render(materials, scene)
+            return np.take(images.reshape(len(images), -1, 3), scene.pixel_indices(), axis=1)
+        check_can_render(self, materials)
+        self._activate()
+        out = np.zeros((len(materials), scene.pixel_indices().size, 3), dtype=np.float32)
+        for light in range(len(scene.lights)):
+            for i, m in enumerate(materials):
+                probe = self._samples(m, scene, light)
+                bsdf = self._bsdf(m)
+                bsdf.set(m)
+                out[i] += mitsuba_call(self.mi, "render", bsdf.shade, probe)
+                self.renders += 1
+        return out
+
+    def _samples(self, m: Material, scene: Scene, light: int) -> _ProbeSamples:
+        """The probe's shading points for one light (the intersections do not depend on the BSDF)."""
+        key = (scene, light)
+        hit = self._probe_samples.get(key)
+        if hit is None:
+            hit = self._probe_samples[key] = _ProbeSamples(self.mi, self._loaded(m, scene, light), scene)
+        return hit
+
+    def _bsdf(self, m: Material) -> _Bsdf:
+        key = (m.model, tuple(sorted(m.options.items())))
+        hit = self._bsdfs.get(key)
+        if hit is None:
+            hit = self._bsdfs[key] = _Bsdf(self.mi, m)
+        return hit
 
     # -- internals ---------------------------------------------------------------------------
     def _render_one(self, m: Material, scene: Scene, light: int) -> np.ndarray:
