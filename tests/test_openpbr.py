@@ -461,6 +461,11 @@ def test_a_coat_fitted_onto_a_plain_metal_is_absorbed_and_the_result_says_so():
     assert base[0] > base[1] > base[2] and base[2] < 0.6 * 0.54  # copper under an amber coat
     notes = [w for w in r.warnings if "absorbed" in w]
     assert len(notes) == 1 and "coat" in notes[0] and "gltf:metal-rough has no coat layer" in notes[0]
+    from matremap.core.lockstep import run
+    from matremap.uniform import fit_steps
+
+    stepped = run(fit_steps(source, "gltf:metal-rough", scene=scene, fix={"metallic": 1.0}))  # as sweeps fit
+    assert [w for w in stepped.warnings if "absorbed" in w] == notes
     free = ["coat", "coat_color", "coat_roughness"]
     r2 = fit(source, "mtlx:standard_surface", "simple", scene=scene, fix={"metalness": 1.0}, free=free)
     assert r2.loss < 0.03 and float(r2.target.values["coat"][0]) > 0.8

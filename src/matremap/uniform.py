@@ -73,20 +73,20 @@ def fit_steps(
     """:func:`fit` in ask/tell form (:func:`matremap.core.fit.fit_steps`): a generator of render requests for
     :func:`~matremap.core.lockstep.lockstep`. Renderer names are resolved when it starts."""
     spec = target_model if isinstance(target_model, ModelSpec) else get_model(target_model)
-    return (
-        yield from core_fit.fit_steps(
-            source,
-            spec,
-            strategy,
-            scene,
-            resolve_renderer(source_renderer, source.model),
-            resolve_renderer(target_renderer, spec.id),
-            fix=fix,
-            free=free,
-            start=start,
-            coarse=coarse,
-        )
+    result = yield from core_fit.fit_steps(
+        source,
+        spec,
+        strategy,
+        scene,
+        resolve_renderer(source_renderer, source.model),
+        resolve_renderer(target_renderer, spec.id),
+        fix=fix,
+        free=free,
+        start=start,
+        coarse=coarse,
     )
+    result.warnings.extend(absorbed_layers(source.model, source.values, spec.id, result.target.values))
+    return result
 
 
 def comparison_strip(result: core_fit.FitResult, gap: int = 4, labels: bool = True) -> np.ndarray:
