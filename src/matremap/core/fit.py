@@ -57,8 +57,11 @@ FD_STEP = 1e-4
 ABSENT = 1e-9
 #: a relative RMSE this small is float32 round-off: the images match
 EXACT = 1e-6
-#: cap on residual evaluations per stage (a converging fit needs 3-10; more means it is lost)
+#: cap on residual evaluations per stage (a converging fit of a few unknowns needs 3-10; more means it is
+#: lost), and per unknown for larger stages: a 12-unknown joint fit of coloured layers (a coat's weight
+#: trading against its colour) converges slowly but surely (SciPy's own default is 100 per unknown)
 MAX_EVALUATIONS = 50
+EVALUATIONS_PER_UNKNOWN = 10
 #: the descent's ftol / xtol / gtol (:func:`matremap.core.descent.descend`)
 FIT_TOL = 1e-4
 #: the longest step of a variable in one descent step, as a fraction of its scale
@@ -312,7 +315,7 @@ class _Problem:
             self.lower,
             self.upper,
             tol=FIT_TOL,
-            max_evaluations=MAX_EVALUATIONS,
+            max_evaluations=max(MAX_EVALUATIONS, EVALUATIONS_PER_UNKNOWN * self.size),
             exact=EXACT,
             limit=self.step_limit,
         )
