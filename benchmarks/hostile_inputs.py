@@ -200,7 +200,7 @@ def transform_with_nan(tmp: Path) -> str:
 
 def inline_material_long(tmp: Path) -> str:
     m = {"model": "mitsuba06:ward", "params": {"alpha": 0.2, "specularReflectance": 0.05}, "notes": "x" * 300}
-    p = cli(["fit", "--source", json.dumps(m), "--target", "mitsuba06:pbr"], tmp)
+    p = cli(["fit", "--source", json.dumps(m), "--to", "mitsuba06:pbr"], tmp)
     if "Traceback" in p.stderr:
         return "TRACEBACK"
     return "handled" if p.returncode in (0, 2) and "File name too long" not in p.stderr else f"exit {p.returncode}"
@@ -210,9 +210,7 @@ def sweep_db_text_numbers(tmp: Path) -> str:
     import sqlite3
 
     src = json.dumps({"model": "mitsuba06:ward", "params": {"alpha": 0.2, "specularReflectance": 0.05}})
-    p = cli(
-        ["sweep", "--source", src, "--target", "mitsuba06:pbr", "--grid", "alpha=0.1:0.3:3", "--db", "s.sqlite"], tmp
-    )
+    p = cli(["sweep", "--source", src, "--to", "mitsuba06:pbr", "--grid", "alpha=0.1:0.3:3", "--db", "s.sqlite"], tmp)
     if p.returncode != 0:
         return f"setup failed: {p.stderr.strip()[-80:]}"
     con = sqlite3.connect(tmp / "s.sqlite")
@@ -239,7 +237,7 @@ def rgb_base_metal_uniform_rough(tmp: Path) -> str:
 
 # -- interruption (finding 8, must-have 6): kill or interrupt a run, then run the same command again ----------
 
-FAST = ["--rotations", "0:360:2", "--size", "48", "--lights", "32"]
+FAST = ["--rotations", "0:360:2", "--size", "48", "--env-lights", "32"]
 SWEEP_SOURCE = json.dumps({"model": "mitsuba06:ward", "params": {"alpha": 0.2, "specularReflectance": 0.05}})
 
 
@@ -392,13 +390,13 @@ def remap_file_killed(tmp: Path) -> str:
 
 
 def sweep_killed(tmp: Path) -> str:
-    args = ["sweep", "--source", SWEEP_SOURCE, "--target", "mitsuba06:pbr", "--grid", "alpha=0.1:0.3:6"]
+    args = ["sweep", "--source", SWEEP_SOURCE, "--to", "mitsuba06:pbr", "--grid", "alpha=0.1:0.3:6"]
     args += ["--db", "s.sqlite", "--workers", "2", "--no-progress"]
     return interrupted(tmp, args, signal.SIGKILL, db_started, "s.sqlite")
 
 
 def sweep_sigint(tmp: Path) -> str:
-    args = ["sweep", "--source", SWEEP_SOURCE, "--target", "mitsuba06:pbr", "--grid", "alpha=0.1:0.3:6"]
+    args = ["sweep", "--source", SWEEP_SOURCE, "--to", "mitsuba06:pbr", "--grid", "alpha=0.1:0.3:6"]
     args += ["--db", "s.sqlite", "--workers", "2", "--no-progress"]
     return interrupted(tmp, args, signal.SIGINT, db_started, "s.sqlite")
 

@@ -163,7 +163,7 @@ def main() -> None:
     ap.add_argument("--size", type=int, default=128)
     ap.add_argument("--count", type=int, default=10)
     ap.add_argument("--variant", default=None, help="Mitsuba variant (default scalar_rgb; 'auto' picks llvm if usable)")
-    ap.add_argument("--lights", type=float, nargs="+", default=[0.0], help="light angles (degrees)")
+    ap.add_argument("--env-lights", type=float, nargs="+", default=[0.0], help="light angles (degrees)")
     ap.add_argument("--autodiff", action="store_true", help="compare autodiff and finite-difference conductor fits")
     args = ap.parse_args()
     if args.autodiff:

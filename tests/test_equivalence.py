@@ -21,7 +21,7 @@ from matremap.renderers import get_renderer, renderer_for
 from matremap.svbrdf.textures import load_map_set, read_image
 
 HAS_MITSUBA = importlib.util.find_spec("mitsuba") is not None
-FAST = ["--rotations", "0:360:2", "--size", "48", "--lights", "32"]
+FAST = ["--rotations", "0:360:2", "--size", "48", "--env-lights", "32"]
 
 #: source values each pair is rendered with (the requirements are added)
 VALUES = {

@@ -17,7 +17,7 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 def test_a_transform_learned_with_failed_points_is_not_cached(tmp_path, capsys, monkeypatch):
     import matremap.sweep.run as sweep_run
 
-    real, calls = sweep_run.fit, []
+    real, calls = sweep_run.fit_steps, []
 
     def flaky(*args, **kwargs):
         calls.append(1)
@@ -28,13 +28,13 @@ def test_a_transform_learned_with_failed_points_is_not_cached(tmp_path, capsys, 
     cache = tmp_path / "cache"
     args = ["remap", str(EXAMPLES / "blue-plastic"), "--to", "mitsuba06:pbr", "--fix", "distribution=as"]
     args += ["--sweep", "--no-evaluate", "--workers", "1", "--cache", str(cache)]
-    monkeypatch.setattr(sweep_run, "fit", flaky)
+    monkeypatch.setattr(sweep_run, "fit_steps", flaky)
     assert main([*args, "-o", str(tmp_path / "first")]) in (0, 3)
     err = capsys.readouterr().err
     assert "1 failed" in err and "not cached" in err, err
     assert list(cache.glob("*.json")) == []  # before: cached, and every later run reused it
     assert (tmp_path / "first" / "transform.json").is_file()  # what this run applied is still written
-    monkeypatch.setattr(sweep_run, "fit", real)
+    monkeypatch.setattr(sweep_run, "fit_steps", real)
     assert main([*args, "-o", str(tmp_path / "second")]) == 0
     err = capsys.readouterr().err
     assert "sweep: done: 1 points fitted (0 failed)" in err, err  # only the failed point, from the database

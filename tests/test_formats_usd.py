@@ -374,7 +374,7 @@ def test_remap_gltf_to_usd_and_back_on_a_textured_metal(tmp_path):
     pytest.importorskip("colour", reason="the quality gate needs colour-science")
     from matremap.cli import main
 
-    fast = ["--rotations", "0:360:2", "--size", "48", "--lights", "32"]
+    fast = ["--rotations", "0:360:2", "--size", "48", "--env-lights", "32"]
     assert main(["remap", str(BRASS), "--to", "usd:preview_surface", "-o", str(tmp_path / "u"), *fast]) == 0
     usd = tmp_path / "u" / "brass.usda"  # the default suffix of usd:* targets
     stage = Usd.Stage.Open(str(usd))

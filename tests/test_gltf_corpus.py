@@ -16,7 +16,7 @@ import pytest
 from matremap.cli import main
 
 CORPUS = Path(__file__).resolve().parent / "data" / "corpus"
-FAST = ["--rotations", "0:360:2", "--size", "48", "--lights", "32"]
+FAST = ["--rotations", "0:360:2", "--size", "48", "--env-lights", "32"]
 PLASTIC = ["mitsuba3:roughplastic", "--fix", "distribution=ggx"]
 
 pytest.importorskip("colour", reason="the quality gate needs colour-science")

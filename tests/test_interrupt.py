@@ -31,13 +31,13 @@ ROOT = Path(__file__).resolve().parents[1]
 SRC = str(Path(matremap.__file__).resolve().parents[1])
 BRONZE = ROOT / "examples" / "bronze"
 BRASS = ROOT / "examples" / "brass-gltf" / "brass.gltf"
-FAST = ["--rotations", "0:360:2", "--size", "48", "--lights", "32"]
+FAST = ["--rotations", "0:360:2", "--size", "48", "--env-lights", "32"]
 PBR = ["--to", "mitsuba06:pbr", "--fix", "distribution=as"]
 SWEEP = [
     "sweep",
     "--source",
     json.dumps({"model": "mitsuba06:ward", "params": {"alpha": 0.2, "specularReflectance": 0.05}}),
-    "--target",
+    "--to",
     "mitsuba06:pbr",
     "--grid",
     "alpha=0.1:0.3:6",

@@ -16,7 +16,7 @@ from matremap.cli import main
 from matremap.svbrdf.textures import ImageInfo, write_image_like
 
 CORPUS = Path(__file__).resolve().parent / "data" / "corpus"
-FAST = ["--rotations", "0:360:2", "--size", "48", "--lights", "32"]
+FAST = ["--rotations", "0:360:2", "--size", "48", "--env-lights", "32"]
 
 #: corpus folder -> None (converts onto glTF) or the words its one-line refusal must hold
 EXPECTED = {

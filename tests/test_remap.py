@@ -110,7 +110,7 @@ def test_cli_remap_convert_evaluate(plastic, tmp_path, capsys):
             "0:360:2",
             "--size",
             "48",
-            "--lights",
+            "--env-lights",
             "16",
             "--workers",
             "1",
@@ -135,7 +135,7 @@ def test_cli_remap_convert_evaluate(plastic, tmp_path, capsys):
                 "0:360:2",
                 "--size",
                 "48",
-                "--lights",
+                "--env-lights",
                 "16",
             ]
         )

@@ -177,7 +177,7 @@ SWEEP_ARGS = [
     "sweep",
     "--source",
     "mitsuba06:ward,variant=ward,diffuseReflectance=0",
-    "--target",
+    "--to",
     "mitsuba06:pbr",
     "--fix",
     "distribution=as",

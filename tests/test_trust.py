@@ -20,7 +20,7 @@ pytest.importorskip("colour", reason="the quality gate needs colour-science")
 pytest.importorskip("skimage", reason="the evaluation needs scikit-image")
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
-FAST = ["--rotations", "0:360:2", "--size", "48", "--lights", "32"]
+FAST = ["--rotations", "0:360:2", "--size", "48", "--env-lights", "32"]
 
 
 def png(path: Path, rgb: np.ndarray) -> None:
@@ -164,7 +164,7 @@ def test_a_renderer_that_is_not_installed_exits_4(tmp_path, monkeypatch, capsys)
     monkeypatch.setattr(registry, "_FACTORIES", {})  # nor one registered by a test
     monkeypatch.setenv("MATREMAP_BPY_PYTHON", str(tmp_path / "no-python"))
     # cycles:principled is emulated by the embedded renderer by default: ask for real Cycles
-    code = main(["fit", "--source", "mitsuba06:ward", "--target", "cycles:principled", "--target-renderer", "cycles"])
+    code = main(["fit", "--source", "mitsuba06:ward", "--to", "cycles:principled", "--target-renderer", "cycles"])
     assert code == 4 and "bpy" in capsys.readouterr().err
 
 
