@@ -303,6 +303,12 @@ class AtomicFiles:
         self._staged[p] = self._staging_folder(p.parent) / "new" / p.name
         return self._staged[p]
 
+    def discard(self, path: str | os.PathLike[str]) -> None:
+        """Leave ``path`` out of the group after all: its staged file is removed and nothing is moved there."""
+        staged = self._staged.pop(Path(path), None)
+        if staged is not None:
+            staged.unlink(missing_ok=True)
+
     def write_bytes(self, path: str | os.PathLike[str], data: bytes) -> Path:
         """Stage ``path`` with ``data``; returns the destination."""
         self.stage(path).write_bytes(data)

@@ -41,6 +41,8 @@ from matremap.svbrdf.textures import ImageInfo, MapReader, MapSet, MapWriter, ma
 
 MASK_NAME = "outside_domain.png"
 MANIFEST_NAME = "material.json"
+#: relative spread under which a converted parameter is the same at every texel (float32 round-off)
+UNIFORM_OUTPUT = 1e-6
 #: quantity -> the file-name convention its maps get
 _CONVENTION = {"roughness": "roughness", "reflectance": "specular", "diffuse": "diffuse"}
 
@@ -198,6 +200,7 @@ def _run(plan: _Plan, outputs: list[_Output], progress_every: int = 0, progress=
     outside = 0
     bounded: dict[str, int] = {}
     first: dict[str, Any] = {}
+    ranges: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     try:
         for name, path in plan.maps.items():
             info = plan.infos[name]
@@ -213,12 +216,14 @@ def _run(plan: _Plan, outputs: list[_Output], progress_every: int = 0, progress=
                 first = {k: np.asarray(v)[(0,) * (np.ndim(off))].tolist() for k, v in out.items()}
             for o, w in writers:
                 w.write_rows(y0, off.astype(np.float32) if o.param is None else out[o.param])
+                if o.param is not None:
+                    ranges[o.param] = _band_range(out[o.param], ranges.get(o.param))
             if progress is not None:
                 progress(y1, plan.size[0])
         for _, w in writers:
             w.close()
         clipped = {o.param: w.clipped for o, w in writers if o.param}
-        return {"outside": outside, "clipped": clipped, "bounded": bounded, "first": first}
+        return {"outside": outside, "clipped": clipped, "bounded": bounded, "first": first, "ranges": ranges}
     finally:
         for r in readers.values():
             r.close()
@@ -227,6 +232,27 @@ def _run(plan: _Plan, outputs: list[_Output], progress_every: int = 0, progress=
                 w.close()
             except Exception:  # noqa: BLE001 - the first error is the one to report
                 pass
+
+
+def _band_range(values: Any, seen: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray]:
+    """The per-channel (min, max) of a parameter's values so far, this band's taken in."""
+    a = np.asarray(values, dtype=np.float64)
+    a = a.reshape(-1, a.shape[-1]) if a.ndim == 3 else a.reshape(-1, 1)
+    lo, hi = a.min(axis=0), a.max(axis=0)
+    return (lo, hi) if seen is None else (np.minimum(seen[0], lo), np.maximum(seen[1], hi))
+
+
+def uniform_outputs(results: Sequence[Mapping[str, Any]], tolerance: float = UNIFORM_OUTPUT) -> set[str]:
+    """The target parameters whose converted values are the same at every texel (within ``tolerance``,
+    relative): a map of them carries nothing a constant does not, and a renderer that takes the parameter
+    as a number only (Mitsuba 3's rough plastic ``alpha`` and ``int_ior``) refuses a map of it. A transform
+    maps every quantity, so a uniform roughness used to become a constant alpha *map*."""
+    out = set()
+    for r in results:
+        for name, (lo, hi) in r["ranges"].items():
+            if np.all(hi - lo <= tolerance * np.maximum(1.0, np.abs(hi))):
+                out.add(name)
+    return out
 
 
 def _split(outputs: list[_Output], n: int) -> list[list[_Output]]:
@@ -298,7 +324,13 @@ def convert(
         results = _execute(plan, outputs, workers, progress)
         outside = results[0]["outside"]
         clipped, bounded = _clip_counts(results, outputs, t.target, notes)
-        doc = _manifest(map_set, t, outputs, results[0]["first"], final_normal, outside)
+        uniform = uniform_outputs(results)
+        for o in outputs:
+            if o.param in uniform:
+                files.discard(o.path)
+                notes.append(f"{o.param} is the same at every texel: written as a constant, not a map")
+        kept = [o for o in outputs if o.param not in uniform]
+        doc = _manifest(map_set, t, kept, results[0]["first"], final_normal, outside)
         files.write_text(out / MANIFEST_NAME, json.dumps(doc, indent=1) + "\n")
         if map_set.normal and final_normal is not None:
             files.copy(map_set.normal, final_normal)
