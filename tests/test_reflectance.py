@@ -6,7 +6,15 @@ import numpy as np
 import pytest
 
 from matremap.core.models import ModelSpec
-from matremap.core.reflectance import Conductor, Dielectric, MetalRough, Reflectance, SpecularParam
+from matremap.core.reflectance import (
+    Conductor,
+    Dielectric,
+    Metalness,
+    MetalRough,
+    Reflectance,
+    SpecularLevel,
+    SpecularParam,
+)
 from matremap.dialects import list_models
 from matremap.regress import quantities as qty
 
@@ -111,3 +119,32 @@ def test_every_declared_reflectance_names_the_models_parameters(spec: ModelSpec)
     written = qty.write(spec, {"reflectance": np.array([[0.05] * 3])}, values)
     again = qty.read(spec, {k: np.asarray(v)[0] for k, v in written.items()})
     assert np.allclose(again["reflectance"], 0.05, atol=1e-6), (quantities["reflectance"], again["reflectance"])
+
+
+def test_specular_level_is_a_scaled_grey_f0() -> None:
+    r = SpecularLevel("specular")
+    np.testing.assert_allclose(r.f0({"specular": np.array([0.5, 1.0])}, {"specular": 1}), [[0.04] * 3, [0.08] * 3])
+    out: dict = {"specular": 0.5}
+    assert r.write_f0(np.array([0.02, 0.02, 0.02]), out, {"specular": 1}) == ["specular"]
+    assert float(out["specular"]) == pytest.approx(0.25)
+
+
+def test_metalness_reads_a_metal_from_its_base_colour_and_a_dielectric_from_its_ior() -> None:
+    """Principled BSDFs (Cycles, Mitsuba 3): a textured brass onto them lost its colour map, since F0 was read
+    (and written) through the IOR alone and the base colour was taken for a diffuse albedo."""
+    r = Metalness("Base Color", "Metallic", Dielectric("IOR"))
+    ch = {"Base Color": 3, "Metallic": 1, "IOR": 1}
+    values = {
+        "Base Color": np.array([[0.9, 0.6, 0.2], [0.5, 0.4, 0.3]]),
+        "Metallic": np.array([1.0, 0.0]),
+        "IOR": np.array([1.5, 1.5]),
+    }
+    np.testing.assert_allclose(r.f0(values, ch), [[0.9, 0.6, 0.2], [0.04] * 3])
+    np.testing.assert_allclose(r.albedo(values["Base Color"], values), [[0, 0, 0], [0.5, 0.4, 0.3]])
+    out = {"Base Color": np.zeros((2, 3)), "Metallic": np.array([1.0, 0.0]), "IOR": np.array([1.5, 1.5])}
+    f0 = np.array([[0.8, 0.5, 0.1], [0.0625] * 3])
+    driven = r.write_f0(f0, out, ch, diffuse=np.array([[0.0] * 3, [0.2, 0.3, 0.4]]))
+    assert driven == ["Base Color", "IOR"]
+    np.testing.assert_allclose(out["Base Color"], [[0.8, 0.5, 0.1], [0.2, 0.3, 0.4]])
+    np.testing.assert_allclose(out["IOR"], [1.5, 5.0 / 3.0])  # the metal's IOR held; F0 0.0625 is IOR 5/3
+    assert r.driven_param(True) == "Base Color" and r.driven_param(False) == "IOR"

@@ -243,3 +243,29 @@ def test_the_shipped_gltf_example_reads_and_routes_through_the_library(tmp_path)
     )
     assert any(m.startswith("library: gltf:metal-rough (metallic=1) -> mitsuba06:pbr") for m in logs)
     assert res.remap.outside == 0 and (tmp_path / "out" / "maps" / "material.json").is_file()
+
+
+@pytest.mark.parametrize(
+    ("target", "base"), [("mitsuba3:principled", "base_color"), ("cycles:principled", "Base Color")], ids=["mi", "cy"]
+)
+def test_a_textured_metal_keeps_its_colour_map_on_a_principled_target(tmp_path, target, base):
+    """The example brass (a glTF metal with a base colour texture) onto a Principled BSDF: its colour map
+    came out as a constant grey base colour (0.61; the gate failed it on delta E), because those models read
+    F0 through their IOR or specular level alone. Now a metal's F0 is its base colour (core.reflectance.
+    Metalness), and the written base colour map has the brass's hue and brightness."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    import corpus_checks as cc
+
+    from matremap.svbrdf.textures import load_map_set, read_image
+
+    src = Path(__file__).resolve().parents[1] / "examples" / "brass-gltf" / "brass.gltf"
+    res = remap_file(src, target, tmp_path / "out", log=lambda m: None, evaluate=False)
+    maps = load_map_set(tmp_path / "out" / "maps")
+    assert base in maps.maps and maps.constants.get("Metallic", maps.constants.get("metallic")) == 1.0
+    out, _ = read_image(maps.maps[base], maps.colorspace[base])
+    brass = cc.gltf_base_colour(src)
+    assert cc.hue_difference(cc.mean_hue(brass), cc.mean_hue(out)) < 5
+    assert 0.9 < cc.mean_luminance(out) / cc.mean_luminance(brass) < 1.1
+    assert res.verdict.passed

@@ -240,3 +240,84 @@ class MetalRough(Reflectance):
                 out[self.specular_color] = np.where(metal, np.asarray(out[self.specular_color]), f0 / scale)
                 driven.append(self.specular_color)
         return driven
+
+
+@dataclass(frozen=True)
+class SpecularLevel(Reflectance):
+    """A grey dielectric F0 given as a level: F0 = ``scale`` x the parameter (Burley 2012, "Physically-based
+    shading at Disney", §5.3: ``specular`` in [0, 1] maps to F0 in [0, 0.08]; Mitsuba 3's ``principled`` takes
+    eta = 2 / (1 - sqrt(0.08 specular)) - 1, the same F0). Written back as the channel mean / ``scale``."""
+
+    param: str
+    scale: float = 0.08
+
+    @property
+    def params(self) -> tuple[str, ...]:
+        return (self.param,)
+
+    @property
+    def map_params(self) -> tuple[str, ...]:
+        return (self.param,)
+
+    def driven_param(self, metal: bool = True) -> str:
+        return self.param
+
+    def f0(self, values: Mapping[str, Any], channels: Channels) -> np.ndarray:
+        return as_rgb(self.scale * as_floats(values[self.param]), 1)
+
+    def write_f0(
+        self, f0: np.ndarray, out: MutableMapping[str, Any], channels: Channels, diffuse: np.ndarray | None = None
+    ) -> list[str]:
+        out[self.param] = np.clip(f0.mean(axis=-1) / self.scale, 0.0, 1.0)
+        return [self.param]
+
+
+@dataclass(frozen=True)
+class Metalness(Reflectance):
+    """A principled BSDF's metallic blend: F0 = mix(F0 of the dielectric part, base colour, metallic) (Burley
+    2012 §5.3, "metallic"; Blender's Principled BSDF and Mitsuba 3's ``principled`` take a metal's F0 from its
+    base colour, and scale the diffuse by 1 - metallic). Written back per texel as glTF's metal-roughness is:
+    a metal (the template's metallic >= 0.5) takes F0 as its base colour, a dielectric takes its albedo as
+    base colour and F0 through the dielectric part (an IOR, a specular level), written only where it is not
+    metal."""
+
+    base_color: str
+    metallic: str
+    dielectric: Reflectance
+
+    writes_albedo: ClassVar[bool] = True
+
+    @property
+    def params(self) -> tuple[str, ...]:
+        return (self.base_color, self.metallic, *self.dielectric.params)
+
+    @property
+    def map_params(self) -> tuple[str, ...]:
+        return (self.base_color, self.metallic)
+
+    def driven_param(self, metal: bool = True) -> str:
+        """A metal's base colour, or the dielectric part's parameter."""
+        return self.base_color if metal else self.dielectric.driven_param(False)
+
+    def f0(self, values: Mapping[str, Any], channels: Channels) -> np.ndarray:
+        m = as_floats(values[self.metallic])[..., None]
+        return self.dielectric.f0(values, channels) * (1.0 - m) + as_rgb(values[self.base_color], 3) * m
+
+    def albedo(self, diffuse: np.ndarray, values: Mapping[str, Any]) -> np.ndarray:
+        """A metal's base colour is no albedo: diffuse (1 - metallic)."""
+        return diffuse * (1.0 - as_floats(values[self.metallic])[..., None])
+
+    def write_f0(
+        self, f0: np.ndarray, out: MutableMapping[str, Any], channels: Channels, diffuse: np.ndarray | None = None
+    ) -> list[str]:
+        metal = (np.asarray(out[self.metallic]) >= 0.5)[..., None]
+        albedo = np.asarray(out[self.base_color]) if diffuse is None else as_floats(diffuse)
+        out[self.base_color] = np.where(metal, f0, albedo)
+        driven = [self.base_color]
+        if not np.all(metal):
+            name = self.dielectric.driven_param(False)
+            held = np.asarray(out[name], dtype=float)
+            self.dielectric.write_f0(f0, out, channels)
+            out[name] = np.where(metal[..., 0] if held.ndim < metal.ndim else metal, held, np.asarray(out[name]))
+            driven.append(name)
+        return driven

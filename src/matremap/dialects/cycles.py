@@ -58,7 +58,7 @@ published model) and drawn by real Cycles with ``--target-renderer cycles``:
 from __future__ import annotations
 
 from matremap.core.models import ModelSpec, OptionSpec, ParamSpec
-from matremap.core.reflectance import Dielectric, SpecularParam
+from matremap.core.reflectance import Dielectric, Metalness, SpecularParam
 
 GLOSSY = ModelSpec(
     id="cycles:glossy",
@@ -133,8 +133,9 @@ PRINCIPLED = ModelSpec(
             {"roles": {"Base Color": "specular", "IOR": "other"}, "diffuse_only": None, "specular_only": {}},
         ),
     ),
-    # F0 of the IOR, with Specular IOR Level held at 0.5 (where Cycles leaves F0 as the IOR gives it)
-    reflectance=Dielectric("IOR"),
+    # F0: a metal's Base Color (F82-tint: Base Color is F0); a dielectric's F0 of the IOR, with Specular IOR
+    # Level held at 0.5 (where Cycles leaves F0 as the IOR gives it)
+    reflectance=Metalness("Base Color", "Metallic", Dielectric("IOR")),
     channel_separable=False,
     normal_mapping="cycles",
 )
