@@ -228,3 +228,27 @@ def test_a_mirror_is_never_black_and_never_scored_zero():
         fit(black, "mitsuba06:ward")
     broad = fit(Material.create("mitsuba06:ward", {"alpha": 0.2}), "mitsuba06:pbr")
     assert broad.warnings == []
+
+
+def test_a_principled_dielectric_keeps_its_specular_lobe_in_a_two_stage_fit():
+    """Mitsuba 3's principled has no override that draws its specular part alone: two-stage fits took that
+    part for black and switched the target's specular off (ior at its minimum), the loss (0.042) hiding it
+    behind the diffuse. Its specular goal is now full - diffuse: the fit keeps a dielectric F0 near the
+    source's 0.04 and reaches the joint fit's loss."""
+    source = Material.create(
+        "mitsuba3:principled", {"base_color": [0.8, 0.6, 0.3], "roughness": 0.4, "metallic": 0.0, "specular": 0.5}
+    )
+    two = fit(source, "usd:preview_surface")
+    simple = fit(source, "usd:preview_surface", strategy="simple")
+    assert not any("black" in s.message for s in two.stages)
+    assert 0.025 < f0_from_ior(float(two.target.values["ior"][0])) < 0.06
+    assert two.loss < 1.1 * simple.loss and two.loss < 0.02
+
+
+def test_a_principled_metal_is_fitted_as_a_metal_in_two_stages():
+    """Held at metallic 1, Mitsuba 3's principled has no diffuse part and its whole render is the specular
+    part; its specialisation did not say so, and every fit of a sweep from it ended at loss 1."""
+    source = Material.create("mitsuba3:principled", {"base_color": [0.8, 0.6, 0.3], "roughness": 0.4, "metallic": 1.0})
+    r = fit(source, "usd:preview_surface", fix={"metallic": 1.0})
+    assert r.loss < 0.01
+    np.testing.assert_allclose(r.target.values["diffuseColor"], [0.8, 0.6, 0.3], atol=0.05)

@@ -343,3 +343,26 @@ def test_cli_sweep_report_and_export(ward_db, tmp_path, capsys):
     assert "--force" in capsys.readouterr().err
     assert main(["export", str(ward_db), "-o", str(tmp_path / "t.csv")]) == 0
     assert "30 rows" in capsys.readouterr().err
+
+
+def test_a_sweep_whose_every_fit_found_no_match_is_flagged_and_not_learned_from(ward_db, tmp_path):
+    """Every fit at loss 1 (a source part drawn black, say: Mitsuba 3 principled onto UsdPreviewSurface) has no
+    outlier, so the robust z-score flagged none and a constant transform was learned from them."""
+    import shutil
+
+    from matremap.regress.data import load_training_data
+
+    rows, grid, config = load(ward_db)
+    rows = copy.deepcopy(rows)
+    for r in rows:
+        r["loss"] = 1.0
+    a = analyse(rows, grid, config)
+    assert all("loss" in a.flags[r["key"]] for r in rows)
+    db = tmp_path / "lost.sqlite"
+    shutil.copyfile(ward_db, db)
+    import sqlite3
+
+    with sqlite3.connect(db) as con:
+        con.execute("UPDATE points SET loss = 1.0")
+    with pytest.raises(MatremapError, match="every fit of the sweep found no match"):
+        load_training_data(db)

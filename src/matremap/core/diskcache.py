@@ -31,8 +31,10 @@ from matremap.errors import MatremapError
 CACHE_ENV = ("MATREMAP_CACHE", "MATREMAP_CACHE_DIR")
 #: part of the key of every cached result (swept databases, learned transforms): bump it in the commit that
 #: changes what fitting, sweeping or learning would give for the same inputs, so results cached by an older
-#: matremap are recomputed rather than reused (3: a scale mapping's domain reaches 0)
-RESULTS_REVISION = 3
+#: matremap are recomputed rather than reused (3: a scale mapping's domain reaches 0; 4: Principled metals read
+#: F0 from their base colour; 5: a source's specular part no override isolates is full - diffuse, and Mitsuba 3's
+#: principled metal is its specular part)
+RESULTS_REVISION = 5
 
 
 def cache_dir() -> Path:

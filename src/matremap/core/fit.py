@@ -716,7 +716,11 @@ def _source_goals(
     source: Material, strategy: str, scale: float, renderer: Renderer, counter: _Counter
 ) -> Steps[dict[str, np.ndarray]]:
     """The irradiance-matched source pixels each stage fits: full, and for the staged strategies the
-    diffuse-only and specular-only parts (zero where the source has no such part)."""
+    diffuse-only and specular-only parts (zero where the source has no such part). A source whose specular
+    part no override isolates (Mitsuba 3's principled: its metallic lobe takes the base colour) but whose
+    diffuse part can be drawn has the difference full - diffuse as its specular goal: the lobes add (a
+    source without a specular part gets 0 either way). It was taken for black, and the target's specular
+    part switched off."""
     which = [FULL] if strategy in JOINT else [DIFFUSE, SPECULAR, FULL]
     src_parts = [part(source, w) for w in which]
     rendered = yield from counter.pixels(renderer, [m for m in src_parts if m is not None])
@@ -724,7 +728,9 @@ def _source_goals(
     it = iter(rendered)
     for w, m in zip(which, src_parts, strict=True):
         goals[w] = scale * next(it) if m is not None else np.zeros((counter.indices.size, 3))
-
+    spec = source.spec.specialise(source.values)
+    if strategy not in JOINT and spec.specular_only is None and spec.diffuse_only is not None:
+        goals[SPECULAR] = np.maximum(goals[FULL] - goals[DIFFUSE], 0.0)
     return goals
 
 

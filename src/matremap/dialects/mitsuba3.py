@@ -27,7 +27,7 @@ mitsuba3:principled        base_color (0.5); roughness, metallic, specular (0.5)
 from __future__ import annotations
 
 from matremap.core.models import ModelSpec, OptionSpec, ParamSpec
-from matremap.core.reflectance import Conductor, Dielectric
+from matremap.core.reflectance import Conductor, Dielectric, Metalness, SpecularLevel
 
 CONDUCTORS = (
     "none",
@@ -238,10 +238,17 @@ PRINCIPLED = ModelSpec(
     # the metallic lobe takes base_color's colour: no parameter override isolates the specular part
     specular_only=None,
     channel_separable=False,  # tints use the luminance of base_color
-    # a metal (metallic 1, chosen for a source without a diffuse part): base_color is its F0
+    # a metal (metallic 1, chosen for a source without a diffuse part): base_color is its F0, the whole render
+    # its specular part (without this a two-stage fit from a principled metal found its specular part black)
     specialisations=(
-        ("metallic", 1.0, {"roles": {"base_color": "specular", "specular": "other"}, "diffuse_only": None}),
+        (
+            "metallic",
+            1.0,
+            {"roles": {"base_color": "specular", "specular": "other"}, "diffuse_only": None, "specular_only": {}},
+        ),
     ),
+    # F0: a metal's base colour, a dielectric's 0.08 specular (spec_tint held at 0)
+    reflectance=Metalness("base_color", "metallic", SpecularLevel("specular")),
 )
 
 #: the models of this dialect, in the order they are listed

@@ -73,7 +73,9 @@ finished points on the grid and gives every point a list of flag reasons. It is 
     decades. The MAD is floored at ``LOSS_MIN_SPREAD`` (0.05 in log units) so that a sweep of
     near-identical losses does not flag points that differ by a few per cent. Where a whole region
     of the grid fits badly, the MAD is large and few points stand out: this rule finds single
-    failed fits, not bad regions (the loss map shows those).
+    failed fits, not bad regions (the loss map shows those). A loss above ``LOSS_MAX`` (0.5: half the
+    image's energy unexplained) is flagged whatever the others: a sweep whose every fit failed the same way
+    (a source part drawn black, say) has no outlier, and was learned from.
 
 Only fitted target parameters are tested: those the model fits by default or the configuration
 frees, minus those it fixes. Rows whose swept values are not on the current grid keep their
@@ -103,6 +105,7 @@ ABOVE = 1.0
 LOSS_Z = 3.5
 LOSS_MIN = 0.02
 LOSS_MIN_SPREAD = 0.05
+LOSS_MAX = 0.5
 #: RGB values whose channels agree within this (relative) are grey
 GREY_RTOL = 1e-4
 
@@ -345,6 +348,11 @@ def _optimised(row: Mapping[str, Any]) -> set[str] | None:
 
 def _loss_test(ok: Sequence[Mapping[str, Any]], flags: dict[str, list[str]], details: dict[str, list[str]]) -> None:
     losses = [(r["key"], float(r["loss"])) for r in ok if r.get("loss") is not None and r["loss"] > 0]
+    for key, loss in losses:
+        if loss > LOSS_MAX:  # no remapping at all, however many points share it
+            flags[key].append("loss")
+            details[key].append(f"loss {loss:.3g} above {LOSS_MAX:g}: the fit found no match")
+    losses = [(k, v) for k, v in losses if v <= LOSS_MAX]
     if len(losses) < 3:
         return
     logs = np.log([v for _, v in losses])
