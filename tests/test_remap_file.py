@@ -269,3 +269,13 @@ def test_a_textured_metal_keeps_its_colour_map_on_a_principled_target(tmp_path, 
     assert cc.hue_difference(cc.mean_hue(brass), cc.mean_hue(out)) < 5
     assert 0.9 < cc.mean_luminance(out) / cc.mean_luminance(brass) < 1.1
     assert res.verdict.passed
+
+
+def test_a_file_remap_refuses_a_write_name_its_target_cannot_be_written_as_before_any_work(tmp_path, capsys):
+    """--write brass.gltf with a Cycles target was refused only after the sweep, conversion and evaluation."""
+    src = Path(__file__).resolve().parents[1] / "examples" / "brass-gltf" / "brass.gltf"
+    out = tmp_path / "out"
+    code = main(["remap", str(src), "--to", "cycles:principled", "-o", str(out), "--write", "brass.gltf"])
+    err = capsys.readouterr().err
+    assert code == 2 and "write a .blend file instead" in err.strip().splitlines()[-1]
+    assert "convert:" not in err and "sweep" not in err and not out.exists()

@@ -901,6 +901,7 @@ def _output_name(
         from matremap.formats.confine import output_inside
 
         output_inside(out, write)  # a name like ../../x.gltf is refused: outputs stay under OUT
+        check_material_file_name(write, target)  # a format that cannot hold the target fails now, not after the work
         name = write
     if name is not None:
         format_for(name)  # fails early on a suffix no writer takes
