@@ -142,6 +142,7 @@ LAYERS: dict[str, dict[str, str]] = {
     OPEN_PBR_SURFACE.id: {"coat": "coat_weight", "sheen": "fuzz_weight"},
     STANDARD_SURFACE.id: {"coat": "coat", "sheen": "sheen"},
     "mitsuba3:principled": {"coat": "clearcoat", "sheen": "sheen"},
+    "gltf:pbr": {"coat": "clearcoat", "sheen": "sheenColor"},
 }
 
 
