@@ -37,6 +37,7 @@ the closure mixture with reflectance() the lobes' directional albedos
 
 from __future__ import annotations
 
+import shlex
 from collections.abc import Mapping
 from typing import Any
 
@@ -143,6 +144,7 @@ LAYERS: dict[str, dict[str, str]] = {
     STANDARD_SURFACE.id: {"coat": "coat", "sheen": "sheen"},
     "mitsuba3:principled": {"coat": "clearcoat", "sheen": "sheen"},
     "gltf:pbr": {"coat": "clearcoat", "sheen": "sheenColor"},
+    "cycles:principled": {"coat": "Coat Weight", "sheen": "Sheen Weight"},
 }
 
 
@@ -163,7 +165,7 @@ def absorbed_layers(
         where = (
             f"{target_model} has no {layer} layer"
             if own is None
-            else f"{target_model}'s {own} stayed 0 (free it with --free {own} --strategy simple)"
+            else f"{target_model}'s {own} stayed 0 (free it with --free {shlex.quote(own)} --strategy simple)"
         )
         notes.append(
             f"the source's {layer} layer ({weight} {amount:.3g}) was absorbed into the other parameters: {where}"

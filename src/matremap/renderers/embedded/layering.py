@@ -211,16 +211,21 @@ def zeltner_ltc(mu, rough) -> tuple[np.ndarray, np.ndarray]:
 
 def zeltner_sheen(rough, g) -> np.ndarray:
     """The white Zeltner sheen times cos(theta_light): R(mu_o, r) D(i), D the linearly transformed cosine
-    in the frame whose x axis is the viewer's azimuth: with w = (a x + b z, a y, z) the light direction
-    under the inverse matrix, D = max(w_z, 0)/pi (a / |w|^2)^2."""
+    (:func:`ltc_cosine`) with the fitted (a, b) at (mu_o, r)."""
     a, b = zeltner_ltc(g.cos_o, rough)
+    return zeltner_albedo(g.cos_o, rough) * ltc_cosine(a, b, g)
+
+
+def ltc_cosine(a, b, g) -> np.ndarray:
+    """The linearly transformed cosine of Zeltner et al.'s sheen, D(light), in the frame whose x axis is the
+    viewer's azimuth: with w = (a x + b z, a y, z) the light direction under the inverse matrix
+    [[a, 0, b], [0, a, 0], [0, 0, 1]], D = max(w_z, 0)/pi (a / |w|^2)^2 (it integrates to 1)."""
     sin_o = np.sqrt(np.maximum(1.0 - g.cos_o**2, 0.0))
     x = np.where(sin_o > 1e-9, (g.i_dot_o - g.cos_i * g.cos_o) / np.maximum(sin_o, 1e-9), 0.0)
     y2 = np.maximum(1.0 - g.cos_i**2 - x * x, 0.0)
     z = g.cos_i
     len2 = (a * x + b * z) ** 2 + a * a * y2 + z * z
-    d = np.maximum(z, 0.0) * INV_PI * (a / len2) ** 2
-    return zeltner_albedo(g.cos_o, rough) * d
+    return np.maximum(z, 0.0) * INV_PI * (a / len2) ** 2
 
 
 def charlie_sheen(rough, g) -> np.ndarray:
@@ -511,6 +516,7 @@ __all__ = [
     "gltf_sheen",
     "gltf_sheen_albedo",
     "gltf_sheen_table",
+    "ltc_cosine",
     "ggx_weighted_albedo",
     "modulated_ior",
     "multiscatter_gain",
