@@ -169,6 +169,10 @@ def test_defaults_are_off_and_the_model_is_then_metal_rough_bit_for_bit():
         "sheenRoughness": 0.0,
         "clearcoat": 0.0,
         "clearcoatRoughness": 0.0,
+        "transmission": 0.0,
+        "thickness": 0.0,
+        "attenuationDistance": 0.0,
+        "attenuationColor": (1.0, 1.0, 1.0),
     }
     assert not any(p.fit for p in pbr.params[len(mr.params) :])  # held off unless freed
     rng = np.random.default_rng(7)

@@ -36,7 +36,15 @@ gltf:pbr -- the same material with two more of Khronos' ratified layer extension
   off) and ``clearcoatRoughness``; the spec's ``fresnel_coat`` with F0 0.04 (ior 1.5) and Schlick's Fresnel
   of N.V (not V.H, as the README's "Discussion" says): Fc = 0.04 + 0.96 (1 - N.V)^5,
   f = material (1 - clearcoat Fc) + clearcoat Fc D V, D V the core specular lobe (GGX, the same
-  visibility option) with alpha = clearcoatRoughness^2. Clear coat sits on top of sheen.
+  visibility option) with alpha = clearcoatRoughness^2. Clear coat sits on top of sheen;
+* KHR_materials_transmission (ratified README, "Transmission" and "Implementation"): ``transmission`` (default 0)
+  replaces that share of the dielectric base's diffuse by the specular BTDF tinted by baseColor:
+  dielectric_brdf = fresnel_mix(ior, base = mix(diffuse_brdf, specular_btdf baseColor, transmission), layer =
+  specular_brdf); the BTDF reflects nothing, so in reflection the diffuse is (1 - transmission) of itself. What
+  goes through is drawn by the transmission probe (``renderers/embedded/transmission.py``), with
+  KHR_materials_volume (ratified README): ``thickness`` (0: thin-walled, no refraction), ``attenuationColor`` and
+  ``attenuationDistance`` (Beer-Lambert, sigma = -ln(attenuationColor) / attenuationDistance; 0 here stands for
+  the default +infinity, as glTF forbids 0 itself).
 
 It is a model of its own rather than more parameters of gltf:metal-rough so that a material file writer
 that stores gltf:metal-rough refuses a result with these layers (one line naming the model) instead of
@@ -112,7 +120,7 @@ METAL_ROUGH = ModelSpec(
 
 PBR = ModelSpec(
     id="gltf:pbr",
-    summary="glTF 2.0 metallic-roughness with KHR_materials_ior/specular/sheen/clearcoat (MaterialX gltf_pbr)",
+    summary="glTF 2.0 metallic-roughness with KHR_materials_ior/specular/sheen/clearcoat/transmission/volume",
     params=(
         *METAL_ROUGH.params,
         ParamSpec(
@@ -148,6 +156,39 @@ PBR = ModelSpec(
             (0.0, 1.0),
             fit=False,
             doc="KHR_materials_clearcoat clearcoatRoughnessFactor: alpha = clearcoatRoughness^2",
+        ),
+        ParamSpec(
+            "transmission",
+            "other",
+            0.0,
+            (0.0, 1.0),
+            fit=False,
+            doc="KHR_materials_transmission transmissionFactor: share of the dielectric base that refracts",
+        ),
+        ParamSpec(
+            "thickness",
+            "other",
+            0.0,
+            (0.0, 1000.0),
+            fit=False,
+            doc="KHR_materials_volume thicknessFactor: 0 thin-walled, > 0 a volume (the probe traces the real one)",
+        ),
+        ParamSpec(
+            "attenuationDistance",
+            "other",
+            0.0,
+            (0.0, 1e6),
+            fit=False,
+            doc="KHR_materials_volume attenuationDistance (scene units); 0 stands for glTF's default, infinity",
+        ),
+        ParamSpec(
+            "attenuationColor",
+            "other",
+            (1.0,) * 3,
+            (0.0, 1.0),
+            channels=3,
+            fit=False,
+            doc="KHR_materials_volume attenuationColor: what is left of white light after attenuationDistance",
         ),
     ),
     options=METAL_ROUGH.options,

@@ -65,9 +65,22 @@ def clearcoat_layer(p, opt, g, material) -> np.ndarray:
     return material * (1.0 - weight) + weight * specular_dv(p["clearcoatRoughness"], opt, g)
 
 
+def transmitted_diffuse(p, g) -> np.ndarray:
+    """The diffuse reflection KHR_materials_transmission takes away: (1 - metallic) transmission (1 - specular
+    max F) baseColor/pi cos (the specular BTDF that replaces it reflects nothing)."""
+    f0 = dielectric_f0(p["ior"], 1.0, p["specularColor"])
+    fr = f0 + (1.0 - f0) * g.schlick_weight
+    weight = 1.0 - p["specular"] * np.max(fr, axis=1, keepdims=True)
+    return (1.0 - p["metallic"]) * p["transmission"] * weight * p["baseColor"] * g.lambert
+
+
 def pbr(p, opt, g):
-    """gltf:pbr: the metallic-roughness material, the sheen over it, the clear coat over both."""
-    return clearcoat_layer(p, opt, g, sheen_layer(p, g, metal_rough(p, opt, g)))
+    """gltf:pbr: the metallic-roughness material less what it transmits, the sheen over it, the clear coat over
+    both."""
+    material = metal_rough(p, opt, g)
+    if np.any(np.asarray(p["transmission"]) > 0.0):
+        material = material - transmitted_diffuse(p, g)
+    return clearcoat_layer(p, opt, g, sheen_layer(p, g, material))
 
 
 #: model id -> evaluator
