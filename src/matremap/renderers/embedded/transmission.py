@@ -184,6 +184,25 @@ def interface_of(material: Material) -> Interface:
     return reader(material.values)
 
 
+def gltf_equivalent(iface: Interface, thickness: float = 2.0 * SPHERE_RADIUS) -> dict[str, Any]:
+    """The gltf:pbr transmission parameters that transmit as ``iface`` does (KHR_materials_transmission and
+    _volume read back through :func:`gltf_interface`): transmission, ior, roughness, the entry tint as baseColor,
+    a thin wall or a volume of the given ``thickness`` (what rasterisers use; the probe traces the real object),
+    and the extinction as attenuationColor after attenuationDistance 1 (0, glTF's infinity, when clear). Only
+    the Fresnel form differs (glTF's Schlick for OpenPBR's exact one); a grey weight is assumed."""
+    clear = not np.any(iface.sigma > 0.0)
+    return {
+        "metallic": 0.0,
+        "transmission": float(iface.weight[0]),
+        "ior": float(iface.eta),
+        "roughness": math.sqrt(iface.alpha),
+        "baseColor": iface.tint.tolist(),
+        "thickness": 0.0 if iface.thin_walled else float(thickness),
+        "attenuationColor": [1.0, 1.0, 1.0] if clear else np.exp(-iface.sigma).tolist(),
+        "attenuationDistance": 0.0 if clear else 1.0,
+    }
+
+
 # -- the background -------------------------------------------------------------------------------------
 
 #: the tiles' colours (linear RGB): six hues at two brightnesses, so refraction moves and tints visible edges
@@ -404,6 +423,7 @@ __all__ = [
     "beer_sigma",
     "cross",
     "far_side",
+    "gltf_equivalent",
     "gltf_interface",
     "interface_of",
     "openpbr_interface",
