@@ -264,3 +264,26 @@ def test_matches_real_cycles(cases):
     emulated = EmbeddedRenderer().render(mats, scene)
     for m, a, b in zip(mats, emulated, real, strict=True):
         assert relative_rmse(a, b, scene.mask()) < 1e-3, m
+
+
+def test_transforms_learned_before_the_layer_sockets_still_load():
+    """The shipped Ward -> Principled transform's template predates the Coat and Sheen sockets: they take their
+    defaults (layers off, as Cycles held them), the output has them, and a template lacking a fitted parameter
+    is still refused."""
+    import json
+    from pathlib import Path
+
+    from matremap.errors import MatremapError
+    from matremap.regress import transform as tf
+
+    path = Path(tf.__file__).parent / "transforms" / "ward-cyclesprincipled.json"
+    raw = json.loads(path.read_text())
+    assert "Coat Weight" not in raw["template"]
+    t = tf.Transform.load(path, require_checksum=True)
+    assert t.template["Coat Weight"] == 0.0 and t.template["Sheen Weight"] == 0.0
+    assert tuple(t.template["Coat Tint"]) == (1.0, 1.0, 1.0)
+    out, _ = t.apply({"alpha": np.array([0.2]), "specularReflectance": np.array([[0.05] * 3])})
+    assert float(out["Coat Weight"][0]) == 0.0 and float(out["Sheen Weight"][0]) == 0.0
+    del raw["template"]["Roughness"], raw["checksum"]
+    with pytest.raises(MatremapError, match="template lacks target parameters Roughness"):
+        tf.Transform.from_dict(raw, "edited")
