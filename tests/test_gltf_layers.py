@@ -303,15 +303,17 @@ def test_layers_table_names_the_gltf_layers():
 
 def test_a_coat_is_found_again_when_freed_and_named_when_held():
     """OpenPBR coated copper onto gltf:pbr: with the coat held off the look is absorbed and the note says how to
-    free it (measured 0.084 relative RMSE at 128^2, as onto gltf:metal-rough); freed, the clear coat is found
-    (measured 0.011 at 128^2, clearcoat 1.0, clearcoatRoughness 0.235)."""
+    free it (measured 0.084 relative RMSE at 128^2, as onto gltf:metal-rough); freed, three-stage, the clear coat
+    is found (measured 0.011 at 128^2, clearcoat 1.0, clearcoatRoughness 0.235; two-stage stops at 0.03 with
+    main's descent, which limits a stage's evaluations)."""
     from matremap.uniform import fit
 
     source = Material.create("mtlx:open_pbr_surface", COATED_COPPER)
     held = fit(source, MODEL, scene=SCENE, fix={"metallic": 1.0})
     assert held.loss > 0.06
     assert any("gltf:pbr's clearcoat stayed 0 (free it with --free clearcoat" in w for w in held.warnings)
-    freed = fit(source, MODEL, scene=SCENE, fix={"metallic": 1.0}, free=["clearcoat", "clearcoatRoughness"])
+    free = ["clearcoat", "clearcoatRoughness"]
+    freed = fit(source, MODEL, "three-stage", scene=SCENE, fix={"metallic": 1.0}, free=free)
     assert freed.loss < 0.3 * held.loss and freed.loss < 0.025
     assert float(freed.target.values["clearcoat"][0]) > 0.8
     assert 0.15 < float(freed.target.values["clearcoatRoughness"][0]) < 0.35
