@@ -17,7 +17,12 @@ Groups (each for distribution multi_ggx and ggx):
   0.5 / 1, Specular Tint white / coloured;
 * metal: Metallic 1, coloured Base Color, Roughness 0.05..1, Specular Tint white / coloured;
 * full: coloured Base Color, Metallic 0 / 0.5, Roughness 0.05..1, IOR 1.1 / 1.5 / 2.5, Specular IOR
-  Level 0 / 0.5 / 1, Specular Tint white / coloured.
+  Level 0 / 0.5 / 1, Specular Tint white / coloured;
+* coat: a coloured dielectric (Roughness 0.4) or metal (Metallic 1, Roughness 0.3) under Coat Weight
+  0.5 / 1, Coat Roughness 0.03..1, Coat IOR 1.3 / 1.5 / 2.0, Coat Tint white / amber;
+* sheen: the same bases under Sheen Weight 0.5 / 1, Sheen Roughness 0.05..1, Sheen Tint white / pink, and a
+  sheen alone (black base, no specular);
+* coat+sheen: both layers over the dielectric and the metal.
 
 Needs the bpy venv (``python3.11 -m venv .venv-bpy && .venv-bpy/bin/pip install bpy==5.0.1``).
 """
@@ -65,6 +70,33 @@ def grid() -> list[tuple[str, str, dict]]:
                 "Specular Tint": tint,
             }
             cases.append(("full", dist, values))
+        cases += layered_cases(dist)
+    return cases
+
+
+LAYER_BASES = (
+    {"Base Color": BASE, "Roughness": 0.4},
+    {"Base Color": BASE, "Metallic": 1.0, "Roughness": 0.3},
+)
+LAYER_ROUGHNESS = (0.03, 0.05, 0.2, 0.5, 1.0)
+GROUPS = ("diffuse", "dielectric", "metal", "full", "coat", "sheen", "coat+sheen")
+
+
+def layered_cases(dist: str) -> list[tuple[str, str, dict]]:
+    """The coat, sheen and coat+sheen groups of one distribution (see the module docstring)."""
+    cases: list[tuple[str, str, dict]] = []
+    for base in LAYER_BASES:
+        for w, r, ior, tint in itertools.product((0.5, 1.0), LAYER_ROUGHNESS, (1.3, 1.5, 2.0), TINTS):
+            coat = {"Coat Weight": w, "Coat Roughness": r, "Coat IOR": ior, "Coat Tint": tint}
+            cases.append(("coat", dist, {**base, **coat}))
+        for w, r, tint in itertools.product((0.5, 1.0), LAYER_ROUGHNESS, ((1.0, 1.0, 1.0), (1.0, 0.5, 0.6))):
+            cases.append(("sheen", dist, {**base, "Sheen Weight": w, "Sheen Roughness": r, "Sheen Tint": tint}))
+        for r in (0.05, 0.3, 0.8):
+            both = {"Coat Weight": 1.0, "Coat Roughness": r, "Coat Tint": TINTS[1], "Sheen Weight": 0.7}
+            cases.append(("coat+sheen", dist, {**base, **both, "Sheen Roughness": r, "Sheen Tint": (1.0, 0.5, 0.6)}))
+    for r in LAYER_ROUGHNESS:
+        alone = {"Base Color": 0.0, "Specular IOR Level": 0.0, "Sheen Weight": 1.0, "Sheen Roughness": r}
+        cases.append(("sheen", dist, alone))
     return cases
 
 
@@ -122,7 +154,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{len(cases)} cases at {args.resolution}^2, lights at 0 and 45 degrees: {timing}")
     print("| lobe | distribution | cases | median rel. RMSE | worst | worst, diffuse under 1 - F0 |")
     print("|---|---|---|---|---|---|")
-    for group in ("diffuse", "dielectric", "metal", "full"):
+    for group in GROUPS:
         for dist in DISTRIBUTIONS:
             sel = np.array([g == group and d == dist for g, d, _ in cases])
             worst = int(np.argmax(np.where(sel, err, -1.0)))

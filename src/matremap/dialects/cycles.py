@@ -43,7 +43,7 @@ Diffuse Color   RGB in [0, 1], default 0 (no diffuse node); Lambertian Color/pi
 cycles:diffuse -- the Diffuse BSDF node with Roughness 0 (Lambert): Color/pi.
 
 cycles:principled -- the Principled BSDF node of Blender 5.0 with the sockets below (the others at
-their defaults: no coat, sheen, subsurface, transmission, emission, thin film, Diffuse Roughness 0).
+their defaults: no subsurface, transmission, emission, thin film, Diffuse Roughness 0).
 Emulated by the embedded renderer (``renderers/embedded/evaluators/principled.py``, which follows
 ``kernel/svm/closure.h`` ``CLOSURE_BSDF_PRINCIPLED_ID`` and says where Cycles departs from the
 published model) and drawn by real Cycles with ``--target-renderer cycles``:
@@ -52,7 +52,11 @@ published model) and drawn by real Cycles with ``--target-renderer cycles``:
   Tint); over the rest (1 - Metallic) a dielectric GGX lobe whose Fresnel is that of the IOR with F0
   scaled by 2 Specular IOR Level and remapped to F0 Specular Tint, over a Lambertian of Base Color
   weighted by 1 - the dielectric lobe's estimated directional albedo (the largest RGB channel);
-  Multiscatter GGX scales each lobe by Cycles' energy compensation.
+  Multiscatter GGX scales each lobe by Cycles' energy compensation. Over all of it, as layers weighing
+  what lies below by 1 - their estimated albedo (largest RGB channel): a sheen (Sheen Weight, Sheen Tint,
+  Sheen Roughness: Zeltner et al.'s LTC sheen) and over that a coat (Coat Weight, Coat Roughness, Coat IOR:
+  a GGX lobe with the real dielectric Fresnel and energy compensation whatever the distribution), whose
+  Coat Tint absorbs along the refracted view (tint^(1/cos theta_t)). Both off by default (weights 0).
 """
 
 from __future__ import annotations
@@ -119,12 +123,48 @@ PRINCIPLED = ModelSpec(
             fit=False,
             doc="dielectric specular colour (held at white in fits)",
         ),
+        ParamSpec(
+            "Coat Weight",
+            "specular",
+            0.0,
+            (0.0, 1.0),
+            fit=False,
+            linear=False,
+            doc="coverage of the coat layer (0: none; held in fits: --free 'Coat Weight')",
+        ),
+        ParamSpec("Coat Roughness", "roughness", 0.03, (0.0, 1.0), fit=False, doc="coat GGX, alpha = roughness^2"),
+        ParamSpec("Coat IOR", "other", 1.5, (1.0, 4.0), fit=False, doc="IOR of the coat (its real Fresnel)"),
+        ParamSpec(
+            "Coat Tint",
+            "other",
+            (1.0,) * 3,
+            (0.0, 1.0),
+            channels=3,
+            fit=False,
+            doc="colour of the coat's absorption at normal incidence (Beer's law along the refracted view)",
+        ),
+        ParamSpec(
+            "Sheen Weight",
+            "diffuse",
+            0.0,
+            (0.0, 1.0),
+            fit=False,
+            linear=False,
+            doc="weight of the sheen layer (0: none; held in fits: --free 'Sheen Weight')",
+        ),
+        ParamSpec(
+            "Sheen Roughness", "diffuse", 0.5, (0.0, 1.0), fit=False, linear=False, doc="Zeltner et al. LTC sheen"
+        ),
+        ParamSpec(
+            "Sheen Tint", "diffuse", (1.0,) * 3, (0.0, 1.0), channels=3, fit=False, doc="colour of the sheen layer"
+        ),
     ),
     options=(OptionSpec("distribution", ("multi_ggx", "ggx"), "multi_ggx", "microfacet distribution"),),
-    diffuse_only={"Metallic": 0.0, "Specular IOR Level": 0.0},
-    # with Metallic = 0 (held in fits) a black base leaves the dielectric specular lobe alone;
+    # the diffuse part keeps the sheen (a diffuse absorbs it) and the coat's tint (Coat IOR 1: no coat reflection)
+    diffuse_only={"Metallic": 0.0, "Specular IOR Level": 0.0, "Coat IOR": 1.0},
+    # with Metallic = 0 (held in fits) a black base leaves the dielectric specular lobe (and the coat) alone;
     # a metal's lobe takes Base Color's colour, so this isolates nothing when Metallic > 0
-    specular_only={"Base Color": 0.0},
+    specular_only={"Base Color": 0.0, "Sheen Weight": 0.0},
     # a metal (Metallic 1, chosen for a source without a diffuse part): Base Color is its F0, no diffuse part
     specialisations=(
         (

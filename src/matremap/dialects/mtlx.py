@@ -2,8 +2,12 @@
 
 Parameters are named exactly as the MaterialX 1.39 inputs of ``ND_open_pbr_surface_surfaceshader`` and
 ``ND_standard_surface_surfaceshader``, with their defaults. Only the opaque reflection of each shader is
-modelled: transmission, subsurface, thin film, emission, opacity, anisotropy and normal inputs are not
-parameters here (a file using them is refused by its reader, not silently flattened).
+modelled, and OpenPBR's transmission: subsurface, thin film, emission, opacity, anisotropy and normal inputs are
+not parameters here (a file using them is refused by its reader, not silently flattened). OpenPBR's
+``transmission_weight`` ("Translucent base") takes that share of the dielectric base's diffuse away in
+reflection (its specular reflection stays); what it transmits -- ``transmission_color`` and
+``transmission_depth`` (Beer-Lambert, or a tint of the interface at depth 0) and ``geometry_thin_walled`` -- is
+drawn by the transmission probe (``renderers/embedded/transmission.py``).
 
 mtlx:open_pbr_surface -- OpenPBR Surface specification v1.1 (ASWF, 2024; text of v1.1.1), reduced to a
 mixture of lobes with albedo scaling as its section "Reduction to a mixture of lobes" derives
@@ -37,6 +41,7 @@ the closure mixture with reflectance() the lobes' directional albedos
 
 from __future__ import annotations
 
+import shlex
 from collections.abc import Mapping
 from typing import Any
 
@@ -83,6 +88,10 @@ OPEN_PBR_SURFACE = ModelSpec(
         _held("fuzz_weight", 0.0, doc="coverage of the fuzz (Zeltner et al. LTC sheen)"),
         _rgb("fuzz_color", "other", 1.0, fit=False, doc="reflection albedo colour of the fuzz"),
         _held("fuzz_roughness", 0.5, doc="fuzz roughness (fibre-like at 0, dusty at 1)"),
+        _held("transmission_weight", 0.0, doc="share of the dielectric base that is translucent (refracts)"),
+        _rgb("transmission_color", "other", 1.0, fit=False, doc="colour of the transmitted light (see depth)"),
+        _held("transmission_depth", 0.0, (0.0, 1e6), doc="distance at which white light takes transmission_color"),
+        _held("geometry_thin_walled", 0.0, doc="1: a thin shell (no refraction), 0: the boundary of a volume"),
     ),
     options=(_MULTISCATTER,),
     # the diffuse part keeps the fuzz (a sheen is absorbed by a diffuse) and the coat's tint (coat_ior 1: no
@@ -142,6 +151,8 @@ LAYERS: dict[str, dict[str, str]] = {
     OPEN_PBR_SURFACE.id: {"coat": "coat_weight", "sheen": "fuzz_weight"},
     STANDARD_SURFACE.id: {"coat": "coat", "sheen": "sheen"},
     "mitsuba3:principled": {"coat": "clearcoat", "sheen": "sheen"},
+    "gltf:pbr": {"coat": "clearcoat", "sheen": "sheenColor"},
+    "cycles:principled": {"coat": "Coat Weight", "sheen": "Sheen Weight"},
 }
 
 
@@ -162,7 +173,7 @@ def absorbed_layers(
         where = (
             f"{target_model} has no {layer} layer"
             if own is None
-            else f"{target_model}'s {own} stayed 0 (free it with --free {own} --strategy simple)"
+            else f"{target_model}'s {own} stayed 0 (free it with --free {shlex.quote(own)} --strategy simple)"
         )
         notes.append(
             f"the source's {layer} layer ({weight} {amount:.3g}) was absorbed into the other parameters: {where}"

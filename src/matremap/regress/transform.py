@@ -145,10 +145,12 @@ class Transform:
             raise MatremapError(f"{where}: 'mappings' is empty")
         for name, m in mappings.items():
             schema.mapping(name, m, source, target, where)
-        template = schema.obj(d.get("template"), f"{where}: 'template'")
-        missing = [p.name for p in target.params if p.name not in template]
+        template = dict(schema.obj(d.get("template"), f"{where}: 'template'"))
+        missing = [p.name for p in target.params if p.name not in template and p.fit]
         if missing:
             raise MatremapError(f"{where}: template lacks target parameters {', '.join(missing)}")
+        # a held parameter the model gained after the transform was learned: the renderer held it at its default
+        template.update({p.name: p.default for p in target.params if p.name not in template})
         schema.values(target, template, f"{where}: template")
         source_template = schema.obj(d.get("source_template", {}), f"{where}: 'source_template'")
         schema.values(source, source_template, f"{where}: source_template")

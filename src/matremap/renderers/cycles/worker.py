@@ -475,6 +475,24 @@ def render_svbrdf(request: dict, tmp: str) -> np.ndarray:
 # -- .blend files (ops "write_blend", "inspect_blend", "render_blend"; see matremap.formats.blend) ------
 
 
+#: the Principled BSDF inputs the cycles:principled dialect sets (its parameter names)
+PRINCIPLED_SOCKETS = (
+    "Base Color",
+    "Metallic",
+    "Roughness",
+    "IOR",
+    "Specular IOR Level",
+    "Specular Tint",
+    "Coat Weight",
+    "Coat Roughness",
+    "Coat IOR",
+    "Coat Tint",
+    "Sheen Weight",
+    "Sheen Roughness",
+    "Sheen Tint",
+)
+
+
 def _material_nodes(nt, model: str, options: dict) -> tuple[dict, list]:
     """Build a model's BSDF nodes into an emptied node tree, wired to a Material Output; returns
     (parameter name -> input socket, the BSDF nodes that take a normal)."""
@@ -484,10 +502,7 @@ def _material_nodes(nt, model: str, options: dict) -> tuple[dict, list]:
         p = nt.nodes.new("ShaderNodeBsdfPrincipled")
         p.distribution = DISTRIBUTIONS[options.get("distribution", "multi_ggx")]
         nt.links.new(p.outputs[0], out.inputs["Surface"])
-        sockets = {
-            n: p.inputs[n]
-            for n in ("Base Color", "Metallic", "Roughness", "IOR", "Specular IOR Level", "Specular Tint")
-        }
+        sockets = {n: p.inputs[n] for n in PRINCIPLED_SOCKETS}
         return sockets, [p]
     if model == "cycles:glossy":
         glossy = nt.nodes.new("ShaderNodeBsdfGlossy")

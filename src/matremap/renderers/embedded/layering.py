@@ -36,6 +36,11 @@ Sources (formulas, not code):
   D = (2 + 1/r) sin^(1/r)(theta_h) / (2 pi), r >= 0.005, with Neubelt and Pettineo's visibility
   1/(4 (mu_i + mu_o - mu_i mu_o)), the form MaterialX 1.39's ``sheen_bsdf`` evaluates for Standard
   Surface (its spec names only the distribution).
+* glTF sheen (KHR_materials_sheen, ratified README, "Implementation Notes"): the same D with
+  r = sheenRoughness^2 and Estevez and Kulla's own visibility 1/((1 + Lambda(mu_o) + Lambda(mu_i)) 4 mu_i mu_o),
+  Lambda(mu) = exp(L(mu)) for mu < 1/2 and exp(2 L(1/2) - L(1 - mu)) above, L(x) = a/(1 + b x^c) + d x + e
+  with a..e interpolated in (1 - r)^2 between the README's two sets of constants; its directional albedo
+  (the E(mu) the extension's albedo scaling looks up) is integrated here into a table of its own.
 
 Directional albedos E(mu_o) of the GGX lobes (white, and with the real dielectric Fresnel of every F0)
 and of the Charlie sheen are integrated numerically on node grids here (uniform in sqrt(mu), in the
@@ -206,16 +211,21 @@ def zeltner_ltc(mu, rough) -> tuple[np.ndarray, np.ndarray]:
 
 def zeltner_sheen(rough, g) -> np.ndarray:
     """The white Zeltner sheen times cos(theta_light): R(mu_o, r) D(i), D the linearly transformed cosine
-    in the frame whose x axis is the viewer's azimuth: with w = (a x + b z, a y, z) the light direction
-    under the inverse matrix, D = max(w_z, 0)/pi (a / |w|^2)^2."""
+    (:func:`ltc_cosine`) with the fitted (a, b) at (mu_o, r)."""
     a, b = zeltner_ltc(g.cos_o, rough)
+    return zeltner_albedo(g.cos_o, rough) * ltc_cosine(a, b, g)
+
+
+def ltc_cosine(a, b, g) -> np.ndarray:
+    """The linearly transformed cosine of Zeltner et al.'s sheen, D(light), in the frame whose x axis is the
+    viewer's azimuth: with w = (a x + b z, a y, z) the light direction under the inverse matrix
+    [[a, 0, b], [0, a, 0], [0, 0, 1]], D = max(w_z, 0)/pi (a / |w|^2)^2 (it integrates to 1)."""
     sin_o = np.sqrt(np.maximum(1.0 - g.cos_o**2, 0.0))
     x = np.where(sin_o > 1e-9, (g.i_dot_o - g.cos_i * g.cos_o) / np.maximum(sin_o, 1e-9), 0.0)
     y2 = np.maximum(1.0 - g.cos_i**2 - x * x, 0.0)
     z = g.cos_i
     len2 = (a * x + b * z) ** 2 + a * a * y2 + z * z
-    d = np.maximum(z, 0.0) * INV_PI * (a / len2) ** 2
-    return zeltner_albedo(g.cos_o, rough) * d
+    return np.maximum(z, 0.0) * INV_PI * (a / len2) ** 2
 
 
 def charlie_sheen(rough, g) -> np.ndarray:
@@ -224,6 +234,43 @@ def charlie_sheen(rough, g) -> np.ndarray:
     sin2_h = g.tan2_h / (1.0 + g.tan2_h)
     d = (2.0 + inv_r) * sin2_h ** (0.5 * inv_r) / (2.0 * np.pi)
     return d / (4.0 * (g.cos_i + g.cos_o - g.cos_i * g.cos_o)) * g.cos_i
+
+
+#: Estevez and Kulla's fitted constants of L(x) (KHR_materials_sheen README): (at r = 1, at r = 0) for a..e
+_CHARLIE_L = (
+    (21.5473, 25.3245),
+    (3.82987, 3.32435),
+    (0.19823, 0.16801),
+    (-1.97760, -1.27393),
+    (-4.32054, -4.85967),
+)
+#: the smallest sheen roughness (the Khronos sample viewer's clamp; the README leaves 0 open)
+GLTF_SHEEN_MIN_ROUGHNESS = 1e-6
+
+
+def charlie_lambda(mu, r) -> np.ndarray:
+    """Estevez and Kulla's fitted Lambda of the Charlie sheen at cos ``mu`` for r = alpha (see the module doc)."""
+    t = (1.0 - np.asarray(r, dtype=float)) ** 2
+    a, b, c, d, e = ((1.0 - t) * lo + t * hi for lo, hi in _CHARLIE_L)
+
+    def big_l(x):
+        return a / (1.0 + b * np.power(x, c)) + d * x + e
+
+    mu = np.abs(np.asarray(mu, dtype=float))
+    low = np.minimum(mu, 0.5)  # each branch evaluated only where it holds, then chosen
+    high = np.maximum(mu, 0.5)
+    return np.where(mu < 0.5, np.exp(big_l(low)), np.exp(2.0 * big_l(0.5) - big_l(1.0 - high)))
+
+
+def gltf_sheen(rough, g) -> np.ndarray:
+    """The white glTF (KHR_materials_sheen) sheen times cos(theta_light): D_Charlie(r) / ((1 + Lambda(mu_o) +
+    Lambda(mu_i)) 4 mu_o), r = max(rough, 1e-6)^2."""
+    r = np.maximum(np.asarray(rough, dtype=float), GLTF_SHEEN_MIN_ROUGHNESS) ** 2
+    inv_r = 1.0 / r
+    sin2_h = g.tan2_h / (1.0 + g.tan2_h)
+    d = (2.0 + inv_r) * sin2_h ** (0.5 * inv_r) / (2.0 * np.pi)
+    lam = 1.0 + charlie_lambda(g.cos_o, r) + charlie_lambda(g.cos_i, r)
+    return d / (lam * 4.0 * np.maximum(g.cos_o, 1e-12))
 
 
 # -- numerical directional albedos ----------------------------------------------------------------
@@ -278,10 +325,11 @@ def ggx_weighted_albedo(
     return np.sum(f * wgt, axis=(-2, -1))
 
 
-def sheen_albedo_numeric(mu, rough, quad: tuple[int, int] | None = None) -> np.ndarray:
-    """The directional albedo of :func:`charlie_sheen` for a viewer at cos ``mu`` (1-d ``mu``, ``rough``),
-    by Gauss-Legendre quadrature over the light's cosine (split at 0.5, where the lobe has its knee at
-    grazing angles) and azimuth (the lobe is symmetric about the view plane)."""
+def sheen_albedo_numeric(mu, rough, quad: tuple[int, int] | None = None, lobe=None) -> np.ndarray:
+    """The directional albedo of :func:`charlie_sheen` (or of ``lobe(rough, g)``, f cos(theta_light) of an
+    isotropic lobe) for a viewer at cos ``mu`` (1-d ``mu``, ``rough``), by Gauss-Legendre quadrature over
+    the light's cosine (split at 0.5, where the lobe has its knee at grazing angles) and azimuth (the lobe
+    is symmetric about the view plane)."""
     from matremap.renderers.embedded.geometry import LocalGeometry
 
     n_t, n_p = quad or _SHEEN_QUAD
@@ -296,7 +344,7 @@ def sheen_albedo_numeric(mu, rough, quad: tuple[int, int] | None = None) -> np.n
     st = np.sqrt(1.0 - ct * ct)[:, None]
     i_dot_o = st * np.sqrt(1.0 - mu * mu) * np.cos(phi)[None, :] + ct[:, None] * mu
     g = LocalGeometry(np.broadcast_to(ct[:, None], i_dot_o.shape), np.broadcast_to(mu, i_dot_o.shape), i_dot_o)
-    fcos = charlie_sheen(rough, g)
+    fcos = (lobe or charlie_sheen)(rough, g)
     return 2.0 * np.sum(fcos * wt[:, None] * wphi[None, :], axis=(-2, -1))
 
 
@@ -315,14 +363,14 @@ def _table_path() -> Path:
     return cache_dir() / f"layering_albedo_{digest}.npz"
 
 
-def mu_nodes() -> np.ndarray:
+def mu_nodes(n: int = MU_NODES) -> np.ndarray:
     """The cos_view nodes: uniform in sqrt(mu) (finer towards grazing, where albedos change fastest)."""
-    return np.maximum((np.arange(MU_NODES) / (MU_NODES - 1)) ** 2, 1e-4)
+    return np.maximum((np.arange(n) / (n - 1)) ** 2, 1e-4)
 
 
-def rough_nodes() -> np.ndarray:
+def rough_nodes(n: int = ROUGH_NODES) -> np.ndarray:
     """The roughness nodes: uniform in [0, 1]."""
-    return np.arange(ROUGH_NODES) / (ROUGH_NODES - 1)
+    return np.arange(n) / (n - 1)
 
 
 def f0_nodes() -> np.ndarray:
@@ -378,9 +426,11 @@ def _lerp(x, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _bilinear(table: np.ndarray, mu, rough, plane=()) -> np.ndarray:
-    """``table[*plane, mu, r]`` read bilinearly in (sqrt(mu), r); ``plane`` indexes leading axes."""
-    m0, m1, tm = _lerp(np.sqrt(np.clip(mu, 0.0, 1.0)), MU_NODES)
-    r0, r1, tr = _lerp(rough, ROUGH_NODES)
+    """``table[*plane, mu, r]`` read bilinearly in (sqrt(mu), r) (nodes as :func:`mu_nodes` and
+    :func:`rough_nodes` make them, as many as the table has); ``plane`` indexes leading axes."""
+    n_mu, n_rough = table.shape[-2:]
+    m0, m1, tm = _lerp(np.sqrt(np.clip(mu, 0.0, 1.0)), n_mu)
+    r0, r1, tr = _lerp(rough, n_rough)
     row0 = (1 - tr) * table[(*plane, m0, r0)] + tr * table[(*plane, m0, r1)]
     row1 = (1 - tr) * table[(*plane, m1, r0)] + tr * table[(*plane, m1, r1)]
     return (1 - tm) * row0 + tm * row1
@@ -404,6 +454,46 @@ def sheen_albedo(mu, rough) -> np.ndarray:
     return _bilinear(albedo_tables()["sheen"], mu, rough)
 
 
+_GLTF_SHEEN_FORMAT = 1
+_GLTF_SHEEN_QUAD = (160, 96)
+#: nodes of the glTF sheen table (cos_view, sheenRoughness): finer in roughness than the others, as the
+#: lobe's albedo at grazing views changes fast below sheenRoughness 0.2
+GLTF_SHEEN_NODES = (48, 96)
+
+
+def _gltf_sheen_spec() -> str:
+    spec = {"format": _GLTF_SHEEN_FORMAT, "nodes": list(GLTF_SHEEN_NODES), "quad": list(_GLTF_SHEEN_QUAD)}
+    return json.dumps(spec, sort_keys=True)
+
+
+@functools.cache
+def gltf_sheen_table() -> np.ndarray:
+    """E[mu node, roughness node] of the white glTF sheen (:func:`gltf_sheen`), from the cache or integrated
+    (a few seconds); a table file of its own, so the other tables' cache stays valid."""
+    spec = _gltf_sheen_spec()
+    path = cache_dir() / f"gltf_sheen_albedo_{hashlib.sha256(spec.encode()).hexdigest()[:12]}.npz"
+    data = load_tables(path, spec, {"sheen": GLTF_SHEEN_NODES})
+    if data is None:
+        mus = mu_nodes(GLTF_SHEEN_NODES[0])
+        table = np.stack(
+            [
+                sheen_albedo_numeric(mus, np.full_like(mus, r), _GLTF_SHEEN_QUAD, gltf_sheen)
+                for r in rough_nodes(GLTF_SHEEN_NODES[1])
+            ],
+            axis=1,
+        )
+        data = {"sheen": np.clip(table, 0.0, 1.0)}
+        save_tables(path, "gltf_sheen_albedo_*.npz", spec=np.array(spec), **data)
+    table = data["sheen"]
+    table.flags.writeable = False
+    return table
+
+
+def gltf_sheen_albedo(mu, rough) -> np.ndarray:
+    """E(mu, sheenRoughness) of the white glTF sheen, read bilinearly (in sqrt(mu), sheenRoughness)."""
+    return _bilinear(gltf_sheen_table(), mu, rough)
+
+
 def multiscatter_gain(f0, mu, rough) -> np.ndarray:
     """Turquin's factor 1 + F0 (1 - E) / E on a GGX lobe (E the white albedo at the view angle)."""
     e = np.maximum(white_albedo(mu, rough), 1e-6)
@@ -415,6 +505,7 @@ __all__ = [
     "albedo_tables",
     "artistic_conductor",
     "average_fresnel",
+    "charlie_lambda",
     "charlie_sheen",
     "dielectric_albedo",
     "eon_diffuse",
@@ -422,6 +513,10 @@ __all__ = [
     "fon_albedo",
     "fon_average_albedo",
     "ggx_lobe",
+    "gltf_sheen",
+    "gltf_sheen_albedo",
+    "gltf_sheen_table",
+    "ltc_cosine",
     "ggx_weighted_albedo",
     "modulated_ior",
     "multiscatter_gain",

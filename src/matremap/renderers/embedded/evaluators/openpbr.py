@@ -15,7 +15,9 @@ Source: the OpenPBR Surface specification v1.1 (text of v1.1.1, AcademySoftwareF
   eta_bc = specular_ior/coat_ior, inverted when below 1 ("Coat", eq. specular_ior_ratio, and "Total
   internal reflection", eq. specular_ior_ratio_with_tir_fix); eta'_s from eq. modulated_ior with
   xi_s = specular_weight. E_specular is its directional albedo (tinted: RGB).
-* f_diffuse ("Glossy-diffuse"): base_weight times EON with rho = base_color, sigma = base_diffuse_roughness.
+* f_diffuse ("Glossy-diffuse"): base_weight times EON with rho = base_color, sigma = base_diffuse_roughness,
+  times 1 - transmission_weight ("Translucent base": its BTDF reflects nothing; the coat darkening's base albedo
+  loses the same share of the diffuse). What it transmits is drawn by ``..transmission``.
 * f_conductor ("Metal"): GGX times specular_weight F82-tint(F0 = base_weight base_color, tint =
   specular_color), capped at 1 (specular_weight may exceed 1 for the dielectric only).
 * Roughening ("Coat > Roughening"): the base lobes use lerp(r, min(1, r^4 + 2 r_coat^4)^(1/4), C).
@@ -69,6 +71,8 @@ def dielectric_base(p, g, rough, eta, multi: bool) -> tuple[np.ndarray, np.ndarr
     gain_n = ly.multiscatter_gain(f0, 1.0, rough) if multi else 1.0
     e_normal = tint * ly.dielectric_albedo(1.0, rough, f0) * gain_n
     diffuse = p["base_weight"] * ly.eon_diffuse(p["base_color"], p["base_diffuse_roughness"], g)
+    if np.any(np.asarray(p["transmission_weight"]) > 0.0):  # "Translucent base": its BTDF reflects nothing
+        diffuse = (1.0 - np.clip(p["transmission_weight"], 0.0, 1.0)) * diffuse
     return specular + (1.0 - e_specular) * diffuse, e_normal
 
 
@@ -91,7 +95,10 @@ def darkening(p, g, eta_s, e_specular_normal) -> np.ndarray:
     r_b = (1.0 - metal) * r_d + metal * rough
     k = (1.0 - r_b) * k_s + r_b * k_r
     albedo = p["base_weight"] * p["base_color"]
-    e_dielectric = e_specular_normal + (1.0 - e_specular_normal) * albedo
+    diffuse_albedo = albedo
+    if np.any(np.asarray(p["transmission_weight"]) > 0.0):
+        diffuse_albedo = (1.0 - np.clip(p["transmission_weight"], 0.0, 1.0)) * albedo
+    e_dielectric = e_specular_normal + (1.0 - e_specular_normal) * diffuse_albedo
     e_base = (1.0 - metal) * e_dielectric + metal * np.minimum(p["specular_weight"] * albedo, 1.0)
     delta = (1.0 - k) / (1.0 - e_base * k)
     amount = np.clip(p["coat_weight"], 0.0, 1.0) * p["coat_darkening"]

@@ -41,8 +41,28 @@ takes the largest RGB channel (a tinted specular darkens the diffuse equally in 
 and under Multiscatter GGX the albedo includes the multiple-scattering gain but not the 1/E.
 A Base Color above 1 would still feed the diffuse unclamped (the dialect caps it at 1).
 
-Left out, as the dialect does not expose them: coat, sheen, subsurface, transmission, emission,
-thin film, anisotropy, alpha, Diffuse Roughness (Oren-Nayar) and normal maps on other lobes.
+The two layers over that base, in ``CLOSURE_BSDF_PRINCIPLED_ID``'s order (the weight w starts at 1 and each
+layer leaves w clamp(1 - max over RGB of (its albedo / w), 0, 1) to what lies below: ``closure_layering_weight``):
+
+* sheen, first, when Sheen Weight > 1e-5 (``CLOSURE_WEIGHT_CUTOFF``): a closure of weight Sheen Weight Sheen
+  Tint w evaluated by ``kernel/closure/bsdf_sheen.h``: Zeltner, Burley and Chiang's LTC sheen, R(mu_o, r)
+  D_LTC(light) in the frame of the view's azimuth, roughness clamped to [1e-3, 1], with A, B and R read from
+  Cycles' 32 x 32 table ``sheen_ltc`` (:mod:`..cycles_sheen_ltc`, the paper's published fit) bilinearly as
+  ``lookup_table_read_2D`` does; skipped (no lobe, no layering) where |A| or R is below 1e-5; its albedo
+  Sheen Weight Sheen Tint R(mu_o, r). (The analytic fits of the same table, which MaterialX uses for
+  OpenPBR's fuzz, differ from it by 1 to 30 % of a sheen's image below roughness 0.5.)
+* coat, second, when Coat Weight > 1e-5: a GGX closure of weight Coat Weight w, alpha = Coat Roughness^2, the
+  real dielectric Fresnel of Coat IOR (``bsdf_microfacet_setup_fresnel_dielectric``), which always applies
+  ``microfacet_ggx_preserve_energy`` with Fss = ``fresnel_dielectric_Fss``(Coat IOR): the lobe times
+  1 + Fms (1 - E)/E whatever the node's distribution; its albedo Coat Weight (1 + Fms (1 - E)/E) E
+  mix(F0(Coat IOR), 1, s), s the ``ggx_gen_schlick_ior_s`` table as for the dielectric lobe (0 at Coat IOR 1);
+  then, if Coat Tint is not white, w *= mix(1, Coat Tint^(1/cos theta_t), Coat Weight), theta_t the view
+  refracted into the coat.
+
+Both default to off (weights 0), where w stays exactly 1 and the result is the base's bit for bit.
+
+Left out, as the dialect does not expose them: subsurface, transmission, emission, thin film, anisotropy,
+alpha, Coat Normal, Diffuse Roughness (Oren-Nayar) and normal maps on other lobes.
 """
 
 from __future__ import annotations
@@ -57,13 +77,17 @@ import numpy as np
 from matremap.core.diskcache import cache_dir, load_tables, save_tables
 from matremap.core.optics import f0_from_ior, fresnel_dielectric, ior_from_f0
 from matremap.dialects.cycles import PRINCIPLED
+from matremap.renderers.embedded import layering as ly
 from matremap.renderers.embedded import microfacet as mf
+from matremap.renderers.embedded.cycles_sheen_ltc import sheen_ltc_table
 from matremap.renderers.embedded.evaluators.cycles import ggx_albedo, multiscatter_scale
 
 #: nodes per axis of Cycles' ``ggx_gen_schlick_ior_s`` table (roughness, cos_view, z)
 SCHLICK_NODES = 16
 #: Cycles' ``BSDF_ROUGHNESS_SQ_THRESH`` as the glossy emulation uses it: alpha^2 at or below is a mirror
 MIRROR_ALPHA2 = 2e-10
+#: Cycles' ``CLOSURE_WEIGHT_CUTOFF``: a layer of this weight or less is not created
+CLOSURE_WEIGHT_CUTOFF = 1e-5
 
 _TABLE_FORMAT = 1
 _TABLE_QUAD = (48, 48)
@@ -227,8 +251,75 @@ def ggx_lobe(rough, g) -> np.ndarray:
     return np.where(alpha * alpha <= MIRROR_ALPHA2, 0.0, d * g2 / (4.0 * g.cos_o))
 
 
+def layering_weight(ratio, w) -> np.ndarray:
+    """``closure_layering_weight``: w clamp(1 - max over RGB of albedo / w, 0, 1), with the layer's albedo
+    given as ``ratio`` = albedo / w (channels where w is 0 count as 0, as ``safe_divide_color`` makes them)."""
+    ratio = np.where(w > 0.0, np.broadcast_to(ratio, np.broadcast(ratio, w).shape), 0.0)
+    return w * np.clip(1.0 - np.max(ratio, axis=1, keepdims=True), 0.0, 1.0)
+
+
+def sheen_ltc(mu, rough) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(A, B, R) of Cycles' sheen at cos_view ``mu`` and roughness: ``lookup_table_read_2D`` of
+    :func:`~matremap.renderers.embedded.cycles_sheen_ltc.sheen_ltc_table`, linear in cos_view within the two
+    roughness rows around it, then in roughness."""
+    table = sheen_ltc_table()
+    n = table.shape[-1]
+    m0, m1, tm = _lerp(mu, n)
+    r0, r1, tr = _lerp(rough, n)
+
+    def read(plane):
+        def row(r):
+            return (1.0 - tm) * table[plane, r, m0] + tm * table[plane, r, m1]
+
+        return (1.0 - tr) * row(r0) + tr * row(r1)
+
+    return read(0), read(1), read(2)
+
+
+def sheen_layer(p, g) -> tuple[np.ndarray, np.ndarray]:
+    """The sheen closure's f cos(theta_light) for w = 1, and its albedo (see the module docstring)."""
+    weight = np.maximum(p["Sheen Weight"], 0.0)
+    colour = weight * np.maximum(p["Sheen Tint"], 0.0)
+    rough = np.clip(p["Sheen Roughness"], 1e-3, 1.0)
+    a, b, albedo = sheen_ltc(g.cos_o, rough)
+    on = (weight > CLOSURE_WEIGHT_CUTOFF) & (np.abs(a) >= 1e-5) & (albedo >= 1e-5)
+    fcos = np.where(on, colour * albedo * ly.ltc_cosine(np.where(on, a, 1.0), b, g), 0.0)
+    return fcos, np.where(on, colour * albedo, 0.0)
+
+
+def coat_layer(p, g) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The coat closure's f cos(theta_light) and albedo for w = 1, and the tint its absorption leaves on w."""
+    weight = np.maximum(p["Coat Weight"], 0.0)
+    rough = np.clip(p["Coat Roughness"], 0.0, 1.0)
+    ior = np.maximum(p["Coat IOR"], 1.0)
+    on = weight > CLOSURE_WEIGHT_CUTOFF
+    f0 = f0_from_ior(ior)
+    gain = multiscatter_scale(dielectric_average_fresnel(ior), rough, g.cos_o)
+    fcos = weight * gain * fresnel_dielectric(g.i_dot_h, ior) * ggx_lobe(rough, g)
+    estimate = np.where(ior > 1.0, f0 + (1.0 - f0) * specular_albedo_s(rough, g.cos_o, ior), 0.0)
+    albedo = weight * gain * ggx_albedo(rough, g.cos_o) * estimate
+    cos_t = np.sqrt(np.maximum(1.0 - (1.0 - g.cos_o**2) / ior**2, 0.0))
+    tint = np.maximum(p["Coat Tint"], 0.0) ** (1.0 / np.maximum(cos_t, 1e-12))
+    absorbed = (1.0 - weight) + weight * tint
+    return np.where(on, fcos, 0.0), np.where(on, albedo, 0.0), np.where(on, absorbed, 1.0)
+
+
 def principled(p, opt, g):
-    """f * cos(theta_light) of the Principled BSDF (see the module docstring for each step)."""
+    """f * cos(theta_light) of the Principled BSDF: the sheen over the coat over the base (the base alone
+    when no material of the batch has a layer)."""
+    base = principled_base(p, opt, g)
+    if not any(np.any(np.asarray(p.get(k, 0.0)) > CLOSURE_WEIGHT_CUTOFF) for k in ("Sheen Weight", "Coat Weight")):
+        return base
+    sheen, sheen_albedo = sheen_layer(p, g)
+    w = layering_weight(sheen_albedo, np.ones_like(np.asarray(sheen_albedo, dtype=float)))
+    coat, coat_albedo, absorbed = coat_layer(p, g)
+    coat = w * coat
+    w = layering_weight(coat_albedo, w) * absorbed
+    return sheen + coat + w * base
+
+
+def principled_base(p, opt, g):
+    """f * cos(theta_light) of the Principled BSDF without its layers (see the module docstring for each step)."""
     multi = opt["distribution"] == "multi_ggx"
     base = np.maximum(p["Base Color"], 0.0)
     f0_metal = np.minimum(base, 1.0)

@@ -1,0 +1,434 @@
+"""The transmission probe: a sphere in front of a tiled background under an environment map, so that what a
+transmissive material lets through -- refracted, tinted, blurred -- is in the image.
+
+The opaque probe (point lights, :mod:`.probe`) and the environment renders (:mod:`.environment`) draw a model's
+BRDF, which for a transmissive material is only its reflection. This module adds what goes through, by tracing
+rays through the sphere deterministically (fixed sample sets, no noise): one ray per pixel centre from the
+evaluation camera (:mod:`matremap.renderers.textured`: pinhole at (0, 0, 8), sphere of radius 2 at the origin);
+behind the sphere a plane at z = -4 tiled with coloured squares (:func:`background`), the environment elsewhere.
+
+What a model transmits is read from its parameters into an :class:`Interface` -- the physics the probe needs --
+by the functions of :data:`INTERFACES`:
+
+* ``gltf:pbr`` (KHR_materials_transmission, KHR_materials_volume; ratified READMEs): the share
+  ``transmission`` (1 - metallic) of the dielectric base refracts through a GGX microsurface of the material's
+  roughness, weighted by 1 - specular max F (Schlick's F of the IOR and KHR_materials_specular, on the outer
+  side's cosine) and tinted by baseColor where it enters; ``thickness`` 0 is a thin wall (no bending), > 0 the
+  volume of the object itself, attenuated by Beer-Lambert: sigma = -ln(attenuationColor) / attenuationDistance
+  (no attenuation at the default distance, infinity, written 0 here).
+* ``mtlx:open_pbr_surface`` (OpenPBR 1.1, "Translucent base", "Thin-walled" and "Transmission" in "Volume"):
+  the share transmission_weight (1 - base_metalness) refracts through the specular lobe (its roughness and
+  its IOR modulated by specular_weight), weighted by 1 - the exact dielectric Fresnel; transmission_color is a
+  tint of the interface when transmission_depth is 0 (or the object thin-walled), else the colour white light
+  takes after transmission_depth inside (sigma = -ln(transmission_color) / transmission_depth);
+  ``geometry_thin_walled`` 1 makes the surface a thin shell.
+
+Tracing (:func:`transmitted`): a camera ray enters the sphere through a microfacet normal drawn from the GGX
+distribution of visible normals (Heitz 2018, "Sampling the GGX distribution of visible normals", JCGT 7(4)),
+refracts by Snell's law, travels to the far side (attenuated), where a second microfacet normal splits it into
+the part leaving (1 - F) towards the background and the part reflected back inside (F, followed for
+``bounces`` internal reflections; total internal reflection keeps all of it); each sampled direction is weighted
+by Smith's G1 of the direction it leaves in (the estimator of VNDF sampling). A smooth interface (alpha below
+1e-4) uses the macroscopic normal and one path per pixel; a rough one ``samples`` paths per pixel at fixed
+Hammersley points. A thin wall is crossed in and straight out again at the same point (two microfacet normals,
+no internal reflection), once at the front and once at the back of the sphere. Light reflected off the outside
+is the model's BRDF under the environment's directional lights (:class:`.environment.SVBRDFRender`); a smooth
+interface's mirror reflection of the background is therefore not in the image.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from matremap.core.envmap import EnvMap, directional_lights, resolve
+from matremap.core.material import Material
+from matremap.core.optics import dielectric_f0, fresnel_dielectric
+from matremap.errors import MatremapError
+from matremap.renderers.embedded.layering import modulated_ior
+from matremap.renderers.textured import surface_pixels
+
+#: the evaluation camera and sphere (renderers/textured.py)
+CAMERA_Z = 8.0
+SPHERE_RADIUS = 2.0
+#: below this GGX alpha an interface is smooth (one path per pixel)
+SMOOTH_ALPHA = 1e-4
+
+
+@dataclass(frozen=True)
+class TransmissionScene:
+    """The transmission probe: resolution, the background plane (z, half-size, tile size), the environment
+    (a :func:`~matremap.core.envmap.resolve` spec) and its directional lights for the reflection, internal
+    bounces followed and paths per pixel of a rough interface."""
+
+    resolution: int = 96
+    plane_z: float = -4.0
+    plane_half_size: float = 12.0
+    tile: float = 0.5
+    env: str | EnvMap = "builtin"
+    env_lights: int = 256
+    bounces: int = 4
+    samples: int = 32
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.resolution, int) or not 8 <= self.resolution <= 4096:
+            raise MatremapError(f"transmission probe resolution must be an integer in [8, 4096], got {self.resolution}")
+        if self.bounces < 1 or self.samples < 1:
+            raise MatremapError("the transmission probe needs at least one bounce and one sample")
+
+
+@dataclass(frozen=True)
+class Interface:
+    """What a material lets through, in physical terms (RGB arrays of shape [3]).
+
+    ``weight``: the share of light reaching the base that is transmitted rather than diffused (before the
+    interface's Fresnel); ``eta``: interior over exterior IOR; ``alpha``: GGX alpha of the refracting
+    microsurface; ``tint``: colour applied where light crosses the surface inwards (a thin wall: each wall);
+    ``sigma``: extinction coefficient inside (per scene unit); ``thin_walled``; ``fresnel``: the fraction
+    reflected at a crossing, ``fresnel(cos_outside)`` for a ray crossing with the given cosine on the outer
+    (lower-index) side."""
+
+    weight: np.ndarray
+    eta: float
+    alpha: float
+    tint: np.ndarray
+    sigma: np.ndarray
+    thin_walled: bool
+    fresnel: Callable[[np.ndarray], np.ndarray]
+
+
+def _scalar(values: Mapping[str, Any], name: str) -> float:
+    return float(np.asarray(values[name], dtype=float).reshape(-1)[0])
+
+
+def _rgb(values: Mapping[str, Any], name: str) -> np.ndarray:
+    return np.broadcast_to(np.asarray(values[name], dtype=float).reshape(-1), (3,)).astype(float)
+
+
+def beer_sigma(colour: np.ndarray, distance: float) -> np.ndarray:
+    """sigma = -ln(colour) / distance (0 for an infinite or zero distance or a white colour; a black channel
+    absorbs everything within 1e-6 of it)."""
+    if distance <= 0.0 or not math.isfinite(distance):
+        return np.zeros(3)
+    return -np.log(np.clip(colour, 1e-6, 1.0)) / distance
+
+
+def gltf_interface(values: Mapping[str, Any]) -> Interface:
+    """``gltf:pbr``'s transmission (see the module docstring)."""
+    f0 = dielectric_f0(_scalar(values, "ior"), 1.0, _rgb(values, "specularColor"))
+    specular = _scalar(values, "specular")
+
+    def fresnel(cos_outside: np.ndarray) -> np.ndarray:
+        m = 1.0 - np.clip(cos_outside, 0.0, 1.0)
+        return specular * np.max(f0[:, None] + (1.0 - f0[:, None]) * m**5, axis=0)
+
+    thin = _scalar(values, "thickness") <= 0.0
+    sigma = (
+        np.zeros(3) if thin else beer_sigma(_rgb(values, "attenuationColor"), _scalar(values, "attenuationDistance"))
+    )
+    weight = _scalar(values, "transmission") * (1.0 - _scalar(values, "metallic"))
+    return Interface(
+        weight=np.full(3, weight),
+        eta=max(_scalar(values, "ior"), 1.0),
+        alpha=_scalar(values, "roughness") ** 2,
+        tint=np.clip(_rgb(values, "baseColor"), 0.0, 1.0),
+        sigma=sigma,
+        thin_walled=thin,
+        fresnel=fresnel,
+    )
+
+
+def openpbr_interface(values: Mapping[str, Any]) -> Interface:
+    """``mtlx:open_pbr_surface``'s transmission (see the module docstring)."""
+    eta = float(modulated_ior(_scalar(values, "specular_ior"), _scalar(values, "specular_weight")))
+    eta = max(eta, 1.0 + 1e-9)
+
+    def fresnel(cos_outside: np.ndarray) -> np.ndarray:
+        return fresnel_dielectric(np.clip(cos_outside, 1e-9, 1.0), eta)
+
+    thin = _scalar(values, "geometry_thin_walled") >= 0.5
+    depth = _scalar(values, "transmission_depth")
+    colour = np.clip(_rgb(values, "transmission_color"), 0.0, 1.0)
+    volume = not thin and depth > 0.0
+    weight = np.clip(_scalar(values, "transmission_weight"), 0.0, 1.0) * (1.0 - _scalar(values, "base_metalness"))
+    return Interface(
+        weight=np.full(3, weight),
+        eta=eta,
+        alpha=_scalar(values, "specular_roughness") ** 2,
+        tint=np.ones(3) if volume else colour,
+        sigma=beer_sigma(colour, depth) if volume else np.zeros(3),
+        thin_walled=thin,
+        fresnel=fresnel,
+    )
+
+
+#: model id -> the reading of its transmission
+INTERFACES: dict[str, Callable[[Mapping[str, Any]], Interface]] = {
+    "gltf:pbr": gltf_interface,
+    "mtlx:open_pbr_surface": openpbr_interface,
+}
+
+
+def interface_of(material: Material) -> Interface:
+    """The :class:`Interface` of a uniform material; a model the probe cannot read is refused."""
+    reader = INTERFACES.get(material.model)
+    if reader is None:
+        raise MatremapError(
+            f"the transmission probe draws {', '.join(sorted(INTERFACES))}, not {material.model}; "
+            "remap the material onto one of them first"
+        )
+    return reader(material.values)
+
+
+def gltf_equivalent(iface: Interface, thickness: float = 2.0 * SPHERE_RADIUS) -> dict[str, Any]:
+    """The gltf:pbr transmission parameters that transmit as ``iface`` does (KHR_materials_transmission and
+    _volume read back through :func:`gltf_interface`): transmission, ior, roughness, the entry tint as baseColor,
+    a thin wall or a volume of the given ``thickness`` (what rasterisers use; the probe traces the real object),
+    and the extinction as attenuationColor after attenuationDistance 1 (0, glTF's infinity, when clear). Only
+    the Fresnel form differs (glTF's Schlick for OpenPBR's exact one); a grey weight is assumed."""
+    clear = not np.any(iface.sigma > 0.0)
+    return {
+        "metallic": 0.0,
+        "transmission": float(iface.weight[0]),
+        "ior": float(iface.eta),
+        "roughness": math.sqrt(iface.alpha),
+        "baseColor": iface.tint.tolist(),
+        "thickness": 0.0 if iface.thin_walled else float(thickness),
+        "attenuationColor": [1.0, 1.0, 1.0] if clear else np.exp(-iface.sigma).tolist(),
+        "attenuationDistance": 0.0 if clear else 1.0,
+    }
+
+
+# -- the background -------------------------------------------------------------------------------------
+
+#: the tiles' colours (linear RGB): six hues at two brightnesses, so refraction moves and tints visible edges
+PALETTE = np.array(
+    [
+        [0.9, 0.2, 0.15],
+        [0.15, 0.7, 0.2],
+        [0.15, 0.25, 0.9],
+        [0.9, 0.8, 0.15],
+        [0.15, 0.8, 0.85],
+        [0.85, 0.2, 0.8],
+    ]
+)
+
+
+def background(origins: np.ndarray, directions: np.ndarray, scene: TransmissionScene, env: EnvMap) -> np.ndarray:
+    """Radiance [N, 3] seen from ``origins`` along unit ``directions`` [N, 3]: the tiled plane z = plane_z
+    (tile (i, j) of size ``tile``: PALETTE[(i + 2 j) mod 6], every other tile at 0.35 of its brightness) where
+    the ray meets it within ``plane_half_size``, else the environment."""
+    dz = directions[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (scene.plane_z - origins[:, 2]) / dz
+    hit = origins + np.where(np.isfinite(t), t, 0.0)[:, None] * directions
+    on_plane = (dz < 0.0) & (t > 0.0) & (np.max(np.abs(hit[:, :2]), axis=1) < scene.plane_half_size)
+    hit = np.where(on_plane[:, None], hit, 0.0)
+    i = np.floor(hit[:, 0] / scene.tile).astype(np.int64)
+    j = np.floor(hit[:, 1] / scene.tile).astype(np.int64)
+    colour = PALETTE[np.mod(i + 2 * j, len(PALETTE))] * np.where(np.mod(i + j, 2) == 0, 1.0, 0.35)[:, None]
+    return np.where(on_plane[:, None], colour, env.lookup(directions))
+
+
+# -- microfacet crossings -------------------------------------------------------------------------------
+
+
+def _frame(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit tangents completing the unit normals ``n`` [N, 3] to right-handed frames."""
+    helper = np.where(np.abs(n[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
+    t = np.cross(helper, n)
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    return t, np.cross(n, t)
+
+
+def sample_vndf(wi: np.ndarray, alpha: float, u: np.ndarray) -> np.ndarray:
+    """Microfacet normals [N, 3] (local frame, z the macroscopic normal) of the GGX distribution of normals
+    visible from the local directions ``wi`` [N, 3] (z > 0), at uniform points ``u`` [N, 2] (Heitz 2018)."""
+    vh = np.stack([alpha * wi[:, 0], alpha * wi[:, 1], wi[:, 2]], axis=1)
+    vh /= np.linalg.norm(vh, axis=1, keepdims=True)
+    lensq = vh[:, 0] ** 2 + vh[:, 1] ** 2
+    safe = np.sqrt(np.maximum(lensq, 1e-300))
+    t1 = np.where(
+        (lensq > 0.0)[:, None], np.stack([-vh[:, 1], vh[:, 0], 0.0 * lensq], axis=1) / safe[:, None], [1, 0, 0]
+    )
+    t2 = np.cross(vh, t1)
+    r = np.sqrt(u[:, 0])
+    phi = 2.0 * math.pi * u[:, 1]
+    a, b = r * np.cos(phi), r * np.sin(phi)
+    s = 0.5 * (1.0 + vh[:, 2])
+    b = (1.0 - s) * np.sqrt(np.maximum(1.0 - a * a, 0.0)) + s * b
+    nh = a[:, None] * t1 + b[:, None] * t2 + np.sqrt(np.maximum(1.0 - a * a - b * b, 0.0))[:, None] * vh
+    ne = np.stack([alpha * nh[:, 0], alpha * nh[:, 1], np.maximum(nh[:, 2], 0.0)], axis=1)
+    return ne / np.linalg.norm(ne, axis=1, keepdims=True)
+
+
+def smith_g1(cos_theta: np.ndarray, alpha: float) -> np.ndarray:
+    """Smith's G1 of GGX for directions at ``cos_theta`` to the macroscopic normal (0 below it)."""
+    c = np.clip(cos_theta, 1e-12, 1.0)
+    tan2 = (1.0 - c * c) / (c * c)
+    return np.where(cos_theta > 0.0, 2.0 / (1.0 + np.sqrt(1.0 + alpha * alpha * tan2)), 0.0)
+
+
+@dataclass
+class Crossing:
+    """One interface crossing of N rays: the refracted and reflected directions, the fraction reflected, and the
+    masking weights of each outgoing direction."""
+
+    refracted: np.ndarray
+    reflected: np.ndarray
+    reflect_share: np.ndarray
+    g_refracted: np.ndarray
+    g_reflected: np.ndarray
+
+
+def cross(
+    d: np.ndarray, n: np.ndarray, eta: float, alpha: float, u: np.ndarray, iface: Interface, entering: bool
+) -> Crossing:
+    """Rays travelling along ``d`` [N, 3] reach an interface whose macroscopic normal ``n`` [N, 3] faces them
+    (n . d < 0), with relative IOR ``eta`` (far side over near side); a microfacet normal is drawn at ``u``.
+    ``entering``: the near side is the outside (the Fresnel term takes the outer cosine)."""
+    wi = -d
+    if alpha < SMOOTH_ALPHA:
+        m = n
+    else:
+        t, b = _frame(n)
+        local = np.stack([np.sum(wi * t, 1), np.sum(wi * b, 1), np.maximum(np.sum(wi * n, 1), 1e-9)], axis=1)
+        local /= np.linalg.norm(local, axis=1, keepdims=True)
+        ml = sample_vndf(local, alpha, u)
+        m = ml[:, 0:1] * t + ml[:, 1:2] * b + ml[:, 2:3] * n
+    cos_i = np.clip(np.sum(wi * m, 1), 1e-9, 1.0)
+    sin2_t = (1.0 - cos_i * cos_i) / (eta * eta)
+    tir = sin2_t >= 1.0
+    cos_t = np.sqrt(np.maximum(1.0 - sin2_t, 0.0))
+    refracted = -wi / eta + (cos_i / eta - cos_t)[:, None] * m
+    refracted /= np.linalg.norm(refracted, axis=1, keepdims=True)
+    reflected = 2.0 * cos_i[:, None] * m - wi
+    reflected /= np.linalg.norm(reflected, axis=1, keepdims=True)
+    f = np.where(tir, 1.0, iface.fresnel(cos_i if entering else cos_t))
+    smooth = alpha < SMOOTH_ALPHA
+    g_t = np.ones(len(d)) if smooth else smith_g1(-np.sum(refracted * n, 1), alpha)
+    g_r = np.ones(len(d)) if smooth else smith_g1(np.sum(reflected * n, 1), alpha)
+    return Crossing(refracted, reflected, f, np.where(tir, 0.0, g_t), g_r)
+
+
+def far_side(p: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where rays from points ``p`` on the sphere travelling inwards along ``d`` leave it (put back on the sphere,
+    so that rounding does not grow over internal reflections), and the distance."""
+    t = np.maximum(-2.0 * np.sum(p * d, 1), 0.0)
+    q = p + t[:, None] * d
+    return q * (SPHERE_RADIUS / np.linalg.norm(q, axis=1, keepdims=True)), t
+
+
+# -- tracing --------------------------------------------------------------------------------------------
+
+
+def _points(n: int, salt: int) -> np.ndarray:
+    """n fixed points in [0, 1)^2: a Hammersley set shifted by a rotation drawn from ``salt``."""
+    k = np.arange(n)
+    radical = np.zeros(n)
+    f, kk = 0.5, k.copy()
+    while np.any(kk):
+        radical += f * (kk & 1)
+        kk >>= 1
+        f *= 0.5
+    shift = np.random.default_rng(salt).random(2)
+    return np.mod(np.stack([(k + 0.5) / n, radical], axis=1) + shift, 1.0)
+
+
+def _thin_wall(
+    d: np.ndarray, n: np.ndarray, iface: Interface, samples: list[np.ndarray], salt: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """A thin wall crossed in and straight out at the same place: new directions and [N, 3] weights."""
+    inside = cross(d, n, iface.eta, iface.alpha, samples[salt], iface, entering=True)
+    out = cross(inside.refracted, n, 1.0 / iface.eta, iface.alpha, samples[salt + 1], iface, entering=False)
+    w = (1.0 - inside.reflect_share) * inside.g_refracted * (1.0 - out.reflect_share) * out.g_refracted
+    return out.refracted, w[:, None] * iface.tint
+
+
+def transmitted(
+    material: Material, scene: TransmissionScene, env: EnvMap | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Long: the paths (entry, walls or the volume's internal bounces) are one loop read best together.
+
+    Radiance [res, res, 3] the material transmits to the camera through the sphere, and the sphere's mask."""
+    iface = interface_of(material)
+    env = env if env is not None else resolve(scene.env)
+    surf = surface_pixels("sphere", scene.resolution)
+    out = np.zeros((scene.resolution * scene.resolution, 3))
+    if not np.any(iface.weight > 0.0):
+        return out.reshape(scene.resolution, scene.resolution, 3), surf.mask()
+    k = 1 if iface.alpha < SMOOTH_ALPHA else scene.samples
+    p0 = surf.normal * SPHERE_RADIUS
+    n_pix = len(p0)
+    # every pixel traced along k paths: path j of pixel i at row i * k + j
+    p = np.repeat(p0, k, axis=0)
+    n = np.repeat(surf.normal, k, axis=0)
+    d = np.repeat(-surf.view, k, axis=0)
+    crossings = 2 * scene.bounces + 4
+    samples = [np.tile(_points(k, salt), (n_pix, 1)) for salt in range(crossings)]
+    radiance = np.zeros((n_pix * k, 3))
+    if iface.thin_walled:
+        d, w = _thin_wall(d, n, iface, samples, 0)
+        q, _ = far_side(p, d)
+        d, w2 = _thin_wall(d, -q / SPHERE_RADIUS, iface, samples, 2)
+        radiance += w * w2 * background(q, d, scene, env)
+    else:
+        entry = cross(d, n, iface.eta, iface.alpha, samples[0], iface, entering=True)
+        w = ((1.0 - entry.reflect_share) * entry.g_refracted)[:, None] * iface.tint
+        d = entry.refracted
+        for bounce in range(scene.bounces):
+            q, length = far_side(p, d)
+            w = w * np.exp(-iface.sigma[None, :] * length[:, None])
+            leave = cross(d, -q / SPHERE_RADIUS, 1.0 / iface.eta, iface.alpha, samples[1 + bounce], iface, False)
+            share = ((1.0 - leave.reflect_share) * leave.g_refracted)[:, None]
+            radiance += w * share * background(q, leave.refracted, scene, env)
+            w = w * (leave.reflect_share * leave.g_reflected)[:, None]
+            p, d = q, leave.reflected
+    per_pixel = radiance.reshape(n_pix, k, 3).mean(axis=1) * iface.weight[None, :]
+    out[surf.pixels] = per_pixel
+    return out.reshape(scene.resolution, scene.resolution, 3), surf.mask()
+
+
+def render(material: Material, scene: TransmissionScene | None = None) -> np.ndarray:
+    """The transmission probe image [res, res, 3] (float32): on the sphere, the material's reflection of the
+    environment (its BRDF under the directional lights) plus what it transmits; elsewhere the background."""
+    from matremap.renderers.embedded.environment import SVBRDFRender
+
+    scene = scene or TransmissionScene()
+    env = resolve(scene.env)
+    through, mask = transmitted(material, scene, env)
+    lights = directional_lights(env, scene.env_lights, 0.0)
+    reflected = SVBRDFRender(material.model, dict(material.values), dict(material.options), "sphere", scene.resolution)
+    image = through + reflected.render(*lights).astype(float)
+    # the background seen past the sphere
+    from matremap.core.scene import Scene
+
+    rays = Scene(resolution=scene.resolution).camera_rays().reshape(-1, 3)
+    origins = np.broadcast_to([0.0, 0.0, CAMERA_Z], rays.shape)
+    seen = background(np.asarray(origins, dtype=float), rays, scene, env).reshape(image.shape)
+    return np.where(mask[..., None], image, seen).astype(np.float32)
+
+
+__all__ = [
+    "INTERFACES",
+    "PALETTE",
+    "Crossing",
+    "Interface",
+    "TransmissionScene",
+    "background",
+    "beer_sigma",
+    "cross",
+    "far_side",
+    "gltf_equivalent",
+    "gltf_interface",
+    "interface_of",
+    "openpbr_interface",
+    "render",
+    "sample_vndf",
+    "smith_g1",
+    "transmitted",
+]
