@@ -255,6 +255,19 @@ def uniform_outputs(results: Sequence[Mapping[str, Any]], tolerance: float = UNI
     return out
 
 
+def _drop_uniform(
+    outputs: list[_Output], results: Sequence[Mapping[str, Any]], files: AtomicFiles, notes: list[str]
+) -> list[_Output]:
+    """The outputs to keep as maps: those of :func:`uniform_outputs` leave the group (their values go into
+    the manifest as constants), with a note each."""
+    uniform = uniform_outputs(results)
+    for o in outputs:
+        if o.param in uniform:
+            files.discard(o.path)
+            notes.append(f"{o.param} is the same at every texel: written as a constant, not a map")
+    return [o for o in outputs if o.param not in uniform]
+
+
 def _split(outputs: list[_Output], n: int) -> list[list[_Output]]:
     groups: list[list[_Output]] = [[] for _ in range(n)]
     load = [0.0] * n
@@ -324,12 +337,7 @@ def convert(
         results = _execute(plan, outputs, workers, progress)
         outside = results[0]["outside"]
         clipped, bounded = _clip_counts(results, outputs, t.target, notes)
-        uniform = uniform_outputs(results)
-        for o in outputs:
-            if o.param in uniform:
-                files.discard(o.path)
-                notes.append(f"{o.param} is the same at every texel: written as a constant, not a map")
-        kept = [o for o in outputs if o.param not in uniform]
+        kept = _drop_uniform(outputs, results, files, notes)
         doc = _manifest(map_set, t, kept, results[0]["first"], final_normal, outside)
         files.write_text(out / MANIFEST_NAME, json.dumps(doc, indent=1) + "\n")
         if map_set.normal and final_normal is not None:
