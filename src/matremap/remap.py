@@ -28,7 +28,7 @@ import json
 import shutil
 import time
 import warnings
-from collections.abc import Callable, Collection, Mapping
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -40,7 +40,7 @@ from matremap.core.atomic import staged_folder
 from matremap.core.envmap import resolve as resolve_envmap
 from matremap.core.imageio import write_image, write_text
 from matremap.core.material import Material, SVMaterial
-from matremap.core.scene import Scene
+from matremap.core.scene import Scene, parse_probe
 from matremap.dialects import get_model
 from matremap.dialects.equivalence import Equivalence, equivalence
 from matremap.errors import MatremapError, TransformChecksumError
@@ -264,34 +264,53 @@ LIBRARY_MAX_OUTSIDE = 0.01
 
 
 def library_transform(
-    map_set: MapSet, params: Mapping[str, Any], target: str, fix: Mapping[str, Any], log: Callable[[str], None]
+    map_set: MapSet,
+    params: Mapping[str, Any],
+    target: str,
+    fix: Mapping[str, Any],
+    log: Callable[[str], None],
+    probes: Sequence[str] = ("point",),
+    envmap: str = "builtin",
 ) -> Transform | None:
     """A transform from the shipped library (direct or chained) that covers these maps, or None.
     ``params``: the maps' parameters, whole or a sample (strided here to at most
-    :data:`~matremap.svbrdf.mapstats.LIBRARY_LIMIT` texels a side for the domain check)."""
+    :data:`~matremap.svbrdf.mapstats.LIBRARY_LIMIT` texels a side for the domain check). ``probes``: the
+    kinds of probe a route may have been fitted under; when routes of several kinds cover the maps, the one
+    whose result looks closest under ``envmap`` is taken (:func:`matremap.svbrdf.choice.best_transform`)."""
     from matremap.regress.library import describe_node, find_route, nearest_routes, node_key
 
     spec = map_set.spec
     held = {name: params[name] for name, _, _ in spec.specialisations if name in params}
-    found = find_route(spec.id, map_set.options, target, fix, source_values=held)
-    if found is None:
+    texels = {k: sample(v, LIBRARY_LIMIT) for k, v in params.items() if k in spec.param_names}
+    covering = []
+    for probe in probes:
+        found = find_route(spec.id, map_set.options, target, fix, source_values=held, probe=probe)
+        if found is None:
+            continue
+        _, outside = found.transform.apply(texels)
+        share = float(np.mean(outside)) if np.size(outside) else 0.0
+        if share > LIBRARY_MAX_OUTSIDE:
+            log(f"library: {found.describe()} covers only {100 * (1 - share):.1f}% of the texels")
+            continue
+        covering.append((probe, found))
+    if not covering:
         asked = describe_node(node_key(spec.id, map_set.options), defaults=True)
         near = nearest_routes(spec.id, map_set.options, target, fix)
         log(
-            f"library: no route from {asked} to {describe_node(node_key(target, fix), defaults=True)}"
-            + (f"; nearest: {'; '.join(near)}" if near else "")
-            + "; sweeping"
+            f"library: no route from {asked} to {describe_node(node_key(target, fix), defaults=True)} that covers "
+            "the maps" + (f"; nearest: {'; '.join(near)}" if near else "") + "; sweeping"
         )
         return None
-    transform = found.transform
-    texels = {k: sample(v, LIBRARY_LIMIT) for k, v in params.items() if k in spec.param_names}
-    _, outside = transform.apply(texels)
-    share = float(np.mean(outside)) if np.size(outside) else 0.0
-    if share > LIBRARY_MAX_OUTSIDE:
-        log(f"library: {found.describe()} covers only {100 * (1 - share):.1f}% of the texels; sweeping instead")
-        return None
-    log(f"library: {found.describe()}")
-    return transform
+    probe, found = covering[0]
+    if len(covering) > 1:
+        from matremap.svbrdf.choice import best_transform
+
+        choice = best_transform([r.transform for _, r in covering], spec.id, map_set.options, texels, envmap)
+        probe, found = covering[choice.index]
+        scores = ", ".join(f"{k} probe {v:.4f}" for (k, _), v in zip(covering, choice.scores, strict=True))
+        log(f"library: routes fitted under several probes; mean 1-SSIM of the maps' texels under {envmap}: {scores}")
+    log(f"library: {found.describe()}" + ("" if probe == "point" else f" (fitted under the {probe} probe)"))
+    return found.transform
 
 
 def cached_transform(
@@ -305,6 +324,7 @@ def cached_transform(
     log: Callable[[str], None],
     scene: Scene | None = None,
     target_renderer: str = "embedded",
+    objective: str = "l2",
 ) -> tuple[Transform, Path | None, bool]:
     """The transform for these maps (``summary``: their statistics) and models: from the cache, or swept
     and learned now (and cached, unless some of the sweep's fits failed: then the next run fits those
@@ -328,6 +348,7 @@ def cached_transform(
         scene=scene or Scene(),
         source_renderer=renderer_for(spec.id),
         target_renderer=target_renderer,
+        objective=objective,
     )
     from matremap.core.diskcache import RESULTS_REVISION
 
@@ -344,7 +365,7 @@ def cached_transform(
             log(f"note: {e}; recomputing it")
     db = path.with_suffix(".sqlite")
     grid = parse_grid(grid_text, spec)
-    log(f"sweep: {spec.id} -> {config.target}, {len(grid)} fits over {grid_text}")
+    log(f"sweep: {spec.id} -> {config.target}, {len(grid)} fits over {grid_text}; {config.scene.describe()}")
     from tqdm import tqdm
 
     with (
@@ -394,6 +415,34 @@ class RemapJob:
     thresholds: Thresholds = field(default_factory=Thresholds)
     #: the largest map (width x height) read; None: :data:`~matremap.svbrdf.textures.DEFAULT_MAX_TEXELS`
     max_texels: int | None = None
+    #: the probe fits are made under (:func:`~matremap.core.scene.parse_probe`), or ``auto`` (see
+    #: :func:`sweep_probe` and :func:`library_probes`); ignored when ``scene`` is given
+    probe: str = "auto"
+    #: what the fits make small; None: ``ssim`` under an environment probe, ``l2`` under the point probe
+    objective: str | None = None
+
+
+def sweep_probe(job: RemapJob) -> tuple[Scene | None, str]:
+    """The probe (None: the paper's default point probe) and objective a sweep for ``job`` fits under:
+    ``auto`` sweeps under the point probe (an environment sweep costs about ten times as much); the
+    objective defaults to ``ssim`` under an environment (docs/fitting.md has the measurements)."""
+    scene = job.scene
+    if scene is None and job.probe not in ("auto", "point"):
+        scene = parse_probe(job.probe)
+    objective = job.objective or ("ssim" if scene is not None and scene.environment is not None else "l2")
+    return scene, objective
+
+
+def library_probes(job: RemapJob) -> list[str]:
+    """The kinds of probe a library route may have been fitted under for ``job``: both with ``auto`` (then
+    the one that looks closest under the evaluation's environment is taken), the one asked for, or none
+    for a probe of the user's own (point lights other than the headlight, or an environment file)."""
+    if job.scene is not None or ":" in job.probe:
+        return []
+    kinds = ["point", "env"] if job.probe == "auto" else [job.probe]
+    if job.objective is not None:  # only routes fitted under that objective
+        kinds = [k for k in kinds if job.objective == ("l2" if k == "point" else "ssim")]
+    return kinds
 
 
 def staged_strategy(job: RemapJob, log: Callable[[str], None]) -> RemapJob:
@@ -532,6 +581,7 @@ def remap_into(
             thresholds=job.thresholds,
             checks=checks,
             domain_map=folder / "maps" / MASK_NAME,
+            notes=fit_notes(folder / "transform.json", job.envmap, angles, log),
         )
         seconds["evaluate"] = time.perf_counter() - t
         verdict, mean, html = evaluation.verdict, float(evaluation.mean_full), folder / "report" / "report.html"
@@ -544,6 +594,28 @@ def remap_into(
     return RemapResult(
         tpath, cached, folder / "maps", html, outside, texels, mean, seconds, verdict, identity is not None
     )
+
+
+def fit_notes(transform_file: Path, envmap: str, angles: Sequence[float], log: Callable[[str], None]) -> dict[str, str]:
+    """The report's row on the light the applied transform was fitted under, and a warning when the
+    evaluation turns the environment the fit was made under to one of the fit's own rotations (then the
+    evaluation does not judge the transform on views held out from its fits)."""
+    from matremap.regress.library import fitted_under
+
+    if not transform_file.is_file():  # the identity or a per-texel blend: nothing was fitted as a whole
+        return {}
+    probes = fitted_under(Transform.load(transform_file))
+    scene, objective = probes[0]
+    notes = {"fitted under": f"{scene.describe()}; objective {objective}"}
+    env = scene.environment
+    if env is not None and env.env == str(envmap) and set(env.rotations) & {float(a) for a in angles}:
+        shared = sorted(set(env.rotations) & {float(a) for a in angles})
+        notes["held out"] = (
+            f"no: the evaluation turns {envmap} to rotations the transform was fitted at ({shared}); choose others "
+            "with --rotations to judge it on held-out views"
+        )
+        log(f"warning: {notes['held out']}")
+    return notes
 
 
 def _convert_maps(
@@ -611,15 +683,19 @@ def _transform_for(
 ) -> tuple[Transform, Path | None, bool]:
     """A library route that covers the maps, else the cached (or newly swept and learned) transform."""
     target = job.target
-    if job.library and job.scene is None and target_renderer == renderer_for(target) and job.strategy == "two-stage":
-        transform = library_transform(map_set, summary.sample(LIBRARY_LIMIT), target, fix, log)
+    probes = library_probes(job)
+    if job.library and probes and target_renderer == renderer_for(target) and job.strategy == "two-stage":
+        transform = library_transform(
+            map_set, summary.sample(LIBRARY_LIMIT), target, fix, log, probes=probes, envmap=job.envmap
+        )
         if transform is not None:
             return transform, None, True
     elif job.library:
         log(
-            "library: not used (its transforms are two-stage fits on the default probe, each model drawn by its "
-            "default renderer)"
+            "library: not used (its transforms are two-stage fits under the headlight or the built-in environment, "
+            "each model drawn by its default renderer)"
         )
+    scene, objective = sweep_probe(job)
     return cached_transform(
         map_set,
         summary,
@@ -629,8 +705,9 @@ def _transform_for(
         job.cache or default_cache(),
         job.workers,
         log,
-        job.scene,
+        scene,
         target_renderer,
+        objective,
     )
 
 
@@ -920,6 +997,7 @@ def _remap_uniform(
     ``compare.png`` (source | target | difference x10 on the probe) are written into ``stage``."""
     from matremap.core.fit import FULL, FitResult, part
     from matremap.renderers import get_renderer
+    from matremap.renderers.base import render_images
     from matremap.uniform import comparison_strip, fit
 
     target = job.target
@@ -937,6 +1015,7 @@ def _remap_uniform(
         return copied
     full_fix = complete_fix(source.model, qty.material_values(source), target, job.fix)
     job = staged_strategy(job, log)
+    probe, objective = sweep_probe(job)
     r = fit(
         source,
         target,
@@ -944,7 +1023,8 @@ def _remap_uniform(
         target_renderer=job.target_renderer or renderer_for(target),
         fix=full_fix,
         strategy=job.strategy,
-        scene=job.scene,
+        scene=probe,
+        objective=objective,
     )
     for w in r.warnings:
         log(f"warning: {w}")
@@ -958,8 +1038,9 @@ def _remap_uniform(
         )
     else:
         scene = r.scene
-        src = get_renderer(r.source_renderer).render([part(source, FULL) or source], scene)[0] * r.irradiance_scale
-        tgt = get_renderer(r.target_renderer).render([r.target], scene)[0]
+        src = render_images(get_renderer(r.source_renderer), [part(source, FULL) or source], scene)[0]
+        src = src * r.irradiance_scale
+        tgt = render_images(get_renderer(r.target_renderer), [r.target], scene)[0]
         checks += image_checks([("probe render", src, tgt)], scene.mask(), job.thresholds)
     result.material, result.loss, result.verdict = r.target, r.loss, Verdict(checks)
     write_text(stage / "material.json", json.dumps(r.target.to_dict(), indent=1) + "\n")

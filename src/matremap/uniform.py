@@ -22,7 +22,7 @@ from matremap.core.models import ModelSpec
 from matremap.core.scene import Scene
 from matremap.dialects import get_model
 from matremap.dialects.mtlx import absorbed_layers
-from matremap.renderers.base import Renderer
+from matremap.renderers.base import Renderer, render_images
 from matremap.renderers.registry import get_renderer, resolve_renderer
 
 
@@ -38,6 +38,7 @@ def fit(
     free: Sequence[str] = (),
     start: Mapping[str, Any] | None = None,
     coarse: bool | None = None,
+    objective: str = "l2",
 ) -> core_fit.FitResult:
     """:func:`matremap.core.fit.fit` with renderers given by name, object or None (the model's own)."""
     spec = target_model if isinstance(target_model, ModelSpec) else get_model(target_model)
@@ -52,6 +53,7 @@ def fit(
         free=free,
         start=start,
         coarse=coarse,
+        objective=objective,
     )
     result.warnings.extend(absorbed_layers(source.model, source.values, spec.id, result.target.values))
     return result
@@ -69,6 +71,7 @@ def fit_steps(
     free: Sequence[str] = (),
     start: Mapping[str, Any] | None = None,
     coarse: bool | None = None,
+    objective: str = "l2",
 ) -> Steps[core_fit.FitResult]:
     """:func:`fit` in ask/tell form (:func:`matremap.core.fit.fit_steps`): a generator of render requests for
     :func:`~matremap.core.lockstep.lockstep`. Renderer names are resolved when it starts."""
@@ -84,28 +87,30 @@ def fit_steps(
         free=free,
         start=start,
         coarse=coarse,
+        objective=objective,
     )
     result.warnings.extend(absorbed_layers(source.model, source.values, spec.id, result.target.values))
     return result
 
 
 def comparison_strip(result: core_fit.FitResult, gap: int = 4, labels: bool = True) -> np.ndarray:
-    """[H (+ a caption band), 3W + 2 gap, 3] linear image of a fit: source (irradiance-matched), target,
+    """[H (+ a caption band), 3W + 2 gap, 3] linear image of a fit (W: the probe's views side by side):
+    source (irradiance-matched), target,
     and |target - source| scaled so that 10 % of the source's peak reads as the peak; exposure puts the
     source's 99.5th percentile at 1 (sRGB-encoded when written as PNG). ``labels``: a band above
     names each panel (the models and the difference's scale)."""
     scene = result.scene
-    src = get_renderer(result.source_renderer).render([result.source], scene)[0] * result.irradiance_scale
-    tgt = get_renderer(result.target_renderer).render([result.target], scene)[0]
+    src = render_images(get_renderer(result.source_renderer), [result.source], scene)[0] * result.irradiance_scale
+    tgt = render_images(get_renderer(result.target_renderer), [result.target], scene)[0]
     peak = float(np.percentile(src[scene.mask()], 99.5)) or 1.0
     diff = np.abs(tgt - src) / (0.1 * peak) * peak
-    h = scene.resolution
+    h, w = tgt.shape[:2]
     spacer = np.full((h, gap, 3), 0.02 * peak, dtype=np.float32)
     strip = np.concatenate([src, spacer, tgt, spacer, diff.astype(np.float32)], axis=1) / peak
     if not labels:
         return strip
     names = [f"source {result.source.model}", f"target {result.target.model}", "|difference| x10"]
-    band = caption_band(strip.shape[1], [(i * (h + gap), h, t) for i, t in enumerate(names)])
+    band = caption_band(strip.shape[1], [(i * (w + gap), w, t) for i, t in enumerate(names)])
     return np.concatenate([band, strip], axis=0)
 
 

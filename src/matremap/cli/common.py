@@ -11,7 +11,8 @@ from typing import Any, Protocol
 
 from matremap.core.fit import STRATEGIES
 from matremap.core.material import Material, parse_material
-from matremap.core.scene import Scene, parse_lights
+from matremap.core.objective import OBJECTIVES
+from matremap.core.scene import Scene, parse_lights, parse_probe
 from matremap.errors import MatremapError
 
 
@@ -100,19 +101,46 @@ def parse_assignments(items: Sequence[str], flag: str) -> dict[str, str]:
 
 
 def make_scene(args: argparse.Namespace) -> Scene:
-    """The probe scene of ``--light`` and ``--size``."""
-    return Scene.probe(lights=parse_lights(args.light), resolution=args.size)
+    """The probe scene of ``--probe``, ``--light`` and ``--size``."""
+    return parse_probe(getattr(args, "probe", "point"), parse_lights(args.light), args.size)
 
 
 def add_scene_args(p: argparse.ArgumentParser) -> None:
-    """``--light`` and ``--size``: the probe scene (read back with :func:`make_scene`)."""
+    """``--probe``, ``--light`` and ``--size``: the probe scene (read back with :func:`make_scene`)."""
+    add_probe_option(p)
     add_light_option(p, "point lights of the probe scene, each at DEG degrees from the view axis")
     p.add_argument(
         "--size",
         type=int,
-        default=128,
+        default=None,
         metavar="N",
-        help="probe image side in pixels, N x N (default %(default)s; the paper used 512)",
+        help="probe image side in pixels, N x N (default 128 for the point probe, 64 for env and mixed; the paper "
+        "used 512)",
+    )
+
+
+PROBE_HELP = (
+    "the light fits are made under: point (the paper's point lights, --light), env (the sphere under the built-in "
+    "studio environment at 30, 150 and 270 degrees; env:FILE.exr for your own lat-long map) or mixed (both; "
+    "mixed:FILE.exr)"
+)
+
+
+def add_probe_option(p: argparse.ArgumentParser, default: str = "point", help: str = PROBE_HELP) -> None:
+    """``--probe``: the light the fit is made under (:func:`matremap.core.scene.parse_probe`)."""
+    p.add_argument(
+        "--probe", default=default, metavar="KIND[:FILE]", help=f"{help} (default {default}; docs/fitting.md)"
+    )
+
+
+def add_objective_option(p: argparse.ArgumentParser, default: str = "l2") -> None:
+    """``--objective``: what a fit makes small (:mod:`matremap.core.objective`)."""
+    p.add_argument(
+        "--objective",
+        choices=OBJECTIVES,
+        default=default,
+        help="what the fit makes small: l2 (linear HDR, the paper's), log (relative differences) or ssim (1 - SSIM "
+        f"of the probe views, what the evaluation judges) (default {default}; docs/fitting.md)",
     )
 
 

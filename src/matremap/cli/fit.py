@@ -17,6 +17,7 @@ from matremap.cli.common import (
     add_fix_option,
     add_force_option,
     add_free_option,
+    add_objective_option,
     add_renderer_options,
     add_scene_args,
     add_strategy_option,
@@ -26,6 +27,7 @@ from matremap.cli.common import (
     parse_assignments,
 )
 from matremap.core.material import Material
+from matremap.core.scene import Scene
 from matremap.dialects import get_model
 from matremap.errors import MatremapError
 
@@ -81,6 +83,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     from matremap.core.fit import part
     from matremap.core.imageio import IMAGE_SUFFIXES, check_output, write_image
     from matremap.renderers import get_renderer
+    from matremap.renderers.base import render_images
 
     material = load_material(args.material)
     scene = make_scene(args)
@@ -89,9 +92,10 @@ def cmd_render(args: argparse.Namespace) -> int:
     shown = part(material, args.part)
     if shown is None:
         raise MatremapError(f"{material.model} has no {args.part} part to render")
-    image = renderer.render([shown], scene)[0]
+    image = render_images(renderer, [shown], scene)[0]
     write_image(out, image, force=args.force)
-    print(f"wrote {out} ({scene.resolution}x{scene.resolution}, {material.model}, {args.part})", file=sys.stderr)
+    views = f", {scene.view_count} views side by side" if scene.view_count > 1 else ""
+    print(f"wrote {out} ({scene.resolution}x{scene.resolution}{views}, {material.model}, {args.part})", file=sys.stderr)
     return 0
 
 
@@ -105,6 +109,7 @@ def add_fit(subparsers: Subparsers) -> None:
     add_fix_option(p, "set a target option or hold a parameter (repeatable), e.g. distribution=as")
     add_free_option(p, "also fit a parameter that is held by default (repeatable)")
     add_strategy_option(p)
+    add_objective_option(p)
     add_renderer_options(p)
     p.add_argument("--json", action="store_true", help="print the result as one JSON object on stdout")
     p.add_argument("-o", "--output", metavar="FILE.json", help="also save the result as JSON")
@@ -141,6 +146,7 @@ def cmd_fit(args: argparse.Namespace) -> int:
         target_renderer=args.target_renderer,
         fix=fix,
         free=args.free,
+        objective=args.objective,
     )
     record = result.to_dict()
     for w in result.warnings:
@@ -165,9 +171,11 @@ def cmd_fit(args: argparse.Namespace) -> int:
 
 def print_fit(r: dict[str, Any]) -> None:
     """A fit record (:meth:`FitResult.to_dict`) as a short table."""
+    objective = r.get("objective", {"name": "l2"})
+    probe = Scene.from_dict(r["scene"]).describe() if "scene" in r else "point probe"
     print(
         f"{r['source']['model']} -> {r['model']}  ({r['strategy']}, {r['renderers']['source']} -> "
-        f"{r['renderers']['target']})"
+        f"{r['renderers']['target']}; {probe})"
     )
     for k, v in r["params"].items():
         v = (
@@ -180,6 +188,8 @@ def print_fit(r: dict[str, Any]) -> None:
         f"loss (relative RMSE) {r['loss']:.4g}   renders {r['renders']}   {r['seconds'] * 1000:.1f} ms"
         + (f"   irradiance scale {r['irradiance_scale']:.4g}" if r["irradiance_scale"] != 1.0 else "")
     )
+    if objective["name"] != "l2":
+        print(f"objective {objective['name']} {objective['value']:.4g}")
     for s in r["stages"]:
         print(f"  stage {s['name']}: loss {s['loss']:.4g}, {s['renders']} renders, {s['message']}")
 

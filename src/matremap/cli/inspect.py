@@ -118,6 +118,12 @@ def add_transforms(subparsers: Subparsers) -> None:
         metavar="NAME=VALUE",
         help="with --route: an option of the source, e.g. variant=ward (repeatable; default: the model's defaults)",
     )
+    p.add_argument(
+        "--probe",
+        choices=("point", "env", "mixed"),
+        default="point",
+        help="with --route: through transforms fitted under this probe (default %(default)s; docs/fitting.md)",
+    )
     add_json_option(p)
     p.set_defaults(func=cmd_transforms)
 
@@ -130,7 +136,7 @@ def cmd_transforms(args: argparse.Namespace) -> int:
         source, target = args.route
         fix = parse_assignments(args.fix, "--fix")
         options = parse_assignments(args.source_option, "--source-option")
-        found = find_route(get_model(source).id, options, get_model(target).id, fix)
+        found = find_route(get_model(source).id, options, get_model(target).id, fix, probe=args.probe)
         if found is None:
             near = nearest_routes(source, options, target, fix)
             raise MatremapError(
@@ -158,7 +164,8 @@ def cmd_transforms(args: argparse.Namespace) -> int:
             if set(rend.values()) <= {"embedded"}
             else f"source {rend.get('source')}, target {rend.get('target')}"
         )
-        print(f"{'':<30} trained on {dom} ({how})")
+        fitted = "" if r["probe"] == "point" else f"; fitted under the {r['probe']} probe, objective {r['objective']}"
+        print(f"{'':<30} trained on {dom} ({how}{fitted})")
     return 0
 
 

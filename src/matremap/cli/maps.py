@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from matremap.cli.common import (
+    PROBE_HELP,
     Subparsers,
     add_allow_path_option,
     add_command,
@@ -19,12 +20,14 @@ from matremap.cli.common import (
     add_force_option,
     add_json_option,
     add_light_option,
+    add_probe_option,
     add_renamed,
     add_strategy_option,
     add_target_option,
     parse_assignments,
 )
-from matremap.core.scene import Scene, parse_lights
+from matremap.core.objective import OBJECTIVES
+from matremap.core.scene import parse_lights, parse_probe
 from matremap.dialects import get_model
 from matremap.errors import MatremapError, QualityGateFailed
 from matremap.svbrdf.quality import Thresholds
@@ -366,6 +369,7 @@ def add_remap(subparsers: Subparsers) -> None:
         "point lights of the sweep's probe scene at DEG degrees from the view axis (any other than the "
         "default skips the library, whose transforms were learned with the headlight)",
     )
+    add_fit_light_options(p)
     p.add_argument(
         "--target-renderer",
         metavar="NAME",
@@ -380,6 +384,23 @@ def add_remap(subparsers: Subparsers) -> None:
     _max_texels(p)
     add_force_option(p, "write into an existing output folder")
     p.set_defaults(func=_limited(cmd_remap))
+
+
+def add_fit_light_options(p: argparse.ArgumentParser) -> None:
+    """remap's ``--probe`` (with ``auto``) and ``--objective`` (its default depending on the probe)."""
+    add_probe_option(
+        p,
+        "auto",
+        "auto (a library route fitted under the headlight or the built-in environment, whichever looks closer "
+        "under --envmap, else a sweep under the headlight), or " + PROBE_HELP,
+    )
+    p.add_argument(
+        "--objective",
+        choices=OBJECTIVES,
+        default=None,
+        help="what the fits make small: l2 (linear HDR, the paper's), log or ssim (default: ssim under an environment "
+        "probe, l2 under the point probe; docs/fitting.md)",
+    )
 
 
 def cmd_remap(args: argparse.Namespace) -> int:
@@ -423,7 +444,9 @@ def cmd_remap(args: argparse.Namespace) -> int:
             + f"; {fres.verdict.line()}"
         )
         return _verdict(fres.verdict)
-    scene = Scene.probe(lights=parse_lights(args.light)) if args.light else None
+    scene = (
+        parse_probe(args.probe if args.probe != "auto" else "point", parse_lights(args.light)) if args.light else None
+    )
     result = remap(args.maps, args.source, args.target, args.output, scene=scene, write=args.write, **options)
     file = Path(args.output) / args.write if args.write else None
     if args.json:
@@ -480,6 +503,8 @@ def remap_options(args: argparse.Namespace) -> dict[str, Any]:
         "library": not args.sweep,
         "thresholds": Thresholds.parse(args.max_error),
         "max_texels": args.max_texels,
+        "probe": args.probe,
+        "objective": args.objective,
     }
 
 

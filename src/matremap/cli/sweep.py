@@ -14,6 +14,7 @@ from matremap.cli.common import (
     add_fix_option,
     add_force_option,
     add_free_option,
+    add_objective_option,
     add_renderer_options,
     add_scene_args,
     add_strategy_option,
@@ -64,6 +65,7 @@ def add_sweep(subparsers: Subparsers) -> None:
     add_fix_option(p, "set a target option or hold a target parameter at a value (repeatable), e.g. distribution=as")
     add_free_option(p, "also fit a target parameter the model holds by default (repeatable)")
     add_strategy_option(p)
+    add_objective_option(p)
     add_renderer_options(p)
     add_executor_options(p, "fit")
     p.add_argument(
@@ -100,6 +102,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         target_renderer=args.target_renderer or renderer_for(target),
         continuation=args.continuation,
         round_trip=args.round_trip,
+        objective=args.objective,
     )
     grid = parse_grid(args.grid, source.spec)
     check_grid_for(config, grid)

@@ -22,7 +22,7 @@ from matremap.core.material import Material, white_reference
 from matremap.core.scene import Scene
 from matremap.dialects import get_model
 from matremap.errors import MatremapError
-from matremap.renderers.base import Renderer
+from matremap.renderers.base import Renderer, render_pixels
 
 
 def same_units(source_model: str, target_model: str) -> bool:
@@ -53,16 +53,15 @@ def irradiance_scale(
 ) -> float:
     """Factor s such that s * (source probe render) is in the target's irradiance units.
 
-    1.0 when source and target share a renderer family (:func:`same_units`). ``render`` lets the caller
-    count renders; it defaults to the renderer's own ``render``.
+    1.0 when source and target share a renderer family (:func:`same_units`). ``render`` (the sphere pixels
+    of a batch, as :func:`~matremap.renderers.base.render_pixels` draws them) lets the caller count renders.
     """
     if same_units(source.model, target_model):
         return 1.0
-    render = render or (lambda r, ms: r.render(ms, scene))
-    mask = scene.mask()
+    render = render or (lambda r, ms: render_pixels(r, ms, scene))
     source_family, target_family = source.spec.family, get_model(target_model).family
-    src = render(source_renderer, [white_reference(source_family)])[0][mask]
-    tgt = render(target_renderer, [white_reference(target_family)])[0][mask]
+    src = render(source_renderer, [white_reference(source_family)])[0]
+    tgt = render(target_renderer, [white_reference(target_family)])[0]
     return irradiance_ratio(src, tgt, f"{source_family} in {source_renderer.name}")
 
 

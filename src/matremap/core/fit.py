@@ -41,10 +41,12 @@ from matremap.core.descent import Descent, descend
 from matremap.core.lockstep import RenderRequest, Steps, run
 from matremap.core.material import Material, white_reference
 from matremap.core.models import SPECULAR_ROLES, ModelSpec, ParamSpec
+from matremap.core.objective import check as check_objective
+from matremap.core.objective import make as make_objective
 from matremap.core.scene import Scene
 from matremap.dialects import get_model
 from matremap.errors import MatremapError
-from matremap.renderers.base import Renderer
+from matremap.renderers.base import Renderer, check_probe
 
 STRATEGIES = ("simple", "two-stage", "three-stage", "separable")
 DIFFUSE, SPECULAR, FULL = "diffuse", "specular", "full"
@@ -98,6 +100,10 @@ class FitResult:
     target_renderer: str
     stages: list[StageReport] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    #: what the fit made small (:mod:`matremap.core.objective`) and its value there (for ``ssim``, the mean
+    #: 1 - SSIM over the probe's sphere pixels); ``loss`` is the relative RMSE whatever the objective
+    objective: str = "l2"
+    objective_value: float = 0.0
 
     @property
     def params(self) -> dict[str, Any]:
@@ -108,6 +114,7 @@ class FitResult:
             "model": self.target.model,
             "params": self.params,
             "loss": self.loss,
+            "objective": {"name": self.objective, "value": self.objective_value},
             "renders": self.renders,
             "seconds": self.seconds,
             "strategy": self.strategy,
@@ -177,6 +184,7 @@ class _Problem:
         renderer: Renderer,
         counter: _Counter,
         grey: bool = False,
+        objective: str = "l2",
     ) -> None:
         self.template = template
         self.free = list(free)
@@ -184,6 +192,8 @@ class _Problem:
         self.grey = grey
         self.goal = goal[:, :1] if grey else goal
         self.norm = float(np.linalg.norm(self.goal))
+        #: None for the paper's L2 (computed inline, as it always was); else the objective's residuals
+        self.objective = None if objective == "l2" else make_objective(objective, self.goal, counter.scene)
         self.renderer = renderer
         self.counter = counter
         self.width = [1 if grey else p.channels for p in self.free]
@@ -230,7 +240,10 @@ class _Problem:
             return self._last[1]
         self.evaluations += 1
         img = yield from self._pixels([x])
-        r = ((img[0] - self.goal) / self.norm).ravel()
+        if self.objective is None:
+            r = ((img[0] - self.goal) / self.norm).ravel()
+        else:
+            r = self.objective.residuals(img)[0]
         self._last = (x.copy(), r)
         return r
 
@@ -255,7 +268,10 @@ class _Problem:
         """The Jacobian [residuals, variables] from the renders of :meth:`perturbations` (built by
         columns, returned as a Fortran-ordered view)."""
         jac_t = np.zeros((self.size, r0.size))
-        diffs = (images - self.goal).reshape(len(columns), -1) * (1.0 / self.norm) - r0
+        if self.objective is None:
+            diffs = (images - self.goal).reshape(len(columns), -1) * (1.0 / self.norm) - r0
+        else:
+            diffs = self.objective.residuals(images) - r0
         for (_, g, h), diff in zip(columns, diffs, strict=True):
             if len(g) == 1:
                 jac_t[g[0]] = diff / h[0]
@@ -373,7 +389,7 @@ class _Projected(_Problem):
         limit = spec.affine_sum_limit
         # channel by channel: every affine parameter has a value per image channel, no sum across them
         self.by_channel = spec.channel_separable and limit is None and all(ch == 1 or p.channels == 3 for p in linear)
-        self.packed = self.by_channel and self._grey_basis() and 1 + len(linear) <= 3
+        self.packed = self.by_channel and counter.scene.grey_lighting and self._grey_basis() and 1 + len(linear) <= 3
         self.layout = varpro.unknowns([p.channels for p in self.linear], ch)
         self.sums = varpro.sum_rows(self.layout, ch) if limit is not None else None
         self.limit = limit
@@ -558,14 +574,17 @@ def fit(
     free: Sequence[str] = (),
     start: Mapping[str, Any] | None = None,
     coarse: bool | None = None,
+    objective: str = "l2",
 ) -> FitResult:
     """Remap a uniform ``source`` material onto ``target_model`` (see the module docstring).
 
     ``fix`` sets target options or holds parameters at given values; ``free`` also fits parameters
     that are held by default (e.g. ``eta`` of a conductor); ``start`` gives starting values (a warm
     start). ``coarse`` (default: only without ``start``) tries a few roughness values and an
-    intensity ratio in one batched render before the descent. The fit's renders are made as it asks
-    for them (:func:`fit_steps` is the same fit in ask/tell form, for :func:`~matremap.core.lockstep.lockstep`).
+    intensity ratio in one batched render before the descent. ``objective`` (:mod:`matremap.core.objective`):
+    other than ``l2``, the strategy's result is refined by a last stage over every free parameter under
+    it. The fit's renders are made as it asks for them (:func:`fit_steps` is the same fit in ask/tell form,
+    for :func:`~matremap.core.lockstep.lockstep`).
     """
     return run(
         fit_steps(
@@ -579,6 +598,7 @@ def fit(
             free=free,
             start=start,
             coarse=coarse,
+            objective=objective,
         )
     )
 
@@ -595,12 +615,14 @@ def fit_steps(
     free: Sequence[str] = (),
     start: Mapping[str, Any] | None = None,
     coarse: bool | None = None,
+    objective: str = "l2",
 ) -> Steps[FitResult]:
     """:func:`fit` as a generator of render requests (:mod:`matremap.core.lockstep`); returns the
     :class:`FitResult`. The arguments are checked before the first request."""
     t0 = time.perf_counter()
     if strategy not in STRATEGIES:
         raise MatremapError(f"unknown strategy {strategy!r}; choose one of {', '.join(STRATEGIES)}")
+    check_objective(objective)
     spec = target_model if isinstance(target_model, ModelSpec) else get_model(target_model)
     scene = scene or Scene()
     if (
@@ -614,10 +636,13 @@ def fit_steps(
     for r, model in ((src_r, source.model), (tgt_r, spec.id)):
         if not r.can_render(model):
             raise MatremapError(f"renderer {r.name!r} cannot render model {model}")
+        check_probe(r, scene)
     spec, template, free_params = _fit_setup(spec, fix, free, start)
     if coarse is None:
         coarse = not start
-    return (yield from _fit_body(source, spec, strategy, scene, src_r, tgt_r, template, free_params, coarse, t0))
+    return (
+        yield from _fit_body(source, spec, strategy, scene, src_r, tgt_r, template, free_params, coarse, t0, objective)
+    )
 
 
 def _fit_body(
@@ -631,8 +656,10 @@ def _fit_body(
     free_params: list[ParamSpec],
     coarse: bool,
     t0: float,
+    objective: str = "l2",
 ) -> Steps[FitResult]:
-    """The renders of a checked fit: irradiance, source goals, the strategy's stages, the final loss."""
+    """The renders of a checked fit: irradiance, source goals, the strategy's stages (and the objective's),
+    the final loss."""
     counter = _Counter(scene)
     scale = 1.0
     if not same_units(source.model, spec.id):
@@ -643,12 +670,13 @@ def _fit_body(
 
     goals, sharpened, warnings = yield from _resolved_goals(source, strategy, scale, src_r, counter)
     stages: list[StageReport] = []
-    current = yield from _descend(strategy, template, free_params, goals, tgt_r, counter, stages, coarse)
+    current = yield from _descend(strategy, template, free_params, goals, tgt_r, counter, stages, coarse, objective)
 
     # the loss is measured where the fit was made (at the resolvable width for a too-narrow highlight)
     final = (yield from counter.pixels(tgt_r, [current]))[0]
     goal = goals[FULL]
     loss = float(np.linalg.norm(final - goal) / np.linalg.norm(goal))
+    value = float(np.sum(make_objective(objective, goal, scene).residuals(final[None]) ** 2))
     if sharpened is not None:
         current = yield from _towards_mirror(
             source, sharpened, current, strategy, scale, src_r, tgt_r, free_params, counter, stages
@@ -666,6 +694,8 @@ def _fit_body(
         target_renderer=tgt_r.name,
         stages=stages,
         warnings=warnings,
+        objective=objective,
+        objective_value=value,
     )
 
 
@@ -687,7 +717,7 @@ def _resolved_goals(
         warnings += _check_resolution(goals[which], scene)
     if not np.any(goals[FULL] > 0):
         raise MatremapError(
-            f"{source.model} renders black on the probe ({len(scene.lights)} light(s)): there is nothing to fit; "
+            f"{source.model} renders black on the probe ({scene.describe()}): there is nothing to fit; "
             "check its parameters (is every reflectance 0?)"
         )
     return goals, sharpened, warnings
@@ -743,9 +773,42 @@ def _descend(
     counter: _Counter,
     stages: list[StageReport],
     coarse: bool,
+    objective: str = "l2",
 ) -> Steps[Material]:
     """Run the strategy's stages from ``template``: diffuse then specular (two-stage), everything at
-    once (simple), or both and then everything (three-stage); each stage appends its report."""
+    once (simple), or both and then everything (three-stage); under an objective other than L2, then every
+    free parameter under it from there. Each stage appends its report."""
+    current = yield from _strategy_stages(strategy, template, free_params, goals, renderer, counter, stages, coarse)
+    if objective == "l2":
+        return current
+    return (
+        yield from _run_stage(
+            FULL,
+            free_params,
+            current,
+            goals[FULL],
+            1.0,
+            renderer,
+            counter,
+            stages,
+            name=objective,
+            coarse=False,
+            objective=objective,
+        )
+    )
+
+
+def _strategy_stages(
+    strategy: str,
+    template: Material,
+    free_params: list[ParamSpec],
+    goals: Mapping[str, np.ndarray],
+    renderer: Renderer,
+    counter: _Counter,
+    stages: list[StageReport],
+    coarse: bool,
+) -> Steps[Material]:
+    """The stages of ``strategy`` under L2 (see :func:`_descend`)."""
     current = template
     if strategy in ("two-stage", "three-stage"):
         total = float(np.sum(goals[FULL] ** 2)) or 1.0
@@ -939,11 +1002,12 @@ def _run_stage(
     name: str | None = None,
     coarse: bool = True,
     project: bool = False,
+    objective: str = "l2",
 ) -> Steps[Material]:
     """Long: one stage's set-up, its two degenerate cases and its report are read best together.
 
-    Fit ``params`` of ``current`` to ``goal`` (the ``which`` part); ``project``: solve the parameters the
-    model is affine in by variable projection."""
+    Fit ``params`` of ``current`` to ``goal`` (the ``which`` part) under ``objective``; ``project``: solve the
+    parameters the model is affine in by variable projection (exact under L2 only, so not under another)."""
     t0 = time.perf_counter()
     renders0 = counter.images
     names = [p.name for p in params]
@@ -977,8 +1041,8 @@ def _run_stage(
         report(current, 1.0, 0, f"{why}; {100 * energy / total_energy:.3g}% of the source energy is unmatched")
         return current
     # grey goal and grey parameters (grey parameters render grey images in an RGB renderer)
-    grey = is_grey(goal) and all(np.all(v == v[0]) for v in current.values.values())
-    affine = current.spec.affine_params(current.options) if project else ()
+    grey = counter.scene.grey_lighting and is_grey(goal) and all(np.all(v == v[0]) for v in current.values.values())
+    affine = current.spec.affine_params(current.options) if project and objective == "l2" else ()
     linear = [p for p in params if p.name in affine]
     if linear:
         nonlinear = [p for p in params if p.name not in affine]
@@ -989,7 +1053,7 @@ def _run_stage(
             report(result, float(np.linalg.norm(r)), 1, "solved in closed form")
             return result
     else:
-        problem = _Problem(current, params, which, goal, renderer, counter, grey=grey)
+        problem = _Problem(current, params, which, goal, renderer, counter, grey=grey, objective=objective)
     result, sol = yield from problem.solve(current, coarse=coarse)
     report(result, float(np.sqrt(2.0 * sol.cost)), problem.evaluations, str(sol.message))
     return result

@@ -1,4 +1,4 @@
-"""The probe scene: a sphere lit by point lights, seen by a pinhole camera (paper §4).
+"""The probe scene: a sphere lit by point lights or an environment, seen by a pinhole camera (paper §4).
 
 Plain data that every renderer backend builds the same way:
 
@@ -11,13 +11,26 @@ Plain data that every renderer backend builds the same way:
   facing a headlight at the sphere's nearest point has radiance 1.
 
 Images are linear HDR RGB float32 ``[H, W, 3]``; :meth:`Scene.mask` marks sphere pixels.
+
+**Environment probes** (issue 18). The paper fits under a point light and judges under an environment map;
+a scene may instead (or as well) light the sphere by an :class:`EnvironmentProbe`: an environment map turned
+to a few rotations about +y, each drawn as its own *view* of the sphere, lit by the map's importance-sampled
+directional lights (:func:`~matremap.core.envmap.directional_lights`). A scene with point lights and an
+environment is the *mixed* probe: the point-light view, then the environment views. A scene of several views
+is drawn view by view (:meth:`Scene.views`, each a scene of one view); its pixels are the views' sphere
+pixels one view after the other, and its image is the views side by side (``[H, V W, 3]``). Each view is
+weighted by :meth:`Scene.view_weights` -- the inverse of the mean radiance a white Lambertian sphere has in
+it -- so that a bright environment does not drown a point-light view in the least squares (the weights
+multiply source and target renders alike, so a fit's optimum in one view is unchanged by them).
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
+import os
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from typing import Any
 
@@ -37,6 +50,88 @@ class PointLight:
         return {"theta": self.theta, "intensity": self.intensity}
 
 
+#: the rotations (degrees about +y) an environment probe fits under by default: none of them is among the
+#: evaluation's default rotations (0:360:6, i.e. 0, 60, ..., 300), so a fit is never judged where it was made
+FIT_ROTATIONS = (30.0, 150.0, 270.0)
+#: the directional lights an environment probe samples per rotation, and its sampling seed (the evaluation's
+#: is 0: its light set is another draw of the same map)
+FIT_LIGHTS = 64
+FIT_SEED = 1
+
+
+@dataclass(frozen=True)
+class EnvironmentProbe:
+    """An environment map lighting the probe sphere at each of ``rotations`` (degrees about +y), sampled
+    into ``lights`` directional lights with ``seed``. ``env`` is ``'builtin'``, ``'constant'`` or an
+    .exr/.hdr path; ``digest`` is the file's SHA-256 (:meth:`of` fills it), so that a sweep's key changes
+    when the map's content does."""
+
+    env: str = "builtin"
+    rotations: tuple[float, ...] = FIT_ROTATIONS
+    lights: int = FIT_LIGHTS
+    seed: int = FIT_SEED
+    digest: str = ""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "rotations", tuple(float(r) for r in self.rotations))
+        if not self.rotations or not all(math.isfinite(r) for r in self.rotations):
+            raise MatremapError("an environment probe needs at least one finite rotation (degrees)")
+        if not isinstance(self.lights, int) or not 1 <= self.lights <= 4096:
+            raise MatremapError(f"an environment probe takes 1 to 4096 lights per rotation, got {self.lights!r}")
+
+    @classmethod
+    def of(cls, env: str | os.PathLike, **kw: Any) -> EnvironmentProbe:
+        """The probe of the map ``env`` ('builtin', 'constant' or a file, checked and digested now)."""
+        name = str(env)
+        digest = ""
+        if name not in ("builtin", "constant"):
+            from matremap.core.envmap import load
+
+            load(name)  # one clear error now for a missing or unreadable map
+            with open(name, "rb") as f:
+                digest = hashlib.sha256(f.read()).hexdigest()
+            name = os.path.abspath(name)
+        return cls(env=name, digest=digest, **kw)
+
+    def label(self) -> str:
+        env = self.env if self.env in ("builtin", "constant") else os.path.basename(self.env)
+        turns = ", ".join(f"{r:g}" for r in self.rotations)
+        return f"{env} at {turns} deg, {self.lights} lights"
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "env": self.env,
+            "rotations": list(self.rotations),
+            "lights": self.lights,
+            "seed": self.seed,
+            "digest": self.digest,
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> EnvironmentProbe:
+        return cls(
+            env=str(d.get("env", "builtin")),
+            rotations=tuple(d.get("rotations", FIT_ROTATIONS)),
+            lights=int(d.get("lights", FIT_LIGHTS)),
+            seed=int(d.get("seed", FIT_SEED)),
+            digest=str(d.get("digest", "")),
+        )
+
+    def directional(self, rotation: float) -> tuple[np.ndarray, np.ndarray]:
+        """Unit directions towards the lights [L, 3] and their RGB intensities [L, 3] at ``rotation``."""
+        return _directional(self.env, self.lights, float(rotation), self.seed)
+
+
+@lru_cache(maxsize=64)
+def _directional(env: str, lights: int, rotation: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    from matremap.core.envmap import directional_lights, resolve
+
+    d, i = directional_lights(resolve(env), lights, rotation, seed)
+    d.flags.writeable = False
+    i.flags.writeable = False
+    return d, i
+
+
 @dataclass(frozen=True)
 class Scene:
     resolution: int = 128
@@ -45,11 +140,13 @@ class Scene:
     sphere_radius: float = 2.0
     light_distance: float | None = None
     fov: float | None = None
+    #: an environment lighting the sphere in views of its own (see the module docstring)
+    environment: EnvironmentProbe | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.resolution, int) or not 8 <= self.resolution <= 8192:
             raise MatremapError(f"scene resolution must be an integer in [8, 8192], got {self.resolution!r}")
-        if not self.lights:
+        if not self.lights and self.environment is None:
             raise MatremapError("the scene needs at least one light")
         for light in self.lights:
             if not math.isfinite(light.theta) or not -90.0 < light.theta < 90.0:
@@ -70,7 +167,7 @@ class Scene:
         return cls(resolution=resolution, lights=tuple(PointLight(float(t)) for t in lights))
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        d = {
             "resolution": self.resolution,
             "lights": [light.to_dict() for light in self.lights],
             "camera_distance": self.camera_distance,
@@ -78,12 +175,54 @@ class Scene:
             "light_distance": self.effective_light_distance,
             "fov": self.effective_fov,
         }
+        if self.environment is not None:  # absent for the point-light probe: its keys stay as they were
+            d["environment"] = self.environment.to_dict()
+        return d
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> Scene:
         lights = tuple(PointLight(**light) for light in d.get("lights", [{"theta": 0.0}]))
         kw = {k: d[k] for k in ("resolution", "camera_distance", "sphere_radius", "light_distance", "fov") if k in d}
-        return cls(lights=lights, **kw)
+        env = d.get("environment")
+        return cls(lights=lights, environment=EnvironmentProbe.from_dict(env) if env else None, **kw)
+
+    # -- views ---------------------------------------------------------------------------------
+    @property
+    def kind(self) -> str:
+        """``point`` (the paper's), ``env`` or ``mixed`` (point lights and an environment)."""
+        if self.environment is None:
+            return "point"
+        return "mixed" if self.lights else "env"
+
+    def describe(self) -> str:
+        """The probe in words, for logs and reports."""
+        point = f"{len(self.lights)} point light(s) at {', '.join(f'{lt.theta:g}' for lt in self.lights)} deg"
+        if self.environment is None:
+            return f"point probe: {point}"
+        env = f"environment {self.environment.label()}"
+        return f"{self.kind} probe: " + (f"{point} + {env}" if self.lights else env)
+
+    def views(self) -> tuple[Scene, ...]:
+        """The scenes of one view each that make up this one: the point-light view, then one per rotation
+        of the environment; a scene of one view is its own only view."""
+        return _views(self)
+
+    @property
+    def view_count(self) -> int:
+        return (1 if self.lights else 0) + (len(self.environment.rotations) if self.environment else 0)
+
+    def view_weights(self) -> np.ndarray:
+        """Per view, 1 / (the mean radiance of a white Lambertian sphere in it); all 1 for a one-view scene."""
+        return _view_weights(self)
+
+    @property
+    def grey_lighting(self) -> bool:
+        """Whether every light is white, so that a grey material renders a grey image (the fitter's grey
+        and packed shortcuts rely on it): point lights are; an environment's lights are when the map is grey."""
+        if self.environment is None:
+            return True
+        env = self.environment
+        return all(_grey(env.directional(r)[1]) for r in env.rotations)
 
     # -- derived quantities --------------------------------------------------------------------
     @property
@@ -120,21 +259,81 @@ class Scene:
         return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
     def mask(self) -> np.ndarray:
-        """Boolean [H, W]: True on pixels whose centre ray hits the sphere."""
+        """Boolean [H, V W]: True on pixels whose centre ray hits the sphere (the views side by side)."""
         return _sphere_hits(self)[0]
 
     def pixel_indices(self) -> np.ndarray:
-        """Flat indices (row-major, into H*W) of the sphere pixels; faster than the boolean mask."""
+        """Flat indices (into the [H, V W] image) of the sphere pixels, view after view and row-major in
+        each; faster than the boolean mask."""
         return _sphere_hits(self)[1]
 
     def sphere_points(self) -> np.ndarray:
-        """World positions [P, 3] of the sphere points seen through the masked pixels (row-major)."""
+        """World positions [V P, 3] of the sphere points seen through the masked pixels (in
+        :meth:`pixel_indices` order)."""
         return _sphere_hits(self)[2]
+
+
+def _grey(intensities: np.ndarray) -> bool:
+    return bool(np.all(np.abs(intensities - intensities[:, :1]) <= 1e-12 * np.max(np.abs(intensities))))
+
+
+@lru_cache(maxsize=32)
+def _views(scene: Scene) -> tuple[Scene, ...]:
+    if scene.environment is None or (not scene.lights and len(scene.environment.rotations) == 1):
+        return (scene,)
+    out = [replace(scene, environment=None)] if scene.lights else []
+    env = scene.environment
+    out += [replace(scene, lights=(), environment=replace(env, rotations=(r,))) for r in env.rotations]
+    return tuple(out)
+
+
+@lru_cache(maxsize=32)
+def _view_weights(scene: Scene) -> np.ndarray:
+    views = scene.views()
+    if len(views) == 1:
+        w = np.ones(1)
+    else:
+        w = np.array([1.0 / max(white_radiance(v), 1e-12) for v in views])
+    w.flags.writeable = False
+    return w
+
+
+def white_radiance(view: Scene) -> float:
+    """Mean luminance over the sphere pixels of a white Lambertian (albedo 1) in a one-view scene:
+    sum over lights of E cos(theta_i) / pi (E = I / d^2 for a point light, the intensity for a directional
+    one)."""
+    p = _sphere_hits(replace(view, lights=view.lights or (PointLight(),), environment=None))[2]
+    n = p / np.linalg.norm(p, axis=-1, keepdims=True)
+    total = np.zeros(len(p))
+    for light in view.lights:
+        to_light = view.light_position(light) - p
+        d2 = np.sum(to_light * to_light, axis=-1)
+        cos = np.maximum(np.sum(to_light * n, axis=-1) / np.sqrt(d2), 0.0)
+        total += view.light_intensity(light) / d2 * cos
+    if view.environment is not None:
+        from matremap.core.envmap import LUMINANCE
+
+        for r in view.environment.rotations:
+            d, i = view.environment.directional(r)
+            total += np.maximum(n @ d.T, 0.0) @ (i @ LUMINANCE)
+    return float(np.mean(total) / math.pi)
 
 
 @lru_cache(maxsize=32)
 def _sphere_hits(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Mask, flat pixel indices and hit points of the camera rays on the sphere (read-only)."""
+    """Mask, flat pixel indices and hit points of the camera rays on the sphere (read-only), for every view
+    (the camera is the same in each)."""
+    views = scene.view_count
+    if views > 1:
+        single = replace(scene, lights=(PointLight(),), environment=None)
+        mask1, pix1, points1 = _sphere_hits(single)
+        n = scene.resolution
+        rows, cols = pix1 // n, pix1 % n
+        pix = np.concatenate([rows * (views * n) + v * n + cols for v in range(views)])
+        out = (np.tile(mask1, (1, views)), pix, np.tile(points1, (views, 1)))
+        for a in out:
+            a.flags.writeable = False
+        return out
     d = scene.camera_rays()
     o = np.array([0.0, 0.0, scene.camera_distance])
     b = d @ o
@@ -146,6 +345,29 @@ def _sphere_hits(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     for a in out:
         a.flags.writeable = False
     return out
+
+
+#: the probes ``--probe`` names
+PROBES = ("point", "env", "mixed")
+#: the default image side of each probe: an environment view shades 64 lights per pixel where the point
+#: probe shades one, and 64 x 64 resolves the same SSIM optimum as 128 x 128 (benchmarks/ssim_floor.py)
+PROBE_RESOLUTION = {"point": 128, "env": 64, "mixed": 64}
+
+
+def parse_probe(text: str, lights: Iterable[float] = (0.0,), resolution: int | None = None) -> Scene:
+    """The probe scene ``--probe`` names: ``point`` (the paper's, point ``lights`` at their angles), ``env`` or
+    ``env:FILE`` (the sphere under the built-in studio or an .exr/.hdr lat-long map at the
+    :data:`FIT_ROTATIONS`), ``mixed`` or ``mixed:FILE`` (both); ``resolution`` None takes the probe's default."""
+    kind, _, env = str(text).partition(":")
+    if kind not in PROBES or (kind == "point" and env):
+        raise MatremapError(f"--probe {text!r}: give point, env, env:FILE.exr, mixed or mixed:FILE.exr")
+    res = resolution or PROBE_RESOLUTION[kind]
+    angles = tuple(float(t) for t in lights)
+    if kind == "point":
+        return Scene.probe(lights=angles, resolution=res)
+    probe = EnvironmentProbe.of(env or "builtin")
+    point = tuple(PointLight(t) for t in angles) if kind == "mixed" else ()
+    return Scene(resolution=res, lights=point, environment=probe)
 
 
 def parse_lights(values: Iterable[str | float] | None) -> tuple[float, ...]:

@@ -121,4 +121,4 @@ def load_training_data(db: str | Path, reverse: bool = False, exclude_flagged: b
 def store_config_summary(config: Any) -> dict[str, Any]:
     """The parts of a sweep configuration a transform's provenance records."""
     d = config.to_dict()
-    return {k: d[k] for k in ("source", "target", "strategy", "scene", "renderers", "matremap")}
+    return {k: d[k] for k in ("source", "target", "strategy", "scene", "renderers", "matremap", "objective") if k in d}

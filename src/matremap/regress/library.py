@@ -22,14 +22,17 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from matremap.dialects import get_model
-from matremap.errors import TransformChecksumError
+from matremap.errors import MatremapError, TransformChecksumError
 from matremap.regress import schema
 from matremap.regress.transform import Transform
+
+if TYPE_CHECKING:
+    from matremap.core.scene import Scene
 
 LIBRARY_DIR = Path(__file__).with_name("transforms")
 #: the longest chain a route may take
@@ -53,6 +56,10 @@ class Pair:
     reverse: bool = True
     #: also learn from points the stability analysis flags (see the pairs that set it for why)
     keep_flagged: bool = False
+    #: the probe its fits are made under (:func:`matremap.core.scene.parse_probe`; ``point``: the paper's
+    #: headlight) and what they make small (:mod:`matremap.core.objective`)
+    probe: str = "point"
+    objective: str = "l2"
 
 
 _WARD_GRID = "alpha=0.03:0.7:10,specularReflectance=0.02:0.5:6,diffuseReflectance=0;0.5"
@@ -79,6 +86,18 @@ PAIRS: tuple[Pair, ...] = (
         _WARD_GRID,
         source_params={"variant": "ward"},
         fix={"distribution": "ggx"},
+    ),
+    # the same, fitted under the built-in environment with the SSIM objective (issue 18): remap --probe auto
+    # takes whichever of the two looks closer under the light the maps will be seen in
+    Pair(
+        "wardclassic-as-env",
+        "mitsuba06:ward",
+        "mitsuba06:pbr",
+        _WARD_GRID,
+        source_params={"variant": "ward"},
+        fix={"distribution": "as"},
+        probe="env",
+        objective="ssim",
     ),
     Pair(
         "blender27ward-ward",
@@ -260,10 +279,48 @@ class Entry:
         return node_key(t.target, t.target_options, t.template)
 
     @cached_property
+    def probe(self) -> str:
+        """The probe its sweep fitted under: ``point``, ``env`` or ``mixed`` (:attr:`Scene.kind`)."""
+        return probe_of(self.transform)
+
+    @cached_property
+    def objective(self) -> str:
+        """What its sweep's fits made small (``l2`` for transforms that do not say)."""
+        return objective_of(self.transform)
+
+    @cached_property
     def error(self) -> float:
         """The largest held-out RMSE of its mappings (quantity units: roughness, F0, albedo)."""
         errs = [v.get("heldout_rmse") for v in self.transform.errors.values()]
         return float(max((e for e in errs if e is not None), default=0.0))
+
+
+def fitted_under(t: Transform) -> list[tuple[Scene, str]]:
+    """The probe scene and the objective of each sweep behind ``t`` (one per step of a chain); the paper's
+    point probe and L2 where a provenance does not say (transforms learned before probes had a choice)."""
+    from matremap.core.scene import Scene
+
+    out = []
+    for step in t.steps or [t]:
+        sweep = step.provenance.get("sweep")
+        doc = sweep.get("scene") if isinstance(sweep, dict) else None
+        try:
+            scene = Scene.from_dict(doc) if isinstance(doc, dict) else Scene()
+        except (TypeError, ValueError, KeyError, MatremapError):
+            scene = Scene()
+        objective = sweep.get("objective", "l2") if isinstance(sweep, dict) else "l2"
+        out.append((scene, str(objective)))
+    return out
+
+
+def probe_of(t: Transform) -> str:
+    """The kind of probe a transform's sweeps fitted under: ``point``, ``env`` or ``mixed``."""
+    return fitted_under(t)[0][0].kind
+
+
+def objective_of(t: Transform) -> str:
+    """The objective a transform's sweeps fitted under (``l2`` when its provenance does not say)."""
+    return fitted_under(t)[0][1]
 
 
 @lru_cache(maxsize=4)
@@ -318,6 +375,8 @@ def listing(directory: str | Path | None = None) -> list[dict[str, Any]]:
                 "heldout_rmse": {k: v.get("heldout_rmse") for k, v in t.errors.items()},
                 "domain": t.domain,
                 "renderers": _renderers(t),
+                "probe": e.probe,
+                "objective": e.objective,
             }
         )
     return rows
@@ -373,11 +432,11 @@ def _matches(node: tuple, want: tuple) -> bool:
 
 
 def route(
-    source: tuple, target: tuple, directory: str | Path | None = None, max_steps: int = MAX_STEPS
+    source: tuple, target: tuple, directory: str | Path | None = None, max_steps: int = MAX_STEPS, probe: str = "point"
 ) -> Route | None:
     """The shortest chain of library transforms from ``source`` to ``target`` (node keys, see
-    :func:`node_key`; ties broken by accumulated error), or None."""
-    lib = entries(directory)
+    :func:`node_key`; ties broken by accumulated error) among those fitted under ``probe``, or None."""
+    lib = tuple(e for e in entries(directory) if e.probe == probe)
     heap: list[tuple[int, float, int, list[Entry]]] = []
     counter = 0
     for e in lib:
@@ -407,14 +466,16 @@ def find_route(
     fix: Mapping[str, Any],
     directory: str | Path | None = None,
     source_values: Mapping[str, Any] | None = None,
+    probe: str = "point",
 ) -> Route | None:
     """The route for remapping ``source_model`` (with its options, and ``source_values`` for the
     parameters its spec specialises on) onto ``target_model`` with the user's ``fix`` (options and
-    held values)."""
+    held values), through transforms fitted under ``probe``."""
     return route(
         node_key(source_model, source_options, source_values or source_options),
         node_key(target_model, fix, fix),
         directory,
+        probe=probe,
     )
 
 
@@ -455,7 +516,7 @@ def build_pair(
 ) -> list[Path]:
     """Sweep one pair and write its transform(s) into ``out_dir``; returns the files written."""
     from matremap.core.material import Material
-    from matremap.core.scene import Scene
+    from matremap.core.scene import Scene, parse_probe
     from matremap.regress.transform import learn_transform
     from matremap.sweep.executors import make_executor
     from matremap.sweep.grid import parse_grid
@@ -464,7 +525,7 @@ def build_pair(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     source = Material.create(pair.source, dict(pair.source_params))
-    scene = Scene(resolution=size) if size else Scene()
+    scene = parse_probe(pair.probe, resolution=size) if pair.probe != "point" or size else Scene()
     config = SweepConfig(
         source=source,
         target=pair.target,
@@ -474,6 +535,7 @@ def build_pair(
         scene=scene,
         source_renderer=pair.source_renderer,
         target_renderer=pair.renderer,
+        objective=pair.objective,
     )
     grid = parse_grid(pair.grid, source.spec)
     db = out / f".{pair.name}.sqlite"
@@ -501,10 +563,16 @@ def build_pair(
     return written
 
 
+#: the name suffixes of library transforms fitted under another probe than the point probe
+PROBE_SUFFIXES = ("-env", "-mixed")
+
+
 def reverse_name(name: str) -> str:
-    """The library name of a pair's reverse transform: ``ward-as`` -> ``as-ward``."""
-    a, sep, b = name.partition("-")
-    return f"{b}-{a}" if sep else f"{name}-reverse"
+    """The library name of a pair's reverse transform: ``ward-as`` -> ``as-ward``, ``ward-as-env`` ->
+    ``as-ward-env``."""
+    suffix = next((x for x in PROBE_SUFFIXES if name.endswith(x)), "")
+    a, sep, b = name[: len(name) - len(suffix)].partition("-")
+    return (f"{b}-{a}" if sep else f"{name}-reverse") + suffix
 
 
 def max_prediction_difference(a: Transform, b: Transform, samples: int = 200, seed: int = 0) -> dict[str, float]:

@@ -130,13 +130,49 @@ def render_pixels(renderer: Renderer, materials: Sequence[Material], scene: Scen
     """The sphere pixels of a render, float32 [N, P, 3] in ``scene.pixel_indices()`` order.
 
     A renderer may offer this directly (method ``render_pixels``) to skip building whole images;
-    it must return exactly ``render(...)`` at the sphere pixels.
+    it must return exactly ``render(...)`` at the sphere pixels. A scene of several views (an environment
+    probe, :meth:`~matremap.core.scene.Scene.views`) is drawn view by view, each view's pixels multiplied
+    by its weight (:meth:`~matremap.core.scene.Scene.view_weights`): renderers only ever see one view.
     """
+    views = scene.views()
+    if len(views) > 1:
+        check_probe(renderer, scene)
+        parts = [w * render_pixels(renderer, materials, v) for v, w in zip(views, scene.view_weights(), strict=True)]
+        return np.concatenate(parts, axis=1).astype(np.float32, copy=False)
     fast = getattr(renderer, "render_pixels", None)
     if fast is not None:
         return fast(materials, scene)
     images = renderer.render(materials, scene)
     return np.take(images.reshape(len(materials), -1, 3), scene.pixel_indices(), axis=1)
+
+
+def render_images(renderer: Renderer, materials: Sequence[Material], scene: Scene) -> np.ndarray:
+    """Whole probe images, float32 [N, H, V W, 3]: the views side by side, each multiplied by its weight
+    (as :func:`render_pixels` draws them; a one-view scene is ``renderer.render``)."""
+    views = scene.views()
+    if len(views) == 1:
+        return renderer.render(materials, scene)
+    check_probe(renderer, scene)
+    parts = [w * renderer.render(materials, v) for v, w in zip(views, scene.view_weights(), strict=True)]
+    return np.concatenate(parts, axis=2).astype(np.float32, copy=False)
+
+
+def probe_support(renderer: Renderer, scene: Scene) -> str | None:
+    """None when ``renderer`` draws ``scene``'s probe; else the reason. A renderer that draws environment
+    probes says so with ``environment_probe = True``; every renderer draws the point-light probe."""
+    if scene.environment is None or getattr(renderer, "environment_probe", False):
+        return None
+    return (
+        f"the {renderer.name} renderer draws the point-light probe only, not the {scene.kind} probe; "
+        "use --probe point, or fit with the embedded renderer"
+    )
+
+
+def check_probe(renderer: Renderer, scene: Scene) -> None:
+    """Raise :func:`probe_support`'s reason when ``renderer`` cannot draw ``scene``."""
+    why = probe_support(renderer, scene)
+    if why is not None:
+        raise MatremapError(why)
 
 
 __all__ = [
@@ -148,5 +184,8 @@ __all__ = [
     "check_can_render",
     "check_environment",
     "check_environment_args",
+    "check_probe",
+    "probe_support",
+    "render_images",
     "render_pixels",
 ]

@@ -271,6 +271,7 @@ def evaluate(
     thresholds: Thresholds | None = None,
     checks: Sequence[Check] = (),
     domain_map: Path | None = None,
+    notes: Mapping[str, str] | None = None,
 ) -> EvaluationResult:
     """Render ``source`` and ``target`` (see :meth:`SVMaterial.of`) under ``env`` at each rotation,
     full and specular only, compare them with SSIM and write PNGs, ``results.json`` and a
@@ -281,7 +282,8 @@ def evaluate(
     The result carries a :class:`~matremap.svbrdf.quality.Verdict`: ``checks`` the caller measured (e.g.
     on the maps), the full renders' luminance and CIEDE2000 measures and the mean 1 - SSIM, each against
     ``thresholds`` (default :class:`~matremap.svbrdf.quality.Thresholds`); the report opens with it.
-    ``domain_map``: a PNG marking the texels outside the transform's training domain, shown in the report."""
+    ``domain_map``: a PNG marking the texels outside the transform's training domain, shown in the report.
+    ``notes``: more rows for the report's settings table (e.g. the light the transform was fitted under)."""
     src, tgt = SVMaterial.of(source), SVMaterial.of(target)
     rotations = [float(r) for r in rotations]
     if not rotations:
@@ -331,6 +333,7 @@ def evaluate(
         verdict=verdict,
     )
     info = _settings(src, tgt, env, geometry, resolution, lights, prepared, scale, comparison.exposure)
+    info.update(notes or {})
     _write_results(result, info, images, title or f"matremap evaluation: {src.model} \u2192 {tgt.model}")
     return result
 

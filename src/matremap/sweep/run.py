@@ -27,9 +27,11 @@ from matremap import __version__
 from matremap.core.fit import STRATEGIES
 from matremap.core.lockstep import Steps, lockstep
 from matremap.core.material import Material
+from matremap.core.objective import check as check_objective
 from matremap.core.scene import Scene
 from matremap.dialects import get_model
 from matremap.errors import MatremapError, RendererUnavailable
+from matremap.renderers.base import check_probe
 from matremap.renderers.registry import can_draw, get_renderer, renderer_for
 from matremap.sweep.executors import limit_blas_threads
 from matremap.sweep.grid import Grid
@@ -53,8 +55,11 @@ class SweepConfig:
     target_renderer: str | None = None
     continuation: bool = False
     round_trip: bool = False
+    #: what each fit makes small (:mod:`matremap.core.objective`)
+    objective: str = "l2"
 
     def __post_init__(self) -> None:
+        check_objective(self.objective)
         if self.source_renderer is None:
             object.__setattr__(self, "source_renderer", renderer_for(self.source.model))
         if self.target_renderer is None:
@@ -69,7 +74,7 @@ class SweepConfig:
             spec.param(name)
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        d = {
             "source": self.source.to_dict(),
             "target": {"model": self.target, "fix": dict(sorted(self.fix.items())), "free": list(self.free)},
             "strategy": self.strategy,
@@ -79,6 +84,9 @@ class SweepConfig:
             "round_trip": self.round_trip,
             "matremap": __version__,
         }
+        if self.objective != "l2":  # absent for the paper's objective: keys of earlier sweeps stay valid
+            d["objective"] = self.objective
+        return d
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> SweepConfig:
@@ -93,6 +101,7 @@ class SweepConfig:
             target_renderer=d["renderers"]["target"],
             continuation=d["continuation"],
             round_trip=d["round_trip"],
+            objective=d.get("objective", "l2"),
         )
 
 
@@ -123,6 +132,7 @@ def fit_chain(
                 fix=cfg.fix,
                 free=cfg.free,
                 start=start,
+                objective=cfg.objective,
             )
             row.update(
                 target=result.params,
@@ -143,6 +153,7 @@ def fit_chain(
                     cfg.target_renderer,
                     cfg.source_renderer,
                     fix=dict(cfg.source.options),
+                    objective=cfg.objective,
                 )
                 row.update(back=back.params, back_loss=back.loss, renders=result.renders + back.renders)
             warm = {k: v for k, v in result.params.items() if k not in cfg.fix}
@@ -241,7 +252,7 @@ def check_renderers(config: SweepConfig) -> None:
             raise MatremapError(
                 f"renderer {name!r} cannot draw {model}; {renderer_for(model)!r} does (drop {flag} or name it)"
             )
-        get_renderer(name)  # starts it: one that is not installed says so now, not at every point
+        check_probe(get_renderer(name), config.scene)  # starts it: one not installed says so now, not at every point
 
 
 def run_sweep(

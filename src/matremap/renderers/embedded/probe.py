@@ -4,6 +4,11 @@ It shades each sphere pixel (one ray through the pixel centre, so no sampling no
 point lights of the scene: radiance = sum over lights of I / d^2 * [f cos(theta_i)], where the
 bracket is the dialect's evaluator (see :mod:`.dialects`). A batch of materials is evaluated in one
 vectorised pass per (model, options) group, which makes a finite-difference Jacobian one call.
+
+A view of an environment probe (:class:`~matremap.core.scene.EnvironmentProbe`) is shaded the same way by
+the map's directional lights: radiance = sum over lights of E_rgb [f cos(theta_i)], E_rgb the light's RGB
+intensity, the sum taken over chunks of lights so that the evaluators' temporaries stay bounded -- the
+same estimator as the environment face's renders (:mod:`.environment`), on the probe's camera.
 """
 
 from __future__ import annotations
@@ -16,37 +21,64 @@ import numpy as np
 
 from matremap.core.material import Material, SVMaterial
 from matremap.core.scene import Scene
+from matremap.errors import MatremapError
 from matremap.renderers.base import EnvironmentLight, EnvironmentRender, check_can_render, check_environment_args
 from matremap.renderers.embedded.geometry import LocalGeometry
 
 
 @dataclass(frozen=True, eq=False)
 class SceneGeometry:
-    """Shading inputs for the sphere pixels of a scene, per light: arrays [L, P]."""
+    """Shading inputs for the sphere pixels of a scene, per light: arrays [L, P]; the irradiance is
+    [1, L, P] (point lights: white) or [3, L, P] (an environment's lights: RGB)."""
 
     local: LocalGeometry
-    irradiance: np.ndarray  # I / d^2 where the light is above the surface, else 0
+    irradiance: np.ndarray  # I / d^2 (or the light's RGB intensity) where the light is above the surface, else 0
     lit: np.ndarray
+
+    def chunks(self, size: int) -> list[SceneGeometry]:
+        """The geometry split into runs of at most ``size`` lights (itself when it has no more)."""
+        count = self.lit.shape[0]
+        if count <= size:
+            return [self]
+        out = []
+        for a in range(0, count, size):
+            sl = slice(a, a + size)
+            g = self.local
+            frame = None if g.frame is None else tuple(f[sl] for f in g.frame)
+            local = LocalGeometry(g.cos_i[sl], g.cos_o[sl], g.i_dot_o[sl], frame)  # type: ignore[arg-type]
+            out.append(SceneGeometry(local, self.irradiance[:, sl], self.lit[sl]))
+        return out
+
+
+def _light_rows(scene: Scene, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit directions to each light [L, P, 3] and its irradiance [C, L, P] at the points ``p``."""
+    if scene.environment is not None:  # a view of an environment probe: one rotation, directional lights
+        (rotation,) = scene.environment.rotations
+        d, i = scene.environment.directional(rotation)
+        wi = np.broadcast_to(d[:, None, :], (len(d), len(p), 3))
+        return wi, np.broadcast_to(i.T[:, :, None], (3, len(d), len(p)))
+    wis, irr = [], []
+    for light in scene.lights:
+        to_light = scene.light_position(light) - p
+        d2 = np.sum(to_light * to_light, axis=-1)
+        wis.append(to_light / np.sqrt(d2)[:, None])
+        irr.append(scene.light_intensity(light) / d2)
+    return np.stack(wis), np.stack(irr)[None]
 
 
 @lru_cache(maxsize=16)
 def scene_geometry(scene: Scene) -> SceneGeometry:
+    if scene.view_count != 1:
+        raise MatremapError("the embedded renderer draws one view of a scene at a time (Scene.views)")
     p = scene.sphere_points()
     n = p / np.linalg.norm(p, axis=-1, keepdims=True)
     cam = np.array([0.0, 0.0, scene.camera_distance])
     wo = cam - p
     wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
     s, t = sphere_frame(p, n)
-    rows: dict[str, list[np.ndarray]] = {k: [] for k in ("cos_i", "cos_o", "i_dot_o", "irr", "i_s", "i_t")}
-    for light in scene.lights:
-        to_light = scene.light_position(light) - p
-        d2 = np.sum(to_light * to_light, axis=-1)
-        wi = to_light / np.sqrt(d2)[:, None]
-        for key, value in (("cos_i", n), ("i_dot_o", wo), ("i_s", s), ("i_t", t)):
-            rows[key].append(np.sum(wi * value, axis=-1))
-        rows["cos_o"].append(np.sum(n * wo, axis=-1))
-        rows["irr"].append(scene.light_intensity(light) / d2)
-    cos_i, cos_o, i_dot_o, irr, i_s, i_t = (np.stack(rows[k]) for k in rows)
+    wi, irr = _light_rows(scene, p)
+    cos_i, i_dot_o, i_s, i_t = (np.sum(wi * v, axis=-1) for v in (n, wo, s, t))
+    cos_o = np.broadcast_to(np.sum(n * wo, axis=-1), cos_i.shape)
     o_s, o_t = (np.broadcast_to(np.sum(wo * v, axis=-1), cos_i.shape) for v in (s, t))
     lit = (cos_i > 0.0) & (cos_o > 0.0)
     # keep every formula finite where the point is unlit (light and view along the normal); the result is
@@ -56,7 +88,14 @@ def scene_geometry(scene: Scene) -> SceneGeometry:
     for a in (cos_i, cos_o, i_dot_o, lit, *frame):
         a.flags.writeable = False
     local = LocalGeometry(cos_i, cos_o, i_dot_o, frame)  # type: ignore[arg-type]
-    return SceneGeometry(local, np.where(lit, irr, 0.0), lit)
+    irradiance = np.where(lit[None], irr, 0.0)
+    irradiance.flags.writeable = False
+    return SceneGeometry(local, irradiance, lit)
+
+
+#: elements of a [materials, lights, pixels] block shaded at once: bounds the evaluators' temporaries for
+#: environment views (64 lights); the point-light probe's one to three lights always fit in one block
+CHUNK_ELEMENTS = 1 << 21
 
 
 def sphere_frame(p: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -73,6 +112,8 @@ class EmbeddedRenderer:
     """Numpy renderer emulating renderer dialects (``mitsuba06:*``, ``blender27:*``, ``cycles:*``)."""
 
     name = "embedded"
+    #: draws the probe under an environment (:class:`~matremap.core.scene.EnvironmentProbe`) as well
+    environment_probe = True
     #: materials per call a caller should batch (:func:`matremap.core.lockstep.lockstep`): larger batches'
     #: [N, C, L, P] intermediates fall out of the CPU caches (8 measured best at 128^2, 16-64 ~10 % slower)
     batch_size = 8
@@ -141,7 +182,14 @@ class EmbeddedRenderer:
             # grey parameters shade the same in every channel: compute one and broadcast
             if all(np.all(v == v[:, :1]) for v in params.values()):
                 params = {k: v[:, :1] for k, v in params.items()}
-            fcos = EVALUATORS[model](params, dict(options), geo.local)
-            # unlit points have finite stand-in geometry and zero irradiance
-            radiance = fcos * geo.irradiance
-            yield idx, (radiance[:, :, 0] if radiance.shape[2] == 1 else radiance.sum(axis=2))
+            radiance = None
+            # runs of lights sized for a full batch whatever this one's size, so that a material's pixels
+            # are summed in the same order alone or in a batch (bit for bit)
+            lights = max(1, CHUNK_ELEMENTS // (self.batch_size * geo.lit.shape[1]))
+            for chunk in geo.chunks(lights):
+                fcos = EVALUATORS[model](params, dict(options), chunk.local)
+                # unlit points have finite stand-in geometry and zero irradiance
+                part = (fcos * chunk.irradiance).sum(axis=2)
+                radiance = part if radiance is None else radiance + part
+            assert radiance is not None
+            yield idx, radiance
