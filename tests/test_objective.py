@@ -76,9 +76,10 @@ def test_the_ssim_stage_refines_the_l2_fit_and_never_worsens_its_measure():
 
     r = EmbeddedRenderer()
     before = float(np.sum(measure.residuals(render_pixels(r, [l2.target], scene).astype(float)) ** 2))
-    assert ssim.objective_value <= before + 1e-12
-    assert ssim.objective_value < 0.98 * before  # the Ward's look under this light is not the L2 optimum's
-    assert ssim.to_dict()["objective"] == {"name": "ssim", "value": ssim.objective_value}
+    assert ssim.loss <= before + 1e-12  # under ssim, the loss is the mean 1 - SSIM
+    assert ssim.loss < 0.98 * before  # the Ward's look under this light is not the L2 optimum's
+    assert ssim.to_dict()["objective"] == "ssim" and ssim.relative_rmse > ssim.loss / 10
+    assert l2.loss == pytest.approx(l2.relative_rmse)
 
 
 def l2_goal(scene):
@@ -92,4 +93,4 @@ def test_the_point_probe_and_l2_are_the_default_and_unchanged(embedded):
     r = fit(WARD, "mitsuba06:pbr", fix={"distribution": "as"})
     assert r.objective == "l2" and r.scene.kind == "point"
     assert [s.name for s in r.stages] == ["diffuse", "specular"]
-    assert r.objective_value == pytest.approx(r.loss**2, rel=1e-6)
+    assert r.relative_rmse == r.loss

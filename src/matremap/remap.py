@@ -1028,8 +1028,10 @@ def _remap_uniform(
     )
     for w in r.warnings:
         log(f"warning: {w}")
-    log(f"fit: {target} {json.dumps(r.target.to_dict()['params'])}; relative L2 error {r.loss:.4f}")
-    checks = [Check("fit_error", r.loss, job.thresholds.fit_error, "relative RMSE on the probe")]
+    measure = "relative L2 error" if r.objective == "l2" else f"{r.objective} loss"
+    log(f"fit: {target} {json.dumps(r.target.to_dict()['params'])}; {measure} {r.loss:.4f}")
+    where = "relative RMSE" if r.objective == "l2" else f"{r.objective} loss"
+    checks = [Check("fit_error", r.loss, job.thresholds.fit_error, f"{where} on the {r.scene.kind} probe")]
     if any("narrower than the probe resolves" in w for w in r.warnings):
         # the probe cannot show the source's lobe (a mirror): the fit error, measured at the narrowest
         # resolvable width, is the measure; images of the invisible lobe would compare nothing

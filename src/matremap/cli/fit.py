@@ -171,7 +171,7 @@ def cmd_fit(args: argparse.Namespace) -> int:
 
 def print_fit(r: dict[str, Any]) -> None:
     """A fit record (:meth:`FitResult.to_dict`) as a short table."""
-    objective = r.get("objective", {"name": "l2"})
+    objective = r.get("objective", "l2")
     probe = Scene.from_dict(r["scene"]).describe() if "scene" in r else "point probe"
     print(
         f"{r['source']['model']} -> {r['model']}  ({r['strategy']}, {r['renderers']['source']} -> "
@@ -184,12 +184,12 @@ def print_fit(r: dict[str, Any]) -> None:
             else ("[" + ", ".join(f"{x:.6g}" for x in v) + "]" if isinstance(v, list) else v)
         )
         print(f"  {k} = {v}")
+    measure = {"l2": "relative RMSE", "log": "RMS log difference", "ssim": "mean 1 - SSIM"}.get(objective, objective)
     print(
-        f"loss (relative RMSE) {r['loss']:.4g}   renders {r['renders']}   {r['seconds'] * 1000:.1f} ms"
+        f"loss ({measure}) {r['loss']:.4g}   renders {r['renders']}   {r['seconds'] * 1000:.1f} ms"
         + (f"   irradiance scale {r['irradiance_scale']:.4g}" if r["irradiance_scale"] != 1.0 else "")
+        + (f"   relative RMSE {r['relative_rmse']:.4g}" if objective != "l2" else "")
     )
-    if objective["name"] != "l2":
-        print(f"objective {objective['name']} {objective['value']:.4g}")
     for s in r["stages"]:
         print(f"  stage {s['name']}: loss {s['loss']:.4g}, {s['renders']} renders, {s['message']}")
 

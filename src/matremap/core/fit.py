@@ -23,7 +23,9 @@ Strategies:
                  of the others (variable projection, :mod:`matremap.core.varpro`): the joint optimum
                  of ``simple`` at about the cost of a fit over the nonlinear parameters alone.
 
-The loss reported is the relative RMSE over sphere pixels, ||t - s|| / ||s||.
+The loss reported is the relative RMSE over sphere pixels, ||t - s|| / ||s||; under another objective
+(:mod:`matremap.core.objective`), that objective's measure (the mean 1 - SSIM under ``ssim``), the relative
+RMSE being reported beside it.
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ from matremap.core.material import Material, white_reference
 from matremap.core.models import SPECULAR_ROLES, ModelSpec, ParamSpec
 from matremap.core.objective import check as check_objective
 from matremap.core.objective import make as make_objective
+from matremap.core.objective import measure
 from matremap.core.scene import Scene
 from matremap.dialects import get_model
 from matremap.errors import MatremapError
@@ -100,10 +103,11 @@ class FitResult:
     target_renderer: str
     stages: list[StageReport] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
-    #: what the fit made small (:mod:`matremap.core.objective`) and its value there (for ``ssim``, the mean
-    #: 1 - SSIM over the probe's sphere pixels); ``loss`` is the relative RMSE whatever the objective
+    #: what the fit made small (:mod:`matremap.core.objective`); ``loss`` is its measure at the result
+    #: (:func:`~matremap.core.objective.measure`: the relative RMSE under ``l2``, the mean 1 - SSIM under
+    #: ``ssim``), ``relative_rmse`` the paper's measure whatever the objective
     objective: str = "l2"
-    objective_value: float = 0.0
+    relative_rmse: float = 0.0
 
     @property
     def params(self) -> dict[str, Any]:
@@ -114,7 +118,8 @@ class FitResult:
             "model": self.target.model,
             "params": self.params,
             "loss": self.loss,
-            "objective": {"name": self.objective, "value": self.objective_value},
+            "objective": self.objective,
+            "relative_rmse": self.relative_rmse,
             "renders": self.renders,
             "seconds": self.seconds,
             "strategy": self.strategy,
@@ -675,8 +680,10 @@ def _fit_body(
     # the loss is measured where the fit was made (at the resolvable width for a too-narrow highlight)
     final = (yield from counter.pixels(tgt_r, [current]))[0]
     goal = goals[FULL]
-    loss = float(np.linalg.norm(final - goal) / np.linalg.norm(goal))
-    value = float(np.sum(make_objective(objective, goal, scene).residuals(final[None]) ** 2))
+    rmse = float(np.linalg.norm(final - goal) / np.linalg.norm(goal))
+    loss = (
+        rmse if objective == "l2" else measure(objective, make_objective(objective, goal, scene).residuals(final[None]))
+    )
     if sharpened is not None:
         current = yield from _towards_mirror(
             source, sharpened, current, strategy, scale, src_r, tgt_r, free_params, counter, stages
@@ -695,7 +702,7 @@ def _fit_body(
         stages=stages,
         warnings=warnings,
         objective=objective,
-        objective_value=value,
+        relative_rmse=rmse,
     )
 
 

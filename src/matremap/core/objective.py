@@ -20,8 +20,11 @@ measures the gap; these objectives are the candidates it compares:
            its derivative finite where the images agree.
 
 An objective is made for one goal (the source's pixels of one stage) by :func:`make`; ``residuals(images)``
-maps target pixels [N, P, C] to residual rows [N, R]. Only ``l2`` is linear in the images, so the fitter
-solves affine parameters in closed form under ``l2`` only and fits the others' final stage jointly.
+maps target pixels [N, P, C] to residual rows [N, R], and :func:`measure` turns a residual row into the
+number a fit under it reports as its loss: the relative RMSE (``l2``), the RMS log difference (``log``), the
+mean 1 - SSIM (``ssim``) -- 0 for a perfect match, about 1 for none, whichever the objective. Only ``l2`` is
+linear in the images, so the fitter solves affine parameters in closed form under ``l2`` only and fits the
+others' final stage jointly.
 """
 
 from __future__ import annotations
@@ -59,6 +62,13 @@ def check(name: str) -> str:
     if name not in OBJECTIVES:
         raise MatremapError(f"unknown objective {name!r}; choose one of {', '.join(OBJECTIVES)}")
     return name
+
+
+def measure(name: str, residuals: np.ndarray) -> float:
+    """The loss a fit under ``name`` reports for its residual row: sqrt(sum r^2) (``l2``: the relative RMSE;
+    ``log``: the RMS log difference), or sum r^2 (``ssim``: the mean 1 - SSIM)."""
+    total = float(np.sum(np.square(residuals)))
+    return total if name == "ssim" else float(np.sqrt(total))
 
 
 def make(name: str, goal: np.ndarray, scene: Scene) -> Objective:
@@ -160,4 +170,4 @@ class SSIM:
         return (np.sqrt(d) * self.scale).reshape(len(images), -1)
 
 
-__all__ = ["OBJECTIVES", "Objective", "check", "make"]
+__all__ = ["OBJECTIVES", "Objective", "check", "make", "measure"]

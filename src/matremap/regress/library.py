@@ -87,8 +87,8 @@ PAIRS: tuple[Pair, ...] = (
         source_params={"variant": "ward"},
         fix={"distribution": "ggx"},
     ),
-    # the same, fitted under the built-in environment with the SSIM objective (issue 18): remap --probe auto
-    # takes whichever of the two looks closer under the light the maps will be seen in
+    # wardclassic-as fitted under the built-in environment with the SSIM objective (issue 18): remap --probe
+    # auto takes whichever of the two looks closer under the light the maps will be seen in
     Pair(
         "wardclassic-as-env",
         "mitsuba06:ward",
@@ -98,6 +98,9 @@ PAIRS: tuple[Pair, ...] = (
         fix={"distribution": "as"},
         probe="env",
         objective="ssim",
+        # its reverse learns AS -> Ward to held-out RMSE 0.027 roughness, 0.038 reflectance (the SSIM optimum is
+        # flatter than the L2 one): the headlight's as-wardclassic serves that direction
+        reverse=False,
     ),
     Pair(
         "blender27ward-ward",
