@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import shutil
 import time
 import warnings
@@ -608,7 +609,8 @@ def fit_notes(transform_file: Path, envmap: str, angles: Sequence[float], log: C
     scene, objective = probes[0]
     notes = {"fitted under": f"{scene.describe()}; objective {objective}"}
     env = scene.environment
-    if env is not None and env.env == str(envmap) and set(env.rotations) & {float(a) for a in angles}:
+    judged = str(envmap) if str(envmap) in ("builtin", "constant") else os.path.abspath(envmap)
+    if env is not None and env.env == judged and set(env.rotations) & {float(a) for a in angles}:
         shared = sorted(set(env.rotations) & {float(a) for a in angles})
         notes["held out"] = (
             f"no: the evaluation turns {envmap} to rotations the transform was fitted at ({shared}); choose others "

@@ -41,7 +41,9 @@ FIT_EXAMPLES = """examples:
       --to mitsuba06:pbr --fix distribution=as
   matremap fit --source ward.json --to cycles:glossy --strategy three-stage --light 0 45 --json
   matremap fit --source mitsuba06:roughconductor,distribution=as,alpha=0.2 --to mitsuba06:ward \\
-      --compare strip.png     (source | target | difference x10, labelled)"""
+      --compare strip.png     (source | target | difference x10, labelled)
+  matremap fit --source ward.json --to mitsuba06:pbr --fix distribution=as --probe env --objective ssim
+      (fitted under the built-in environment, for the look SSIM judges there)"""
 
 APPLY_EXAMPLES = """examples:
   matremap apply ward2as.json --source mitsuba06:ward,variant=ward,alpha=0.3,specularReflectance=0.12"""

@@ -54,7 +54,9 @@ REMAP_EXAMPLES = """examples:
   matremap remap examples/bronze --to gltf:metal-rough -o out/bronze-gltf --write bronze.gltf
       (the converted maps, and a glTF material that uses them)
   matremap remap helmet.glb --to mitsuba3:roughconductor -o out/helmet      (writes out/helmet/helmet.xml)
-  matremap remap scene.xml --material gold --to gltf:metal-rough -o out/gold  (writes out/gold/scene.gltf)"""
+  matremap remap scene.xml --material gold --to gltf:metal-rough -o out/gold  (writes out/gold/scene.gltf)
+  matremap remap examples/bronze --to mitsuba06:pbr --fix distribution=as --envmap studio.exr \\
+      --probe env:studio.exr -o out/bronze-studio   (fitted for the light it will be seen in: sweeps)"""
 
 
 def add_convert(subparsers: Subparsers) -> None:
