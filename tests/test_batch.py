@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -20,6 +21,7 @@ from matremap.errors import MatremapError
 
 CORPUS = Path(__file__).parent / "data" / "corpus"
 FAST = {"rotations": "0:360:2", "resolution": 48, "lights": 32}
+FAST_CLI = ["--rotations", "0:360:2", "--size", "48", "--env-lights", "32"]
 
 
 def gltf_library(folder: Path, red: float = 0.8) -> Path:
@@ -156,6 +158,7 @@ def test_the_index_page_sorts_by_error_in_a_real_browser(tmp_path):
     from matremap.batch import Row, index_page
 
     rows = [
+        Row("c.xml", "refusal", "c/refusal", verdict="refused"),  # no measure: sorted after every measured one
         Row("a.gltf", "worst", "a/worst", verdict="failed", measures={"fit_error": 0.9}),
         Row("a.gltf", "best", "a/best", verdict="passed", measures={"fit_error": 0.01}),
         Row("b.xml", "middle", "b/middle", verdict="passed", measures={"fit_error": 0.2}),
@@ -169,9 +172,9 @@ def test_the_index_page_sorts_by_error_in_a_real_browser(tmp_path):
         timeout=60,
         check=True,
     ).stdout
-    order = [name for name in ("best", "middle", "worst") if name in dom]
+    order = [name for name in ("best", "middle", "worst", "refusal") if name in dom]
     positions = [dom.index(f"<td>{n}</td>") for n in order]
-    assert order == ["best", "middle", "worst"] and positions == sorted(positions), dom[:500]
+    assert order == ["best", "middle", "worst", "refusal"] and positions == sorted(positions), dom[:500]
     unsorted = page.read_text()
     assert unsorted.index("<td>worst</td>") < unsorted.index("<td>best</td>")  # the browser sorted it
 
@@ -430,3 +433,87 @@ def test_one_failing_material_makes_the_exit_status_3_and_the_last_line_says_so(
     assert summary["exit_code"] == 3 and [i["material"] for i in summary["items"] if i["verdict"] == "failed"] == [
         "gold"
     ]
+
+
+PUBLIC = [  # third-party files (tests/data/corpus/README.md): two glTF of several materials, MaterialX, Mitsuba
+    "gltf-TextureCoordinateTest",  # 5 materials, textured, one .glb
+    "gltf-EmissiveStrengthTest",  # 6 materials, emission
+    "mtlx-gltf_pbr_boombox",  # textured gltf_pbr
+    "mtlx-standard_surface_gold",
+    "mtlx-standard_surface_velvet",  # sheen: refused
+    "mitsuba-test1",  # a whole scene: sensor, emitter, ply mesh, <default>s
+    "mitsuba-roughplastic",
+    "mitsuba-dielectric",  # transmission: refused
+]
+
+
+@pytest.mark.slow
+def test_a_folder_of_public_assets_converts_in_one_command(tmp_path, capsys, monkeypatch):
+    """Issue 20, done when: a folder of public assets (several glTF with several materials each, MaterialX
+    documents, Mitsuba scenes) converts in one command; the output files open in their own libraries with every
+    material replaced and the geometry intact; the summary and the index list every material with its verdict
+    (the index opened in headless chromium, sorted by error)."""
+    import corpus_checks as cc
+    import gltf_validation as gv
+
+    pytest.importorskip("pygltflib", reason="pip install pygltflib")
+    pytest.importorskip("MaterialX", reason="pip install materialx")
+    monkeypatch.setenv("MATREMAP_CACHE", str(tmp_path / "cache"))
+    src = tmp_path / "assets"
+    for name in PUBLIC:
+        shutil.copytree(CORPUS / name, src / name)
+    out = tmp_path / "out"
+    code = main(["remap", str(src), "--to", "gltf:metal-rough", "-o", str(out), "--workers", "2", "--json"] + FAST_CLI)
+    doc = json.loads(capsys.readouterr().out)
+    listed = {(Path(i["file"]).name, i["material"]): i for i in doc["items"]}
+    assert len(listed) == 5 + 6 + 1 + 1 + 1 + 1 + 1 + 1
+    refused = {k for k, i in listed.items() if i["verdict"] == "refused"}
+    assert refused == {("standard_surface_velvet.mtlx", "Velvet"), ("dielectric.xml", "bsdf")}
+    assert all(i["verdict"] == "passed" for k, i in listed.items() if k not in refused), doc["items"]
+    assert code == 2 and doc["exit_code"] == 2  # the refusals; 0 only when every material passed
+    rows = list(csv.DictReader((out / "summary.csv").open()))
+    assert {(Path(r["file"]).name, r["material"], r["verdict"]) for r in rows} == {
+        (f, m, i["verdict"]) for (f, m), i in listed.items()
+    }
+
+    wholes = {Path(i["file"]).name: out / i["whole_file"] for i in doc["items"] if i["whole_file"]}
+    assert set(wholes) == {
+        "TextureCoordinateTest.glb",
+        "EmissiveStrengthTest.glb",
+        "gltf_pbr_boombox.mtlx",
+        "standard_surface_gold.mtlx",
+        "test1.xml",
+        "roughplastic.xml",
+    }
+    for name, whole in wholes.items():
+        source = next(src.rglob(name))
+        if whole.suffix in (".glb", ".gltf"):
+            assert gv.offline_check(whole) == [] and cc.gltf_loads(whole)[0], name
+            if source.suffix == ".glb":  # a copy: the geometry and which primitive uses which material, unchanged
+                assert gv.accessor_digest(whole) == gv.accessor_digest(source)
+                assert gv.primitive_materials(whole) == gv.primitive_materials(source)
+            for (f, material), item in listed.items():  # every material is the converted one
+                if f == name:
+                    own = out / item["output"]
+                    assert cc.gltf_base_colour(whole, material).mean() == pytest.approx(
+                        cc.gltf_base_colour(own, 0 if source.suffix == ".xml" else material).mean(), abs=2e-3
+                    )
+        else:
+            ok, why = cc.mtlx_loads(whole)
+            assert ok, why
+            assert "gltf_pbr" in whole.read_text()
+
+    index = out / "index.html"
+    if shutil.which("chromium") is None:
+        return
+    dom = subprocess.run(
+        ["chromium", "--headless", "--no-sandbox", "--disable-gpu", "--dump-dom", f"{index.as_uri()}?sort=error"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=True,
+    ).stdout
+    assert dom.count('<tr class="') == len(listed)
+    assert all(f"<td>{m}</td>" in dom for _, m in listed)
+    errors = [float(v) for v in re.findall(r'<td data-value="([^"]+)">[0-9.]*</td><td>[0-9.]+</td>', dom)]
+    assert len(errors) == len(listed) and errors == sorted(errors)  # the browser sorted by error

@@ -802,7 +802,8 @@ def index_page(rows: Iterable[Row], title_line: str) -> str:
             f'<tr class="{e(r.verdict)}"><td>{e(r.file)}</td><td>{e(r.material)}</td>'
             f"<td>{e(r.source_model)} → {e(r.target_model)}</td><td>{e(r.route)}</td>"
             f'<td data-value="{VERDICTS.index(r.verdict)}">{e(r.verdict)}</td>'
-            f'<td data-value="{err}">{"" if err == float("inf") else f"{err:.4f}"}</td>'
+            f'<td data-value="{"Infinity" if err == float("inf") else err}">'  # parseFloat reads "Infinity"
+            f"{'' if err == float('inf') else f'{err:.4f}'}</td>"
             f"<td>{r.seconds:.1f}</td><td>{thumbs}</td><td>{e(r.reason)}</td><td>{_written(r)}</td></tr>"
         )
     return (
