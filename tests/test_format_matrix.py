@@ -12,6 +12,7 @@ brass's hue (< 10 degrees) and luminance (within -20 %/+25 %). The sources are t
 pair also reads what another pair wrote (this replaces the ring glTF -> MaterialX -> Mitsuba -> USD -> glTF of
 tests/test_format_ring.py, four of these pairs). Six of the pairs sweep (no library route to or from USD's
 UsdPreviewSurface or Mitsuba 3's principled), with one cache for the module: about 45 s in all on 2 cores.
+`python benchmarks/format_matrix.py` prints the sixteen runs of the full-size example, timed, as a table.
 """
 
 from __future__ import annotations
