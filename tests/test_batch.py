@@ -475,6 +475,9 @@ def test_a_folder_of_public_assets_converts_in_one_command(tmp_path, capsys, mon
     assert {(Path(r["file"]).name, r["material"], r["verdict"]) for r in rows} == {
         (f, m, i["verdict"]) for (f, m), i in listed.items()
     }
+    for i in doc["items"]:  # the index's thumbnails: source and target under the environment, or the probe strip
+        if i["verdict"] == "passed":
+            assert i["thumbnails"] and all((out / t).is_file() for t in i["thumbnails"].values()), i
 
     wholes = {Path(i["file"]).name: out / i["whole_file"] for i in doc["items"] if i["whole_file"]}
     assert set(wholes) == {
