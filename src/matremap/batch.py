@@ -590,7 +590,9 @@ def assemble(out: Path, source: Path, done: Sequence[tuple[Item, Row]], target: 
     from matremap.svbrdf.textures import load_map_set
 
     fmt = READERS[source.suffix.lower()][0]
-    suffix = default_suffix(target, fmt) or (source.suffix.lower() if target.startswith("gltf:") else None)
+    suffix = default_suffix(target, fmt) or (
+        source.suffix.lower() if fmt == "gltf" and target == "gltf:metal-rough" else None
+    )
     converted = [(i, r) for i, r in done if r.verdict in ("passed", "failed")]
     if suffix is None or not converted:
         return ""
