@@ -440,6 +440,24 @@ def _mi_value(v: Any) -> np.ndarray:
     return rgb(a)
 
 
+def _mi_texels(params: Any, key: str) -> Any:
+    """A parameter's value; a bitmap's data as linear floats. Mitsuba 3.9 keeps an 8-bit bitmap's texels as
+    they are stored (``TensorXu8``): the sRGB-encoded bytes unless the bitmap is ``raw`` (the texture's
+    description says ``raw = 1``), decoded here as its lookups decode them."""
+    value = params[key]
+    a = np.asarray(value)
+    if a.dtype != np.uint8:
+        return value
+    node = params.properties[key][2] if hasattr(params, "properties") else None
+    raw = node is not None and "raw = 1" in str(node)
+    a = a.astype(np.float64) / 255.0
+    if not raw:
+        a = a.copy()
+        n = min(a.shape[-1], 3)
+        a[..., :n] = srgb_to_linear(a[..., :n])
+    return a
+
+
 def mitsuba_colour(path: str | os.PathLike, material: str | None = None) -> np.ndarray:
     """Linear colour of the first BSDF (or the one with id ``material``) of a Mitsuba 3 scene, read
     from the loaded scene's parameters (``mitsuba.traverse``): Mitsuba resolves ``$`` defaults,
@@ -459,7 +477,7 @@ def mitsuba_colour(path: str | os.PathLike, material: str | None = None) -> np.n
         for p in prefixes:
             for k in keys:
                 if (not p or k.startswith(p)) and (k.endswith(f".{name}.value") or k.endswith(f".{name}.data")):
-                    return params[k]
+                    return _mi_texels(params, k)
         return None
 
     for name in _MI_COLOUR_KEYS:

@@ -6,9 +6,11 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 import shutil
 import subprocess
 import sys
+from functools import partial
 from pathlib import Path
 
 import pytest
@@ -19,6 +21,7 @@ from matremap.errors import MatremapError
 
 CORPUS = Path(__file__).parent / "data" / "corpus"
 FAST = {"rotations": "0:360:2", "resolution": 48, "lights": 32}
+FAST_CLI = ["--rotations", "0:360:2", "--size", "48", "--env-lights", "32"]
 
 
 def gltf_library(folder: Path, red: float = 0.8) -> Path:
@@ -155,6 +158,7 @@ def test_the_index_page_sorts_by_error_in_a_real_browser(tmp_path):
     from matremap.batch import Row, index_page
 
     rows = [
+        Row("c.xml", "refusal", "c/refusal", verdict="refused"),  # no measure: sorted after every measured one
         Row("a.gltf", "worst", "a/worst", verdict="failed", measures={"fit_error": 0.9}),
         Row("a.gltf", "best", "a/best", verdict="passed", measures={"fit_error": 0.01}),
         Row("b.xml", "middle", "b/middle", verdict="passed", measures={"fit_error": 0.2}),
@@ -168,9 +172,9 @@ def test_the_index_page_sorts_by_error_in_a_real_browser(tmp_path):
         timeout=60,
         check=True,
     ).stdout
-    order = [name for name in ("best", "middle", "worst") if name in dom]
+    order = [name for name in ("best", "middle", "worst", "refusal") if name in dom]
     positions = [dom.index(f"<td>{n}</td>") for n in order]
-    assert order == ["best", "middle", "worst"] and positions == sorted(positions), dom[:500]
+    assert order == ["best", "middle", "worst", "refusal"] and positions == sorted(positions), dom[:500]
     unsorted = page.read_text()
     assert unsorted.index("<td>worst</td>") < unsorted.index("<td>best</td>")  # the browser sorted it
 
@@ -329,3 +333,190 @@ def test_the_whole_file_is_listed_in_the_summary_and_the_index(tmp_path, capsys)
     item = next(i for i in doc["items"] if i["material"] == "wall")
     fitted = json.loads((out / item["slot"] / "material.json").read_text())["params"]["baseColor"]
     assert wall.pbrMetallicRoughness.baseColorFactor[:3] == pytest.approx(fitted, abs=1e-6)
+
+
+def test_a_file_that_cannot_be_read_is_one_refused_row_and_foreign_xml_is_left_out(tmp_path):
+    """A folder of assets holds other files: one malformed glTF stopped the whole batch before anything ran
+    ("... is not valid glTF JSON", exit 2, nothing converted), and so did any .xml that is not a Mitsuba scene
+    (metadata, licences). Now the malformed file is one refused row with its reason, the foreign XML is left
+    out with a note, and the rest converts."""
+    src = tmp_path / "in"
+    mitsuba_scene(src)
+    (src / "meta").mkdir()
+    (src / "meta" / "metadata.xml").write_text('<?xml version="1.0"?>\n<!-- exported -->\n<asset><author/></asset>\n')
+    (src / "broken.gltf").write_text('{"asset": {"version": "2.0"}, "materials": [')
+    skipped: list[Path] = []
+    assert expand_inputs([src], skipped) == [src / "broken.gltf", src / "scene.xml"]
+    assert skipped == [src / "meta" / "metadata.xml"]
+    assert expand_inputs([src / "meta" / "metadata.xml"]) == [src / "meta" / "metadata.xml"]  # named: its reader says
+    logs: list[str] = []
+    out = tmp_path / "out"
+    result = run_batch([src], "mitsuba06:ward", out, workers=1, options=FAST, log=logs.append, progress=False)
+    assert [(r.file, r.material, r.verdict) for r in result.rows] == [
+        (str(src / "broken.gltf"), "", "refused"),
+        (str(src / "scene.xml"), "wall", "passed"),
+        (str(src / "scene.xml"), "steel", "passed"),
+    ]
+    assert "not valid glTF JSON" in result.rows[0].reason and result.exit_code == 2
+    assert result.line().startswith("2 material(s) and 1 unreadable file(s): 2 passed, 0 failed the quality gate")
+    assert any("metadata.xml" in m and "not Mitsuba scenes" in m for m in logs)
+    rows = list(csv.DictReader((out / "summary.csv").open()))
+    assert [r["verdict"] for r in rows] == ["refused", "passed", "passed"]
+    assert "broken.gltf" in (out / "index.html").read_text()
+
+
+def test_material_narrows_a_folder_to_the_files_that_have_it(tmp_path):
+    src = tmp_path / "in"
+    mitsuba_scene(src)
+    gltf_library(src)
+    items = plan(expand_inputs([src]), "gold")  # only the glTF has a "gold"; the scene is left out
+    assert [(i.file.name, i.name) for i in items] == [("library.gltf", "gold")]
+    with pytest.raises(MatremapError, match="none of the 2 files has a material 'brass'"):
+        plan(expand_inputs([src]), "brass")
+    with pytest.raises(MatremapError, match="has no material 'brass'; its materials are wall, steel"):
+        plan([src / "scene.xml"], "brass")
+
+
+def test_a_texture_named_only_in_an_included_file_is_redone_when_edited(tmp_path):
+    """The rerun key hashed the files whose names appear in the input file itself: a Mitsuba scene whose BSDFs
+    live in an included file, with a texture named there, kept its old result after the texture was edited
+    (reported as unchanged, exit 0). Now references are followed through the material files they name."""
+    import numpy as np
+    import OpenImageIO as oiio
+
+    src = tmp_path / "in"
+    (src / "parts").mkdir(parents=True)
+    (src / "tex").mkdir()
+
+    def texture(level: int) -> None:
+        pixels = np.full((8, 8, 3), level, np.uint8)
+        pixels[::2, ::2] = 30
+        assert oiio.ImageBuf(pixels).write(str(src / "tex" / "wood.png"))
+
+    texture(200)
+    (src / "scene.xml").write_text(
+        '<scene version="3.0.0">\n  <path value="tex"/>\n  <include filename="parts/bsdfs.xml"/>\n'
+        '  <shape type="sphere"><ref id="wood"/></shape>\n</scene>\n'
+    )
+    (src / "parts" / "bsdfs.xml").write_text(
+        '<scene version="3.0.0"><bsdf type="diffuse" id="wood"><texture type="bitmap" name="reflectance">'
+        '<string name="filename" value="wood.png"/></texture></bsdf></scene>\n'
+    )
+    out = tmp_path / "out"
+    run = partial(run_batch, [src], "mitsuba06:diffuse", out, workers=1, options=FAST, log=print, progress=False)
+    first = run()
+    assert first.exit_code == 0 and first.skipped == 0
+    assert run().skipped == 1  # nothing changed
+    texture(90)
+    again = run()
+    assert again.skipped == 0 and again.exit_code == 0  # redone
+    (row,) = again.rows
+    written = out / row.slot / "maps"
+    assert (written / "material.json").is_file()
+
+
+def test_one_failing_material_makes_the_exit_status_3_and_the_last_line_says_so(tmp_path, capsys):
+    """Three uniform materials pass; the gold metal onto Ward fits at 0.145 (relative RMSE on the probe) while the
+    others fit within 0.01, so a stricter gate (--max-error fit_error=0.05) fails it alone: exit 3, not 0."""
+    src = tmp_path / "in"
+    mitsuba_scene(src)
+    doc = json.loads(gltf_library(src).read_text())
+    doc["materials"] = doc["materials"][:2]  # the red paint and the gold
+    (src / "library.gltf").write_text(json.dumps(doc))
+    out = tmp_path / "out"
+    code = main(["remap", str(src), "--to", "mitsuba06:ward", "-o", str(out), "--max-error", "fit_error=0.05"])
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    assert code == 3
+    assert last.startswith("4 material(s): 3 passed, 1 failed the quality gate, 0 refused, 0 error(s)"), last
+    assert "[gold]" in last
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["exit_code"] == 3 and [i["material"] for i in summary["items"] if i["verdict"] == "failed"] == [
+        "gold"
+    ]
+
+
+PUBLIC = [  # third-party files (tests/data/corpus/README.md): two glTF of several materials, MaterialX, Mitsuba
+    "gltf-TextureCoordinateTest",  # 5 materials, textured, one .glb
+    "gltf-EmissiveStrengthTest",  # 6 materials, emission
+    "mtlx-gltf_pbr_boombox",  # textured gltf_pbr
+    "mtlx-standard_surface_gold",
+    "mtlx-standard_surface_velvet",  # sheen: refused
+    "mitsuba-test1",  # a whole scene: sensor, emitter, ply mesh, <default>s
+    "mitsuba-roughplastic",
+    "mitsuba-dielectric",  # transmission: refused
+]
+
+
+@pytest.mark.slow
+def test_a_folder_of_public_assets_converts_in_one_command(tmp_path, capsys, monkeypatch):
+    """Issue 20, done when: a folder of public assets (several glTF with several materials each, MaterialX
+    documents, Mitsuba scenes) converts in one command; the output files open in their own libraries with every
+    material replaced and the geometry intact; the summary and the index list every material with its verdict
+    (the index opened in headless chromium, sorted by error)."""
+    import corpus_checks as cc
+    import gltf_validation as gv
+
+    pytest.importorskip("pygltflib", reason="pip install pygltflib")
+    pytest.importorskip("MaterialX", reason="pip install materialx")
+    monkeypatch.setenv("MATREMAP_CACHE", str(tmp_path / "cache"))
+    src = tmp_path / "assets"
+    for name in PUBLIC:
+        shutil.copytree(CORPUS / name, src / name)
+    out = tmp_path / "out"
+    code = main(["remap", str(src), "--to", "gltf:metal-rough", "-o", str(out), "--workers", "2", "--json"] + FAST_CLI)
+    doc = json.loads(capsys.readouterr().out)
+    listed = {(Path(i["file"]).name, i["material"]): i for i in doc["items"]}
+    assert len(listed) == 5 + 6 + 1 + 1 + 1 + 1 + 1 + 1
+    refused = {k for k, i in listed.items() if i["verdict"] == "refused"}
+    assert refused == {("standard_surface_velvet.mtlx", "Velvet"), ("dielectric.xml", "bsdf")}
+    assert all(i["verdict"] == "passed" for k, i in listed.items() if k not in refused), doc["items"]
+    assert code == 2 and doc["exit_code"] == 2  # the refusals; 0 only when every material passed
+    rows = list(csv.DictReader((out / "summary.csv").open()))
+    assert {(Path(r["file"]).name, r["material"], r["verdict"]) for r in rows} == {
+        (f, m, i["verdict"]) for (f, m), i in listed.items()
+    }
+    for i in doc["items"]:  # the index's thumbnails: source and target under the environment, or the probe strip
+        if i["verdict"] == "passed":
+            assert i["thumbnails"] and all((out / t).is_file() for t in i["thumbnails"].values()), i
+
+    wholes = {Path(i["file"]).name: out / i["whole_file"] for i in doc["items"] if i["whole_file"]}
+    assert set(wholes) == {
+        "TextureCoordinateTest.glb",
+        "EmissiveStrengthTest.glb",
+        "gltf_pbr_boombox.mtlx",
+        "standard_surface_gold.mtlx",
+        "test1.xml",
+        "roughplastic.xml",
+    }
+    for name, whole in wholes.items():
+        source = next(src.rglob(name))
+        if whole.suffix in (".glb", ".gltf"):
+            assert gv.offline_check(whole) == [] and cc.gltf_loads(whole)[0], name
+            if source.suffix == ".glb":  # a copy: the geometry and which primitive uses which material, unchanged
+                assert gv.accessor_digest(whole) == gv.accessor_digest(source)
+                assert gv.primitive_materials(whole) == gv.primitive_materials(source)
+            for (f, material), item in listed.items():  # every material is the converted one
+                if f == name:
+                    own = out / item["output"]
+                    assert cc.gltf_base_colour(whole, material).mean() == pytest.approx(
+                        cc.gltf_base_colour(own, 0 if source.suffix == ".xml" else material).mean(), abs=2e-3
+                    )
+        else:
+            ok, why = cc.mtlx_loads(whole)
+            assert ok, why
+            assert "gltf_pbr" in whole.read_text()
+
+    index = out / "index.html"
+    if shutil.which("chromium") is None:
+        return
+    dom = subprocess.run(
+        ["chromium", "--headless", "--no-sandbox", "--disable-gpu", "--dump-dom", f"{index.as_uri()}?sort=error"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=True,
+    ).stdout
+    assert dom.count('<tr class="') == len(listed)
+    assert all(f"<td>{m}</td>" in dom for _, m in listed)
+    errors = [float(v) for v in re.findall(r'<td data-value="([^"]+)">[0-9.]*</td><td>[0-9.]+</td>', dom)]
+    assert len(errors) == len(listed) and errors == sorted(errors)  # the browser sorted by error

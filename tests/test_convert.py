@@ -235,3 +235,26 @@ def test_a_diffuse_map_the_transform_never_saw_is_flagged(tmp_path, ward_to_as):
     report, _ = quiet_convert(load_map_set(tmp_path / "in"), ward_to_as, tmp_path / "out", workers=1)
     assert report.outside == 2 * W + 2  # two rows of non-zero diffuse plus the two texels of fields()
     assert any("diffuse held at 0" in n for n in report.notes)
+
+
+def test_uniform_outputs_become_constants_but_a_map_set_keeps_one_map(tmp_path, ward_to_as):
+    """A parameter the same at every texel is written as a constant (Mitsuba refuses a constant alpha map);
+    when every parameter is, one map stays -- the colour one -- so that the output is still a map set (it was
+    left with none, and reading it refused the remap: ClearCoatTest's Partial_Coating onto USD)."""
+    alpha, rho, normal = fields()
+    ms = make_set(tmp_path / "a", np.full_like(alpha, 0.4), rho, normal)
+    quiet_convert(ms, [ward_to_as], tmp_path / "one", workers=1)
+    doc = json.loads((tmp_path / "one" / "material.json").read_text())
+    assert doc["maps"] == {"F0": "w_specular.png"} and doc["params"]["alpha"] == pytest.approx(
+        float(
+            ward_to_as.apply({"alpha": np.float32(0.4), "specularReflectance": rho[0, 0], "diffuseReflectance": 0.0})[
+                0
+            ]["alpha"]
+        ),
+        abs=1e-5,
+    )
+    ms = make_set(tmp_path / "b", np.full_like(alpha, 0.4), np.broadcast_to(rho[0, 0], rho.shape).copy(), normal)
+    quiet_convert(ms, [ward_to_as], tmp_path / "all", workers=1)
+    doc = json.loads((tmp_path / "all" / "material.json").read_text())
+    assert doc["maps"] == {"F0": "w_specular.png"} and "alpha" in doc["params"]
+    assert load_map_set(tmp_path / "all").maps.keys() == {"F0"}  # still a map set

@@ -233,3 +233,28 @@ def test_remap_of_a_transmissive_gltf_keeps_it_on_gltf_and_refuses_elsewhere(tmp
     assert code == 2 and "KHR_materials_transmission" in err[-1] and "Traceback" not in "\n".join(err)
     assert not (tmp_path / "m").exists()
     assert json.loads(json.dumps(doc))  # the copy is plain JSON
+
+
+@pytest.mark.parametrize("suffix", [".usda", ".mtlx"])
+def test_a_grey_alpha_emissive_texture_is_carried_as_a_grey_colour(tmp_path, suffix):
+    """TextureLinearInterpolationTest (CC0) material 2: its emissive texture is a grey + alpha PNG. The reader
+    took channels (0, 1) (grey and alpha) as the emission's colour: remapping it onto usd:preview_surface ended in
+    an internal error (ValueError: operands could not be broadcast ... (3,) and requested shape (2,)), as did any
+    1- or 4-channel emissive texture. The colour is the grey three times, as PNG decoders expand it."""
+    pytest.importorskip("pxr" if suffix == ".usda" else "MaterialX")
+    from matremap.formats.gltf_write import texture_values
+
+    asset = read(CORPUS / "gltf-TextureLinearInterpolationTest" / "TextureLinearInterpolationTest.glb", 2)
+    e = asset.carried["emission"]
+    assert e.texture.channels == (0, 0, 0)
+    grey = texture_values(e.texture)
+    assert grey.shape[-1] == 3 and np.array_equal(grey[..., 0], grey[..., 2]) and grey.std() > 0.05
+    if suffix == ".usda":
+        result = Material.create("usd:preview_surface", {"diffuseColor": [0.5, 0.5, 0.5], "roughness": 0.4})
+    else:
+        result = Material.create(MR, {"baseColor": [0.5, 0.5, 0.5], "metallic": 0.0, "roughness": 0.4})
+    out = write_asset(tmp_path / f"o{suffix}", result, source=asset)
+    back = read_asset(out).carried["emission"]
+    assert back.texture is not None
+    got = np.asarray(back.value, dtype=float) * texture_values(back.texture, grey.shape[:2])[..., :3]
+    np.testing.assert_allclose(got, np.asarray(e.value) * grey, atol=2e-3)

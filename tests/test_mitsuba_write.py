@@ -220,3 +220,46 @@ def test_corpus_round_trip_read_write_read(tmp_path, src):
         assert read_asset(out, name).material() == m, name
     if HAS_MITSUBA:
         mitsuba_params(out)  # loads
+
+
+@needs_mitsuba
+def test_one_material_of_a_scene_remapped_onto_mitsuba_is_written_into_a_copy_of_the_scene(tmp_path, monkeypatch):
+    """A single-material remap of a Mitsuba scene wrote the new BSDF on the probe sphere: test1.xml's camera,
+    point light and Cube.ply were lost (issue 20: the output is the same kind of file, everything else kept). Now
+    a copy of the scene with that BSDF replaced, as glTF and USD sources are copied; `--material` narrows a scene
+    of several BSDFs to one, the others kept as they were."""
+    import mitsuba as mi
+
+    from matremap.cli import main
+
+    monkeypatch.setenv("MATREMAP_CACHE", str(tmp_path / "cache"))
+    src = copy_corpus("mitsuba-test1", tmp_path)
+    fast = ["--rotations", "0:360:2", "--size", "32", "--env-lights", "16", "--no-evaluate"]
+    assert main(["remap", str(src), "--to", "mitsuba3:roughplastic", "-o", str(tmp_path / "out"), *fast]) == 0
+    out = tmp_path / "out" / "test1.xml"
+    mi.set_variant("scalar_rgb")
+    before, after = mi.load_file(str(src)), mi.load_file(str(out))
+    assert len(after.shapes()) == len(before.shapes()) == 1 and len(after.emitters()) == len(before.emitters())
+    assert len(after.sensors()) == 1 and list(after.sensors()[0].film().size()) == [1280, 720]
+    root = ET.parse(out).getroot()
+    wrapper = root.find("bsdf[@id='mat-Material']")
+    assert wrapper.get("type") == "twosided" and wrapper.find("bsdf").get("type") == "roughplastic"
+    assert root.find("shape").get("type") == "ply"
+
+    scene = tmp_path / "two.xml"
+    scene.write_text(
+        '<scene version="3.0.0">\n'
+        '  <bsdf type="diffuse" id="wall"><rgb name="reflectance" value="0.6, 0.5, 0.4"/></bsdf>\n'
+        '  <bsdf type="roughconductor" id="steel"><string name="material" value="Cr"/>'
+        '<float name="alpha" value="0.2"/></bsdf>\n'
+        '  <shape type="sphere"><ref id="wall"/></shape>\n  <shape type="rectangle"><ref id="steel"/></shape>\n'
+        "</scene>\n"
+    )
+    args = ["remap", str(scene), "--material", "wall", "--to", "mitsuba3:principled", "-o", str(tmp_path / "o2")]
+    assert main([*args, *fast]) == 0
+    root = ET.parse(tmp_path / "o2" / "two.xml").getroot()
+    assert [(b.get("id"), b.get("type")) for b in root.findall("bsdf")] == [
+        ("wall", "principled"),
+        ("steel", "roughconductor"),
+    ]
+    assert len(mi.load_file(str(tmp_path / "o2" / "two.xml")).shapes()) == 2

@@ -216,7 +216,15 @@ def test_every_corpus_document_converts_or_is_refused_in_one_line(tmp_path, caps
     mx.loadLibraries(mx.getDefaultDataLibraryFolders(), mx.getDefaultDataSearchPath(), lib)
     d.importLibrary(lib)
     assert d.validate()[0]
-    back = read(written)  # its maps lie beside it
+    if material is not None:  # --material narrows the conversion: the document is copied with its look, the
+        # other materials' shaders as they were (issue 20)
+        src_doc = mx.createDocument()
+        mx.readFromXmlFile(src_doc, str(CORPUS / rel))
+        assert [m.getName() for m in d.getMaterialNodes()] == [m.getName() for m in src_doc.getMaterialNodes()]
+        assert [lk.getName() for lk in d.getLooks()] == [lk.getName() for lk in src_doc.getLooks()]
+        kinds = {m.getName(): mx.getShaderNodes(m)[0].getCategory() for m in d.getMaterialNodes()}
+        assert kinds.pop(material) == "gltf_pbr" and set(kinds.values()) == {"standard_surface"}
+    back = read(written, material)  # its maps lie beside it; a copy of the source keeps the other materials
     source = read(CORPUS / rel, material, confinement=ALLOW)
     assert set(back.textures) == set(source.textures) and back.name == source.name
 

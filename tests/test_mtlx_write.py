@@ -90,7 +90,12 @@ def test_write_carries_emission_opacity_and_occlusion(tmp_path):
     out = write(tmp_path / "out" / "lamp.mtlx", a.material(), source=a)
     validates(out)
     text = out.read_text()
-    assert 'name="emissive_strength" type="float" value="4.0"' in text  # a colour past 1: colour x strength
+    # a copy of the source document: its shader's name and carried inputs as they were, the ORM image copied
+    assert (
+        '<gltf_pbr name="SR" type="surfaceshader">' in text
+        and 'name="emissive_strength" type="float" value="4"' in text
+    )
+    assert (tmp_path / "out" / "lamp_files" / "orm.exr").is_file()
     b = read(out)
     assert b.name == "Lamp" and b.material() == a.material()
     assert b.carried["emission"].value == pytest.approx((4.0, 2.0, 1.0))
@@ -252,7 +257,7 @@ def test_corpus_round_trip_read_write_read(tmp_path, rel, material):
     (tmp_path / "out").mkdir()
     out = write(tmp_path / "out" / "rt.mtlx", result, source=a)
     validates(out)
-    b = read(out)
+    b = read(out, a.name)  # a copy of the source document: its other materials are kept
     assert b.name == a.name.replace(" ", "_")
     assert b.material() == a.material() or a.textured
     assert {k: v for k, v in b.constants.items() if k not in b.textures} == {

@@ -112,15 +112,20 @@ class BatchResult:
             )
         worst = max((r for r in self.rows if r.verdict != "passed"), key=lambda r: r.exit_code, default=None)
         tail = f"; worst: {worst.file} [{worst.material}]: {worst.reason}" if worst else ""
+        unread = sum(not r.material for r in self.rows)
+        what = f"{len(self.rows) - unread} material(s)" + (f" and {unread} unreadable file(s)" if unread else "")
         return (
-            f"{len(self.rows)} material(s): {c['passed']} passed, {c['failed']} failed the quality gate, "
+            f"{what}: {c['passed']} passed, {c['failed']} failed the quality gate, "
             f"{c['refused']} refused, {c['error']} error(s) ({self.skipped} unchanged, not redone){tail}"
         )
 
 
-def expand_inputs(paths: Sequence[str | os.PathLike]) -> list[Path]:
+def expand_inputs(paths: Sequence[str | os.PathLike], skipped: list[Path] | None = None) -> list[Path]:
     """Material files named by ``paths``: files as given, folders searched recursively, glob patterns
-    expanded; each file once, in the order found. A path that names nothing is an error."""
+    expanded; each file once, in the order found. A path that names nothing is an error. An ``.xml`` file a
+    folder or a pattern finds is taken only when it looks like a Mitsuba scene (:func:`looks_like_scene`) and
+    no other scene found there includes it (:func:`included_files`): asset folders hold other XML (metadata,
+    licences, exports) and scene parts; those are appended to ``skipped``."""
     from matremap.formats import is_material_file
 
     found: list[Path] = []
@@ -128,13 +133,13 @@ def expand_inputs(paths: Sequence[str | os.PathLike]) -> list[Path]:
         text = str(raw)
         if any(ch in text for ch in "*?["):
             matches = [Path(m) for m in sorted(glob.glob(text, recursive=True))]
-            files = [m for m in matches if m.is_file() and is_material_file(m)]
+            files = _scanned([m for m in matches if m.is_file() and is_material_file(m)], skipped)
             if not files:
-                raise MatremapError(f"{text}: the pattern matches no material file (.gltf, .glb, .mtlx, .xml)")
+                raise MatremapError(f"{text}: the pattern matches no material file ({SUFFIXES})")
         elif Path(text).is_dir():
-            files = sorted(p for p in Path(text).rglob("*") if p.is_file() and is_material_file(p))
+            files = _scanned(sorted(p for p in Path(text).rglob("*") if p.is_file() and is_material_file(p)), skipped)
             if not files:
-                raise MatremapError(f"{text}: the folder holds no material file (.gltf, .glb, .mtlx, .xml)")
+                raise MatremapError(f"{text}: the folder holds no material file ({SUFFIXES})")
         elif Path(text).is_file():
             files = [Path(text)]
         else:
@@ -143,42 +148,192 @@ def expand_inputs(paths: Sequence[str | os.PathLike]) -> list[Path]:
     return found
 
 
+#: the suffixes a folder or a pattern is searched for, as messages name them
+SUFFIXES = ".gltf, .glb, .mtlx, Mitsuba .xml, .usda, .usdc, .usdz, .usd"
+#: an XML declaration, processing instruction, comment or document type before the root element
+_PROLOGUE = re.compile(rb"\s*(<\?.*?\?>|<!--.*?-->|<!DOCTYPE[^>]*>)", re.S)
+_ROOT = re.compile(rb"\s*<([A-Za-z_][\w.:-]*)")
+
+
+def looks_like_scene(path: Path) -> bool:
+    """Whether an ``.xml`` file's root element is a Mitsuba scene's (``<scene>`` or ``<bsdf>``), read from its
+    first 64 KB without parsing it; a file whose root is not found there is taken (its reader decides)."""
+    if path.suffix.lower() != ".xml":
+        return True
+    try:
+        with path.open("rb") as f:
+            head = f.read(65536).removeprefix(b"\xef\xbb\xbf")
+    except OSError:
+        return True
+    pos = 0
+    while (m := _PROLOGUE.match(head, pos)) is not None:
+        pos = m.end()
+    root = _ROOT.match(head, pos)
+    return root is None or root.group(1) in (b"scene", b"bsdf")
+
+
+#: a Mitsuba ``<include filename="..."/>`` (its attribute in either quotes)
+_INCLUDE = re.compile(rb"""<include\b[^>]*?\bfilename\s*=\s*(?:"([^"]*)"|'([^']*)')""")
+
+
+def included_files(scenes: Sequence[Path]) -> set[Path]:
+    """The files among ``scenes`` that one of them ``<include>``s (beside the including file, where Mitsuba
+    looks first): parts of a scene, converted through the scene that includes them, not as scenes of their own."""
+    found = {f.resolve() for f in scenes}
+    parts: set[Path] = set()
+    for f in scenes:
+        if f.suffix.lower() != ".xml":
+            continue
+        try:
+            text = f.read_bytes()
+        except OSError:
+            continue
+        for m in _INCLUDE.finditer(text):
+            name = (m.group(1) or m.group(2) or b"").decode("utf-8", "replace")
+            target = (f.parent / name).resolve()
+            if name and target in found and target != f.resolve():
+                parts.add(target)
+    return parts
+
+
+def _scanned(files: list[Path], skipped: list[Path] | None) -> list[Path]:
+    """The files a folder or a pattern found, without the XML files that are not Mitsuba scenes and the
+    scene parts another scene found here includes."""
+    scenes = [f for f in files if looks_like_scene(f)]
+    parts = included_files(scenes)
+    kept = [f for f in scenes if f.resolve() not in parts]
+    if skipped is not None:
+        skipped += [f for f in files if f not in kept]
+    return kept
+
+
 def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9._-]+", "_", text).strip("._") or "material"
 
 
-def plan(files: Sequence[Path], material: str | None = None) -> list[Item]:
-    """Every material of every file (or only the one named ``material``), each with its own folder."""
+def plan(files: Sequence[Path], material: str | None = None, unread: dict[Path, str] | None = None) -> list[Item]:
+    """Every material of every file (or only the one named ``material``), each with its own folder.
+
+    A file whose materials cannot be listed (malformed, or a format matremap refuses) raises, unless
+    ``unread`` is given: then its one-line reason goes there and the other files are planned. With
+    ``material``, files without it are left out; it is an error only when no file has it."""
     from matremap.formats import material_names
 
-    stems: dict[str, int] = {}
-    items = []
-    for f in files:
-        stem = _slug(f.name)
-        stems[stem] = stems.get(stem, 0) + 1
-        folder = stem if stems[stem] == 1 else f"{stem}-{stems[stem]}"
-        names = material_names(f)
-        for i, name in enumerate(names):
-            if material is not None and material not in (name, str(i)):
-                continue
-            slug = _slug(name)
-            slot = f"{folder}/{i:03d}-{slug}" if len(names) > 1 else f"{folder}/{slug}"
-            items.append(Item(f, i, name, slot))
-        if material is not None and not any(it.file == f for it in items):
+    items: list[Item] = []
+    lacking: list[tuple[Path, list[str]]] = []
+    for f, folder in file_folders(files).items():
+        try:
+            names = material_names(f)
+        except MatremapError as e:
+            if unread is None:
+                raise
+            unread[f] = str(e)
+            continue
+        mine = [
+            Item(f, i, name, f"{folder}/{i:03d}-{_slug(name)}" if len(names) > 1 else f"{folder}/{_slug(name)}")
+            for i, name in enumerate(names)
+            if material is None or material in (name, str(i))
+        ]
+        if not mine:
+            lacking.append((f, names))
+        items += mine
+    if material is not None and not items and lacking:
+        if len(lacking) == 1:
+            f, names = lacking[0]
             raise MatremapError(f"{f} has no material {material!r}; its materials are {', '.join(names)}")
+        raise MatremapError(f"none of the {len(lacking)} files has a material {material!r}")
     return items
 
 
-def item_key(item: Item, target: str, options: Mapping[str, Any]) -> str:
-    """A digest of everything that decides an item's result: the file's bytes and those of every file
-    beside it that it references, the material, the target, the options, matremap's version and its results revision."""
+def file_folders(files: Sequence[Path]) -> dict[Path, str]:
+    """Each file's output folder (relative to OUT): its name, numbered from the second file of that name."""
+    stems: dict[str, int] = {}
+    out = {}
+    for f in files:
+        stem = _slug(f.name)
+        stems[stem] = stems.get(stem, 0) + 1
+        out[f] = stem if stems[stem] == 1 else f"{stem}-{stems[stem]}"
+    return out
+
+
+#: what separates a file name from the text around it in the formats read here: JSON and XML quotes and
+#: punctuation, path separators, USD's @asset@ delimiters, the control bytes of binary containers
+_NAME_DELIMITERS = re.compile(rb"[\x00-\x1f\"'<>/\\@=,;()\[\]{}|*?]+")
+
+
+def _names_in(data: bytes) -> set[str]:
+    """The strings of ``data`` that could be file names (also percent-decoded, as glTF URIs are written)."""
+    from urllib.parse import unquote
+
+    names: set[str] = set()
+    for token in _NAME_DELIMITERS.split(data):
+        t = token.strip()
+        if t and len(t) <= 255:
+            text = t.decode("utf-8", "replace")
+            names.update((text, unquote(text)))
+    return names
+
+
+class References:
+    """The files a material file references, for the key a rerun compares: found by name under the file's own
+    folder and the allowed folders (``--allow-path``), and through the material files among them (a Mitsuba
+    ``<include>``, a USD sublayer), so that a texture named only in an included file counts. Over-inclusion (a
+    file of the same name that is not used) only makes a rerun redo more. Each folder is listed once."""
+
+    def __init__(self, allow: Sequence[str | os.PathLike] = ()) -> None:
+        self.allow = [Path(a).resolve() for a in allow]
+        self._trees: dict[Path, dict[str, list[Path]]] = {}
+        self._digests: dict[Path, str] = {}
+
+    def _tree(self, root: Path) -> dict[str, list[Path]]:
+        if root not in self._trees:
+            index: dict[str, list[Path]] = {}
+            for folder, _, names in os.walk(root):
+                for name in names:
+                    index.setdefault(name, []).append(Path(folder) / name)
+            self._trees[root] = index
+        return self._trees[root]
+
+    def files(self, file: Path) -> list[Path]:
+        """``file`` first, then every file it references (see the class), in a fixed order."""
+        from matremap.formats import READERS
+
+        roots = list(dict.fromkeys([file.parent.resolve(), *self.allow]))
+        seen = {file.resolve(): file}
+        queue = [file]
+        while queue:
+            try:
+                data = queue.pop(0).read_bytes()
+            except OSError:
+                continue
+            for name in sorted(_names_in(data)):
+                for p in (p for root in roots for p in self._tree(root).get(name, ())):
+                    if p.resolve() not in seen:
+                        seen[p.resolve()] = p
+                        if p.suffix.lower() in READERS:
+                            queue.append(p)
+        return [file, *sorted(p for p in seen.values() if p != file)]
+
+    def digest(self, file: Path) -> str:
+        """A digest of the bytes of ``file`` and of the files it references, with their names."""
+        if file not in self._digests:
+            h = hashlib.sha256()
+            for p in self.files(file):
+                h.update(p.name.encode())
+                try:
+                    h.update(p.read_bytes())
+                except OSError:
+                    h.update(b"unreadable")
+            self._digests[file] = h.hexdigest()
+        return self._digests[file]
+
+
+def item_key(item: Item, target: str, options: Mapping[str, Any], references: References | None = None) -> str:
+    """A digest of everything that decides an item's result: the file's bytes and those of every file it
+    references (:class:`References`), the material, the target, the options, matremap's version and its
+    results revision."""
     h = hashlib.sha256()
-    h.update(item.file.read_bytes())
-    text = item.file.read_bytes()
-    for ref in sorted(p for p in item.file.parent.rglob("*") if p.is_file() and p != item.file):
-        if ref.name.encode() in text:  # referenced by name (a texture, a .bin buffer, an include)
-            h.update(ref.name.encode())
-            h.update(ref.read_bytes())
+    h.update((references or References()).digest(item.file).encode())
     from matremap.core.diskcache import RESULTS_REVISION
 
     doc = {
@@ -220,20 +375,34 @@ def run_batch(
     out = Path(out)
     options = dict(options or {})
     allow = [str(p) for p in allow_paths or ()]
-    items = plan(expand_inputs(paths), material)
+    skipped: list[Path] = []
+    files = expand_inputs(paths, skipped)
+    unread: dict[Path, str] = {}
+    items = plan(files, material, unread)
     out.mkdir(parents=True, exist_ok=True)
     rows: dict[Item, Row] = {}
     todo: list[tuple[Item, str]] = []
+    references = References(allow)
     for item in items:
-        key = item_key(item, target, options)
+        key = item_key(item, target, options, references)
         done = _finished(out, item, key)
         if done is not None:
             rows[item] = done
         else:
             todo.append((item, key))
-    files = len(set(i.file for i in items))
+    for f, why in unread.items():
+        log(f"refused  {f.name}: {why}")
+    if skipped:
+        log(
+            f"note: {len(skipped)} .xml file(s) left out (not Mitsuba scenes, or parts another scene includes): "
+            + ", ".join(map(str, skipped[:3]))
+            + (" ..." if len(skipped) > 3 else "")
+        )
     with item_executor(workers, scheduler, dask_local, len(todo)) as (executor, desc):
-        log(f"batch: {len(items)} material(s) in {files} file(s); {len(rows)} unchanged, {len(todo)} to do on {desc}")
+        log(
+            f"batch: {len(items)} material(s) in {len(files) - len(unread)} file(s); {len(rows)} unchanged, "
+            f"{len(todo)} to do on {desc}"
+        )
         work = partial(remap_item, target=target, out=str(out), options=options, allow=allow)
         stopped = run_items(executor, work, todo, rows, log, progress)
     if stopped:  # what is on disk decides: an item that wrote its item.json as it was stopped is done
@@ -242,11 +411,11 @@ def run_batch(
             done = None if item in rows else _finished(out, item, key)
             if done is not None:
                 rows[item] = done
-        result = BatchResult([rows[i] for i in items if i in rows], len(items) - len(todo), out)
-        result.interrupted = len(items) - len(result.rows)
+        result = BatchResult(_in_order(files, items, rows, unread), len(items) - len(todo), out)
+        result.interrupted = len(items) - sum(i in rows for i in items)
         write_summary(result)
         return result
-    result = BatchResult([rows[i] for i in items], len(items) - len(todo), out)
+    result = BatchResult(_in_order(files, items, rows, unread), len(items) - len(todo), out)
     from matremap.formats import allowed_paths
 
     for f in dict.fromkeys(i.file for i in items):
@@ -257,6 +426,20 @@ def run_batch(
             rows[i].whole_file = whole
     write_summary(result)
     return result
+
+
+def _in_order(
+    files: Sequence[Path], items: Sequence[Item], rows: Mapping[Item, Row], unread: Mapping[Path, str]
+) -> list[Row]:
+    """The summary's rows in the order of the files: each file's finished items, or the one row of a file
+    whose materials could not be listed (refused, with its reason)."""
+    folders = file_folders(files)
+    ordered = []
+    for f in files:
+        if f in unread:
+            ordered.append(Row(str(f), "", folders[f], verdict="refused", exit_code=EXIT_INPUT, reason=unread[f]))
+        ordered += [rows[i] for i in items if i.file == f and i in rows]
+    return ordered
 
 
 class _NotATerminal:
@@ -407,7 +590,9 @@ def assemble(out: Path, source: Path, done: Sequence[tuple[Item, Row]], target: 
     from matremap.svbrdf.textures import load_map_set
 
     fmt = READERS[source.suffix.lower()][0]
-    suffix = default_suffix(target, fmt) or (source.suffix.lower() if target.startswith("gltf:") else None)
+    suffix = default_suffix(target, fmt) or (
+        source.suffix.lower() if fmt == "gltf" and target == "gltf:metal-rough" else None
+    )
     converted = [(i, r) for i, r in done if r.verdict in ("passed", "failed")]
     if suffix is None or not converted:
         return ""
@@ -619,7 +804,8 @@ def index_page(rows: Iterable[Row], title_line: str) -> str:
             f'<tr class="{e(r.verdict)}"><td>{e(r.file)}</td><td>{e(r.material)}</td>'
             f"<td>{e(r.source_model)} → {e(r.target_model)}</td><td>{e(r.route)}</td>"
             f'<td data-value="{VERDICTS.index(r.verdict)}">{e(r.verdict)}</td>'
-            f'<td data-value="{err}">{"" if err == float("inf") else f"{err:.4f}"}</td>'
+            f'<td data-value="{"Infinity" if err == float("inf") else err}">'  # parseFloat reads "Infinity"
+            f"{'' if err == float('inf') else f'{err:.4f}'}</td>"
             f"<td>{r.seconds:.1f}</td><td>{thumbs}</td><td>{e(r.reason)}</td><td>{_written(r)}</td></tr>"
         )
     return (

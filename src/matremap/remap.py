@@ -509,7 +509,7 @@ WRITTEN_FAMILIES = {"gltf": "gltf", "mtlx": "gltf", "mitsuba-xml": "mitsuba3", "
 def check_material_file_name(name: str, target: str) -> None:
     """Refuse, before any work, a material file name for a map set's remap (``--write``) that no writer
     takes, that the target's model cannot be written as, or that lies in the folders the remap fills."""
-    from matremap.formats import WRITERS, format_for
+    from matremap.formats import WRITERS, format_for, written_models
     from matremap.formats.confine import output_inside
 
     output_inside(Path("."), name)
@@ -521,6 +521,12 @@ def check_material_file_name(name: str, target: str) -> None:
         raise MatremapError(
             f"--write {name}: a {fmt} file holds {family}:* materials, not {target}"
             + (f"; write a {' or '.join(suffixes)} file instead" if suffixes else "; remap to a model it holds")
+        )
+    models = written_models(fmt)
+    if get_model(target).id not in models:
+        raise MatremapError(
+            f"--write {name}: matremap writes {', '.join(models)} into a {fmt} file, not {target}; remap to one of "
+            f"those, or leave out --write (the converted maps and OUT/material.json are written)"
         )
     if Path(name).parts[0] in ("maps", "report", "source"):
         raise MatremapError(
@@ -828,10 +834,16 @@ def default_suffix(target: str, source_format: str) -> str | None:
     """The file a target model's users read: glTF (or MaterialX when the input was one) for
     ``gltf:*``, Mitsuba 3 XML for ``mitsuba3:*``, a .blend for ``cycles:*``, USD (.usda) for ``usd:*``;
     None otherwise."""
+    from matremap.formats import format_for, written_models
+
     family = target.split(":", 1)[0]
     if family == "gltf":
-        return {"gltf": None, "mtlx": ".mtlx"}.get(source_format, ".gltf")
-    return {"mitsuba3": ".xml", "cycles": ".blend", "usd": ".usda"}.get(family)
+        suffix = {"gltf": None, "mtlx": ".mtlx"}.get(source_format, ".gltf")
+    else:
+        suffix = {"mitsuba3": ".xml", "cycles": ".blend", "usd": ".usda"}.get(family)
+    if suffix is not None and get_model(target).id not in written_models(format_for(f"x{suffix}")):
+        return None  # a model of the family no writer takes yet (gltf:pbr): its maps and material.json only
+    return suffix
 
 
 def remap_file(
@@ -973,8 +985,8 @@ def _output_name(
 
     if write is None:
         suffix = default_suffix(target, source_format) or None
-        if suffix is None and target.split(":", 1)[0] == "gltf":
-            suffix = p.suffix.lower()
+        if suffix is None and source_format == "gltf" and get_model(target).id == "gltf:metal-rough":
+            suffix = p.suffix.lower()  # a glTF onto its own model: .gltf or .glb as it came
         name = f"{p.stem}{suffix}" if suffix else None
     else:
         from matremap.formats.confine import output_inside

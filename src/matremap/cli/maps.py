@@ -322,8 +322,9 @@ def add_remap(subparsers: Subparsers) -> None:
         "maps",
         nargs="+",
         metavar="PATH",
-        help="a map set folder, or a .gltf/.glb/.mtlx/Mitsuba .xml file; several files, folders of them or glob "
-        "patterns convert every material of every file (OUT/summary.csv, summary.json, index.html)",
+        help="a map set folder, or a .gltf/.glb/.mtlx/Mitsuba .xml/.usda/.usdc/.usdz/.usd file; several files, "
+        "folders of them or glob patterns convert every material of every file (OUT/summary.csv, summary.json, "
+        "index.html)",
     )
     p.add_argument(
         "--from",
@@ -341,9 +342,9 @@ def add_remap(subparsers: Subparsers) -> None:
     p.add_argument(
         "--write",
         metavar="NAME.EXT",
-        help="the material file to write into OUT: .gltf/.glb or .mtlx (gltf:* models), .xml (mitsuba3:*), .blend "
-        "(cycles:*) (default for a material file: the input's name with the target format's suffix; for a map set: "
-        "none, only the maps)",
+        help="the material file to write into OUT: .gltf/.glb, .mtlx or .usda/.usdc/.usdz (gltf:* models), .xml "
+        "(mitsuba3:*), .blend (cycles:*), .usda/.usdc/.usdz (usd:*) (default for a material file: the input's name "
+        "with the target format's suffix; for a map set: none, only the maps)",
     )
     p.add_argument("--sweep", action="store_true", help="always sweep, even when the transform library has a route")
     add_target_option(p, "target model id (see `matremap models`)")
@@ -425,7 +426,7 @@ def cmd_remap(args: argparse.Namespace) -> int:
     if material_file and args.source:
         raise MatremapError(f"{args.maps} names its own model; drop --from")
     if not material_file and args.material is not None:
-        raise MatremapError("--material applies to material files (.gltf, .glb, .mtlx, .xml); a map set is one")
+        raise MatremapError("--material applies to material files (.gltf, .glb, .mtlx, .xml, .usd*); a map set is one")
     if not material_file:
         user_map_set(args.maps, args.source, args.allow_path)  # its files lie where it may name them
     if args.write is not None:

@@ -47,6 +47,28 @@ WRITERS = {
 }
 
 
+def written_models(fmt: str) -> tuple[str, ...]:
+    """The models the writer of format ``fmt`` (a key of :data:`WRITERS`) takes."""
+    if fmt in ("gltf", "mtlx"):
+        from matremap.formats.gltf_read import MODEL as GLTF
+
+        return (GLTF,)
+    if fmt == "usd":
+        from matremap.formats.gltf_read import MODEL as GLTF
+        from matremap.formats.usd import MODEL as USD
+
+        return (USD, GLTF)
+    if fmt == "mitsuba-xml":
+        from matremap.formats.mitsuba_plugins import MODELS as MITSUBA
+
+        return tuple(MITSUBA)
+    if fmt == "blend":
+        from matremap.formats.blend import MODELS as CYCLES
+
+        return tuple(CYCLES)
+    return ()
+
+
 def _module(name: str):
     return importlib.import_module(f"{__name__}.{name}")
 
@@ -148,5 +170,6 @@ __all__ = [
     "read_asset",
     "source_assets",
     "write_all",
+    "written_models",
     "write_asset",
 ]

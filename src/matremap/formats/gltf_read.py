@@ -371,7 +371,9 @@ class MaterialTextures:
             self.notes.append(note)
 
     def carried_texture(self, info: Any, slot: str, channels: tuple[int, ...] | None, srgb: bool) -> TextureRef | None:
-        """A carried input's texture on the maps' UV set (None, with a note, when it uses another set)."""
+        """A carried input's texture on the maps' UV set (None, with a note, when it uses another set);
+        ``channels`` None: the texture's colour, its RGB (a grey or grey-alpha image's grey three times, as PNG
+        decoders and glTF viewers expand it; an alpha channel is not colour)."""
         tex = self.file(info, slot)
         if tex.uv_set != self.uv_set:
             self.notes.append(
@@ -379,7 +381,8 @@ class MaterialTextures:
                 f"it is; other formats get its factor without the texture (a map set has one UV set)"
             )
             return None
-        return self.ref(tex, channels or tuple(range(tex.channels)), srgb, 1.0)
+        colour = (0, 1, 2) if tex.channels >= 3 else (0, 0, 0)
+        return self.ref(tex, channels or colour, srgb, 1.0)
 
     def read_carried(
         self, m: dict[str, Any], pbr: dict[str, Any], found: dict[str, dict[str, Any]]

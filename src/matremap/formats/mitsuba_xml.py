@@ -49,7 +49,7 @@ from matremap.formats.mitsuba_plugins import (
     MODELS,
     PLUGINS,
 )
-from matremap.formats.mitsuba_scene import load_scene
+from matremap.formats.mitsuba_scene import MitsubaScene, load_scene
 
 
 def material_names(path: str | Path) -> list[str]:
@@ -87,13 +87,17 @@ def read(
 
 
 def write(out: str | Path, result: Any, source: MaterialAsset | None = None, force: bool = False) -> Path:
-    """Write ``result`` (a Material or MapSet of a ``mitsuba3:*`` model) as a Mitsuba 3 scene XML that
-    renders the material on the probe sphere; maps are copied beside it as ``<stem>_<param>.png|.exr``.
-    From ``source`` (any format) the carried opacity is written as a ``mask`` wrapper and the carried
-    emission as an ``area`` emitter on the sphere (a note in ``source.notes`` says so). The scene and
-    its maps are written together or not at all."""
-    from matremap.formats.mitsuba_write import write_probe_scene
+    """Write ``result`` (a Material or MapSet of a ``mitsuba3:*`` model) as a Mitsuba 3 scene XML. With a
+    Mitsuba scene as ``source``: a copy of that scene with the source's BSDF replaced (its id, wrappers,
+    shapes, emitters, sensors and includes kept, as :func:`write_all` copies one; the glTF and USD writers
+    copy their sources the same way). Otherwise a scene that renders the material on the probe sphere,
+    maps copied beside it as ``<stem>_<param>.png|.exr``; from ``source`` (any other format) the carried
+    opacity is written as a ``mask`` wrapper and the carried emission as an ``area`` emitter on the sphere
+    (a note in ``source.notes`` says so). The scene and its maps are written together or not at all."""
+    from matremap.formats.mitsuba_write import write_copied_scene, write_probe_scene
 
+    if source is not None and source.format == FORMAT and isinstance(source.document, MitsubaScene):
+        return write_copied_scene(Path(out), [(source.name, result)], Path(source.path), force)
     return write_probe_scene(Path(out), result, source, force)
 
 

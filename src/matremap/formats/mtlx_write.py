@@ -40,7 +40,7 @@ from matremap.core.material import Material
 from matremap.errors import MatremapError
 from matremap.formats.asset import CarriedInput, MaterialAsset, TextureRef
 from matremap.formats.common import check_map_destinations, map_destination, place_map, result_parts
-from matremap.formats.mtlx_document import EMISSION, MODEL, OPACITY, mx, parse_document, validate
+from matremap.formats.mtlx_document import EMISSION, FORMAT, MODEL, OPACITY, mx, parse_document, validate
 
 #: gltf:metal-rough parameter -> gltf_pbr input
 INPUTS = {
@@ -154,9 +154,13 @@ def write(out: str | Path, result: Any, source: MaterialAsset | None = None, for
     """Write ``result`` (a ``gltf:metal-rough`` Material or MapSet) as a MaterialX document with a
     ``gltf_pbr`` shader and a ``surfacematerial`` named as the source material (when the name is a valid
     MaterialX name); maps are copied beside it and the source's carried inputs written into the
-    shader. The document and its files are written together or not at all."""
+    shader. With a MaterialX ``source``: a copy of its document with that material's shader replaced (its
+    looks, node names and other materials kept, as :func:`write_all` copies one; the glTF and USD writers
+    copy their sources the same way). The document and its files are written together or not at all."""
     out = Path(out)
     result_parts(result, "the MaterialX writer", (MODEL,))
+    if source is not None and source.format == FORMAT and Path(source.path).suffix.lower() == ".mtlx":
+        return write_all(out, [(source.name, result)], Path(source.path), force)
     check_output(out, force, (".mtlx",))
     carried = dict(source.carried) if source is not None else {}
     names = [*getattr(result, "maps", {}), *(["normal"] if getattr(result, "normal", None) else [])]

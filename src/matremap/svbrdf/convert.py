@@ -259,8 +259,15 @@ def _drop_uniform(
     outputs: list[_Output], results: Sequence[Mapping[str, Any]], files: AtomicFiles, notes: list[str]
 ) -> list[_Output]:
     """The outputs to keep as maps: those of :func:`uniform_outputs` leave the group (their values go into
-    the manifest as constants), with a note each."""
+    the manifest as constants), with a note each. When every parameter is uniform, one map stays (a map set
+    is maps; a colour one where there is one, as every renderer takes a colour as a map): a glTF whose only
+    texture varied in alpha (ClearCoatTest's Partial_Coating) lost every map and its remap was refused
+    with "maps/material.json binds no map"."""
     uniform = uniform_outputs(results)
+    params = [o for o in outputs if o.param is not None]
+    if params and all(o.param in uniform for o in params):
+        keep = next((o for o in params if o.info.channels >= 3), params[0])
+        uniform = uniform - {keep.param}
     for o in outputs:
         if o.param in uniform:
             files.discard(o.path)
