@@ -43,6 +43,7 @@ from matremap.core.material import Material, SVMaterial
 from matremap.core.scene import Scene
 from matremap.dialects import get_model
 from matremap.dialects.equivalence import Equivalence, equivalence
+from matremap.dialects.mtlx import freed_layers
 from matremap.errors import MatremapError, TransformChecksumError
 from matremap.regress import quantities as qty
 from matremap.regress.transform import Transform
@@ -453,7 +454,12 @@ def remap(
 
 
 #: format -> the family of models its writer takes (a format not listed is left to its writer to check)
-WRITTEN_FAMILIES = {"gltf": "gltf", "mtlx": "gltf", "mitsuba-xml": "mitsuba3", "blend": "cycles"}
+WRITTEN_FAMILIES: dict[str, tuple[str, ...]] = {
+    "gltf": ("gltf",),
+    "mtlx": ("gltf", "mtlx"),
+    "mitsuba-xml": ("mitsuba3",),
+    "blend": ("cycles",),
+}
 
 
 def check_material_file_name(name: str, target: str) -> None:
@@ -464,12 +470,13 @@ def check_material_file_name(name: str, target: str) -> None:
 
     output_inside(Path("."), name)
     fmt = format_for(name)
-    family = WRITTEN_FAMILIES.get(fmt)
-    if family is not None and target.split(":", 1)[0] != family:
+    families = WRITTEN_FAMILIES.get(fmt)
+    if families is not None and target.split(":", 1)[0] not in families:
         fams = WRITTEN_FAMILIES.items()
-        suffixes = [x for f, fam in fams if fam == target.split(":", 1)[0] for x in WRITERS[f][1]]
+        suffixes = [x for f, fam in fams if target.split(":", 1)[0] in fam for x in WRITERS[f][1]]
+        held = " and ".join(f"{f}:*" for f in families)
         raise MatremapError(
-            f"--write {name}: a {fmt} file holds {family}:* materials, not {target}"
+            f"--write {name}: a {fmt} file holds {held} materials, not {target}"
             + (f"; write a {' or '.join(suffixes)} file instead" if suffixes else "; remap to a model it holds")
         )
     if Path(name).parts[0] in ("maps", "report", "source"):
@@ -747,12 +754,12 @@ class FileRemapResult:
 
 def default_suffix(target: str, source_format: str) -> str | None:
     """The file a target model's users read: glTF (or MaterialX when the input was one) for
-    ``gltf:*``, Mitsuba 3 XML for ``mitsuba3:*``, a .blend for ``cycles:*``, USD (.usda) for ``usd:*``;
-    None otherwise."""
+    ``gltf:*``, MaterialX for ``mtlx:*``, Mitsuba 3 XML for ``mitsuba3:*``, a .blend for ``cycles:*``, USD
+    (.usda) for ``usd:*``; None otherwise."""
     family = target.split(":", 1)[0]
     if family == "gltf":
         return {"gltf": None, "mtlx": ".mtlx"}.get(source_format, ".gltf")
-    return {"mitsuba3": ".xml", "cycles": ".blend", "usd": ".usda"}.get(family)
+    return {"mitsuba3": ".xml", "cycles": ".blend", "usd": ".usda", "mtlx": ".mtlx"}.get(family)
 
 
 def remap_file(
@@ -936,6 +943,13 @@ def _remap_uniform(
         write_image(stage / "compare.png", comparison_strip(same), force=True)
         return copied
     full_fix = complete_fix(source.model, qty.material_values(source), target, job.fix)
+    free, start = freed_layers(source.model, source.values, get_model(target), held=job.fix)
+    if free:
+        log(
+            f"layers: the source's layers are fitted with {target}'s ({', '.join(free)} freed, started at the source's)"
+        )
+        if job.strategy == "two-stage":  # the freed layer refined jointly with the base (docs/models.md)
+            job = replace(job, strategy="three-stage")
     job = staged_strategy(job, log)
     r = fit(
         source,
@@ -945,6 +959,8 @@ def _remap_uniform(
         fix=full_fix,
         strategy=job.strategy,
         scene=job.scene,
+        free=free,
+        start=start,
     )
     for w in r.warnings:
         log(f"warning: {w}")

@@ -46,10 +46,13 @@ from matremap.formats.gltf_container import (
 from matremap.formats.gltf_extensions import (
     EMISSIVE_STRENGTH,
     IOR,
+    LAYERED_MODEL,
     SCHEMAS,
+    SHEEN,
     SPECULAR,
     check_texture_info,
     extension_notes,
+    layer_values,
     lost_look,
     read_extensions,
 )
@@ -203,18 +206,22 @@ def read(
     carried = textures.read_carried(m, pbr, found)
     notes += extension_notes(found)
     note_unknown(ext, obj, notes)
+    layers, lost = layer_values(found), lost_look(found)
+    if layers:  # a coat or sheen carries the look: read into gltf:pbr, where it is fitted
+        constants |= layers
+        lost = [w for w in lost if not w.startswith(SHEEN)]
     return MaterialAsset(
         path=p,
         format="gltf",
         name=name,
-        model=MODEL,
+        model=LAYERED_MODEL if layers else MODEL,
         constants=constants,
         textures=maps,
         normal=normal,
         notes=notes,
         document=doc,
         index=idx,
-        lost=lost_look(found),
+        lost=lost,
         carried=carried,
     )
 
