@@ -32,6 +32,7 @@ READERS = {
     ".glb": ("gltf", "gltf"),
     ".mtlx": ("mtlx", "materialx"),
     ".xml": ("mitsuba-xml", "mitsuba_xml"),
+    ".blend": ("blend", "blend"),
     ".usda": ("usd", "usd"),
     ".usdc": ("usd", "usd"),
     ".usdz": ("usd", "usd"),
