@@ -43,7 +43,7 @@ from matremap.core.material import Material, SVMaterial
 from matremap.core.scene import Scene
 from matremap.dialects import get_model
 from matremap.dialects.equivalence import Equivalence, equivalence
-from matremap.dialects.mtlx import freed_layers
+from matremap.dialects.mtlx import LAYERS, freed_layers
 from matremap.errors import MatremapError, TransformChecksumError
 from matremap.regress import quantities as qty
 from matremap.regress.transform import Transform
@@ -816,6 +816,17 @@ def _remap_file(
             f"{p}: material {asset.name!r} carries its look in {'; '.join(asset.lost)}, which matremap's models do "
             f"not have (no coat, transmission or sheen yet): converting the rest to {target} would be wrong, so it "
             "is not converted"
+        )
+    layers = [
+        w
+        for w in LAYERS.get(asset.model, {}).values()
+        if w in asset.textures or np.max(asset.constants.get(w, 0.0)) > 0
+    ]
+    if asset.textured and layers and not kept:
+        raise MatremapError(
+            f"{p}: material {asset.name!r} is textured and its look has a layer ({', '.join(layers)}); textured "
+            f"layered materials are not converted yet (a sweep's quantities, roughness, F0 and diffuse, have no "
+            f"layer), so it is not converted to {target}; a uniform one is"
         )
     with staged_folder(out, force) as stage:
         result = FileRemapResult(None, asset.model, target, asset.textured, notes=list(asset.notes))

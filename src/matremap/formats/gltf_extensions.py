@@ -211,12 +211,13 @@ def layer_values(found: dict[str, dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
-def extension_notes(found: dict[str, dict[str, Any]]) -> list[str]:
+def extension_notes(found: dict[str, dict[str, Any]], textured: bool = False) -> list[str]:
     """One note per layer extension that does not make the material lost: its values, and what becomes
-    of it (kept in a glTF output, left out elsewhere)."""
+    of it (kept in a glTF output, left out elsewhere; fitted in gltf:pbr when :func:`layer_values` reads it,
+    for a material without textures)."""
     notes = []
     lost = " ".join(lost_look(found))
-    layers = layer_values(found)
+    layers = layer_values(found) if not textured else {}
     if layers:
         what = ", ".join(f"{k} {_g(v) if isinstance(v, float) else _rgb(v)}" for k, v in layers.items())
         notes.append(f"read into {LAYERED_MODEL} ({what}): its layers are fitted, not left out")

@@ -204,10 +204,13 @@ def read(
             "glTF output keeps the normal map"
         )
     carried = textures.read_carried(m, pbr, found)
-    notes += extension_notes(found)
+    notes += extension_notes(found, textured=bool(maps))
     note_unknown(ext, obj, notes)
-    layers, lost = layer_values(found), lost_look(found)
-    if layers:  # a coat or sheen carries the look: read into gltf:pbr, where it is fitted
+    # a coat or sheen carrying the look of a uniform material: read into gltf:pbr, where it is fitted (a textured
+    # one stays gltf:metal-rough, its layers noted and kept in a glTF copy: textured layered materials are not
+    # converted yet)
+    layers, lost = (layer_values(found) if not maps else {}), lost_look(found)
+    if layers:
         constants |= layers
         lost = [w for w in lost if not w.startswith(SHEEN)]
     return MaterialAsset(
