@@ -22,8 +22,8 @@ FAST = {"rotations": "0:360:2", "resolution": 48, "lights": 32}
 
 
 def gltf_library(folder: Path, red: float = 0.8) -> Path:
-    """A glTF with three uniform materials: a red dielectric, a gold metal, and a clear-coated blue
-    whose coat colour matremap's models cannot carry (refused)."""
+    """A glTF with three uniform materials: a red dielectric, a gold metal, and a clear-coated blue glass
+    (transmissive: refused, no fit sees transmission)."""
     folder.mkdir(parents=True, exist_ok=True)
     materials = [
         {"name": "red paint", "pbrMetallicRoughness": {"baseColorFactor": [red, 0.1, 0.1, 1], "metallicFactor": 0.0}},
@@ -38,15 +38,15 @@ def gltf_library(folder: Path, red: float = 0.8) -> Path:
         {
             "name": "coated",
             "pbrMetallicRoughness": {"baseColorFactor": [0.1, 0.2, 0.8, 1], "metallicFactor": 0.0},
-            "extensions": {
+            "extensions": {  # glass under a coat: no fit sees transmission, so it is refused
                 "KHR_materials_clearcoat": {"clearcoatFactor": 1.0},
-                "KHR_materials_sheen": {"sheenColorFactor": [1, 0, 0]},
+                "KHR_materials_transmission": {"transmissionFactor": 1.0},
             },
         },
     ]
     doc = {
         "asset": {"version": "2.0"},
-        "extensionsUsed": ["KHR_materials_clearcoat", "KHR_materials_sheen"],
+        "extensionsUsed": ["KHR_materials_clearcoat", "KHR_materials_transmission"],
         "materials": materials,
     }
     path = folder / "library.gltf"
@@ -95,7 +95,7 @@ def test_a_folder_converts_in_one_run_with_a_summary_and_a_resume(tmp_path, caps
     result = run_batch([src], "mitsuba06:ward", out, workers=2, options=FAST, log=lambda m: None, progress=False)
     by_name = {r.material: r for r in result.rows}
     assert set(by_name) == {"red paint", "gold", "coated", "wall", "steel"}
-    assert by_name["coated"].verdict == "refused" and "sheen" in by_name["coated"].reason
+    assert by_name["coated"].verdict == "refused" and "transmission" in by_name["coated"].reason
     for name in ("red paint", "gold", "wall", "steel"):
         r = by_name[name]
         assert r.verdict == "passed", (name, r.reason)
