@@ -137,7 +137,7 @@ ASSETS: list[Asset] = [
     Asset(
         "ClearCoatTest",
         "gltf-ClearCoatTest/ClearCoatTest.glb",
-        "gltf:metal-rough",
+        "gltf:pbr",  # a coat of factor 1: read into gltf:pbr (fitted, issue 16)
         [GLTF, PLASTIC, CYCLES],
         material="Simple_Coated",
         note="KHR_materials_clearcoat on a red dielectric",

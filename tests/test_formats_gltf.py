@@ -646,7 +646,9 @@ def test_glb_source_to_glb_and_gltf_keeps_embedded_images(tmp_path):
 
 def test_writer_refuses_other_models_existing_files_and_inputs(tmp_path):
     ward = Material.create("mitsuba06:ward", {"variant": "ward"})
-    with pytest.raises(MatremapError, match="remap it onto gltf:metal-rough"):
+    with pytest.raises(
+        MatremapError, match="glTF stores gltf:metal-rough and gltf:pbr materials, and this result is mitsuba06:ward"
+    ):
         write(tmp_path / "w.glb", ward)
     m = Material.create(MR, {"roughness": 0.5})
     with pytest.raises(MatremapError, match="name it .gltf or .glb"):

@@ -88,13 +88,48 @@ def test_malformed_extension_values_are_refused_naming_the_material_and_field(tm
     [
         ({"KHR_materials_transmission": {"transmissionFactor": 0.9}}, "KHR_materials_transmission"),
         ({"KHR_materials_transmission": {"transmissionFactor": 0.2, "transmissionTexture": {"index": 0}}}, "Texture"),
-        ({"KHR_materials_sheen": {"sheenColorFactor": [0.9, 0.2, 0.2]}}, "a coloured sheen"),
+        ({"KHR_materials_sheen": {"sheenColorFactor": [0.9, 0.2, 0.2], "sheenColorTexture": {"index": 0}}}, "sheen"),
         ({"KHR_materials_transmission": {"transmissionFactor": 0.2, "transmissionTexture": {"index": 0}}}, "0.2"),
     ],
 )
-def test_transmissive_and_coloured_sheen_looks_are_lost(tmp_path, ext, lost):
+def test_transmissive_and_textured_coloured_sheen_looks_are_lost(tmp_path, ext, lost):
     asset = read(make_file(tmp_path, "a.gltf", [{"extensions": ext}], {"t": ramp()}))
-    assert len(asset.lost) == 1 and lost in asset.lost[0]
+    assert len(asset.lost) == 1 and lost in asset.lost[0] and asset.model == "gltf:metal-rough"
+
+
+@pytest.mark.parametrize(
+    "ext, layers",
+    [
+        (
+            {"KHR_materials_sheen": {"sheenColorFactor": [0.9, 0.2, 0.2], "sheenRoughnessFactor": 0.4}},
+            {"sheenColor": [0.9, 0.2, 0.2], "sheenRoughness": 0.4},
+        ),
+        (
+            {"KHR_materials_clearcoat": {"clearcoatFactor": 0.8, "clearcoatRoughnessFactor": 0.1}},
+            {"clearcoat": 0.8, "clearcoatRoughness": 0.1},
+        ),
+    ],
+)
+def test_a_uniform_coat_or_coloured_sheen_is_read_into_gltf_pbr_and_fitted(tmp_path, ext, layers):
+    """Such a layer carries the look: it is read into gltf:pbr's parameters (fitted), not left out."""
+    asset = read(make_file(tmp_path, "a.gltf", [{"extensions": ext}], {"t": ramp()}))
+    assert asset.model == "gltf:pbr" and asset.lost == []
+    for k, v in layers.items():
+        np.testing.assert_allclose(asset.constants[k], v, rtol=1e-6)
+    assert any("read into gltf:pbr" in n for n in asset.notes)
+    m = asset.material()
+    assert m.model == "gltf:pbr"
+    np.testing.assert_allclose(
+        m.values[next(iter(layers))], np.broadcast_to(next(iter(layers.values())), m.values[next(iter(layers))].shape)
+    )
+
+
+def test_a_faint_coat_stays_a_note_on_the_metal_rough_base(tmp_path):
+    ext = {"KHR_materials_clearcoat": {"clearcoatFactor": 0.3}}
+    asset = read(make_file(tmp_path, "a.gltf", [{"extensions": ext}], {"t": ramp()}))
+    assert asset.model == "gltf:metal-rough" and any(
+        n.startswith("KHR_materials_clearcoat factor 0.3") for n in asset.notes
+    )
 
 
 def test_corpus_emissive_strength_is_multiplied_into_the_carried_emission():
@@ -120,12 +155,13 @@ def test_corpus_alpha_mask_carries_the_texture_alpha_and_cutoff():
     assert "emission" in asset.carried and asset.carried["emission"].texture is not None
 
 
-def test_corpus_attenuation_is_lost_and_clearcoat_is_noted():
+def test_corpus_attenuation_is_lost_and_clearcoat_is_read_into_gltf_pbr():
     a = read(CORPUS / "gltf-AttenuationTest" / "AttenuationTest.glb", 0)
     assert a.lost == ["KHR_materials_transmission (transmissionFactor 1)"]
     assert any(n.startswith("KHR_materials_volume thickness 1, attenuation colour [0.1, 0.5, 0.9]") for n in a.notes)
-    c = read(CORPUS / "gltf-ClearCoatTest" / "ClearCoatTest.glb", "Simple_Coated")
-    assert c.lost == [] and any(n.startswith("KHR_materials_clearcoat factor 1") for n in c.notes)
+    c = read(CORPUS / "gltf-ClearCoatTest" / "ClearCoatTest.glb", "Simple_Coated")  # a coat of factor 1: fitted
+    assert c.lost == [] and c.model == "gltf:pbr" and c.constants["clearcoat"] == 1.0
+    assert any(n.startswith("read into gltf:pbr (clearcoat 1") for n in c.notes)
 
 
 # ------------------------------------------------------------------------------------------------

@@ -28,7 +28,7 @@ EXPECTED = {
     "mitsuba-mask": None,
     "mitsuba-normalmap": None,
     "mitsuba-plastic": None,
-    "mitsuba-principled": "principled clearcoat 0.8 (a clear coat)",
+    "mitsuba-principled": "principled anisotropic 0.6 (anisotropy)",  # its clearcoat 0.8 alone would be fitted
     "mitsuba-roughconductor_anisotropic": None,  # alpha_u 0.4 / alpha_v 0.2: fit error 0.2455, passes
     "mitsuba-roughconductor_isotropic": None,
     "mitsuba-roughdielectric_isotropic": "its look is transmission",

@@ -44,6 +44,7 @@ from matremap.core.material import Material, SVMaterial
 from matremap.core.scene import Scene, parse_probe
 from matremap.dialects import get_model
 from matremap.dialects.equivalence import Equivalence, equivalence
+from matremap.dialects.mtlx import LAYERS, freed_layers
 from matremap.errors import MatremapError, TransformChecksumError
 from matremap.regress import quantities as qty
 from matremap.regress.transform import Transform
@@ -503,7 +504,12 @@ def remap(
 
 
 #: format -> the family of models its writer takes (a format not listed is left to its writer to check)
-WRITTEN_FAMILIES = {"gltf": "gltf", "mtlx": "gltf", "mitsuba-xml": "mitsuba3", "blend": "cycles"}
+WRITTEN_FAMILIES: dict[str, tuple[str, ...]] = {
+    "gltf": ("gltf",),
+    "mtlx": ("gltf", "mtlx"),
+    "mitsuba-xml": ("mitsuba3",),
+    "blend": ("cycles",),
+}
 
 
 def check_material_file_name(name: str, target: str) -> None:
@@ -514,12 +520,13 @@ def check_material_file_name(name: str, target: str) -> None:
 
     output_inside(Path("."), name)
     fmt = format_for(name)
-    family = WRITTEN_FAMILIES.get(fmt)
-    if family is not None and target.split(":", 1)[0] != family:
+    families = WRITTEN_FAMILIES.get(fmt)
+    if families is not None and target.split(":", 1)[0] not in families:
         fams = WRITTEN_FAMILIES.items()
-        suffixes = [x for f, fam in fams if fam == target.split(":", 1)[0] for x in WRITERS[f][1]]
+        suffixes = [x for f, fam in fams if target.split(":", 1)[0] in fam for x in WRITERS[f][1]]
+        held = " and ".join(f"{f}:*" for f in families)
         raise MatremapError(
-            f"--write {name}: a {fmt} file holds {family}:* materials, not {target}"
+            f"--write {name}: a {fmt} file holds {held} materials, not {target}"
             + (f"; write a {' or '.join(suffixes)} file instead" if suffixes else "; remap to a model it holds")
         )
     models = written_models(fmt)
@@ -832,17 +839,17 @@ class FileRemapResult:
 
 def default_suffix(target: str, source_format: str) -> str | None:
     """The file a target model's users read: glTF (or MaterialX when the input was one) for
-    ``gltf:*``, Mitsuba 3 XML for ``mitsuba3:*``, a .blend for ``cycles:*``, USD (.usda) for ``usd:*``;
-    None otherwise."""
+    ``gltf:*``, MaterialX for ``mtlx:*``, Mitsuba 3 XML for ``mitsuba3:*``, a .blend for ``cycles:*``, USD
+    (.usda) for ``usd:*``; None otherwise, or when no writer of that format takes the model."""
     from matremap.formats import format_for, written_models
 
     family = target.split(":", 1)[0]
     if family == "gltf":
         suffix = {"gltf": None, "mtlx": ".mtlx"}.get(source_format, ".gltf")
     else:
-        suffix = {"mitsuba3": ".xml", "cycles": ".blend", "usd": ".usda"}.get(family)
+        suffix = {"mitsuba3": ".xml", "cycles": ".blend", "usd": ".usda", "mtlx": ".mtlx"}.get(family)
     if suffix is not None and get_model(target).id not in written_models(format_for(f"x{suffix}")):
-        return None  # a model of the family no writer takes yet (gltf:pbr): its maps and material.json only
+        return None  # a model of the family no writer takes yet: its maps and material.json only
     return suffix
 
 
@@ -900,6 +907,17 @@ def _remap_file(
             f"{p}: material {asset.name!r} carries its look in {'; '.join(asset.lost)}, which matremap's models do "
             f"not have (no coat, transmission or sheen yet): converting the rest to {target} would be wrong, so it "
             "is not converted"
+        )
+    layers = [
+        w
+        for w in LAYERS.get(asset.model, {}).values()
+        if w in asset.textures or np.max(asset.constants.get(w, 0.0)) > 0
+    ]
+    if asset.textured and layers and not kept:
+        raise MatremapError(
+            f"{p}: material {asset.name!r} is textured and its look has a layer ({', '.join(layers)}); textured "
+            f"layered materials are not converted yet (a sweep's quantities, roughness, F0 and diffuse, have no "
+            f"layer), so it is not converted to {target}; a uniform one is"
         )
     with staged_folder(out, force) as stage:
         result = FileRemapResult(None, asset.model, target, asset.textured, notes=list(asset.notes))
@@ -1003,6 +1021,50 @@ def _output_name(
     return name
 
 
+def _fit_uniform(
+    source: Material, job: RemapJob, full_fix: dict[str, Any], log: Callable[[str], None]
+) -> tuple[Any, RemapJob]:
+    """The fit of a uniform remap (and the job with the strategy it used). A layer the source has and the target
+    too is freed (:func:`~matremap.dialects.mtlx.freed_layers`, started at the source's) and fitted both
+    three-stage and simple, the better kept: neither wins everywhere (measured, benchmarks/layered_remaps.py:
+    three-stage takes a coat onto OpenPBR / glTF to 1e-4 where simple stops at 0.004-0.017; simple takes
+    OpenPBR's fuzz onto Standard Surface's sheen to 0.045 where three-stage stops at 0.35)."""
+    from matremap.uniform import fit
+
+    target = job.target
+    free, start = freed_layers(source.model, source.values, get_model(target), held=job.fix)
+    strategies = [job.strategy]
+    if free:
+        log(
+            f"layers: the source's layers are fitted with {target}'s ({', '.join(free)} freed, started at the source's)"
+        )
+        if job.strategy == "two-stage":  # the freed layer refined jointly with the base, or all at once
+            strategies = ["three-stage", "simple"]
+    best: Any = None
+    probe, objective = sweep_probe(job)
+    for strategy in strategies:
+        job = staged_strategy(replace(job, strategy=strategy), log)
+        r = fit(
+            source,
+            target,
+            source_renderer=renderer_for(source.model),
+            target_renderer=job.target_renderer or renderer_for(target),
+            fix=full_fix,
+            strategy=job.strategy,
+            scene=probe,
+            free=free,
+            start=start,
+            objective=objective,
+        )
+        if best is None or r.loss < best[0].loss:
+            best = (r, job)
+        if job.strategy == "simple":  # forced (staged_strategy): no second fit
+            break
+    if len(strategies) > 1:
+        log(f"layers: kept the {best[1].strategy} fit (loss {best[0].loss:.4f})")
+    return best
+
+
 def _remap_uniform(
     source: Material, job: RemapJob, stage: Path, result: FileRemapResult, log: Callable[[str], None]
 ) -> Material:
@@ -1012,7 +1074,7 @@ def _remap_uniform(
     from matremap.core.fit import FULL, FitResult, part
     from matremap.renderers import get_renderer
     from matremap.renderers.base import render_images
-    from matremap.uniform import comparison_strip, fit
+    from matremap.uniform import comparison_strip
 
     target = job.target
     eq = uniform_identity(source, target, job.fix)
@@ -1028,18 +1090,7 @@ def _remap_uniform(
         write_image(stage / "compare.png", comparison_strip(same), force=True)
         return copied
     full_fix = complete_fix(source.model, qty.material_values(source), target, job.fix)
-    job = staged_strategy(job, log)
-    probe, objective = sweep_probe(job)
-    r = fit(
-        source,
-        target,
-        source_renderer=renderer_for(source.model),
-        target_renderer=job.target_renderer or renderer_for(target),
-        fix=full_fix,
-        strategy=job.strategy,
-        scene=probe,
-        objective=objective,
-    )
+    r, job = _fit_uniform(source, job, full_fix, log)
     for w in r.warnings:
         log(f"warning: {w}")
     measure = "relative L2 error" if r.objective == "l2" else f"{r.objective} loss"

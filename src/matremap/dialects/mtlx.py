@@ -42,7 +42,8 @@ the closure mixture with reflectance() the lobes' directional albedos
 from __future__ import annotations
 
 import shlex
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -154,6 +155,97 @@ LAYERS: dict[str, dict[str, str]] = {
     "gltf:pbr": {"coat": "clearcoat", "sheen": "sheenColor"},
     "cycles:principled": {"coat": "Coat Weight", "sheen": "Sheen Weight"},
 }
+
+
+@dataclass(frozen=True)
+class Layer:
+    """A layer's parameters in one model: its weight, colour and roughness (None where the model has none).
+    ``gloss``: the roughness parameter is a gloss (1 - roughness, Mitsuba 3's clearcoat_gloss);
+    ``weighted_colour``: the colour is also the weight (glTF's sheenColor: no sheen at black)."""
+
+    weight: str
+    colour: str | None = None
+    roughness: str | None = None
+    gloss: bool = False
+    weighted_colour: bool = False
+
+
+#: the parameters of each layer of the layered models (its weight is :data:`LAYERS`')
+LAYER_PARAMS: dict[str, dict[str, Layer]] = {
+    OPEN_PBR_SURFACE.id: {
+        "coat": Layer("coat_weight", "coat_color", "coat_roughness"),
+        "sheen": Layer("fuzz_weight", "fuzz_color", "fuzz_roughness"),
+    },
+    STANDARD_SURFACE.id: {
+        "coat": Layer("coat", "coat_color", "coat_roughness"),
+        "sheen": Layer("sheen", "sheen_color", "sheen_roughness"),
+    },
+    "mitsuba3:principled": {
+        "coat": Layer("clearcoat", None, "clearcoat_gloss", gloss=True),
+        "sheen": Layer("sheen", None, None),
+    },
+    "gltf:pbr": {
+        "coat": Layer("clearcoat", None, "clearcoatRoughness"),
+        "sheen": Layer("sheenColor", "sheenColor", "sheenRoughness", weighted_colour=True),
+    },
+    "cycles:principled": {
+        "coat": Layer("Coat Weight", "Coat Tint", "Coat Roughness"),
+        "sheen": Layer("Sheen Weight", "Sheen Tint", "Sheen Roughness"),
+    },
+}
+
+
+def freed_layers(
+    source_model: str, source_values: Mapping[str, Any], target: ModelSpec, held: Iterable[str] = ()
+) -> tuple[list[str], dict[str, Any]]:
+    """The target parameters to free, and where to start them, for each layer the source has (weight > 0) and
+    the target too (:data:`LAYER_PARAMS`): a coat is fitted with the target's coat, a sheen with its sheen,
+    instead of being absorbed into the base. The start is the source layer's weight, colour and roughness
+    (gloss = 1 - roughness), clipped to the target's bounds: from the layers at 0 a fit can stay in the minimum
+    where the layer is off (docs/models.md). Parameters in ``held`` (the user's --fix) stay held."""
+    source, layers = LAYER_PARAMS.get(source_model, {}), LAYER_PARAMS.get(target.id, {})
+    spec = target
+    held = set(held)
+    free: list[str] = []
+    start: dict[str, Any] = {}
+    for name, src in source.items():
+        tgt = layers.get(name)
+        weight = _layer_amount(source_values, src)
+        if tgt is None or weight <= 0.0:
+            continue
+        colour = _layer_colour(source_values, src)
+        rough = float(np.mean(source_values.get(src.roughness, 0.5))) if src.roughness else 0.5
+        rough = 1.0 - rough if src.gloss else rough
+        values: dict[str, Any] = {tgt.weight: weight}
+        if tgt.weighted_colour:
+            values[tgt.weight] = (weight * colour).tolist()
+        elif tgt.colour is not None:
+            values[tgt.colour] = colour.tolist()
+        if tgt.roughness is not None:
+            values[tgt.roughness] = 1.0 - rough if tgt.gloss else rough
+        for param, v in values.items():
+            if param in held:
+                continue
+            lo, hi = spec.param(param).bounds
+            free.append(param)
+            start[param] = np.clip(np.asarray(v, dtype=float), lo, hi).tolist()
+    return free, start
+
+
+def _layer_amount(values: Mapping[str, Any], layer: Layer) -> float:
+    """How much of a layer a material has: its weight (glTF's sheen: the largest channel of its colour)."""
+    return float(np.max(np.asarray(values.get(layer.weight, 0.0), dtype=float)))
+
+
+def _layer_colour(values: Mapping[str, Any], layer: Layer) -> np.ndarray:
+    """A layer's colour as RGB (white where the model has none; glTF's sheenColor divided by its weight)."""
+    if layer.colour is None:
+        return np.ones(3)
+    c = np.broadcast_to(np.asarray(values.get(layer.colour, 1.0), dtype=float), (3,))
+    if layer.weighted_colour:
+        top = float(np.max(c))
+        return c / top if top > 0 else np.ones(3)
+    return np.array(c)
 
 
 def absorbed_layers(

@@ -32,6 +32,7 @@ READERS = {
     ".glb": ("gltf", "gltf"),
     ".mtlx": ("mtlx", "materialx"),
     ".xml": ("mitsuba-xml", "mitsuba_xml"),
+    ".blend": ("blend", "blend"),
     ".usda": ("usd", "usd"),
     ".usdc": ("usd", "usd"),
     ".usdz": ("usd", "usd"),
@@ -49,10 +50,14 @@ WRITERS = {
 
 def written_models(fmt: str) -> tuple[str, ...]:
     """The models the writer of format ``fmt`` (a key of :data:`WRITERS`) takes."""
-    if fmt in ("gltf", "mtlx"):
-        from matremap.formats.gltf_read import MODEL as GLTF
+    if fmt == "gltf":
+        from matremap.formats.gltf_read import LAYERED_MODEL, MODEL
 
-        return (GLTF,)
+        return (MODEL, LAYERED_MODEL)
+    if fmt == "mtlx":
+        from matremap.formats.mtlx_write import NODES
+
+        return tuple(NODES)
     if fmt == "usd":
         from matremap.formats.gltf_read import MODEL as GLTF
         from matremap.formats.usd import MODEL as USD

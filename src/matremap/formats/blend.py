@@ -1,4 +1,14 @@
-"""Blender .blend output: a converted material as Cycles nodes on a sphere, written by Blender itself.
+"""Blender .blend files: a converted material written as Cycles nodes on a sphere by Blender itself, and the
+uniform Principled BSDF materials of a .blend read (through the same bpy worker).
+
+``read(path, material=None)`` takes one material whose surface is a single Principled BSDF (Blender 5.0's
+sockets, the names ``cycles:principled`` uses) with none of its modelled sockets linked (a textured .blend
+material is refused in one line): Base Color, Metallic, Roughness, IOR, Specular IOR Level, Specular Tint,
+Coat Weight / Roughness / IOR / Tint, Sheen Weight / Roughness / Tint and the node's distribution become a
+``cycles:principled`` asset; Emission Color x Emission Strength and Alpha are carried (as emission and a
+blended opacity). What the model has no parameter for is noted where it is not at its off value (Subsurface,
+Anisotropic, Thin Film, Diffuse Roughness), and a Transmission Weight above 0.5 makes the look lost (glass,
+which no fit draws yet).
 
 ``write(out, result, source=None, force=False)`` takes a uniform :class:`~matremap.core.material.Material`
 or a :class:`~matremap.svbrdf.textures.MapSet` of converted maps of ``cycles:principled``,
@@ -43,9 +53,21 @@ from matremap.core.material import Material
 from matremap.core.scene import Scene
 from matremap.dialects import get_model
 from matremap.errors import MatremapError
+from matremap.formats.asset import CarriedInput, MaterialAsset
+from matremap.formats.common import pick_material
 
 #: models this writer knows the Blender nodes of
 MODELS = ("cycles:principled", "cycles:glossy", "cycles:diffuse")
+#: Principled BSDF sockets no cycles:principled parameter stands for, and the value at which each is off
+UNMODELLED = {
+    "Subsurface Weight": 0.0,
+    "Anisotropic": 0.0,
+    "Thin Film Thickness": 0.0,
+    "Diffuse Roughness": 0.0,
+    "Transmission Weight": 0.0,
+}
+#: a Transmission Weight past which the look is glass (refused for other models, as the other readers do)
+TRANSMISSION_LOOK = 0.5
 #: the sphere's segments x rings
 GEOMETRY = "128x64"
 
@@ -141,4 +163,86 @@ def write(out: str | os.PathLike, result: Any, source: Any = None, force: bool =
     return p
 
 
-__all__ = ["GEOMETRY", "MODELS", "write", "write_request"]
+def _inspect(path: Path) -> dict[str, Any]:
+    """What the bpy worker sees in the .blend ``path`` (its ``inspect_blend`` request)."""
+    from matremap.renderers.cycles.client import shared_client
+
+    if not path.is_file():
+        raise MatremapError(f"{path} not found")
+    info: dict[str, Any] = shared_client().call({"op": "inspect_blend", "path": str(path.resolve())})
+    return info
+
+
+def material_names(path: str | os.PathLike) -> list[str]:
+    """The names of the node materials of a .blend, in Blender's order."""
+    return list(_inspect(Path(path))["materials"])
+
+
+def read(path: str | os.PathLike, material: str | int | None = None, *, confinement: Any = None) -> MaterialAsset:
+    """One uniform Principled BSDF material of a .blend as a ``cycles:principled``
+    :class:`~matremap.formats.asset.MaterialAsset` (see the module docstring)."""
+    p = Path(path)
+    materials = _inspect(p)["materials"]
+    if not materials:
+        raise MatremapError(f"{p} holds no node material; matremap reads Principled BSDF materials of a .blend")
+    names = list(materials)
+    name = names[pick_material(p, names, material, "material")]
+    where = f"{p}: material {name!r}"
+    node = _surface_principled(materials[name], where)
+    spec = get_model("cycles:principled")
+    inputs, linked = node["inputs"], [s for s in spec.param_names if s not in node["inputs"]]
+    if linked:
+        raise MatremapError(
+            f"{where}: {', '.join(linked)} linked to other nodes (a textured material); matremap reads uniform "
+            f".blend materials only: bake the textures or give the sockets values"
+        )
+    constants: dict[str, Any] = {n: _socket_value(inputs[n], spec.param(n).channels) for n in spec.param_names}
+    constants["distribution"] = str(node.get("distribution", "MULTI_GGX")).lower()
+    notes = [
+        f"{k}={_socket_value(inputs[k], 1):g}: cycles:principled has no such parameter; left out"
+        for k, off in UNMODELLED.items()
+        if k in inputs and _socket_value(inputs[k], 1) != off
+    ]
+    transmission = _socket_value(inputs.get("Transmission Weight", 0.0), 1)
+    lost = [f"Transmission Weight={transmission:g} (glass)"] if transmission > TRANSMISSION_LOOK else []
+    carried = {}
+    strength = _socket_value(inputs.get("Emission Strength", 0.0), 1)
+    colour = np.asarray(_socket_value(inputs.get("Emission Color", [1.0, 1.0, 1.0]), 3), dtype=float)
+    if strength > 0 and np.any(colour > 0):
+        carried["emission"] = CarriedInput(tuple(float(x) for x in colour * strength))
+    alpha = _socket_value(inputs.get("Alpha", 1.0), 1)
+    if alpha < 1.0:
+        carried["opacity"] = CarriedInput(float(alpha), None, {"mode": "blend"})
+    try:
+        Material.create(spec.id, constants)
+    except MatremapError as e:
+        raise MatremapError(f"{where}: {e}") from None
+    return MaterialAsset(
+        path=p, format="blend", name=name, model=spec.id, constants=constants, notes=notes, lost=lost, carried=carried
+    )
+
+
+def _surface_principled(mat: dict[str, Any], where: str) -> dict[str, Any]:
+    """The Principled BSDF node linked into a Material Output's Surface (refused otherwise)."""
+    nodes, links = mat["nodes"], mat["links"]
+    into = [lk for lk in links if nodes.get(lk[2], {}).get("type") == "ShaderNodeOutputMaterial" and lk[3] == "Surface"]
+    if not into:
+        raise MatremapError(f"{where} has no surface shader linked into its Material Output")
+    node = nodes[into[0][0]]
+    if node.get("type") != "ShaderNodeBsdfPrincipled":
+        raise MatremapError(
+            f"{where}: its surface is a {node.get('type')}; matremap reads .blend materials whose surface is one "
+            f"Principled BSDF"
+        )
+    return dict(node)
+
+
+def _socket_value(v: Any, channels: int) -> Any:
+    """A socket's value as a parameter value: a float, or RGB (a colour socket's alpha dropped)."""
+    a = np.atleast_1d(np.asarray(v, dtype=float))
+    if channels == 3:
+        return [float(x) for x in (a[:3] if a.size >= 3 else np.repeat(a[:1], 3))]
+    return float(a[0])
+
+
+__all__ = ["GEOMETRY", "MODELS", "material_names", "read", "write", "write_request"]

@@ -58,9 +58,9 @@ class NewImage:
 
 @dataclass
 class Replacement:
-    """One material to replace: its index, the result's constants, maps and normal map file, what it
-    carries (``copied``: the material is a copy of the glTF it came from, which keeps its own emission
-    and occlusion), the source's normal map and the UV set its maps are on."""
+    """One material to replace: its index, the result's constants (a ``gltf:pbr`` result's include its layers),
+    maps and normal map file, what it carries (``copied``: the material is a copy of the glTF it came from,
+    which keeps its own emission and occlusion), the source's normal map and the UV set its maps are on."""
 
     index: int
     consts: dict[str, Any]
@@ -72,6 +72,9 @@ class Replacement:
     uv_set: int = 0
     spec_ext: dict[str, Any] = field(default_factory=dict)
     old_spec: dict[str, Any] = field(default_factory=dict)
+    #: the copied material was read into gltf:pbr (its coat or sheen fitted): a gltf:metal-rough result absorbed
+    #: them, so the copy drops those extensions instead of keeping them over the new base
+    source_layered: bool = False
 
 
 @dataclass

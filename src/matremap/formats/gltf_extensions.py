@@ -187,13 +187,42 @@ def lost_look(found: dict[str, dict[str, Any]]) -> list[str]:
     return lost
 
 
-def extension_notes(found: dict[str, dict[str, Any]]) -> list[str]:
+#: the model a glTF material is read into when a layer carries its look (:func:`layer_values`)
+LAYERED_MODEL = "gltf:pbr"
+#: a clear coat's factor past which it carries the look (a second, sharp highlight over the base)
+COAT_LOOK = 0.5
+
+
+def layer_values(found: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """The ``gltf:pbr`` layer parameters of a material whose clear coat (clearcoatFactor above
+    :data:`COAT_LOOK`) or coloured sheen (as :func:`lost_look` says) carries its look, when those layers have no
+    texture: the material is then read into ``gltf:pbr`` and its layers are fitted, not left out. Empty
+    otherwise (the material is read as ``gltf:metal-rough``, as before)."""
+    cc, sh = found.get(CLEARCOAT), found.get(SHEEN)
+    coat = cc is not None and cc["clearcoatFactor"] > COAT_LOOK and not _textures(cc)
+    sheen = sh is not None and SHEEN in " ".join(lost_look(found)) and not _textures(sh)
+    if not (coat or sheen):
+        return {}
+    out: dict[str, Any] = {}
+    if cc is not None and not _textures(cc):
+        out |= {"clearcoat": cc["clearcoatFactor"], "clearcoatRoughness": cc["clearcoatRoughnessFactor"]}
+    if sh is not None and not _textures(sh):
+        out |= {"sheenColor": list(sh["sheenColorFactor"]), "sheenRoughness": sh["sheenRoughnessFactor"]}
+    return out
+
+
+def extension_notes(found: dict[str, dict[str, Any]], textured: bool = False) -> list[str]:
     """One note per layer extension that does not make the material lost: its values, and what becomes
-    of it (kept in a glTF output, left out elsewhere)."""
+    of it (kept in a glTF output, left out elsewhere; fitted in gltf:pbr when :func:`layer_values` reads it,
+    for a material without textures)."""
     notes = []
     lost = " ".join(lost_look(found))
+    layers = layer_values(found) if not textured else {}
+    if layers:
+        what = ", ".join(f"{k} {_g(v) if isinstance(v, float) else _rgb(v)}" for k, v in layers.items())
+        notes.append(f"read into {LAYERED_MODEL} ({what}): its layers are fitted, not left out")
     cc = found.get(CLEARCOAT)
-    if cc is not None:
+    if cc is not None and "clearcoat" not in layers:
         if cc["clearcoatFactor"] == 0:
             notes.append(f"{CLEARCOAT} has clearcoatFactor 0: no coat")
         else:
@@ -202,7 +231,7 @@ def extension_notes(found: dict[str, dict[str, Any]]) -> list[str]:
                 f"{_textures(cc)}: matremap's models have no coat, so the fit sees the base layer only; {LEFT_BEHIND}"
             )
     sh = found.get(SHEEN)
-    if sh is not None and SHEEN not in lost:
+    if sh is not None and SHEEN not in lost and "sheenColor" not in layers:
         notes.append(
             f"{SHEEN} colour {_rgb(sh['sheenColorFactor'])}, roughness {_g(sh['sheenRoughnessFactor'])}"
             f"{_textures(sh)}: a faint sheen the fit does not see; {LEFT_BEHIND}"
@@ -227,6 +256,7 @@ __all__ = [
     "CLEARCOAT",
     "EMISSIVE_STRENGTH",
     "IOR",
+    "LAYERED_MODEL",
     "SCHEMAS",
     "SHEEN",
     "SPECULAR",
@@ -234,6 +264,7 @@ __all__ = [
     "VOLUME",
     "check_texture_info",
     "extension_notes",
+    "layer_values",
     "lost_look",
     "read_extensions",
 ]

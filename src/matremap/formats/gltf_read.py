@@ -46,10 +46,13 @@ from matremap.formats.gltf_container import (
 from matremap.formats.gltf_extensions import (
     EMISSIVE_STRENGTH,
     IOR,
+    LAYERED_MODEL,
     SCHEMAS,
+    SHEEN,
     SPECULAR,
     check_texture_info,
     extension_notes,
+    layer_values,
     lost_look,
     read_extensions,
 )
@@ -201,20 +204,27 @@ def read(
             "glTF output keeps the normal map"
         )
     carried = textures.read_carried(m, pbr, found)
-    notes += extension_notes(found)
+    notes += extension_notes(found, textured=bool(maps))
     note_unknown(ext, obj, notes)
+    # a coat or sheen carrying the look of a uniform material: read into gltf:pbr, where it is fitted (a textured
+    # one stays gltf:metal-rough, its layers noted and kept in a glTF copy: textured layered materials are not
+    # converted yet)
+    layers, lost = (layer_values(found) if not maps else {}), lost_look(found)
+    if layers:
+        constants |= layers
+        lost = [w for w in lost if not w.startswith(SHEEN)]
     return MaterialAsset(
         path=p,
         format="gltf",
         name=name,
-        model=MODEL,
+        model=LAYERED_MODEL if layers else MODEL,
         constants=constants,
         textures=maps,
         normal=normal,
         notes=notes,
         document=doc,
         index=idx,
-        lost=lost_look(found),
+        lost=lost,
         carried=carried,
     )
 

@@ -48,7 +48,16 @@ from matremap.formats.gltf_edit import (
     refuse_overwrites,
     update_extension_lists,
 )
-from matremap.formats.gltf_extensions import EMISSIVE_STRENGTH, IOR, SPECULAR
+from matremap.formats.gltf_extensions import (
+    CLEARCOAT,
+    EMISSIVE_STRENGTH,
+    IOR,
+    LAYERED_MODEL,
+    SHEEN,
+    SPECULAR,
+    TRANSMISSION,
+    VOLUME,
+)
 from matremap.formats.gltf_read import DEFAULT_IOR, MODEL
 from matremap.formats.gltf_textures import linear_values
 
@@ -60,12 +69,12 @@ def result_values(result: Any) -> tuple[dict[str, Any], dict[str, np.ndarray], P
 
     if not isinstance(result, Material | MapSet):
         raise MatremapError(f"cannot write {type(result).__name__} as glTF; give a material or a map set")
-    if get_model(result.model).id != MODEL:
+    spec = get_model(result.model)
+    if spec.id not in (MODEL, LAYERED_MODEL):
         raise MatremapError(
-            f"glTF stores {MODEL} materials, and this result is {result.model}; remap it onto {MODEL} "
-            f"first (e.g. matremap remap ... --to {MODEL})"
+            f"glTF stores {MODEL} and {LAYERED_MODEL} materials, and this result is {result.model}; remap it onto "
+            f"one of them first (e.g. matremap remap ... --to {MODEL})"
         )
-    spec = get_model(MODEL)
     if isinstance(result, Material):
         return dict(material_values(result)), {}, None, []
     consts: dict[str, Any] = {p.name: p.default_array if p.channels == 3 else p.default for p in spec.params}
@@ -76,6 +85,10 @@ def result_values(result: Any) -> tuple[dict[str, Any], dict[str, np.ndarray], P
         if name == "ior":
             raise MatremapError(
                 f"{f}: {IOR} has no texture, so a map of ior cannot be written to glTF; use a uniform ior"
+            )
+        if name in LAYER_EXTENSIONS:
+            raise MatremapError(
+                f"{f}: a map of {name} (a layer extension's texture) is not written to glTF yet; use a uniform {name}"
             )
         img, _ = read_image(f, result.colorspace.get(name), colour=pspec.channels == 3 and pspec.role != "other")
         if pspec.channels == 3:
@@ -285,6 +298,7 @@ def write(out: str | os.PathLike, result: Any, source: MaterialAsset | None = No
         copied=gdoc is not None,
         source_normal=source.normal if source is not None else None,
         uv_set=uv_set,
+        source_layered=gdoc is not None and source is not None and source.model == LAYERED_MODEL,
     )
     return commit(out, target, [rep], inputs, force)
 
@@ -385,10 +399,65 @@ def finish_material(doc: dict[str, Any], rep: Replacement, infos: dict[str, dict
         exts[SPECULAR] = rep.spec_ext
     else:
         exts.pop(SPECULAR, None)
+    if "clearcoat" in rep.consts:
+        layer_extensions(exts, rep.consts, keep_unread=rep.copied)
+    elif rep.source_layered:
+        for name in (CLEARCOAT, SHEEN):
+            exts.pop(name, None)
     if not exts:
         mat.pop("extensions")
     if not pbr:
         mat.pop("pbrMetallicRoughness")
 
 
-__all__ = ["commit", "finish_material", "plan_material", "result_values", "texture_values", "write"]
+#: gltf:pbr's layer parameters, each written into the extension named (KHR_materials_*)
+LAYER_EXTENSIONS = {
+    "clearcoat": CLEARCOAT,
+    "clearcoatRoughness": CLEARCOAT,
+    "sheenColor": SHEEN,
+    "sheenRoughness": SHEEN,
+    "transmission": TRANSMISSION,
+    "thickness": VOLUME,
+    "attenuationDistance": VOLUME,
+    "attenuationColor": VOLUME,
+}
+
+
+def layer_extensions(exts: dict[str, Any], consts: dict[str, Any], keep_unread: bool = False) -> None:
+    """Set (or drop, where the layer is off) the layer extensions of a ``gltf:pbr`` result's uniform values:
+    KHR_materials_clearcoat (clearcoatFactor > 0), _sheen (a sheen colour not black), _transmission
+    (transmissionFactor > 0) and _volume (thicknessFactor > 0; attenuationDistance 0 is glTF's default,
+    infinity, so it is left out). The ratified READMEs' property names; a replaced extension loses its textures
+    (the result's values are uniform). ``keep_unread``: in a copy of a glTF source, a transmission or volume the
+    result has off is the source's, which the reader does not read into gltf:pbr (only its coat and sheen): kept."""
+
+    def one(name: str) -> float:
+        return float(np.asarray(consts[name], dtype=float).reshape(-1)[0])
+
+    def rgb(name: str) -> list[float]:
+        return [float(x) for x in np.broadcast_to(np.asarray(consts[name], dtype=float), (3,))]
+
+    values: dict[str, dict[str, Any] | None] = {
+        CLEARCOAT: {"clearcoatFactor": one("clearcoat"), "clearcoatRoughnessFactor": one("clearcoatRoughness")}
+        if one("clearcoat") > 0
+        else None,
+        SHEEN: {"sheenColorFactor": rgb("sheenColor"), "sheenRoughnessFactor": one("sheenRoughness")}
+        if max(rgb("sheenColor")) > 0
+        else None,
+        TRANSMISSION: {"transmissionFactor": one("transmission")} if one("transmission") > 0 else None,
+        VOLUME: {
+            "thicknessFactor": one("thickness"),
+            "attenuationColor": rgb("attenuationColor"),
+            **({"attenuationDistance": one("attenuationDistance")} if one("attenuationDistance") > 0 else {}),
+        }
+        if one("thickness") > 0
+        else None,
+    }
+    for name, ext in values.items():
+        if ext is not None:
+            exts[name] = ext
+        elif not (keep_unread and name in (TRANSMISSION, VOLUME)):
+            exts.pop(name, None)
+
+
+__all__ = ["commit", "finish_material", "layer_extensions", "plan_material", "result_values", "texture_values", "write"]

@@ -19,6 +19,7 @@ from matremap.errors import MatremapError
 from matremap.formats.asset import MaterialAsset
 from matremap.formats.gltf_container import GltfDocument
 from matremap.formats.gltf_edit import Replacement, Target
+from matremap.formats.gltf_extensions import LAYERED_MODEL
 from matremap.formats.gltf_read import material_names, read
 from matremap.formats.gltf_write import commit, result_values
 
@@ -72,7 +73,19 @@ def write_all(
     for asset, (consts, maps, normal, _) in zip(own, values, strict=True):
         adoc = asset.document
         uv_set = adoc.uv_set if isinstance(adoc, GltfDocument) else 0
-        reps.append(Replacement(asset.index, consts, maps, normal, dict(asset.carried), True, asset.normal, uv_set))
+        reps.append(
+            Replacement(
+                asset.index,
+                consts,
+                maps,
+                normal,
+                dict(asset.carried),
+                True,
+                asset.normal,
+                uv_set,
+                source_layered=asset.model == LAYERED_MODEL,
+            )
+        )
     return commit(out, target, reps, inputs, force)
 
 

@@ -23,6 +23,13 @@ document without materials falls back to its shader nodes) and reads its surface
   for, its dielectric lobe is energy-conserving differently -- so the asset carries a warning note
   that says so and lists every input it does not remap whose value differs from the node's
   default (coat, sheen, subsurface, transmission, thin film, anisotropy, ...);
+* a material whose look a layer carries -- a coloured coat or a coat of weight above 0.5, a sheen / fuzz above
+  0.5, gltf_pbr's clearcoat above 0.5 or a coloured sheen_color (:func:`lost_look`) -- is read instead into the
+  shader's own layered model (:data:`LAYERED`: ``mtlx:standard_surface``, ``mtlx:open_pbr_surface``, ``gltf:pbr``),
+  every input it models by name (OpenPBR's boolean ``geometry_thin_walled`` as 0 / 1; gltf_pbr's
+  ``attenuation_distance`` default of "infinity" as gltf:pbr's 0), so that a fit carries the layer onto the
+  target's instead of dropping it (issue 16). A transmission above 0.5 stays lost: no fit sees transmission yet
+  (the probe is opaque);
 * ``UsdPreviewSurface`` (MaterialX's ``ND_UsdPreviewSurface_surfaceshader``) maps one to one onto
   ``usd:preview_surface``, whose parameters are its input names; ``useSpecularWorkflow`` becomes the
   model's option, and a specular-workflow material is read by the same rule as in a USD file
@@ -105,6 +112,45 @@ SHADERS["UsdPreviewSurface"] = {
 }
 #: shader node category -> the matremap model its inputs are read into (gltf:metal-rough unless named here)
 MODELS = {"UsdPreviewSurface": "usd:preview_surface"}
+#: shader node category -> the layered model that draws it as its specification does, used for a material whose
+#: look a layer carries (see :func:`lost_look`): its coat and sheen are then fitted, not dropped
+LAYERED = {
+    "standard_surface": "mtlx:standard_surface",
+    "open_pbr_surface": "mtlx:open_pbr_surface",
+    "gltf_pbr": "gltf:pbr",
+}
+#: gltf_pbr input -> gltf:pbr parameter (MaterialX 1.39 ``libraries/bxdf/gltf_pbr.mtlx``); the MaterialX models'
+#: parameters are their input names
+GLTF_PBR_LAYERED = {
+    **SHADERS["gltf_pbr"],
+    "clearcoat": "clearcoat",
+    "clearcoat_roughness": "clearcoatRoughness",
+    "sheen_color": "sheenColor",
+    "sheen_roughness": "sheenRoughness",
+    "transmission": "transmission",
+    "thickness": "thickness",
+    "attenuation_distance": "attenuationDistance",
+    "attenuation_color": "attenuationColor",
+}
+#: inputs of MaterialX type boolean, read as 0 / 1 (OpenPBR's thin-walled switch)
+BOOLEAN_INPUTS = frozenset({"geometry_thin_walled", "thin_walled"})
+#: inputs that name the dielectric Fresnel and what switches the lobe off, per model read into:
+#: (ior, specular weight, specular colour, metalness)
+_IOR_INPUTS = {
+    "gltf:metal-rough": ("ior", "specular", "specularColor", "metallic"),
+    "gltf:pbr": ("ior", "specular", "specularColor", "metallic"),
+    "mtlx:standard_surface": ("specular_IOR", "specular", "specular_color", "metalness"),
+    "mtlx:open_pbr_surface": ("specular_ior", "specular_weight", "specular_color", "base_metalness"),
+}
+
+
+def layered_inputs(category: str) -> dict[str, str]:
+    """Shader input -> parameter of the layered model :data:`LAYERED` reads ``category`` into."""
+    if category == "gltf_pbr":
+        return dict(GLTF_PBR_LAYERED)
+    return {p.name: p.name for p in get_model(LAYERED[category]).params}
+
+
 #: the input that multiplies base_color
 WEIGHT = {"standard_surface": "base", "open_pbr_surface": "base_weight"}
 #: the shader input carrying the (tangent-space, through normalmap) normal
@@ -191,10 +237,15 @@ class _ShaderReader:
     """The inputs of one shader node: values (or the node definition's defaults) and the graphs
     feeding them, as :class:`_Field` s, and the textures they become."""
 
-    def __init__(self, ctx: _Ctx, shader: Any, doc: Any) -> None:
+    def __init__(self, ctx: _Ctx, shader: Any, doc: Any, layered: bool = False) -> None:
         self.ctx, self.shader = ctx, shader
         self.category = shader.getCategory()
-        self.model = MODELS.get(self.category, MODEL)
+        self.layered = layered
+        if layered:
+            self.model, self.table, self.weight = LAYERED[self.category], layered_inputs(self.category), None
+        else:
+            self.model, self.table = MODELS.get(self.category, MODEL), SHADERS[self.category]
+            self.weight = WEIGHT.get(self.category)
         self.ev = GraphEvaluator(doc, ctx.path, ctx.file, ctx.notes)
 
     def field(self, name: str, typ: str) -> _Field:
@@ -222,10 +273,13 @@ class _ShaderReader:
         """Model parameter -> its field (glTF's base colour x its weight)."""
         spec = get_model(self.model)
         out = {}
-        for input_name, param in SHADERS[self.category].items():
-            out[param] = self.field(input_name, "color3" if spec.param(param).channels == 3 else "float")
-        if self.category in WEIGHT:
-            out["baseColor"] = out["baseColor"].times(self.field(WEIGHT[self.category], "float"))
+        for input_name, param in self.table.items():
+            typ = (
+                "boolean" if input_name in BOOLEAN_INPUTS else "color3" if spec.param(param).channels == 3 else "float"
+            )
+            out[param] = self.field(input_name, typ)
+        if self.weight is not None:
+            out["baseColor"] = out["baseColor"].times(self.field(self.weight, "float"))
         return out
 
     def textures(self, fields: dict[str, _Field]) -> dict[str, TextureRef]:
@@ -349,7 +403,7 @@ class _ShaderReader:
     def skipped(self) -> list[str]:
         """The inputs not remapped that are textured or differ from their defaults, as ``name=value``."""
         out = []
-        table, weight = SHADERS[self.category], WEIGHT.get(self.category)
+        table, weight = self.table, self.weight
         for inp in self.shader.getInputs():
             n = inp.getName()
             if n in table or n == weight or n in _NOT_LISTED:
@@ -409,16 +463,20 @@ def _shader_asset(ctx: _Ctx, shader: Any, name: str, index: int, doc: Any) -> Ma
     cat = shader.getCategory()
     if cat not in SHADERS:
         raise MatremapError(f"{ctx.path}: material {name!r} uses a {cat!r} shader; matremap reads {', '.join(SHADERS)}")
-    reader = _ShaderReader(ctx, shader, doc)
+    lost = lost_look(shader)
+    layered = cat in LAYERED and any(not _is_transmission(w) for w in lost)
+    reader = _ShaderReader(ctx, shader, doc, layered)
     fields = reader.params()
-    if reader.model == MODEL:
-        _check_ior(ctx, shader, fields)
+    if reader.model in _IOR_INPUTS:
+        _check_ior(ctx, shader, fields, _IOR_INPUTS[reader.model])
+    if layered:
+        _distance_default(fields, shader)
+        lost = [w for w in lost if _is_transmission(w)]
     constants = {k: _constant(f) for k, f in fields.items() if not f.textured}
     textures = reader.textures(fields)
     normal = reader.normal()
     carried = reader.carried()
-    lost = lost_look(shader)
-    _note_skipped(ctx, cat, reader.skipped())
+    _note_skipped(ctx, cat, reader.skipped(), reader.model if layered else None)
     if cat == "UsdPreviewSurface":
         from matremap.dialects.usd import specular_workflow
 
@@ -451,17 +509,18 @@ def _constant(f: _Field) -> Any:
     return float(v[0]) if v.size == 1 else [float(x) for x in v]
 
 
-def _check_ior(ctx: _Ctx, shader: Any, fields: dict[str, _Field]) -> None:
+def _check_ior(ctx: _Ctx, shader: Any, fields: dict[str, _Field], names: tuple[str, str, str, str]) -> None:
     """An IOR below 1 (see the module docstring): read as the default where the specular lobe is off,
-    else refused."""
-    f = fields["ior"]
+    else refused. ``names``: the model's (ior, specular weight, specular colour, metalness) parameters."""
+    ior_name, weight, colour, metalness = names
+    f = fields[ior_name]
     if f.textured:
         return
     ior = float(np.asarray(f.evaluate()).reshape(-1)[0])
     if ior >= 1.0:
         return
     input_name = f.name
-    off = {k: fields[k] for k in ("specular", "specularColor", "metallic")}
+    off = {"specular": fields[weight], "specularColor": fields[colour], "metallic": fields[metalness]}
     reason = ""
     if not off["specular"].textured and float(_constant(off["specular"])) == 0.0:
         reason = "the specular weight is 0"
@@ -472,10 +531,10 @@ def _check_ior(ctx: _Ctx, shader: Any, fields: dict[str, _Field]) -> None:
     if not reason:
         raise MatremapError(
             f"{ctx.path}: {shader.getName()}.{input_name}={ior:g}: an IOR below 1 gives a Fresnel of 1 at "
-            f"every angle in MaterialX's dielectric (total reflection), a mirror that gltf:metal-rough's "
-            f"dielectric cannot express; set {input_name} to 1 or more (1.5 is its default)"
+            f"every angle in MaterialX's dielectric (total reflection), a mirror that matremap's dielectric "
+            f"cannot express; set {input_name} to 1 or more (1.5 is its default)"
         )
-    fields["ior"] = _Field(input_name, np.array([1.5]))
+    fields[ior_name] = _Field(input_name, np.array([1.5]))
     ctx.notes.append(f"{input_name}={ior:g} has no effect since {reason}; ior read as the default 1.5")
 
 
@@ -484,11 +543,15 @@ def _check_ior(ctx: _Ctx, shader: Any, fields: dict[str, _Field]) -> None:
 #: Surface's copper; transmission is glass; sheen is velvet.
 _LOOK = {
     "coat": ("coat_color", 0.05),
+    "coat_weight": ("coat_color", 0.05),
+    "clearcoat": (None, 0.5),
     "transmission": (None, 0.5),
     "transmission_weight": (None, 0.5),
     "sheen": (None, 0.5),
     "fuzz_weight": (None, 0.5),
 }
+#: a coat weight past which even a white coat carries the look (a second, sharp highlight over the base)
+_WHITE_COAT = 0.5
 
 
 def lost_look(shader: Any) -> list[str]:
@@ -508,9 +571,32 @@ def lost_look(shader: Any) -> list[str]:
             rgb = [float(x) for x in c.getValueString().split(",")] if c is not None and c.getValueString() else []
             if rgb and max(abs(x - 1.0) for x in rgb) > limit:
                 lost.append(f"{weight}={w:g} with {colour}={', '.join(f'{x:.3g}' for x in rgb)}")
+            elif w > _WHITE_COAT:
+                lost.append(f"{weight}={w:g}")
         elif w > limit:
             lost.append(f"{weight}={w:g}")
+    sheen = shader.getInput("sheen_color") if shader.getCategory() == "gltf_pbr" else None
+    if (
+        sheen is not None
+        and sheen.getValueString()
+        and not (sheen.getAttribute("nodename") or sheen.getAttribute("nodegraph"))
+    ):
+        rgb = [float(x) for x in sheen.getValueString().split(",")]
+        if max(rgb) > 0.5:  # a coloured sheen: velvet (glTF's rule, formats/gltf_extensions.lost_look)
+            lost.append(f"sheen_color={', '.join(f'{x:.3g}' for x in rgb)}")
     return lost
+
+
+def _is_transmission(lost: str) -> bool:
+    """Whether an entry of :func:`lost_look` is a transmission (which no fit sees yet: the probe is opaque)."""
+    return lost.startswith("transmission")
+
+
+def _distance_default(fields: dict[str, _Field], shader: Any) -> None:
+    """gltf_pbr's attenuation_distance of 'infinity' (MaterialX declares a large default) is gltf:pbr's 0."""
+    f = fields.get("attenuationDistance")
+    if shader.getCategory() == "gltf_pbr" and f is not None and f.value is not None and float(f.value[0]) >= 1e6:
+        fields["attenuationDistance"] = _Field(f.name, np.zeros(1))
 
 
 def _float_input(shader: Any, name: str) -> float | None:
@@ -523,8 +609,16 @@ def _float_input(shader: Any, name: str) -> float | None:
         return None
 
 
-def _note_skipped(ctx: _Ctx, category: str, skipped: list[str]) -> None:
-    """Note the inputs not remapped; for a translated shader, warn first that the translation is approximate."""
+def _note_skipped(ctx: _Ctx, category: str, skipped: list[str], layered: str | None = None) -> None:
+    """Note the inputs not remapped; for a translated shader, warn first that the translation is approximate;
+    a shader read into its own layered model (``layered``) says so."""
+    if layered is not None:
+        ctx.notes.insert(
+            0,
+            f"{category} read into {layered} (its layers are fitted, not dropped)"
+            + (f"; inputs not modelled: {', '.join(skipped)}" if skipped else ""),
+        )
+        return
     if category in ("gltf_pbr", "UsdPreviewSurface"):
         if skipped:
             ctx.notes.append(f"{category} inputs not remapped: {', '.join(skipped)}")
@@ -555,7 +649,8 @@ def _clamp_colours(constants: dict[str, Any], notes: list[str], model: str = MOD
 def read(
     path: str | Path, material: str | int | None = None, *, confinement: Confinement | None = None
 ) -> MaterialAsset:
-    """One material of a MaterialX document as a ``gltf:metal-rough`` :class:`MaterialAsset`.
+    """One material of a MaterialX document as a :class:`MaterialAsset` (``gltf:metal-rough``; its own layered
+    model where a layer carries the look; ``usd:preview_surface``; see the module docstring).
     ``material``: a surfacematerial's name or index (the first by default). Texture files must lie
     in the document's folder or a folder ``confinement`` allows (default: the one in effect)."""
     p = Path(path)

@@ -482,13 +482,14 @@ def finish(scene: MitsubaScene, parts: Parts, index: int) -> MaterialAsset:
     )
 
 
-#: principled lobes no other matremap model has, and what they are
-LAYERS = {"clearcoat": "a clear coat", "sheen": "sheen", "spec_trans": "transmission", "anisotropic": "anisotropy"}
+#: principled lobes the embedded renderer does not draw, and what they are (its clearcoat and sheen it draws, and
+#: fits carry them onto the other layered models' coat and sheen)
+LAYERS = {"spec_trans": "transmission", "anisotropic": "anisotropy"}
 
 
 def lost_layers(parts: Parts) -> list[str]:
-    """The look a ``principled`` material carries in lobes only ``mitsuba3:principled`` has (non-zero
-    clearcoat, sheen, spec_trans, anisotropic): kept onto itself, refused onto other models."""
+    """The look a ``principled`` material carries in lobes no fit can draw (non-zero spec_trans, anisotropic):
+    kept onto itself, refused onto other models."""
     if parts.model != "mitsuba3:principled":
         return []
     lost = []

@@ -1,4 +1,10 @@
-"""MaterialX documents written from gltf:metal-rough materials: one material, or every material of a file.
+"""MaterialX documents written from gltf:metal-rough, gltf:pbr, mtlx:open_pbr_surface and mtlx:standard_surface
+materials: one material, or every material of a file.
+
+A ``gltf:*`` result becomes a ``gltf_pbr`` node (gltf:pbr's layers in its ``clearcoat``, ``sheen_*``,
+``transmission``, ``thickness`` and ``attenuation_*`` inputs), an ``mtlx:*`` result the ``open_pbr_surface`` or
+``standard_surface`` node whose inputs its parameters are named after (Standard Surface v1.0.1, OpenPBR Surface
+v1.1 as MaterialX 1.39 declares them).
 
 Sources: the MaterialX specification v1.39 (documents, ``surfacematerial``, ``nodename`` connections,
 ``colorspace`` on ``file`` inputs) and the ``gltf_pbr`` node of its data library
@@ -51,6 +57,29 @@ INPUTS = {
     "specular": "specular",
     "specularColor": "specular_color",
 }
+#: gltf:pbr's layer parameters -> gltf_pbr inputs (MaterialX 1.39 ``libraries/bxdf/gltf_pbr.mtlx``)
+LAYER_INPUTS = {
+    "clearcoat": "clearcoat",
+    "clearcoatRoughness": "clearcoat_roughness",
+    "sheenColor": "sheen_color",
+    "sheenRoughness": "sheen_roughness",
+    "transmission": "transmission",
+    "thickness": "thickness",
+    "attenuationDistance": "attenuation_distance",
+    "attenuationColor": "attenuation_color",
+}
+#: model -> (the shader node written for it, its parameter -> input); the MaterialX models' parameters are
+#: their inputs' names (dialects/mtlx.py)
+NODES: dict[str, tuple[str, dict[str, str] | None]] = {
+    MODEL: ("gltf_pbr", INPUTS),
+    "gltf:pbr": ("gltf_pbr", {**INPUTS, **LAYER_INPUTS}),
+    "mtlx:open_pbr_surface": ("open_pbr_surface", None),
+    "mtlx:standard_surface": ("standard_surface", None),
+}
+#: inputs of MaterialX type boolean (written true / false)
+BOOLEAN_INPUTS = frozenset({"geometry_thin_walled", "thin_walled"})
+#: the input of each written shader that takes a normal map
+NORMAL_INPUT = {"gltf_pbr": "normal", "standard_surface": "normal", "open_pbr_surface": "geometry_normal"}
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
 
@@ -82,11 +111,20 @@ def add_material(
     name: str,
     shader_name: str | None = None,
 ) -> Any:
-    """Add a ``gltf_pbr`` shader (named ``shader_name``, else ``SR_<name>``) for ``m`` to ``doc``:
-    ``maps`` are file names (relative to the document) for textured parameters, ``colorspace`` their
-    encodings (srgb/linear), ``normal`` the normal map's file. Returns the shader node."""
-    shader = doc.addNode("gltf_pbr", shader_name or doc.createValidChildName(f"SR_{name}"), "surfaceshader")
-    for param, input_name in INPUTS.items():
+    """Add the shader of ``m``'s model (:data:`NODES`: ``gltf_pbr``, ``open_pbr_surface`` or
+    ``standard_surface``; named ``shader_name``, else ``SR_<name>``) to ``doc``: ``maps`` are file names
+    (relative to the document) for textured parameters, ``colorspace`` their encodings (srgb/linear),
+    ``normal`` the normal map's file. glTF's attenuationDistance 0 (infinity) is left at the node's default.
+    Returns the shader node."""
+    category, table = NODES[m.model]
+    table = table if table is not None else {p.name: p.name for p in m.spec.params}
+    shader = doc.addNode(category, shader_name or doc.createValidChildName(f"SR_{name}"), "surfaceshader")
+    for param, input_name in table.items():
+        if param == "attenuationDistance" and param not in maps and float(m.values[param][0]) == 0.0:
+            continue
+        if input_name in BOOLEAN_INPUTS:  # OpenPBR's thin-walled switch: a boolean, not a map
+            shader.addInput(input_name, "boolean").setValueString("true" if m.values[param][0] >= 0.5 else "false")
+            continue
         typ = "color3" if m.spec.param(param).channels == 3 else "float"
         inp = shader.addInput(input_name, typ)
         if param in maps:
@@ -97,7 +135,7 @@ def add_material(
         img = _image(doc, f"image_{name}_normal", "vector3", normal, None)
         nm = doc.addNode("normalmap", doc.createValidChildName(f"normalmap_{name}"), "vector3")
         nm.addInput("in", "vector3").setNodeName(img.getName())
-        shader.addInput("normal", "vector3").setNodeName(nm.getName())
+        shader.addInput(NORMAL_INPUT[category], "vector3").setNodeName(nm.getName())
     return shader
 
 
@@ -124,7 +162,7 @@ def _serialise(doc: Any, out: Path) -> str:
 def _place_maps(result: Any, out: Path, prefix: str, files: AtomicFiles) -> tuple[Material, dict, dict, str | None]:
     """Stage the maps of a result beside ``out`` as ``<stem>_<prefix><param>``; (material, file names,
     colour spaces, normal map file)."""
-    m, maps, cs, normal = result_parts(result, "the MaterialX writer", (MODEL,))
+    m, maps, cs, normal = result_parts(result, "the MaterialX writer", tuple(NODES))
     names: dict[str, str] = {}
     spaces: dict[str, str] = {}
     for param, src in maps.items():
@@ -158,7 +196,7 @@ def write(out: str | Path, result: Any, source: MaterialAsset | None = None, for
     looks, node names and other materials kept, as :func:`write_all` copies one; the glTF and USD writers
     copy their sources the same way). The document and its files are written together or not at all."""
     out = Path(out)
-    result_parts(result, "the MaterialX writer", (MODEL,))
+    result_parts(result, "the MaterialX writer", tuple(NODES))
     if source is not None and source.format == FORMAT and Path(source.path).suffix.lower() == ".mtlx":
         return write_all(out, [(source.name, result)], Path(source.path), force)
     check_output(out, force, (".mtlx",))
@@ -170,7 +208,7 @@ def write(out: str | Path, result: Any, source: MaterialAsset | None = None, for
         m, maps, spaces, nfile = _place_maps(result, out, "", files)
         doc = build_document(m, maps, spaces, nfile, name)
         shader = doc.getNode(doc.getNode(name).getInput("surfaceshader").getNodeName())
-        add_carried(doc, shader, carried, out, name, "", files)
+        add_carried(doc, shader, carried, out, name, "", files, source.notes if source is not None else None)
         files.write_text(out, _serialise(doc, out))
     return out
 
@@ -180,10 +218,24 @@ def write(out: str | Path, result: Any, source: MaterialAsset | None = None, for
 
 
 def add_carried(
-    doc: Any, shader: Any, carried: dict[str, CarriedInput], out: Path, name: str, prefix: str, files: AtomicFiles
+    doc: Any,
+    shader: Any,
+    carried: dict[str, CarriedInput],
+    out: Path,
+    name: str,
+    prefix: str,
+    files: AtomicFiles,
+    notes: list[str] | None = None,
 ) -> None:
-    """Write a source's carried inputs into ``gltf_pbr`` node ``shader`` of material ``name`` (see the
-    module docstring); texture files are staged beside ``out`` as ``<stem>_<prefix><key>.exr``."""
+    """Write a source's carried inputs into shader ``shader`` of material ``name`` (see the module docstring);
+    texture files are staged beside ``out`` as ``<stem>_<prefix><key>.exr``. An ``open_pbr_surface`` or
+    ``standard_surface`` node takes the emission colour (weight 1) and the opacity in its own inputs
+    (:data:`~matremap.formats.mtlx_document.EMISSION`, ``OPACITY``); it has no occlusion, which is then left
+    out with a note in ``notes``."""
+    category = shader.getCategory()
+    if category != "gltf_pbr":
+        _add_carried_surface(doc, shader, carried, out, name, prefix, files, notes)
+        return
     emission = carried.get("emission")
     if emission is not None:
         v = np.broadcast_to(np.asarray(emission.value if emission.value is not None else 1.0, float), (3,))
@@ -204,6 +256,46 @@ def add_carried(
         )
         img = _image(doc, f"image_{name}_occlusion", "float", dest, None)
         shader.addInput("occlusion", "float").setNodeName(img.getName())
+
+
+def _add_carried_surface(
+    doc: Any,
+    shader: Any,
+    carried: dict[str, CarriedInput],
+    out: Path,
+    name: str,
+    prefix: str,
+    files: AtomicFiles,
+    notes: list[str] | None,
+) -> None:
+    """:func:`add_carried` for an ``open_pbr_surface`` / ``standard_surface`` node."""
+    category = shader.getCategory()
+    colour, weight = EMISSION[category]
+    emission = carried.get("emission")
+    if emission is not None:
+        v = np.broadcast_to(np.asarray(emission.value if emission.value is not None else 1.0, float), (3,))
+        _set(doc, shader, colour, "color3", v, emission.texture, out, f"{prefix}emission", name, files)
+        shader.addInput(weight, "float").setValueString("1.0")
+    opacity = carried.get("opacity")
+    if opacity is not None:
+        v = np.asarray(opacity.value if opacity.value is not None else 1.0, float).reshape(-1)[:1]
+        typ, channels = ("color3", 3) if category == "standard_surface" else ("float", 1)
+        _set(
+            doc,
+            shader,
+            OPACITY[category],
+            typ,
+            np.repeat(v, channels),
+            opacity.texture,
+            out,
+            f"{prefix}opacity",
+            name,
+            files,
+        )
+        if opacity.settings.get("mode") == "mask" and notes is not None:
+            notes.append(f"the source's opacity mask is written as {category}'s plain opacity (no cutoff there)")
+    if carried.get("occlusion") is not None and notes is not None:
+        notes.append(f"the source's occlusion is not written: {category} has no occlusion input")
 
 
 def _set(
@@ -374,10 +466,19 @@ def _carry_connections(doc: Any, old: Any, new: Any) -> None:
     """Give ``gltf_pbr`` node ``new`` the emission and opacity of shader ``old`` -- its values, or the same
     connections (a ``multiply`` where both colour and weight are connected)."""
     cat = old.getCategory()
-    if cat == "gltf_pbr":
-        for n in ("emissive", "emissive_strength", "alpha", "alpha_mode", "alpha_cutoff", "occlusion"):
-            if old.getInput(n) is not None:
+    if cat == new.getCategory():
+        names = ("emissive", "emissive_strength", "alpha", "alpha_mode", "alpha_cutoff", "occlusion")
+        for n in names if cat == "gltf_pbr" else (*EMISSION.get(cat, ()), OPACITY.get(cat, "")):
+            if n and old.getInput(n) is not None:
                 new.addInput(n, old.getInput(n).getType()).copyContentFrom(old.getInput(n))
+        return
+    if new.getCategory() != "gltf_pbr":
+        carried = [n for n in (*EMISSION.get(cat, ()), OPACITY.get(cat, "")) if n and old.getInput(n) is not None]
+        if carried:
+            raise MatremapError(
+                f"{old.getName()}: its {', '.join(carried)} cannot be carried from a {cat} node into a "
+                f"{new.getCategory()} one yet; write the material into a new file (not a copy of the source)"
+            )
         return
     if cat in EMISSION:
         _carry_emission(doc, old, new, *EMISSION[cat])
