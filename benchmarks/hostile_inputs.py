@@ -325,6 +325,7 @@ def interrupted(tmp: Path, args: list[str], sig: int, point: Callable[[Path], bo
             stderr=log,
             text=True,
             start_new_session=True,
+            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),  # a background shell ignores SIGINT
         )
         deadline = time.time() + 120
         while time.time() < deadline and proc.poll() is None and not point(run):
@@ -338,8 +339,10 @@ def interrupted(tmp: Path, args: list[str], sig: int, point: Callable[[Path], bo
     if sig == signal.SIGINT:
         if "Traceback" in err:
             return "TRACEBACK on SIGINT"
-        if proc.returncode != 130 or err.strip().splitlines()[-1:] != ["matremap: interrupted"]:
-            return f"SIGINT: exit {proc.returncode}, {err.strip().splitlines()[-1:]}"
+        last = (err.strip().splitlines() or [""])[-1]
+        said = last == "matremap: interrupted" or (args[0] == "sweep" and last.startswith("interrupted: "))
+        if proc.returncode != 130 or not said:  # a sweep stopped between points says how far it got
+            return f"SIGINT: exit {proc.returncode}, {last!r}"
     again = cli(args, run)
     if again.returncode != 0:
         return f"rerun exit {again.returncode}: {again.stderr.strip().splitlines()[-1][:70]}"
