@@ -235,3 +235,21 @@ def test_a_diffuse_map_the_transform_never_saw_is_flagged(tmp_path, ward_to_as):
     report, _ = quiet_convert(load_map_set(tmp_path / "in"), ward_to_as, tmp_path / "out", workers=1)
     assert report.outside == 2 * W + 2  # two rows of non-zero diffuse plus the two texels of fields()
     assert any("diffuse held at 0" in n for n in report.notes)
+
+
+def test_maps_of_one_value_each_stay_maps_when_all_are_uniform(tmp_path, ward_to_as):
+    """A target parameter the same at every texel becomes a constant, but a map set needs a map: when every
+    map is uniform (a glTF base colour texture of one colour) they all stay maps. All were dropped, and the
+    remap failed after converting ('material.json binds no map')."""
+    alpha, rho, normal = fields()
+    flat = make_set(tmp_path / "flat", np.full_like(alpha, 0.3), np.full_like(rho, 0.1), normal)
+    report, _ = quiet_convert(flat, ward_to_as, tmp_path / "flat-out", workers=1)
+    out = load_map_set(tmp_path / "flat-out")
+    assert set(out.maps) == {"alpha", "F0"} and not any("same at every" in n for n in report.notes)
+    values = read_image(out.maps["alpha"])[0]
+    assert np.ptp(values) == 0  # one value, written as a map
+    mixed = make_set(tmp_path / "mixed", np.full_like(alpha, 0.3), rho, normal)  # one uniform: a constant
+    report, _ = quiet_convert(mixed, ward_to_as, tmp_path / "mixed-out", workers=1)
+    out = load_map_set(tmp_path / "mixed-out")
+    assert set(out.maps) == {"F0"} and "alpha" in out.constants
+    assert any(n.startswith("alpha is the same at every texel") for n in report.notes)

@@ -259,8 +259,12 @@ def _drop_uniform(
     outputs: list[_Output], results: Sequence[Mapping[str, Any]], files: AtomicFiles, notes: list[str]
 ) -> list[_Output]:
     """The outputs to keep as maps: those of :func:`uniform_outputs` leave the group (their values go into
-    the manifest as constants), with a note each."""
+    the manifest as constants), with a note each; unless every map is uniform (a texture of one colour):
+    a map set needs a map, so they all stay (a glTF whose base colour texture was one colour failed after
+    converting, "material.json binds no map")."""
     uniform = uniform_outputs(results)
+    if all(o.param in uniform for o in outputs if o.param is not None):
+        return outputs
     for o in outputs:
         if o.param in uniform:
             files.discard(o.path)
