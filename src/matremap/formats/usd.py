@@ -62,7 +62,7 @@ from typing import Any
 
 import numpy as np
 
-from matremap.core.atomic import AtomicFiles
+from matremap.core.atomic import AtomicFiles, temp_prefix
 from matremap.core.imageio import check_output
 from matremap.core.material import Material
 from matremap.dialects import get_model
@@ -995,7 +995,7 @@ def _write_stage(
             stage = _build(pxr, out, results, source, asset, files, assets)
             _export(stage.GetRootLayer(), out, files.stage(out))
         return out
-    with tempfile.TemporaryDirectory(prefix=".matremap-usdz-", dir=out.parent) as tmp:
+    with tempfile.TemporaryDirectory(prefix=temp_prefix("usdz"), dir=out.parent) as tmp:  # a killed run's: removed
         inner = Path(tmp) / f"{out.stem}.usdc"
         with AtomicFiles(True) as work:
             stage = _build(pxr, inner, results, source, asset, work, assets)
