@@ -313,6 +313,7 @@ def cached_transform(
     from matremap.sweep.executors import make_executor
     from matremap.sweep.grid import parse_grid
     from matremap.sweep.run import SweepConfig, describe, run_sweep
+    from matremap.sweep.store import discard_if_damaged
 
     spec = map_set.spec
     held = held_values(map_set, summary, target)
@@ -343,6 +344,8 @@ def cached_transform(
         except TransformChecksumError as e:  # edited or damaged since it was written: not trusted
             log(f"note: {e}; recomputing it")
     db = path.with_suffix(".sqlite")
+    if (damage := discard_if_damaged(db)) is not None:  # a cached sweep, resumed below: only when sound
+        log(f"note: the cached sweep database {db.name} was damaged ({damage}); sweeping again")
     grid = parse_grid(grid_text, spec)
     log(f"sweep: {spec.id} -> {config.target}, {len(grid)} fits over {grid_text}")
     from tqdm import tqdm
