@@ -522,6 +522,39 @@ def cached_transform_edited(tmp: Path) -> str:
     return f"WRONG (exit {p.returncode}, edited transform used)" if p.returncode in (0, 3) else f"exit {p.returncode}"
 
 
+def cached_sweep_damaged(tmp: Path) -> str:
+    """The sweep database the transform cache keeps (resumed when its transform is gone), a page damaged."""
+    args = ["remap", str(ROOT / "examples" / "bronze"), "--to", "mitsuba06:pbr", "--fix", "distribution=as"]
+    args += ["--sweep", "--no-evaluate"]
+    if (p := cli([*args, "-o", "out1"], tmp)).returncode not in (0, 3):
+        return f"setup failed: {p.stderr.strip()[-80:]}"
+    for f in (tmp / "cache").rglob("*.json"):
+        if "mappings" in f.read_text():
+            f.unlink()
+    dbs = list((tmp / "cache").rglob("*.sqlite"))
+    if not dbs:
+        return "setup failed: no cached sweep database"
+    for db in dbs:
+        data = bytearray(db.read_bytes())
+        start = len(data) // 2 // 4096 * 4096
+        data[start : start + 4096] = b"A" * 4096
+        db.write_bytes(bytes(data))
+    p = cli([*args, "-o", "out2"], tmp)
+    if "Traceback" in p.stderr:
+        return "TRACEBACK"
+    return "handled" if p.returncode in (0, 3) else f"exit {p.returncode}"
+
+
+def uniform_texture(tmp: Path) -> str:
+    """A glTF whose base colour texture is one colour, onto another model (a legitimate file)."""
+    src = textured_gltf(tmp / "asset", "base.png")
+    png(tmp / "asset" / "base.png", np.full((8, 8, 3), 0.5))
+    p = cli(["remap", str(src), "--to", "mitsuba06:ward", "-o", "out", *FAST], tmp)
+    if "Traceback" in p.stderr:
+        return "TRACEBACK"
+    return "handled" if p.returncode in (0, 3) else f"exit {p.returncode}"
+
+
 def cached_table_damaged(tmp: Path) -> str:
     """A numerically integrated table in the cache with a byte flipped (finding 2: verified on load)."""
     src = "cycles:glossy,distribution=multi_ggx,Roughness=0.4"
@@ -888,6 +921,7 @@ CASES: list[tuple[str, str, Callable[[Path], str]]] = [
     ("glb image cache: forged file, manifest", "2 caches", glb_cache_forged),
     ("cached transform edited", "2 caches", cached_transform_edited),
     ("cached table with a byte flipped", "2 caches", cached_table_damaged),
+    ("cached sweep database, a page damaged", "2 caches", cached_sweep_damaged),
     ("sweep resumed: a failed point refitted", "3 failed fits", failed_points_refitted),
     ("PNG header claiming 40000 x 40000", "4 memory", absurd_png_header),
     ("transform coef as strings", "5 transforms", transform_string_coef),
@@ -910,6 +944,7 @@ CASES: list[tuple[str, str, Callable[[Path], str]]] = [
     ("inline material JSON > 255 chars", "6 tracebacks", inline_material_long),
     ("sweep database with text for numbers", "6 tracebacks", sweep_db_text_numbers),
     ("RGB base colour, metallic 1, uniform roughness", "7 crash", rgb_base_metal_uniform_rough),
+    ("glTF base colour texture of one colour", "7 crash", uniform_texture),
     ("convert killed (SIGKILL), then rerun", "8 leftovers", convert_killed_leftovers),
     ("convert killed (SIGKILL) mid-write, then rerun", "8 leftovers", convert_killed_mid_write),
     ("convert interrupted (SIGINT), then rerun", "8 leftovers", convert_sigint),
