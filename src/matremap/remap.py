@@ -344,8 +344,7 @@ def cached_transform(
         except TransformChecksumError as e:  # edited or damaged since it was written: not trusted
             log(f"note: {e}; recomputing it")
     db = path.with_suffix(".sqlite")
-    if (damage := discard_if_damaged(db)) is not None:  # a cached sweep, resumed below: only when sound
-        log(f"note: the cached sweep database {db.name} was damaged ({damage}); sweeping again")
+    discard_if_damaged(db, log)  # the cached sweep is resumed below: only when sound
     grid = parse_grid(grid_text, spec)
     log(f"sweep: {spec.id} -> {config.target}, {len(grid)} fits over {grid_text}")
     from tqdm import tqdm

@@ -13,7 +13,7 @@ import json
 import math
 import sqlite3
 import time
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -285,9 +285,9 @@ def _damage(conn: sqlite3.Connection) -> str:
     return "" if found == ["ok"] else "; ".join(str(f) for f in found)[:200]
 
 
-def discard_if_damaged(path: str | Path) -> str | None:
-    """Remove a damaged database (and its write-ahead log) that a cache holds, so that its sweep runs again;
-    what was wrong, or None when it is sound or absent."""
+def discard_if_damaged(path: str | Path, log: Callable[[str], None] | None = None) -> str | None:
+    """Remove a damaged database (and its write-ahead log) that a cache holds, so that its sweep runs again,
+    with a note to ``log``; what was wrong, or None when it is sound or absent."""
     p = Path(path)
     if not p.is_file():
         return None
@@ -296,7 +296,10 @@ def discard_if_damaged(path: str | Path) -> str | None:
     except SweepDatabaseDamaged as e:
         for f in (p, p.with_name(p.name + "-wal"), p.with_name(p.name + "-shm")):
             f.unlink(missing_ok=True)
-        return str(e).split(" (", 1)[1].split("); ", 1)[0] if " (" in str(e) else str(e)
+        damage = str(e).split(" (", 1)[1].split("); ", 1)[0] if " (" in str(e) else str(e)
+        if log is not None:
+            log(f"note: the cached sweep database {p.name} was damaged ({damage}); sweeping again")
+        return damage
     except MatremapError:
         return None  # another problem: the sweep says it in its own words
     return None
