@@ -329,3 +329,22 @@ def test_the_whole_file_is_listed_in_the_summary_and_the_index(tmp_path, capsys)
     item = next(i for i in doc["items"] if i["material"] == "wall")
     fitted = json.loads((out / item["slot"] / "material.json").read_text())["params"]["baseColor"]
     assert wall.pbrMetallicRoughness.baseColorFactor[:3] == pytest.approx(fitted, abs=1e-6)
+
+
+def test_an_items_key_covers_a_texture_in_an_allowed_folder(tmp_path):
+    """A batch item is redone only when its key changes: a texture the material names in an --allow-path
+    folder was left out of it, so after that texture changed the stale result was kept as "unchanged"
+    (measured with two `remap in/ --allow-path shared` runs)."""
+    from matremap.batch import item_key
+
+    (tmp_path / "shared").mkdir()
+    (tmp_path / "shared" / "base.png").write_bytes(b"first")
+    (tmp_path / "in").mkdir()
+    doc = {"asset": {"version": "2.0"}, "images": [{"uri": "../shared/base.png"}], "materials": [{"name": "m"}]}
+    (tmp_path / "in" / "m.gltf").write_text(json.dumps(doc))
+    (item,) = plan(expand_inputs([tmp_path / "in" / "m.gltf"]), None)
+    allow = [tmp_path / "shared"]
+    before = item_key(item, "mitsuba06:ward", {}, allow)
+    assert item_key(item, "mitsuba06:ward", {}, allow) == before  # the same inputs, the same key
+    (tmp_path / "shared" / "base.png").write_bytes(b"second")
+    assert item_key(item, "mitsuba06:ward", {}, allow) != before

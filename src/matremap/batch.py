@@ -169,13 +169,17 @@ def plan(files: Sequence[Path], material: str | None = None) -> list[Item]:
     return items
 
 
-def item_key(item: Item, target: str, options: Mapping[str, Any]) -> str:
+def item_key(item: Item, target: str, options: Mapping[str, Any], allow: Sequence[str | os.PathLike] = ()) -> str:
     """A digest of everything that decides an item's result: the file's bytes and those of every file
-    beside it that it references, the material, the target, the options, matremap's version and its results revision."""
+    beside it, or in a folder ``allow`` names (``--allow-path``: a texture there was left out, so a changed one
+    was reused as "unchanged"), that it references, the material, the target, the options, matremap's version
+    and its results revision."""
     h = hashlib.sha256()
     h.update(item.file.read_bytes())
     text = item.file.read_bytes()
-    for ref in sorted(p for p in item.file.parent.rglob("*") if p.is_file() and p != item.file):
+    roots = dict.fromkeys(Path(r).resolve() for r in [item.file.parent, *allow])
+    found = {p.resolve() for root in roots for p in root.rglob("*") if p.is_file()} - {item.file.resolve()}
+    for ref in sorted(found):
         if ref.name.encode() in text:  # referenced by name (a texture, a .bin buffer, an include)
             h.update(ref.name.encode())
             h.update(ref.read_bytes())
@@ -225,7 +229,7 @@ def run_batch(
     rows: dict[Item, Row] = {}
     todo: list[tuple[Item, str]] = []
     for item in items:
-        key = item_key(item, target, options)
+        key = item_key(item, target, options, allow)
         done = _finished(out, item, key)
         if done is not None:
             rows[item] = done
