@@ -12,7 +12,9 @@ fresh cache folder, and classifies the outcome:
 * ``LEFTOVER``   temporary files remained after the run.
 
     python benchmarks/hostile_inputs.py            # every case
-    python benchmarks/hostile_inputs.py killed     # the cases whose name has "killed"
+    python benchmarks/hostile_inputs.py killed     # the cases whose name has "killed" (several: any of them)
+    python benchmarks/hostile_inputs.py -v         # each row with the last line the command printed
+    PYTHONPATH=OTHER/src python benchmarks/hostile_inputs.py   # another checkout (older ones: --target etc.)
 
 The interruption cases run the command once uninterrupted, then again with a signal sent when a staging
 folder appears (or a file in it has bytes, "mid-write"; for a sweep, when a point is in the database),
@@ -25,8 +27,11 @@ Run it on two checkouts to compare (the issue's "probe, before, after" table).
 
 from __future__ import annotations
 
+import functools
+import importlib.util
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -54,11 +59,43 @@ def png(path: Path, rgb: np.ndarray) -> None:
     out.close()
 
 
+#: the module that runs the command line (``matremap.cli`` in checkouts older than ``python -m matremap``)
+MODULE = "matremap" if importlib.util.find_spec("matremap.__main__") else "matremap.cli"
+
+
+@functools.cache
+def help_text(command: str) -> str:
+    return subprocess.run([sys.executable, "-m", MODULE, command, "--help"], capture_output=True, text=True).stdout
+
+
+def spelled(args: list[str]) -> list[str]:
+    """``args`` in the spelling of the matremap measured: an older checkout (the "before" column) said
+    ``--target`` for ``sweep`` and ``fit`` and ``--lights`` for ``remap``'s environment lights."""
+    renames = {"--to": "--target", "--env-lights": "--lights"}
+    text = help_text(args[0])
+
+    def has(option: str) -> bool:
+        return re.search(re.escape(option) + r"(?![\w-])", text) is not None
+
+    return [renames[a] if a in renames and not has(a) and has(renames[a]) else a for a in args]
+
+
+#: the last line the latest command printed on stderr (shown with -v: why a case was refused)
+LAST: list[str] = [""]
+
+
 def cli(args: list[str], cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess[str]:
     env = {**os.environ, "MATREMAP_CACHE_DIR": str(cwd / "cache"), "MATREMAP_CACHE": str(cwd / "cache")}
-    return subprocess.run(
-        [sys.executable, "-m", "matremap", *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout
+    p = subprocess.run(
+        [sys.executable, "-m", MODULE, *spelled(args)],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
     )
+    LAST[0] = (p.stderr.strip().splitlines() or [""])[-1].replace(str(cwd), "T")
+    return p
 
 
 def classify(p: subprocess.CompletedProcess[str], out: Path, expect: str = "refused") -> str:
@@ -89,6 +126,12 @@ def textured_gltf(folder: Path, uri: str) -> Path:
     }
     (folder / "m.gltf").write_text(json.dumps(doc))
     return folder / "m.gltf"
+
+
+def gradient() -> np.ndarray:
+    """An 8 x 8 RGB texture that varies (a texture of one value is written back as a constant)."""
+    y, x = np.mgrid[0:8, 0:8] / 7.0
+    return np.stack([0.5 + 0.4 * x, 0.2 + 0.3 * y, 0.1 + 0 * x], -1)
 
 
 def secret_png(path: Path) -> Path:
@@ -194,7 +237,7 @@ def transform_with_nan(tmp: Path) -> str:
     doc = json.loads((ROOT / "src" / "matremap" / "regress" / "transforms" / "ward-as.json").read_text())
     doc["mappings"]["roughness"]["coef"] = [float("nan")] * len(doc["mappings"]["roughness"]["coef"])
     (tmp / "t.json").write_text(json.dumps(doc))  # json writes NaN, which Python's reader accepts
-    p = cli(["convert", str(ROOT / "examples" / "bronze"), "--transform", "t.json", "-o", "out"], tmp)
+    p = cli(["convert", str(bronze_balanced(tmp)), "--transform", "t.json", "-o", "out"], tmp)
     return classify(p, tmp / "out")
 
 
@@ -233,6 +276,459 @@ def rgb_base_metal_uniform_rough(tmp: Path) -> str:
     if "Traceback" in p.stderr:
         return "TRACEBACK"
     return "handled" if p.returncode in (0, 3) else f"exit {p.returncode}: {p.stderr.strip().splitlines()[-1][:60]}"
+
+
+# -- more of the issue's probe: every finding's other cases --------------------------------------------------
+
+
+def same_line_either_way(tmp: Path) -> str:
+    """The refusal of an outside reference says the same whether the named file exists (finding 1)."""
+    lines = []
+    for exists in (True, False):
+        case = tmp / ("exists" if exists else "missing")
+        if exists:
+            secret_png(case / "secret.png")
+        src = textured_gltf(case / "asset", "../secret.png")
+        p = cli(["remap", str(src), "--to", "gltf:metal-rough", "-o", "out"], case)
+        lines.append(p.stderr.strip().replace(str(case), "T"))
+    if lines[0] != lines[1]:
+        return "DIFFERS (" + " / ".join(ln.splitlines()[-1][:40] for ln in lines) + ")"
+    return "refused" if "outside" in lines[0] else "same line, not a refusal"
+
+
+def gltf_buffer_outside(tmp: Path) -> str:
+    """A glTF whose image is a buffer view of ../secret.bin (the secret bytes inside a PNG's trailer)."""
+    secret = secret_png(tmp / "secret.png").rename(tmp / "secret.bin")
+    src = textured_gltf(tmp / "asset", "unused.png")
+    doc = json.loads(src.read_text())
+    size = secret.stat().st_size
+    doc["buffers"] = [{"uri": "../secret.bin", "byteLength": size}]
+    doc["bufferViews"] = [{"buffer": 0, "byteLength": size}]
+    doc["images"] = [{"bufferView": 0, "mimeType": "image/png"}]
+    src.write_text(json.dumps(doc))
+    return classify(
+        cli(["remap", str(src), "--to", "gltf:metal-rough", "-o", "out", "--write", "m.glb"], tmp), tmp / "out"
+    )
+
+
+def gltf_copy_names_outside(tmp: Path) -> str:
+    """One material remapped and written as a copy of the source, whose other material's image is outside."""
+    secret_png(tmp / "secret.png")
+    src = textured_gltf(tmp / "asset", "base.png")
+    doc = json.loads(src.read_text())
+    doc["images"].append({"uri": "../secret.png"})
+    doc["textures"].append({"source": 1})
+    doc["materials"].append({"name": "other", "pbrMetallicRoughness": {"baseColorTexture": {"index": 1}}})
+    src.write_text(json.dumps(doc))
+    args = ["remap", str(src), "--material", "m", "--to", "gltf:metal-rough", "-o", "out", "--write", "m.gltf", *FAST]
+    p = cli(args, tmp)
+    if p.returncode == 0 and "secret.png" in (tmp / "out" / "m.gltf").read_text():
+        return "OUTSIDE (the copy names ../secret.png)"
+    return classify(p, tmp / "out")
+
+
+def mitsuba_include_outside(tmp: Path) -> str:
+    (tmp / "lib.xml").write_text('<scene version="3.0.0"><bsdf type="diffuse" id="d"/></scene>')
+    (tmp / "asset").mkdir()
+    (tmp / "asset" / "s.xml").write_text('<scene version="3.0.0"><include filename="../lib.xml"/></scene>')
+    return classify(cli(["remap", "asset/s.xml", "--to", "mitsuba06:diffuse", "-o", "out"], tmp), tmp / "out")
+
+
+def materialx_xinclude(tmp: Path) -> str:
+    (tmp / "lib.mtlx").write_text('<?xml version="1.0"?>\n<materialx version="1.39"/>\n')
+    png(tmp / "asset" / "base.png", gradient())
+    text = materialx_file_doc("base.png").replace(
+        '<materialx version="1.39">',
+        '<materialx version="1.39" xmlns:xi="http://www.w3.org/2001/XInclude"><xi:include href="../lib.mtlx"/>',
+    )
+    (tmp / "asset" / "m.mtlx").write_text(text)
+    return classify(cli(["remap", "asset/m.mtlx", "--to", "gltf:metal-rough", "-o", "out"], tmp), tmp / "out")
+
+
+def materialx_file_doc(ref: str, prefix: str = "") -> str:
+    pre = f' fileprefix="{prefix}"' if prefix else ""
+    return (
+        f'<?xml version="1.0"?>\n<materialx version="1.39"{pre}>\n'
+        f'  <image name="tex" type="color3"><input name="file" type="filename" value="{ref}"/></image>\n'
+        '  <standard_surface name="s" type="surfaceshader"><input name="base_color" type="color3" nodename="tex"/>'
+        "</standard_surface>\n"
+        '  <surfacematerial name="mat" type="material"><input name="surfaceshader" type="surfaceshader" nodename="s"/>'
+        "</surfacematerial>\n</materialx>\n"
+    )
+
+
+def materialx_fileprefix(tmp: Path) -> str:
+    secret_png(tmp / "secret.png")
+    (tmp / "asset").mkdir()
+    (tmp / "asset" / "m.mtlx").write_text(materialx_file_doc("secret.png", prefix="../"))
+    return classify(cli(["remap", "asset/m.mtlx", "--to", "gltf:metal-rough", "-o", "out"], tmp), tmp / "out")
+
+
+USD_MATERIAL = """#usda 1.0
+def Xform "Root"
+{{
+    def Shader "ST"
+    {{
+        uniform token info:id = "UsdPrimvarReader_float2"
+        token inputs:varname = "st"
+        float2 outputs:result
+    }}
+    def Material "A"
+    {{
+        token outputs:surface.connect = </Root/A/S.outputs:surface>
+        def Shader "S"
+        {{
+            uniform token info:id = "UsdPreviewSurface"
+            color3f inputs:diffuseColor.connect = </Root/A/T.outputs:rgb>
+            float inputs:roughness = 0.5
+            token outputs:surface
+        }}
+        def Shader "T"
+        {{
+            uniform token info:id = "UsdUVTexture"
+            asset inputs:file = @{tex}@
+            float2 inputs:st.connect = </Root/ST.outputs:result>
+            float3 outputs:rgb
+        }}
+    }}{more}
+}}
+"""
+
+
+def usd_texture_outside(tmp: Path) -> str:
+    secret_png(tmp / "secret.png")
+    (tmp / "asset").mkdir()
+    (tmp / "asset" / "m.usda").write_text(USD_MATERIAL.format(tex="../secret.png", more=""))
+    return classify(cli(["remap", "asset/m.usda", "--to", "gltf:metal-rough", "-o", "out"], tmp), tmp / "out")
+
+
+def usd_copy_other_texture_outside(tmp: Path) -> str:
+    """--write m.usdz of material A: material B's texture is ../secret.png (a .usdz packs what a stage names)."""
+    secret_png(tmp / "secret.png")
+    png(tmp / "asset" / "base.png", gradient())
+    other = USD_MATERIAL.format(tex="../secret.png", more="").split('def Material "A"', 1)[1].rsplit("}", 1)[0]
+    more = '\n    def Material "B"' + other.replace("/Root/A/", "/Root/B/").rstrip()
+    (tmp / "asset" / "m.usda").write_text(USD_MATERIAL.format(tex="base.png", more=more))
+    args = ["remap", "asset/m.usda", "--material", "/Root/A", "--to", "usd:preview_surface", "-o", "out"]
+    return classify(cli([*args, "--write", "m.usdz", *FAST], tmp), tmp / "out")
+
+
+def usd_value_clip_outside(tmp: Path) -> str:
+    """A value clip naming ../clip.usda: USD opened it while matremap read the stage (not a composition arc)."""
+    (tmp / "clip.usda").write_text('#usda 1.0\ndef Xform "Root"\n{\n}\n')
+    png(tmp / "asset" / "base.png", gradient())
+    clips = (
+        "(\n    clips = {\n        dictionary default = {\n            asset[] assetPaths = [@../clip.usda@]\n"
+        '            double2[] active = [(0, 0)]\n            string primPath = "/Root"\n        }\n    }\n)\n'
+    )
+    text = USD_MATERIAL.format(tex="base.png", more="").replace('def Xform "Root"\n', 'def Xform "Root"\n' + clips)
+    (tmp / "asset" / "m.usda").write_text(text)
+    return classify(cli(["remap", "asset/m.usda", "--to", "gltf:metal-rough", "-o", "out", *FAST], tmp), tmp / "out")
+
+
+def usdz_member_outside(tmp: Path) -> str:
+    import zipfile
+
+    secret_png(tmp / "secret.png")
+    (tmp / "asset").mkdir()
+    with zipfile.ZipFile(tmp / "asset" / "m.usdz", "w", zipfile.ZIP_STORED) as z:
+        z.writestr("m.usda", USD_MATERIAL.format(tex="../../secret.png", more=""))
+    return classify(cli(["remap", "asset/m.usdz", "--to", "gltf:metal-rough", "-o", "out"], tmp), tmp / "out")
+
+
+def map_set_manifest_outside(tmp: Path) -> str:
+    png(tmp / "secret.png", np.full((256, 256, 3), 0.4))  # the example's size
+    with (tmp / "secret.png").open("ab") as f:
+        f.write(SECRET)
+    maps = bronze_balanced(tmp)
+    doc = json.loads((maps / "material.json").read_text())
+    doc["maps"]["diffuseReflectance"] = "../secret.png"
+    (maps / "material.json").write_text(json.dumps(doc))
+    transform = str(ROOT / "src" / "matremap" / "regress" / "transforms" / "ward-as.json")
+    return classify(cli(["convert", str(maps), "--transform", transform, "-o", "out"], tmp), tmp / "out")
+
+
+def glb_cache_forged(tmp: Path) -> str:
+    """A .glb's embedded image is extracted to a cache; a same-size forged file put there must not be used,
+    and the written map set must not point into the cache (finding 2)."""
+    import OpenImageIO as oiio
+
+    png(tmp / "a.png", np.full((8, 8, 3), [0.8, 0.2, 0.1]))
+    data = (tmp / "a.png").read_bytes()
+    body = {
+        "asset": {"version": "2.0"},
+        "buffers": [{"byteLength": len(data)}],
+        "bufferViews": [{"buffer": 0, "byteLength": len(data)}],
+        "images": [{"bufferView": 0, "mimeType": "image/png"}],
+        "textures": [{"source": 0}],
+        "materials": [{"name": "m", "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}, "metallicFactor": 0}}],
+    }
+    text = json.dumps(body).encode()
+    text += b" " * (-len(text) % 4)
+    binc = data + b"\0" * (-len(data) % 4)
+    chunks = len(text).to_bytes(4, "little") + b"JSON" + text + len(binc).to_bytes(4, "little") + b"BIN\0" + binc
+    (tmp / "m.glb").write_bytes(b"glTF" + (2).to_bytes(4, "little") + (12 + len(chunks)).to_bytes(4, "little") + chunks)
+    args = ["remap", "m.glb", "--to", "gltf:metal-rough", "-o", "out1", *FAST]
+    if (p := cli(args, tmp)).returncode != 0:
+        return f"setup failed: {p.stderr.strip()[-80:]}"
+    manifest = (tmp / "out1" / "maps" / "material.json").read_text()
+    if str(tmp / "cache") in manifest or tempfile.gettempdir() in manifest:
+        return "WRONG (the map set points into the cache)"
+    png(tmp / "b.png", np.full((8, 8, 3), [0.1, 0.2, 0.8]))
+    forged = (tmp / "b.png").read_bytes()
+    forged += b"\0" * (len(data) - len(forged))  # bytes after IEND: readers ignore them
+    places = [Path(tempfile.gettempdir()), tmp / "cache"]
+    found = [f for d in places for f in d.rglob("*.png") if f.is_file() and f.stat().st_size == len(data)]
+    hits = [f for f in found if tmp / "cache" in f.parents or tmp not in f.parents]  # not the case's own files
+    if not hits:
+        return "setup failed: the extracted image is nowhere"
+    for f in hits:  # the same size, other pixels
+        f.write_bytes(forged)
+    p = cli([*args[: -len(FAST) - 1], "out2", *FAST], tmp)
+    if p.returncode != 0:
+        return f"exit {p.returncode}"
+    truth = oiio.ImageBuf(str(tmp / "a.png")).get_pixels().tobytes()  # the same model: maps are copied
+    kept = [
+        any(oiio.ImageBuf(str(f)).get_pixels().tobytes() == truth for f in (tmp / o / "maps").glob("*.png"))
+        for o in ("out1", "out2")
+    ]
+    return "handled" if all(kept) else "WRONG (a forged or stale cache file was used)"
+
+
+def cached_transform_edited(tmp: Path) -> str:
+    """A swept and learned transform is cached; its coefficients edited, the next run must not use it."""
+    import OpenImageIO as oiio
+
+    args = ["remap", str(ROOT / "examples" / "bronze"), "--to", "mitsuba06:pbr", "--fix", "distribution=as"]
+    args += ["--sweep", *FAST]
+    if (p := cli([*args, "-o", "out1"], tmp)).returncode not in (0, 3):
+        return f"setup failed: {p.stderr.strip()[-80:]}"
+    cached = [f for f in (tmp / "cache").rglob("*.json") if "mappings" in f.read_text()]
+    if not cached:
+        return "setup failed: no cached transform"
+    for f in cached:
+        doc = json.loads(f.read_text())
+        for m in doc["mappings"].values():
+            m["coef"] = [0.0] * len(m["coef"])
+        f.write_text(json.dumps(doc))
+    p = cli([*args, "-o", "out2"], tmp)
+    maps = [sorted((tmp / o / "maps").glob("*.png")) for o in ("out1", "out2")]
+    same = [
+        oiio.ImageBuf(str(a)).get_pixels().tobytes() == oiio.ImageBuf(str(b)).get_pixels().tobytes()
+        for a, b in zip(*maps, strict=False)
+    ]
+    if p.returncode in (0, 3) and maps[0] and all(same) and len(maps[0]) == len(maps[1]):
+        return "handled"
+    return f"WRONG (exit {p.returncode}, edited transform used)" if p.returncode in (0, 3) else f"exit {p.returncode}"
+
+
+def cached_sweep_damaged(tmp: Path) -> str:
+    """The sweep database the transform cache keeps (resumed when its transform is gone), a page damaged."""
+    args = ["remap", str(ROOT / "examples" / "bronze"), "--to", "mitsuba06:pbr", "--fix", "distribution=as"]
+    args += ["--sweep", "--no-evaluate"]
+    if (p := cli([*args, "-o", "out1"], tmp)).returncode not in (0, 3):
+        return f"setup failed: {p.stderr.strip()[-80:]}"
+    for f in (tmp / "cache").rglob("*.json"):
+        if "mappings" in f.read_text():
+            f.unlink()
+    dbs = list((tmp / "cache").rglob("*.sqlite"))
+    if not dbs:
+        return "setup failed: no cached sweep database"
+    for db in dbs:
+        data = bytearray(db.read_bytes())
+        start = len(data) // 2 // 4096 * 4096
+        data[start : start + 4096] = b"A" * 4096
+        db.write_bytes(bytes(data))
+    p = cli([*args, "-o", "out2"], tmp)
+    if "Traceback" in p.stderr:
+        return "TRACEBACK"
+    return "handled" if p.returncode in (0, 3) else f"exit {p.returncode}"
+
+
+def uniform_texture(tmp: Path) -> str:
+    """A glTF whose base colour texture is one colour, onto another model (a legitimate file)."""
+    src = textured_gltf(tmp / "asset", "base.png")
+    png(tmp / "asset" / "base.png", np.full((8, 8, 3), 0.5))
+    p = cli(["remap", str(src), "--to", "mitsuba06:ward", "-o", "out", *FAST], tmp)
+    if "Traceback" in p.stderr:
+        return "TRACEBACK"
+    return "handled" if p.returncode in (0, 3) else f"exit {p.returncode}"
+
+
+def cached_table_damaged(tmp: Path) -> str:
+    """A numerically integrated table in the cache with a byte flipped (finding 2: verified on load)."""
+    src = "cycles:glossy,distribution=multi_ggx,Roughness=0.4"
+    if (p := cli(["render", src, "-o", "a.png", "--size", "16"], tmp)).returncode != 0:
+        return f"setup failed: {p.stderr.strip()[-80:]}"
+    tables = list((tmp / "cache").rglob("*.npz"))
+    if not tables:
+        return "setup failed: no table cached"
+    for t in tables:
+        data = bytearray(t.read_bytes())
+        data[len(data) // 2] ^= 0xFF
+        t.write_bytes(bytes(data))
+    p = cli(["render", src, "-o", "b.png", "--size", "16"], tmp)
+    if "Traceback" in p.stderr:
+        return "TRACEBACK"
+    same = (tmp / "a.png").read_bytes() == (tmp / "b.png").read_bytes() if p.returncode == 0 else False
+    return "handled" if same else f"exit {p.returncode}: {(p.stderr.strip().splitlines() or [''])[-1][:60]}"
+
+
+def failed_points_refitted(tmp: Path) -> str:
+    """A point recorded as failed (its renderer was missing) is fitted again when the sweep resumes (finding 3)."""
+    import sqlite3
+
+    args = ["sweep", "--source", SWEEP_SOURCE, "--to", "mitsuba06:pbr", "--grid", "alpha=0.1:0.3:3"]
+    args += ["--db", "s.sqlite", "--workers", "1", "--no-progress"]
+    if (p := cli(args, tmp)).returncode != 0:
+        return f"setup failed: {p.stderr.strip()[-80:]}"
+    with sqlite3.connect(tmp / "s.sqlite") as con:
+        con.execute("update points set status = 'failed', message = 'RendererNotInstalled' where rowid = 1")
+    p = cli(args, tmp)
+    with sqlite3.connect(tmp / "s.sqlite") as con:
+        bad = con.execute("select count(*) from points where status != 'ok'").fetchone()[0]
+    return "handled" if p.returncode == 0 and bad == 0 else f"WRONG ({bad} failed point(s) kept, exit {p.returncode})"
+
+
+def transform_edit(tmp: Path, edit: Callable[[dict], None]) -> str:
+    doc = json.loads((ROOT / "src" / "matremap" / "regress" / "transforms" / "ward-as.json").read_text())
+    doc.pop("checksum", None)  # a hand-made transform: only its schema can stop it
+    edit(doc)
+    (tmp / "t.json").write_text(json.dumps(doc))
+    p = cli(["convert", str(bronze_balanced(tmp)), "--transform", "t.json", "-o", "out"], tmp)
+    return classify(p, tmp / "out")
+
+
+def bronze_balanced(tmp: Path) -> Path:
+    """``examples/bronze`` with the Ward variant the shipped ward-as transform was learned on (an older
+    matremap refused the example's variant first, before looking at the transform)."""
+    shutil.copytree(ROOT / "examples" / "bronze", tmp / "bronze")
+    doc = json.loads((tmp / "bronze" / "material.json").read_text())
+    doc["params"]["variant"] = "balanced"
+    (tmp / "bronze" / "material.json").write_text(json.dumps(doc))
+    return tmp / "bronze"
+
+
+def transform_string_coef(tmp: Path) -> str:
+    return transform_edit(tmp, lambda d: d["mappings"]["roughness"].update(coef=["0.5"] * 5))
+
+
+def transform_coef_count(tmp: Path) -> str:
+    return transform_edit(tmp, lambda d: d["mappings"]["reflectance"].update(coef=[1.0, 2.0]))
+
+
+def transform_huge_constant(tmp: Path) -> str:
+    return transform_edit(tmp, lambda d: d["mappings"]["roughness"].update(coef=[1e300, 0, 0, 0, 0]))
+
+
+def transform_unknown_option(tmp: Path) -> str:
+    return transform_edit(tmp, lambda d: d["target"]["options"].update(distribution="nonsense"))
+
+
+def transform_deep(tmp: Path) -> str:
+    (tmp / "t.json").write_text('{"schema": ' + "[" * 100_000 + "]" * 100_000 + "}")
+    p = cli(["convert", str(ROOT / "examples" / "bronze"), "--transform", "t.json", "-o", "out"], tmp)
+    return classify(p, tmp / "out")
+
+
+def glb_string_offset(tmp: Path) -> str:
+    data = (ROOT / "examples" / "bronze" / "bronze_diffuse.png").read_bytes()
+    body = {
+        "asset": {"version": "2.0"},
+        "buffers": [{"byteLength": len(data)}],
+        "bufferViews": [{"buffer": 0, "byteOffset": "0", "byteLength": len(data)}],
+        "images": [{"bufferView": 0, "mimeType": "image/png"}],
+        "textures": [{"source": 0}],
+        "materials": [{"name": "m", "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
+    }
+    text = json.dumps(body).encode()
+    text += b" " * (-len(text) % 4)
+    binc = data + b"\0" * (-len(data) % 4)
+    chunks = len(text).to_bytes(4, "little") + b"JSON" + text + len(binc).to_bytes(4, "little") + b"BIN\0" + binc
+    (tmp / "m.glb").write_bytes(b"glTF" + (2).to_bytes(4, "little") + (12 + len(chunks)).to_bytes(4, "little") + chunks)
+    return classify(cli(["remap", "m.glb", "--to", "mitsuba06:ward", "-o", "out"], tmp), tmp / "out")
+
+
+def material_json_deep(tmp: Path) -> str:
+    (tmp / "m.json").write_text('{"model": "mitsuba06:ward", "params": ' + "[" * 100_000 + "]" * 100_000 + "}")
+    p = cli(["fit", "--source", "m.json", "--to", "mitsuba06:pbr"], tmp)
+    return classify(p, tmp / "out")
+
+
+def manifest_deep(tmp: Path) -> str:
+    shutil.copytree(ROOT / "examples" / "bronze", tmp / "maps")
+    (tmp / "maps" / "material.json").write_text(
+        '{"model": "mitsuba06:ward", "maps": ' + "[" * 100_000 + "]" * 100_000 + "}"
+    )
+    return classify(
+        cli(["convert", "maps", "--to", "mitsuba06:pbr", "--fix", "distribution=as", "-o", "out"], tmp), tmp / "out"
+    )
+
+
+def sweep_db_edit(tmp: Path, sql: str) -> str:
+    import sqlite3
+
+    args = ["sweep", "--source", SWEEP_SOURCE, "--to", "mitsuba06:pbr", "--grid", "alpha=0.1:0.3:3"]
+    if (p := cli([*args, "--db", "s.sqlite", "--workers", "1", "--no-progress"], tmp)).returncode != 0:
+        return f"setup failed: {p.stderr.strip()[-80:]}"
+    with sqlite3.connect(tmp / "s.sqlite") as con:
+        con.execute(sql)
+    return classify(cli(["learn", "s.sqlite", "-o", "t.json"], tmp), tmp / "t.json")
+
+
+def sweep_db_bad_json(tmp: Path) -> str:
+    return sweep_db_edit(tmp, "update points set target = '{not json' where rowid = 1")
+
+
+def sweep_db_dropped_column(tmp: Path) -> str:
+    return sweep_db_edit(tmp, "alter table points drop column loss")
+
+
+def two_sweeps_new_db(tmp: Path) -> str:
+    """Two sweeps with different settings start on one new database at once (finding 8)."""
+    outcomes = set()
+    for i in range(4):
+        db = f"race{i}.sqlite"
+        procs = []
+        for strategy in ("two-stage", "simple"):
+            args = ["sweep", "--source", SWEEP_SOURCE, "--to", "mitsuba06:pbr", "--grid", "alpha=0.1:0.3:2"]
+            args += ["--db", db, "--workers", "1", "--no-progress", "--strategy", strategy]
+            env = {**os.environ, "MATREMAP_CACHE": str(tmp / "cache")}
+            procs.append(
+                subprocess.Popen(
+                    [sys.executable, "-m", MODULE, *spelled(args)],
+                    cwd=tmp,
+                    env=env,
+                    stdout=subprocess.DEVNULL,
+                    stderr=subprocess.PIPE,
+                    text=True,
+                )
+            )
+        for proc in procs:
+            err = proc.communicate(timeout=300)[1]
+            if "Traceback" in err:
+                return "TRACEBACK"
+            if proc.returncode != 0:
+                last = (err.strip().splitlines() or [""])[-1]
+                outcomes.add("handled" if "different configuration" in last else f"misleading: {last[:60]}")
+    return ", ".join(sorted(outcomes)) or "both ran (no loser)"
+
+
+def absurd_png_header(tmp: Path) -> str:
+    """A map whose header claims 40000 x 40000 (finding 4: refused from its header, not decoded)."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    shutil.copytree(ROOT / "examples" / "bronze", tmp / "maps")
+    ihdr = struct.pack(">IIBBBBB", 40000, 40000, 8, 2, 0, 0, 0)
+    (tmp / "maps" / "bronze_roughness.png").write_bytes(
+        b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(b"\0" * 1000)) + chunk(b"IEND", b"")
+    )
+    args = ["remap", "maps", "--to", "mitsuba06:pbr", "--fix", "distribution=as", "-o", "out", *FAST]
+    return classify(cli(args, tmp, timeout=600), tmp / "out")
 
 
 # -- interruption (finding 8, must-have 6): kill or interrupt a run, then run the same command again ----------
@@ -318,13 +814,14 @@ def interrupted(tmp: Path, args: list[str], sig: int, point: Callable[[Path], bo
     env = {**os.environ, "MATREMAP_CACHE_DIR": str(run / "cache"), "MATREMAP_CACHE": str(run / "cache")}
     with open(tmp / "stderr.txt", "w+") as log:  # a file, not a pipe: workers a kill orphans may hold it open
         proc = subprocess.Popen(
-            [sys.executable, "-m", "matremap", *args],
+            [sys.executable, "-m", MODULE, *spelled(args)],
             cwd=run,
             env=env,
             stdout=subprocess.DEVNULL,
             stderr=log,
             text=True,
             start_new_session=True,
+            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),  # a background shell ignores SIGINT
         )
         deadline = time.time() + 120
         while time.time() < deadline and proc.poll() is None and not point(run):
@@ -338,8 +835,10 @@ def interrupted(tmp: Path, args: list[str], sig: int, point: Callable[[Path], bo
     if sig == signal.SIGINT:
         if "Traceback" in err:
             return "TRACEBACK on SIGINT"
-        if proc.returncode != 130 or err.strip().splitlines()[-1:] != ["matremap: interrupted"]:
-            return f"SIGINT: exit {proc.returncode}, {err.strip().splitlines()[-1:]}"
+        last = (err.strip().splitlines() or [""])[-1]
+        said = last == "matremap: interrupted" or (args[0] == "sweep" and last.startswith("interrupted: "))
+        if proc.returncode != 130 or not said:  # a sweep stopped between points says how far it got
+            return f"SIGINT: exit {proc.returncode}, {last!r}"
     again = cli(args, run)
     if again.returncode != 0:
         return f"rerun exit {again.returncode}: {again.stderr.strip().splitlines()[-1][:70]}"
@@ -408,6 +907,34 @@ CASES: list[tuple[str, str, Callable[[Path], str]]] = [
     ("Mitsuba bitmap outside the scene folder", "1 confinement", mitsuba_bitmap_outside),
     ("MaterialX file input ../", "1 confinement", materialx_file_outside),
     ("--write ../../x.gltf", "1 outputs under -o", write_outside),
+    ("refusal the same whether the file exists", "1 confinement", same_line_either_way),
+    ("glTF buffer uri ../ (image in it)", "1 confinement", gltf_buffer_outside),
+    ("glTF copy: another material's image ../", "1 confinement", gltf_copy_names_outside),
+    ("Mitsuba <include> ../", "1 confinement", mitsuba_include_outside),
+    ("MaterialX xi:include ../", "1 confinement", materialx_xinclude),
+    ("MaterialX fileprefix ../", "1 confinement", materialx_fileprefix),
+    ("USD texture asset ../", "1 confinement", usd_texture_outside),
+    ("USD value clip ../", "1 confinement", usd_value_clip_outside),
+    ("USD copy to .usdz: other texture ../", "1 confinement", usd_copy_other_texture_outside),
+    (".usdz layer naming ../../ outside", "1 confinement", usdz_member_outside),
+    ("map set manifest naming ../", "1 confinement", map_set_manifest_outside),
+    ("glb image cache: forged file, manifest", "2 caches", glb_cache_forged),
+    ("cached transform edited", "2 caches", cached_transform_edited),
+    ("cached table with a byte flipped", "2 caches", cached_table_damaged),
+    ("cached sweep database, a page damaged", "2 caches", cached_sweep_damaged),
+    ("sweep resumed: a failed point refitted", "3 failed fits", failed_points_refitted),
+    ("PNG header claiming 40000 x 40000", "4 memory", absurd_png_header),
+    ("transform coef as strings", "5 transforms", transform_string_coef),
+    ("transform wrong coefficient count", "5 transforms", transform_coef_count),
+    ("transform constant 1e300", "5 transforms", transform_huge_constant),
+    ("transform unknown target option", "5 transforms", transform_unknown_option),
+    ("transform JSON nested 100k deep", "6 tracebacks", transform_deep),
+    ("GLB byteOffset as a string", "6 tracebacks", glb_string_offset),
+    ("material JSON nested 100k deep", "6 tracebacks", material_json_deep),
+    ("map set manifest nested 100k deep", "6 tracebacks", manifest_deep),
+    ("sweep database: bad JSON in a row", "6 tracebacks", sweep_db_bad_json),
+    ("sweep database: a dropped column", "6 tracebacks", sweep_db_dropped_column),
+    ("two sweeps start one new database", "8 leftovers", two_sweeps_new_db),
     ("glTF data URI with bad base64", "6 tracebacks", data_uri_bad_base64),
     ("GLB chunk length wrapping negative", "6 tracebacks", glb_negative_length),
     ("glTF JSON nested 100k deep", "6 tracebacks", gltf_deep_json),
@@ -417,6 +944,7 @@ CASES: list[tuple[str, str, Callable[[Path], str]]] = [
     ("inline material JSON > 255 chars", "6 tracebacks", inline_material_long),
     ("sweep database with text for numbers", "6 tracebacks", sweep_db_text_numbers),
     ("RGB base colour, metallic 1, uniform roughness", "7 crash", rgb_base_metal_uniform_rough),
+    ("glTF base colour texture of one colour", "7 crash", uniform_texture),
     ("convert killed (SIGKILL), then rerun", "8 leftovers", convert_killed_leftovers),
     ("convert killed (SIGKILL) mid-write, then rerun", "8 leftovers", convert_killed_mid_write),
     ("convert interrupted (SIGINT), then rerun", "8 leftovers", convert_sigint),
@@ -429,17 +957,19 @@ CASES: list[tuple[str, str, Callable[[Path], str]]] = [
 
 
 def main() -> None:
-    only = sys.argv[1:]  # words a case's name must contain (e.g. "killed"), to run a few
+    verbose = "-v" in sys.argv
+    only = [a for a in sys.argv[1:] if a != "-v"]  # parts of case names: run the cases whose name has one
     print(f"{'case':<48} {'finding':<20} outcome")
     for name, finding, fn in CASES:
-        if only and not all(w in name for w in only):
+        if only and not any(w in name for w in only):
             continue
         with tempfile.TemporaryDirectory() as t:
             try:
                 outcome = fn(Path(t))
             except Exception as e:  # noqa: BLE001 - the harness reports, it does not stop
                 outcome = f"harness error: {type(e).__name__}: {e}"
-        print(f"{name:<48} {finding:<20} {outcome}")
+        print(f"{name:<48} {finding:<20} {outcome}" + (f"  | {LAST[0][:150]}" if verbose else ""), flush=True)
+        LAST[0] = ""
 
 
 if __name__ == "__main__":

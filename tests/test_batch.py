@@ -523,3 +523,22 @@ def test_a_folder_of_public_assets_converts_in_one_command(tmp_path, capsys, mon
     assert all(f"<td>{m}</td>" in dom for _, m in listed)
     errors = [float(v) for v in re.findall(r'<td data-value="([^"]+)">[0-9.]*</td><td>[0-9.]+</td>', dom)]
     assert len(errors) == len(listed) and errors == sorted(errors)  # the browser sorted by error
+
+
+def test_an_items_key_covers_a_texture_in_an_allowed_folder(tmp_path):
+    """A batch item is redone only when its key changes: a texture the material names in an --allow-path
+    folder was left out of it, so after that texture changed the stale result was kept as "unchanged"
+    (measured with two `remap in/ --allow-path shared` runs)."""
+    from matremap.batch import References, item_key
+
+    (tmp_path / "shared").mkdir()
+    (tmp_path / "shared" / "base.png").write_bytes(b"first")
+    (tmp_path / "in").mkdir()
+    doc = {"asset": {"version": "2.0"}, "images": [{"uri": "../shared/base.png"}], "materials": [{"name": "m"}]}
+    (tmp_path / "in" / "m.gltf").write_text(json.dumps(doc))
+    (item,) = plan(expand_inputs([tmp_path / "in" / "m.gltf"]), None)
+    refs = References([tmp_path / "shared"])
+    before = item_key(item, "mitsuba06:ward", {}, refs)
+    assert item_key(item, "mitsuba06:ward", {}, References([tmp_path / "shared"])) == before  # same inputs
+    (tmp_path / "shared" / "base.png").write_bytes(b"second")
+    assert item_key(item, "mitsuba06:ward", {}, References([tmp_path / "shared"])) != before

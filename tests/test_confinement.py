@@ -283,3 +283,38 @@ def test_remap_refuses_a_write_name_outside_the_output_folder(tmp_path, capsys, 
     assert code == 2 and "points outside the output folder" in err and "Traceback" not in err
     assert not out.exists()
     assert not list(tmp_path.rglob("escaped.gltf"))
+
+
+@pytest.mark.parametrize("exists", [True, False])
+@pytest.mark.parametrize("key", ["images", "buffers"])
+@pytest.mark.parametrize("suffix", [".gltf", ".glb"])
+def test_a_gltf_copy_refuses_a_file_outside_that_another_part_names(tmp_path, key, suffix, exists):
+    """The reader confines the converted material's textures; a copy of the source also names its other
+    images and buffers (a mesh's, another material's): one outside was written into the copy as
+    ../secret.png, exit 0. Refused now, the same whether it exists, unless its folder is allowed."""
+    from matremap.core.material import Material
+    from matremap.formats import write_asset
+
+    secret = png(tmp_path / "secret.png", seed=3) if exists else tmp_path / "secret.png"
+    src = gltf_image(tmp_path / "asset", "base.png")
+    png(tmp_path / "asset" / "base.png")
+    doc = json.loads(src.read_text())
+    if key == "images":  # a second material's texture
+        doc["images"].append({"uri": "../secret.png"})
+        doc["textures"].append({"source": 1})
+        doc["materials"].append({"name": "other", "pbrMetallicRoughness": {"baseColorTexture": {"index": 1}}})
+    else:  # a buffer no material uses (a mesh's)
+        doc["buffers"] = [{"uri": "../secret.png", "byteLength": 8}]
+        doc["bufferViews"] = [{"buffer": 0, "byteLength": 8}]
+    src.write_text(json.dumps(doc))
+    asset = read_asset(src, "m")  # the material itself is inside
+    m = Material.create("gltf:metal-rough", {"baseColor": [0.5, 0.4, 0.3], "roughness": 0.5})
+    (tmp_path / "out").mkdir()
+    with pytest.raises(MatremapError, match=f"{key[:-1]} 1 uri|{key[:-1]} 0 uri") as e:
+        write_asset(tmp_path / "out" / f"c{suffix}", m, source=asset)
+    assert OUTSIDE in str(e.value) and "'../secret.png'" in str(e.value) and "\n" not in str(e.value)
+    assert list((tmp_path / "out").iterdir()) == []
+    if exists:
+        with allowed_paths([secret.parent]):
+            out = write_asset(tmp_path / "out" / f"c{suffix}", m, source=asset)
+        assert out.is_file()

@@ -9,6 +9,7 @@ import os
 import pickle
 import signal
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -293,3 +294,42 @@ def test_two_stage_fit_back_from_real_cycles_to_ward(cycles):
     assert back.loss < 0.15
     np.testing.assert_allclose(back.target.values["diffuseReflectance"], [0.5, 0.3, 0.2], rtol=0.1)
     assert back.target.values["alpha"][0] == pytest.approx(0.2, rel=0.25)
+
+
+# -- the worker's files --------------------------------------------------------------------------
+
+
+@needs_bpy
+def test_the_worker_keeps_its_files_in_a_marked_private_folder_and_removes_it(tmp_path, monkeypatch):
+    """Each worker left /tmp/matremap-cycles-* with its last render and Blender's /tmp/blender_* (the client
+    kills it), closed or killed (108 and 51 of them on the development machine); now both are in one folder
+    in the private cache, marked as this process's, and removed when the worker stops."""
+    monkeypatch.setenv("MATREMAP_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setenv("TMPDIR", str(tmp_path / "tmp"))  # the worker's fallback would land here
+    (tmp_path / "tmp").mkdir()
+    r = CyclesRenderer(timeout=60)
+    r.render([Material.create("cycles:diffuse")], Scene.probe([0.0], resolution=8))
+    (folder,) = (tmp_path / "cache" / "cycles").iterdir()
+    assert folder.name.startswith(f".matremap-worker-{os.getpid()}x") and any(folder.iterdir())
+    r.close()
+    assert list((tmp_path / "cache" / "cycles").iterdir()) == [] and list((tmp_path / "tmp").iterdir()) == []
+
+
+def test_a_killed_runs_scratch_folder_is_removed_by_the_next_run(tmp_path, monkeypatch):
+    import subprocess
+    import sys
+
+    from matremap.renderers.cycles.client import scratch_folder
+
+    monkeypatch.setenv("MATREMAP_CACHE", str(tmp_path / "cache"))
+    code = (
+        "import os; from matremap.renderers.cycles.client import scratch_folder; "
+        "f = scratch_folder('worker'); (f / 'render.exr').write_bytes(b'x'); print(f, flush=True); "
+        "os.kill(os.getpid(), 9)"
+    )
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=dict(os.environ))
+    assert p.returncode == -signal.SIGKILL
+    left = Path(p.stdout.strip())
+    assert left.is_dir() and left.parent == tmp_path / "cache" / "cycles"
+    mine = scratch_folder("worker")  # the next run
+    assert not left.exists() and mine.is_dir()

@@ -366,6 +366,82 @@ def test_layers_and_textures_outside_the_folder_are_refused_the_same_whether_the
     assert "'../outside/secret.png' points outside the asset folder" in str(e.value)
 
 
+def source_naming_outside(tmp_path: Path, exists: bool) -> tuple[Path, Path]:
+    """The TextureCoordinateTest stage, its TopRightMat's texture moved to ``outside/secret.png`` (written
+    when ``exists``, with bytes a copy would carry); (the stage, the outside folder)."""
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    if exists:
+        (outside / "secret.png").write_bytes((COORD.parent / "TextureCoordinateTemplate.png").read_bytes() + SECRET)
+    src = tmp_path / "asset"
+    shutil.copytree(COORD.parent, src)
+    text = (src / COORD.name).read_text()
+    head, mat, tail = text.partition('def Material "TopRightMat"')
+    tail = tail.replace("@TextureCoordinateTemplate.png@", "@../outside/secret.png@", 1)
+    (src / COORD.name).write_text(head + mat + tail)
+    return src / COORD.name, outside
+
+
+SECRET = b"SECRET-IMAGE-BYTES"
+
+
+@pytest.mark.parametrize("suffix", [".usdz", ".usda"])
+@pytest.mark.parametrize("exists", [True, False])
+def test_a_copy_refuses_a_texture_outside_the_folder_that_another_material_names(tmp_path, suffix, exists):
+    """Issue 19, finding 1: reading BackPlaneMat confines its own textures only; a copy of the whole stage
+    named TopRightMat's ../outside/secret.png too, and a .usdz packed its bytes."""
+    from matremap.formats.confine import allowed_paths
+
+    source, outside = source_naming_outside(tmp_path, exists)
+    mat = "/Asset/Materials/UsdPreviewSurface/Materials/BackPlaneMat"
+    assert read_asset(source, mat).constants  # the material itself reads
+    results = [(mat, Material.create("usd:preview_surface", {"diffuseColor": [0.3, 0.6, 0.9]}))]
+    (tmp_path / "out").mkdir()
+    with pytest.raises(MatremapError) as e:
+        write_all(tmp_path / "out" / f"all{suffix}", results, source)
+    assert "TopRightMat" in str(e.value) and "points outside the asset folder" in str(e.value)
+    assert "\n" not in str(e.value)
+    assert list((tmp_path / "out").iterdir()) == []  # nothing written, no staging left
+    if exists:  # allowed, the copy is written (a .usdz with the file inside)
+        with allowed_paths([outside]):
+            out = write_all(tmp_path / "out" / f"all{suffix}", results, source)
+        assert (SECRET in out.read_bytes()) == (suffix == ".usdz")
+
+
+def clip_stage(folder: Path, clip: str) -> Path:
+    """TextureCoordinateTest's stage with a value clip on its root prim: ``clip`` is a layer path, or a template
+    with #."""
+    if "#" in clip:
+        clips = f'string templateAssetPath = "{clip}"\n double templateStride = 1\n double templateStartTime = 0\n'
+        clips += " double templateEndTime = 1\n"
+    else:
+        clips = f"asset[] assetPaths = [@{clip}@]\n double2[] active = [(0, 0)]\n"
+    meta = f'clips = {{\n dictionary default = {{\n {clips} string primPath = "/Asset"\n }}\n }}\n'
+    text = COORD.read_text().replace('def Xform "Asset" (\n', 'def Xform "Asset" (\n' + meta, 1)
+    folder.mkdir(parents=True, exist_ok=True)
+    shutil.copy(COORD.parent / "TextureCoordinateTemplate.png", folder)
+    (folder / "clip.usda").write_text("#usda 1.0\n")
+    (folder / "s.usda").write_text(text)
+    return folder / "s.usda"
+
+
+@pytest.mark.parametrize("exists", [True, False])
+@pytest.mark.parametrize("clip", ["../outside/clip.usda", "../outside/clip.#.usda"])
+def test_value_clips_outside_the_folder_are_refused_the_same_whether_they_exist(tmp_path, clip, exists):
+    """Value clips are not composition arcs: USD opened ../outside/clip.usda while matremap read the stage."""
+    if exists:
+        (tmp_path / "outside").mkdir()
+        (tmp_path / "outside" / "clip.usda").write_text("#usda 1.0\n")
+    with pytest.raises(MatremapError) as e:
+        read_asset(clip_stage(tmp_path / "asset", clip), "TopLeftMat")
+    assert "points outside the asset folder" in str(e.value) and "../outside" in str(e.value)
+
+
+@pytest.mark.parametrize("clip", ["clip.usda", "clip.#.usda"])
+def test_value_clips_inside_the_folder_still_read(tmp_path, clip):
+    assert read_asset(clip_stage(tmp_path, clip), "TopLeftMat").textures
+
+
 # ------------------------------------------------------------------------------------------------
 # the command line, both ways, evaluated and gated
 

@@ -461,3 +461,23 @@ def test_a_table_planted_in_a_shared_cache_folder_is_not_read(tmp_path):
     assert mean_albedo(shared) == pytest.approx(honest, rel=1e-9)
     os.chmod(shared, 0o700)  # the same file in a private folder is read: the check is what stopped it
     assert mean_albedo(shared) == pytest.approx(0.123)
+
+
+@pytest.mark.parametrize("where", [0.1, 0.5, 0.95])
+def test_a_damaged_cached_table_is_rebuilt_with_a_note(tmp_path, capsys, where):
+    """A cached table's arrays carry their CRC-32 (.npz is a zip): a flipped byte made np.load raise
+    BadZipFile, which reached the command line as an internal error (exit 70). Now: a note, and rebuilt."""
+    from matremap.core.diskcache import load_tables, private_cache_dir
+
+    path = private_cache_dir() / "t_1.npz"
+    save_tables(path, "t_*.npz", spec=np.array("s"), a=np.linspace(0.0, 1.0, 4096))
+    good = load_tables(path, "s", {"a": (4096,)})
+    assert good is not None and good["a"][-1] == 1.0
+    data = bytearray(path.read_bytes())
+    data[int(where * len(data))] ^= 0xFF
+    path.write_bytes(bytes(data))
+    assert load_tables(path, "s", {"a": (4096,)}) is None  # rebuilt by its caller
+    err = capsys.readouterr().err
+    assert "damaged" in err and "rebuilding it" in err and err.count("\n") == 1
+    path.unlink()
+    assert load_tables(path, "s", {"a": (4096,)}) is None and capsys.readouterr().err == ""  # missing: silent

@@ -157,6 +157,13 @@ def group_left(pgid: int, seconds: float = 10.0) -> bool:
     return True
 
 
+def sigint_default() -> None:
+    """In the child before it runs: SIGINT back to its default action. A shell runs a background job (a test
+    run with ``&``, ``nohup``) with SIGINT ignored, and a Python started so never raises KeyboardInterrupt: the
+    SIGINT cases then finished with exit 0 and were skipped as "too quick"."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def signalled(args: list[str], cwd: Path, sig: int, when: Callable[[Path], bool]) -> tuple[int, str]:
     """Run ``matremap ARGS`` in ``cwd``, send ``sig`` when ``when(cwd)`` holds; its exit code and stderr.
     No process of the run may outlive it (a SIGKILLed sweep's workers waited for work for ever)."""
@@ -169,6 +176,7 @@ def signalled(args: list[str], cwd: Path, sig: int, when: Callable[[Path], bool]
             stdout=subprocess.DEVNULL,
             stderr=err,
             start_new_session=True,
+            preexec_fn=sigint_default,
         )
         deadline = time.monotonic() + 300
         while proc.poll() is None and not when(cwd) and time.monotonic() < deadline:

@@ -188,7 +188,7 @@ def test_rgb_base_colour_metal_with_uniform_roughness_outside_the_library_domain
     log: list[str] = []
     # roughness 0.1 lies below the library's training domain: every texel is outside, so no route
     assert library_transform(map_set, params, "mitsuba06:ward", {}, log.append) is None
-    assert "covers only 0.0% of the texels" in log[-1]
+    assert any("covers only 0.0% of the texels" in m for m in log) and "that covers the maps" in log[-1]
     t = {e.name: e for e in library.entries()}["gltf-metal-ward"].transform
     out, outside = t.apply({"baseColor": np.full((4, 5, 3), 0.6), "roughness": 0.1, "metallic": 1.0})
     assert outside.shape == (4, 5) and outside.all()
@@ -415,3 +415,51 @@ def test_an_edited_cached_transform_is_recomputed_not_used(tmp_path, capsys):
     diffuse, _ = read_image(maps.maps["diffuseReflectance"], maps.colorspace["diffuseReflectance"])
     assert diffuse.std() > 0.01 and diffuse.mean() > 0.05  # a real map, not a constant or black
     assert json.loads(cached.read_text())["checksum"] != ""  # rewritten with a valid seal
+
+
+def damage(db: Path) -> None:
+    """Overwrite the middle of a database file (whole pages of a b-tree) with garbage."""
+    data = bytearray(db.read_bytes())
+    start = len(data) // 2 // 4096 * 4096
+    data[start : start + 4096] = b"A" * 4096
+    db.write_bytes(bytes(data))
+
+
+def test_a_damaged_sweep_database_is_one_error_and_a_cached_one_is_discarded(tmp_path, capsys):
+    """A sweep database with a damaged page raised sqlite3.DatabaseError ('database disk image is malformed')
+    from a resumed sweep: an internal error, exit 70, also for the one the transform cache keeps."""
+    from matremap.cli import main
+    from matremap.sweep.store import SweepDatabaseDamaged, discard_if_damaged
+
+    db = tmp_path / "s.sqlite"
+    with SweepStore.create_or_open(db, CONFIG) as store:
+        store.add([good_row(f"p{i:03d}") for i in range(300)])  # several pages
+    assert discard_if_damaged(db) is None and db.is_file()  # a sound one stays
+    damage(db)
+    with pytest.raises(SweepDatabaseDamaged, match="is damaged"):
+        SweepStore.open(db)
+    with pytest.raises(MatremapError, match="is damaged"):
+        SweepStore.create_or_open(db, CONFIG)  # a resumed sweep
+    capsys.readouterr()
+    assert main(["learn", str(db), "-o", str(tmp_path / "t.json")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "is damaged" in err and "\n" not in err and not (tmp_path / "t.json").exists()
+    assert discard_if_damaged(db) and not db.exists()  # the cache's copy: removed, swept again
+
+
+def test_a_damaged_cached_sweep_database_is_swept_again(tmp_path, capsys):
+    from matremap.cli import main
+
+    examples = Path(__file__).resolve().parents[1] / "examples"
+    cache = tmp_path / "cache"
+    args = ["remap", str(examples / "blue-plastic"), "--to", "mitsuba06:pbr", "--fix", "distribution=as"]
+    args += ["--sweep", "--no-evaluate", "--cache", str(cache)]
+    assert main([*args, "-o", str(tmp_path / "first")]) == 0
+    (cached,) = cache.glob("*.json")
+    cached.unlink()  # the transform gone, its sweep's database kept (resumed next time) and damaged
+    (db,) = cache.glob("*.sqlite")
+    damage(db)
+    capsys.readouterr()
+    assert main([*args, "-o", str(tmp_path / "second")]) == 0
+    err = capsys.readouterr().err
+    assert "was damaged" in err and "sweeping again" in err and "0 already in the database" in err, err

@@ -253,3 +253,31 @@ def test_rgba_colour_is_not_multiplied_by_alpha(tmp_path):
     out.close()
     image, _ = read_image(path, "linear")
     np.testing.assert_allclose(image[0, 0] * 255, [200, 100, 50, 64], atol=1e-3)
+
+
+@pytest.mark.parametrize("channels", [1, 2, 3, 4])
+def test_png_bytes_decode_to_the_array_and_use_no_temporary_folder(tmp_path, monkeypatch, channels):
+    """png_bytes encodes in memory (it went through a folder in the system's temporary folder, which a killed
+    run left); PIL and OpenImageIO read back exactly the array, colour under a zero alpha included."""
+    import io
+    import tempfile
+
+    import OpenImageIO as oiio
+    from PIL import Image
+
+    from matremap.core.imageio import png_bytes
+
+    def no_folder(*args, **kwargs):
+        raise AssertionError("png_bytes made a temporary folder")
+
+    monkeypatch.setattr(tempfile, "mkdtemp", no_folder)  # TemporaryDirectory calls it
+    a = np.random.default_rng(channels).integers(0, 256, (5, 7, channels), dtype=np.uint8)
+    if channels in (2, 4):
+        a[0, 0, -1] = 0  # colour kept where alpha is 0 (unassociated)
+    data = png_bytes(a)
+    pil = np.asarray(Image.open(io.BytesIO(data)))
+    np.testing.assert_array_equal(pil.reshape(a.shape), a)
+    (tmp_path / "t.png").write_bytes(data)
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)  # as matremap reads textures
+    np.testing.assert_array_equal(oiio.ImageBuf(str(tmp_path / "t.png"), 0, 0, config).get_pixels(oiio.UINT8), a)

@@ -335,6 +335,7 @@ def cached_transform(
     from matremap.sweep.executors import make_executor
     from matremap.sweep.grid import parse_grid
     from matremap.sweep.run import SweepConfig, describe, run_sweep
+    from matremap.sweep.store import discard_if_damaged
 
     spec = map_set.spec
     held = held_values(map_set, summary, target)
@@ -366,6 +367,7 @@ def cached_transform(
         except TransformChecksumError as e:  # edited or damaged since it was written: not trusted
             log(f"note: {e}; recomputing it")
     db = path.with_suffix(".sqlite")
+    discard_if_damaged(db, log)  # the cached sweep is resumed below: only when sound
     grid = parse_grid(grid_text, spec)
     log(f"sweep: {spec.id} -> {config.target}, {len(grid)} fits over {grid_text}; {config.scene.describe()}")
     from tqdm import tqdm

@@ -18,7 +18,10 @@ from __future__ import annotations
 
 import os
 import stat
+import sys
 import tempfile
+import zipfile
+import zlib
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -96,8 +99,9 @@ def trusted(path: Path) -> bool:
 
 def load_tables(path: Path, spec: str, shapes: Mapping[str, tuple[int, ...]]) -> dict[str, np.ndarray] | None:
     """The arrays :func:`save_tables` wrote to ``path``, as float arrays of the given ``shapes``; None when
-    the table must be rebuilt: missing, unreadable or corrupt, made for another ``spec``, of another shape,
-    holding NaN or infinity, or in a folder others can write (:func:`trusted`)."""
+    the table must be rebuilt: missing, unreadable or damaged (each array's CRC-32 in the .npz is verified
+    on reading; a note says so), made for another ``spec``, of another shape, holding NaN or infinity, or
+    in a folder others can write (:func:`trusted`)."""
     if not trusted(path):  # a table in a folder others can write is not read
         return None
     try:
@@ -105,7 +109,11 @@ def load_tables(path: Path, spec: str, shapes: Mapping[str, tuple[int, ...]]) ->
             if str(z["spec"]) != spec:
                 return None
             data = {name: np.array(z[name], dtype=float) for name in shapes}
-    except (OSError, KeyError, ValueError, EOFError):
+    except FileNotFoundError:
+        return None
+    except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as e:
+        # the zip's CRC-32 of each array is its checksum: a damaged table raised BadZipFile (an internal error)
+        print(f"matremap: note: the cached table {path} is damaged ({e}); rebuilding it", file=sys.stderr)
         return None
     ok = all(data[k].shape == shape and np.isfinite(data[k]).all() for k, shape in shapes.items())
     return data if ok else None

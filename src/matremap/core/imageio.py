@@ -117,11 +117,23 @@ def _oiio_write(path: str, data: np.ndarray) -> None:
 
 def png_bytes(array: np.ndarray) -> bytes:
     """8-bit PNG bytes of a uint8 array [H, W, C] (C = 1..4), values stored as given (an alpha
-    channel does not scale the colour)."""
+    channel does not scale the colour). Encoded here (PNG specification, 2nd ed.: IHDR colour types 0/4/2/6,
+    filter 0 per row, one zlib IDAT), in memory: the OpenImageIO route wrote each image through a temporary
+    folder in the system's temporary folder, which a killed run left behind."""
+    import struct
+    import zlib
+
     a = np.ascontiguousarray(array, dtype=np.uint8)
     if a.ndim == 2:
         a = a[..., None]
-    with tempfile.TemporaryDirectory(prefix="matremap-png-") as d:
-        f = os.path.join(d, "t.png")
-        _oiio_write(f, a)
-        return Path(f).read_bytes()
+    h, w, c = a.shape
+    if c not in (1, 2, 3, 4):
+        raise MatremapError(f"cannot encode a PNG of {c} channels")
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    rows = np.concatenate([np.zeros((h, 1), np.uint8), a.reshape(h, w * c)], axis=1)  # filter byte 0 per row
+    ihdr = struct.pack(">IIBBBBB", w, h, 8, {1: 0, 2: 4, 3: 2, 4: 6}[c], 0, 0, 0)
+    idat = zlib.compress(rows.tobytes(), 6)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", idat) + chunk(b"IEND", b"")

@@ -162,6 +162,18 @@ def refuse_overwrites(out: Path, planned: list[Path], inputs: list[Path], force:
             check_output(f, force)
 
 
+def confine_uris(doc: dict[str, Any], src: Path, where: Path) -> None:
+    """Refuse a copy of a source whose buffers or images (not only the converted materials' textures, which the
+    reader confined) name a file outside ``src`` (the source's folder) and the allowed folders."""
+    from matremap.formats.confine import resolve_reference
+
+    for key in ("buffers", "images"):
+        for i, item in enumerate(doc.get(key, [])):
+            uri = item.get("uri") if isinstance(item, dict) else None
+            if isinstance(uri, str) and not uri.startswith("data:") and "://" not in uri:
+                resolve_reference(unquote(uri), src, f"{where}: {key[:-1]} {i} uri")
+
+
 def rebase_uris(doc: dict[str, Any], src: Path, out_dir: Path) -> None:
     """Rewrite the relative URIs of buffers and images (files beside the source) as seen from ``out_dir``."""
     for key in ("buffers", "images"):
@@ -387,6 +399,7 @@ __all__ = [
     "extension_names",
     "glb_bytes",
     "material_textures",
+    "confine_uris",
     "rebase_uris",
     "refuse_overwrites",
     "texture_infos",

@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from matremap.core.atomic import temp_prefix
 from matremap.core.material import Material
 from matremap.errors import MatremapError
 from matremap.formats.asset import CarriedInput, MaterialAsset, TextureRef
@@ -98,7 +99,7 @@ def without_alpha(path: Path) -> Path:
     if pixels is None:
         raise MatremapError(f"cannot read {path}: the image is corrupt; re-export it")
     colour = np.ascontiguousarray(pixels[..., :3] if spec.nchannels == 4 else pixels[..., :1])
-    fd, tmp = tempfile.mkstemp(prefix=".rgb.", suffix=".png", dir=folder)
+    fd, tmp = tempfile.mkstemp(prefix=temp_prefix("tmp", "rgb"), suffix=".png", dir=folder)  # marked: see clean_stale
     os.close(fd)
     try:
         o = oiio.ImageOutput.create(tmp)

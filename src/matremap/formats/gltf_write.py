@@ -41,6 +41,7 @@ from matremap.formats.gltf_edit import (
     add_bin_buffer,
     add_images,
     check_writable_source,
+    confine_uris,
     drop_unused,
     glb_bytes,
     material_textures,
@@ -323,6 +324,8 @@ def commit(out: Path, target: Target, reps: list[Replacement], inputs: list[Path
         planned += [out.parent / im.file_name(out) for im in images]
         planned += [bin_file] if target.bin is not None else []
     refuse_overwrites(out, planned, [*inputs, *target.inputs], force)
+    if target.base is not None:
+        confine_uris(doc, target.base, target.inputs[0])
     if target.base is not None and target.base.resolve() != out.parent.resolve():
         rebase_uris(doc, target.base, out.parent)
     if kind == ".glb" and images and target.bin is None:

@@ -62,7 +62,7 @@ from typing import Any
 
 import numpy as np
 
-from matremap.core.atomic import AtomicFiles
+from matremap.core.atomic import AtomicFiles, temp_prefix
 from matremap.core.imageio import check_output
 from matremap.core.material import Material
 from matremap.dialects import get_model
@@ -143,7 +143,13 @@ def _check_layers(pxr: Any, p: Path, confinement: Confinement | None) -> None:
             raise MatremapError(f"{p}: composes more than {MAX_LAYERS} layers; flatten it first (usdcat --flatten)")
         layer = _open_layer(pxr, f, str(p))
         package = f.suffix.lower() == ".usdz"
-        for dep in layer.GetCompositionAssetDependencies():
+        clips, template_folders = _clip_assets(pxr, layer)
+        for folder in template_folders:  # the clips' files need not exist yet; their folder must be inside
+            if package:
+                _package_member(p, folder, "")
+            else:
+                resolve_reference(folder, f.parent, f"{p}: layer {f.name} has value clips in", confinement)
+        for dep in [*layer.GetCompositionAssetDependencies(), *clips]:
             if "://" in dep or re.match(r"^[A-Za-z][A-Za-z0-9+.-]*:(?![\\/])", dep):
                 raise MatremapError(f"{p}: layer {f.name} composes {dep!r}, which is not a local file")
             if package:
@@ -154,6 +160,35 @@ def _check_layers(pxr: Any, p: Path, confinement: Confinement | None) -> None:
                 raise MatremapError(f"{p}: layer {f.name} composes {dep!r}, not found beside it")
             if target.suffix.lower() in SUFFIXES:
                 todo.append(target)
+
+
+#: the metadata of value clips naming layers (in a ``clips`` set, and the older prim metadata): USD opens
+#: those layers when it reads or flattens time samples, yet they are not composition arcs
+CLIP_KEYS = {"assetPaths": "clipAssetPaths", "manifestAssetPath": "clipManifestAssetPath"}
+CLIP_TEMPLATE_KEYS = {"templateAssetPath": "clipTemplateAssetPath"}
+
+
+def _clip_assets(pxr: Any, layer: Any) -> tuple[list[str], list[str]]:
+    """The layers a layer's value clips name, and the folders its clip templates (``clip.#.usd``) stand for."""
+    files: list[str] = []
+    templates: list[str] = []
+
+    def paths(value: Any) -> list[str]:
+        items = [value] if isinstance(value, pxr.Sdf.AssetPath | str) else list(value or [])
+        return [v.path if isinstance(v, pxr.Sdf.AssetPath) else str(v) for v in items]
+
+    def visit(path: Any) -> None:
+        spec = layer.GetObjectAtPath(path)
+        if not isinstance(spec, pxr.Sdf.PrimSpec):
+            return
+        sets = [v for v in dict(spec.GetInfo("clips")).values() if isinstance(v, dict)] if spec.HasInfo("clips") else []
+        for keys, into in ((CLIP_KEYS, files), (CLIP_TEMPLATE_KEYS, templates)):
+            for key, legacy in keys.items():
+                values = [c[key] for c in sets if key in c] + ([spec.GetInfo(legacy)] if spec.HasInfo(legacy) else [])
+                into.extend(p for v in values for p in paths(v) if p)
+
+    layer.Traverse(pxr.Sdf.Path.absoluteRootPath, visit)
+    return files, [posixpath.dirname(t) or "." for t in templates]
 
 
 def _open_stage(p: Path, confinement: Confinement | None) -> Any:
@@ -960,7 +995,7 @@ def _write_stage(
             stage = _build(pxr, out, results, source, asset, files, assets)
             _export(stage.GetRootLayer(), out, files.stage(out))
         return out
-    with tempfile.TemporaryDirectory(prefix=".matremap-usdz-", dir=out.parent) as tmp:
+    with tempfile.TemporaryDirectory(prefix=temp_prefix("usdz"), dir=out.parent) as tmp:  # a killed run's: removed
         inner = Path(tmp) / f"{out.stem}.usdc"
         with AtomicFiles(True) as work:
             stage = _build(pxr, inner, results, source, asset, work, assets)
@@ -1004,7 +1039,7 @@ def _target_stage(
         mats = [pxr.UsdShade.Material.Define(stage, f"/Root/Materials/{_sdf_name(name, used)}") for name, _ in results]
         return stage, mats
     flat = _open_stage(source, None).Flatten()
-    _rebase_assets(pxr, flat, out, files)
+    _rebase_assets(pxr, flat, out, files, source)
     stage = pxr.Usd.Stage.Open(flat)
     mats = []
     for name, _ in results:
@@ -1015,21 +1050,38 @@ def _target_stage(
     return stage, mats
 
 
-def _rebase_assets(pxr: Any, layer: Any, out: Path, files: AtomicFiles) -> None:
+def _rebase_assets(pxr: Any, layer: Any, out: Path, files: AtomicFiles, source: Path) -> None:
     """Rewrite the (anchored, absolute) asset paths of a flattened layer as seen from ``out``'s folder; files
-    inside a usdz are extracted and copied beside ``out``."""
+    inside a usdz are extracted and copied beside ``out``. Every asset path of the copy (defaults, arrays, time
+    samples), not only the converted materials' textures the reader confined, must lie in ``source``'s folder
+    or an allowed one (:func:`~matremap.formats.confine.resolve_reference`): a ``.usdz`` packs what they name."""
     copied: dict[str, str] = {}
+    asset_types = (pxr.Sdf.ValueTypeNames.Asset, pxr.Sdf.ValueTypeNames.AssetArray)
 
     def visit(path: Any) -> None:
         spec = layer.GetObjectAtPath(path)
-        if not isinstance(spec, pxr.Sdf.AttributeSpec) or spec.typeName != pxr.Sdf.ValueTypeNames.Asset:
+        if not isinstance(spec, pxr.Sdf.AttributeSpec) or spec.typeName not in asset_types:
             return
+        values = [spec.default, *(layer.QueryTimeSample(path, t) for t in layer.ListTimeSamplesForPath(path))]
+        for value in values:
+            for a in [value] if isinstance(value, pxr.Sdf.AssetPath) else list(value or []):
+                if a.path:
+                    _confined_asset(pxr, a.path, source, f"{source}: {path}")
         value = spec.default
         if not isinstance(value, pxr.Sdf.AssetPath) or not value.path:
             return
         spec.default = pxr.Sdf.AssetPath(_rebased(pxr, value.path, out, files, copied))
 
     layer.Traverse(pxr.Sdf.Path.absoluteRootPath, visit)
+
+
+def _confined_asset(pxr: Any, path: str, source: Path, what: str) -> None:
+    """Refuse an asset path of a flattened copy of ``source`` that lies outside its folder (and the allowed
+    ones); a path inside a usdz is checked by its package's file."""
+    if "://" in path or re.match(r"^[A-Za-z][A-Za-z0-9+.-]*:(?![\\/])", path):
+        raise MatremapError(f"{what} names {path!r}, which is not a local file")
+    package, _ = _split_package(pxr, path)
+    resolve_reference(package or path, source.resolve().parent, what)
 
 
 def _rebased(pxr: Any, path: str, out: Path, files: AtomicFiles, copied: dict[str, str]) -> str:

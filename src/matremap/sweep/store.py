@@ -13,7 +13,7 @@ import json
 import math
 import sqlite3
 import time
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -101,6 +101,12 @@ class SweepStore:
         except sqlite3.DatabaseError as e:
             conn.close()
             raise MatremapError(f"{p} is not a matremap sweep database ({e})") from None
+        damage = _damage(conn)
+        if damage:
+            conn.close()
+            raise SweepDatabaseDamaged(
+                f"{p} is damaged ({damage}); move it aside and run the sweep again into a new --db file"
+            )
         if version is None or _loads(version[0]) != SCHEMA_VERSION:
             conn.close()
             raise MatremapError(f"{p} is not a matremap sweep database of schema {SCHEMA_VERSION}")
@@ -218,7 +224,10 @@ class SweepStore:
     # -- rows --------------------------------------------------------------------------------
     def finished_keys(self) -> set[str]:
         """The points fitted successfully; a failed point is not finished: a resumed sweep retries it."""
-        return {k for (k,) in self.conn.execute("SELECT key FROM points WHERE status = 'ok'")}
+        try:
+            return {k for (k,) in self.conn.execute("SELECT key FROM points WHERE status = 'ok'")}
+        except sqlite3.DatabaseError as e:
+            raise MatremapError(f"cannot read the points of {self.path}: {e}") from None
 
     def add(self, rows: Iterable[Mapping[str, Any]]) -> int:
         """Insert finished points in one transaction; a point already fitted is left as it is, a point
@@ -257,6 +266,43 @@ class SweepStore:
 
 
 _BAD = object()
+
+
+class SweepDatabaseDamaged(MatremapError):
+    """A sweep database whose pages SQLite's own check finds damaged."""
+
+
+def _damage(conn: sqlite3.Connection) -> str:
+    """What SQLite's ``quick_check`` (each page's structure, in one pass) finds wrong, or "" when nothing."""
+    try:
+        found = [row[0] for row in conn.execute("PRAGMA quick_check(3)")]
+    except sqlite3.OperationalError as e:
+        if "locked" in str(e) or "busy" in str(e):
+            return ""  # another process writing it: not damage
+        return str(e)
+    except sqlite3.DatabaseError as e:
+        return str(e)
+    return "" if found == ["ok"] else "; ".join(str(f) for f in found)[:200]
+
+
+def discard_if_damaged(path: str | Path, log: Callable[[str], None] | None = None) -> str | None:
+    """Remove a damaged database (and its write-ahead log) that a cache holds, so that its sweep runs again,
+    with a note to ``log``; what was wrong, or None when it is sound or absent."""
+    p = Path(path)
+    if not p.is_file():
+        return None
+    try:
+        SweepStore.open(p).close()
+    except SweepDatabaseDamaged as e:
+        for f in (p, p.with_name(p.name + "-wal"), p.with_name(p.name + "-shm")):
+            f.unlink(missing_ok=True)
+        damage = str(e).split(" (", 1)[1].split("); ", 1)[0] if " (" in str(e) else str(e)
+        if log is not None:
+            log(f"note: the cached sweep database {p.name} was damaged ({damage}); sweeping again")
+        return damage
+    except MatremapError:
+        return None  # another problem: the sweep says it in its own words
+    return None
 
 
 def _loads(text: Any) -> Any:

@@ -12,6 +12,7 @@ import io
 import json
 import os
 import select
+import shutil
 import struct
 import subprocess
 import tempfile
@@ -65,6 +66,25 @@ class _WorkerDied(Exception):
     pass
 
 
+#: the environment variable that hands the worker its scratch folder (its render files)
+SCRATCH_ENV = "MATREMAP_CYCLES_SCRATCH"
+
+
+def scratch_folder(kind: str) -> Path:
+    """A new folder for files the Cycles worker reads or writes, marked as this process's
+    (:func:`~matremap.core.atomic.temp_prefix`) in the private cache's ``cycles`` folder, whose stale
+    entries (of killed runs) every later run removes; the system temporary folder if the cache is unusable.
+    Each worker left a ``matremap-cycles-*`` folder with its last render in /tmp, killed or not."""
+    from matremap.core.atomic import temp_prefix
+    from matremap.core.diskcache import private_cache_dir
+
+    try:
+        parent: Path | None = private_cache_dir("cycles")
+    except MatremapError:
+        parent = None
+    return Path(tempfile.mkdtemp(prefix=temp_prefix(kind), dir=parent))
+
+
 class WorkerClient:
     """A persistent bpy worker process and the requests it answers over a pipe.
 
@@ -83,6 +103,7 @@ class WorkerClient:
         self.geometry = geometry
         self._proc: subprocess.Popen[bytes] | None = None
         self._log: Any = None
+        self._scratch: Path | None = None
         self.renders = 0  # Cycles images (one per material and light)
         self.restarts = 0
         self.blender_version: str | None = None
@@ -115,9 +136,13 @@ class WorkerClient:
             self.restarts += 1
         self.close()
         self._log = tempfile.TemporaryFile()
+        self._scratch = scratch_folder("worker")
+        # Blender makes its own blender_* folder in the temporary folder and a killed worker leaves it there
+        scratch = str(self._scratch)
+        env = {**os.environ, SCRATCH_ENV: scratch, "TMPDIR": scratch, "TEMP": scratch, "TMP": scratch}
         try:
             self._proc = subprocess.Popen(
-                [self.python, str(WORKER)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._log
+                [self.python, str(WORKER)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._log, env=env
             )
         except OSError as e:
             raise RendererUnavailable(f"cannot start the Cycles worker with {self.python}: {e}; {INSTALL_HINT}") from e
@@ -141,6 +166,9 @@ class WorkerClient:
         if self._log is not None:
             self._log.close()
             self._log = None
+        if self._scratch is not None:
+            shutil.rmtree(self._scratch, ignore_errors=True)
+            self._scratch = None
 
     def request(self, request: dict[str, Any]) -> np.ndarray:
         """Send a request whose reply carries images; returns them."""

@@ -23,8 +23,9 @@ environment orientation as the embedded renderer, so the images compare pixel by
 
 from __future__ import annotations
 
-import tempfile
-from collections.abc import Mapping
+import shutil
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -38,7 +39,7 @@ from matremap.dialects import cycles as cycles_dialect
 from matremap.dialects import get_model
 from matremap.errors import MatremapError
 from matremap.renderers.base import PARTS
-from matremap.renderers.cycles.client import WorkerClient, shared_client
+from matremap.renderers.cycles.client import WorkerClient, scratch_folder, shared_client
 from matremap.renderers.textured import check_normal_map, check_options, split_texture_params
 
 #: the models Cycles draws
@@ -46,6 +47,16 @@ MODELS = tuple(spec.id for spec in cycles_dialect.MODELS)
 
 #: default samples per pixel
 DEFAULT_SPP = 64
+
+
+@contextmanager
+def _scratch() -> Iterator[str]:
+    """A folder for the arrays a request hands the worker (:func:`scratch_folder`), removed afterwards."""
+    folder = scratch_folder("svbrdf")
+    try:
+        yield str(folder)
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def _split_params(
@@ -102,7 +113,7 @@ def render_svbrdf_cycles(
     nm = None if normal_map is None else check_normal_map(normal_map)
     scene = Scene(resolution=res)
     r = shared_client(renderer)
-    with tempfile.TemporaryDirectory(prefix="matremap-cycles-svbrdf-") as d:
+    with _scratch() as d:
         names = {}
         for i, (name, tex) in enumerate(textures.items()):
             names[name] = str(i)

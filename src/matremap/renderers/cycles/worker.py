@@ -74,7 +74,8 @@ class Probe:
 
     def __init__(self) -> None:
         self.key: str | None = None
-        self.tmp = tempfile.mkdtemp(prefix="matremap-cycles-")
+        # the client's scratch folder (it removes it, and a later run removes a killed run's)
+        self.tmp = os.environ.get("MATREMAP_CYCLES_SCRATCH") or tempfile.mkdtemp(prefix="matremap-cycles-")
         self.materials: dict[str, tuple] = {}
 
     # -- scene ---------------------------------------------------------------------------------
