@@ -49,3 +49,22 @@ def test_convert_reports_values_clipped_to_the_targets_bounds(tmp_path):
     assert any("clipped to its bounds" in n for n in report.notes)
     honest = convert(maps, [Transform.load(LIBRARY / "ward-as.json")], tmp_path / "honest")
     assert honest.bounded == 0
+
+
+def test_the_clamped_measure_is_a_fraction_of_the_values(tmp_path):
+    """``clamped`` counts values, three to an RGB texel: divided by the texels alone it read 1.7 and 2.5 for
+    USD TextureTransformTest onto glTF. With alpha clipped at every texel, one value in seven is clipped."""
+    from matremap.remap import values_per_texel
+
+    doc = json.loads((LIBRARY / "ward-as.json").read_text())
+    doc.pop("checksum", None)
+    coef = doc["mappings"]["roughness"]["coef"]
+    doc["mappings"]["roughness"]["coef"] = [0.0] * (len(coef) - 1) + [3.0]  # alpha 3 everywhere: above 1
+    maps = load_map_set(ROOT / "examples" / "blue-plastic")
+    maps.constants["variant"] = "balanced"
+    report = convert(maps, [Transform.from_dict(doc)], tmp_path / "out")
+    out = load_map_set(tmp_path / "out")
+    h, w = maps.size
+    assert values_per_texel(out) == 1 + 3 + 3  # alpha, F0, diffuseReflectance (not the held multiplier)
+    assert report.bounded + report.clipped == h * w
+    assert (report.bounded + report.clipped) / (h * w * values_per_texel(out)) == 1 / 7

@@ -573,7 +573,7 @@ def remap_into(
         ),
         Check(
             "clamped",
-            clipped / max(texels, 1),
+            clipped / max(texels * values_per_texel(result_set), 1),
             job.thresholds.clamped,
             f"values clipped to the target's bounds or the files' range: {clipped}",
         ),
@@ -610,6 +610,16 @@ def remap_into(
     return RemapResult(
         tpath, cached, folder / "maps", html, outside, texels, mean, seconds, verdict, identity is not None
     )
+
+
+def values_per_texel(map_set: MapSet) -> int:
+    """The values a texel of ``map_set`` holds: a channel count per fitted parameter, map or constant (a
+    transform writes each at every texel, a uniform one too; held ones such as a specular multiplier are the
+    template's). The ``clamped`` measure's denominator: it counts values, three to an RGB texel; divided by
+    the texels alone it read 1.7 or 2.5 for a "fraction"."""
+    spec = map_set.spec
+    names = {*map_set.maps, *(k for k in map_set.constants if k in spec.param_names)}
+    return max(1, sum(spec.param(n).channels for n in names if n in spec.param_names and spec.param(n).fit))
 
 
 def fit_notes(transform_file: Path, envmap: str, angles: Sequence[float], log: Callable[[str], None]) -> dict[str, str]:
