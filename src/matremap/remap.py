@@ -315,6 +315,18 @@ def library_transform(
     return found.transform
 
 
+def transform_cache_path(cache: Path, config: Any, grid_text: str) -> Path:
+    """Where the transform of a sweep is cached: named by its models and a digest of everything that decides
+    it (the sweep's configuration with its probe and objective, the grid, matremap's version and results
+    revision); ``cache`` is created."""
+    from matremap.core.diskcache import RESULTS_REVISION
+
+    key_doc = {"config": config.to_dict(), "grid": grid_text, "version": __version__, "revision": RESULTS_REVISION}
+    key = hashlib.sha256(json.dumps(key_doc, sort_keys=True).encode()).hexdigest()[:16]
+    cache.mkdir(parents=True, exist_ok=True)
+    return cache / f"{config.source.model.replace(':', '-')}--{config.target.replace(':', '-')}-{key}.json"
+
+
 def cached_transform(
     map_set: MapSet,
     summary: MapSummary,
@@ -353,12 +365,7 @@ def cached_transform(
         target_renderer=target_renderer,
         objective=objective,
     )
-    from matremap.core.diskcache import RESULTS_REVISION
-
-    key_doc = {"config": config.to_dict(), "grid": grid_text, "version": __version__, "revision": RESULTS_REVISION}
-    key = hashlib.sha256(json.dumps(key_doc, sort_keys=True).encode()).hexdigest()[:16]
-    cache.mkdir(parents=True, exist_ok=True)
-    path = cache / f"{spec.id.replace(':', '-')}--{config.target.replace(':', '-')}-{key}.json"
+    path = transform_cache_path(cache, config, grid_text)
     if path.is_file():
         try:
             t = Transform.load(path, require_checksum=True)
