@@ -192,10 +192,23 @@ def test_the_single_writer_carries_opacity_and_emission(tmp_path):
     assert ET.parse(out2).getroot().find("bsdf/float").get("value") == "1.0"  # alpha-tested: 0.7 >= 0.5
 
 
+def _readable(scene: Path) -> bool:
+    """Whether matremap reads some BSDF of the scene (the corpus's dielectric scenes are refused whole, in one
+    line each: tested in test_mitsuba_corpus, so not round-tripped here)."""
+    for name in material_names(scene):
+        try:
+            read_asset(scene, name)
+            return True
+        except MatremapError:
+            pass
+    return False
+
+
 CORPUS_UNIFORM = [
     p
     for p in sorted(CORPUS.glob("mitsuba-*/*.xml"))
     if p.parent.name not in ("mitsuba-normalmap",)  # its blank.png normal map: covered by the map tests
+    and _readable(p)
 ]
 
 
@@ -212,8 +225,7 @@ def test_corpus_round_trip_read_write_read(tmp_path, src):
         except MatremapError:
             continue
         results.append((name, a.material()))
-    if not results:
-        pytest.skip("every BSDF of this scene is refused (tested in test_mitsuba_corpus)")
+    assert results  # _readable chose the scene for a BSDF that reads
     (tmp_path / "out").mkdir()
     out = write_all(tmp_path / "out" / src.name, results, src)
     for name, m in results:
