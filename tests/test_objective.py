@@ -63,22 +63,38 @@ def test_an_unknown_objective_is_refused():
         fit(WARD, "mitsuba06:pbr", fix={"distribution": "as"}, objective="psnr")
 
 
-def test_the_ssim_stage_refines_the_l2_fit_and_never_worsens_its_measure():
-    """Under the environment probe the ssim objective's stage starts from the L2 strategy's result and only
-    takes steps that lower 1 - SSIM; the stage is reported, and the L2 loss is still the relative RMSE."""
+def test_the_ssim_stage_refines_the_headlight_fit_and_never_worsens_its_measure():
+    """Under an environment probe the L2 stages are made under the headlight (and, for a second start, under
+    the environment); the ssim stage runs from both on the environment, keeps alpha at least half the
+    headlight's (a narrower lobe would vanish between the environment's lights), and only takes steps that
+    lower 1 - SSIM: it ends no worse than either start."""
     scene = env(res=32, lights=16)
+    headlight = fit(WARD, "mitsuba06:pbr", "two-stage", Scene(resolution=128), fix={"distribution": "as"})
     l2 = fit(WARD, "mitsuba06:pbr", "two-stage", scene, fix={"distribution": "as"})
     ssim = fit(WARD, "mitsuba06:pbr", "two-stage", scene, fix={"distribution": "as"}, objective="ssim")
-    assert [s.name for s in ssim.stages] == ["diffuse", "specular", "ssim"]
+    assert [s.name for s in ssim.stages] == [
+        "headlight diffuse",
+        "headlight specular",
+        "environment diffuse",
+        "environment specular",
+        "ssim",
+        "ssim",
+    ]
     assert ssim.objective == "ssim" and l2.objective == "l2"
     measure = make("ssim", l2_goal(scene), scene)
     from matremap.renderers.embedded import EmbeddedRenderer
 
     r = EmbeddedRenderer()
-    before = float(np.sum(measure.residuals(render_pixels(r, [l2.target], scene).astype(float)) ** 2))
-    assert ssim.loss <= before + 1e-12  # under ssim, the loss is the mean 1 - SSIM
-    assert ssim.loss < 0.98 * before  # the Ward's look under this light is not the L2 optimum's
-    assert ssim.to_dict()["objective"] == "ssim" and ssim.relative_rmse > ssim.loss / 10
+
+    def one_minus_ssim(m):
+        return float(np.sum(measure.residuals(render_pixels(r, [m], scene).astype(float)) ** 2))
+
+    assert ssim.loss == pytest.approx(one_minus_ssim(ssim.target), rel=1e-9)  # under ssim: the mean 1 - SSIM
+    assert ssim.loss <= one_minus_ssim(headlight.target) + 1e-12
+    assert ssim.loss <= one_minus_ssim(l2.target) + 1e-12 and ssim.loss < 0.98 * one_minus_ssim(headlight.target)
+    a0, a1 = float(headlight.target.values["alpha"][0]), float(ssim.target.values["alpha"][0])
+    assert a1 >= a0 / 2 - 1e-12
+    assert ssim.to_dict()["objective"] == "ssim" and ssim.relative_rmse > 0
     assert l2.loss == pytest.approx(l2.relative_rmse)
 
 

@@ -23,16 +23,18 @@ Strategies:
                  of the others (variable projection, :mod:`matremap.core.varpro`): the joint optimum
                  of ``simple`` at about the cost of a fit over the nonlinear parameters alone.
 
-The loss reported is the relative RMSE over sphere pixels, ||t - s|| / ||s||; under another objective
-(:mod:`matremap.core.objective`), that objective's measure (the mean 1 - SSIM under ``ssim``), the relative
-RMSE being reported beside it.
+The loss reported is the relative RMSE over sphere pixels, ||t - s|| / ||s||. Under another objective
+(:mod:`matremap.core.objective`) the strategy's result is refined by one more stage over every free parameter
+under that objective, no roughness below half the L2 fit's; under an environment probe the L2 stages are made on
+the headlight probe (:func:`_fit_body` says why). The loss is then the objective's measure
+(the mean 1 - SSIM under ``ssim``) on the probe asked for, the relative RMSE being reported beside it.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, cast
 
 import numpy as np
@@ -663,37 +665,80 @@ def _fit_body(
     t0: float,
     objective: str = "l2",
 ) -> Steps[FitResult]:
-    """The renders of a checked fit: irradiance, source goals, the strategy's stages (and the objective's),
-    the final loss."""
+    """Long: the two probes of an objective fit and the loss where it was made are read best together.
+
+    The renders of a checked fit: irradiance, source goals, the strategy's stages under L2, then under an
+    objective other than L2 one more stage over every free parameter, the final loss. Under an environment
+    probe the L2 stages are made on the headlight probe, which resolves a lobe's width wherever the
+    environment's few lights may not: a lobe narrower than their spacing vanishes between them, and the SSIM
+    objective would take that for a match (a blue plastic sweep under the mixed probe put 106 of 120 AS fits at
+    alpha 1e-4, learned a constant diffuse and failed the gate at 1 - SSIM 0.52). So the objective's stage, on
+    the environment, keeps each roughness at least half the headlight's (:func:`_around`), and runs from two
+    starts, the headlight's fit and the L2 fit under the environment itself (bounded alike), the better kept:
+    they lie in different basins (the examples' blue plastic under the built-in studio: 0.0990 from the first,
+    0.0751 from the second, the floor 0.0749)."""
     counter = _Counter(scene)
-    scale = 1.0
-    if not same_units(source.model, spec.id):
-        white_s, white_t = white_reference(source.spec.family), white_reference(spec.family)
-        src = yield from counter.pixels(src_r, [white_s])
-        tgt = yield from counter.pixels(tgt_r, [white_t])
-        scale = irradiance_ratio(src[0], tgt[0], f"{source.spec.family} in {src_r.name}")
-
-    goals, sharpened, warnings = yield from _resolved_goals(source, strategy, scale, src_r, counter)
+    headlight = objective != "l2" and scene.environment is not None
+    first = _Counter(headlight_probe(scene)) if headlight else counter
+    scale = yield from _irradiance(source, spec, src_r, tgt_r, first)
+    goals, sharpened, warnings = yield from _resolved_goals(source, strategy, scale, src_r, first)
     stages: list[StageReport] = []
-    current = yield from _descend(strategy, template, free_params, goals, tgt_r, counter, stages, coarse, objective)
-
+    current = yield from _strategy_stages(strategy, template, free_params, goals, tgt_r, first, stages, coarse)
+    if headlight:
+        for stage in stages:
+            stage.name = f"headlight {stage.name}"
+    goal, where = goals[FULL], first
+    if objective != "l2" and sharpened is None:
+        starts = [current]
+        params = _around(current, free_params)
+        if headlight:  # a second start: the L2 fit under the environment itself (another basin), bounded alike
+            scale = yield from _irradiance(source, spec, src_r, tgt_r, counter)
+            env_goals = yield from _source_goals(source, strategy, scale, src_r, counter)
+            goal = env_goals[FULL]
+            there: list[StageReport] = []
+            env_fit = yield from _strategy_stages(
+                strategy, template, free_params, env_goals, tgt_r, counter, there, coarse
+            )
+            starts.append(_clip_to(env_fit, params))
+            stages += [replace(stage, name=f"environment {stage.name}") for stage in there]
+        best: tuple[float, Material] | None = None
+        for start in starts:
+            result = yield from _run_stage(
+                FULL,
+                params,
+                start,
+                goal,
+                1.0,
+                tgt_r,
+                counter,
+                stages,
+                name=objective,
+                coarse=False,
+                objective=objective,
+            )
+            if best is None or stages[-1].loss < best[0]:
+                best = (stages[-1].loss, result)
+        assert best is not None
+        current = best[1]
+        where = counter
+    elif objective != "l2":
+        warnings.append(f"the {objective} stage is skipped: the source's lobe is narrower than the probe resolves")
     # the loss is measured where the fit was made (at the resolvable width for a too-narrow highlight)
-    final = (yield from counter.pixels(tgt_r, [current]))[0]
-    goal = goals[FULL]
+    final = (yield from where.pixels(tgt_r, [current]))[0]
     rmse = float(np.linalg.norm(final - goal) / np.linalg.norm(goal))
-    loss = (
-        rmse if objective == "l2" else measure(objective, make_objective(objective, goal, scene).residuals(final[None]))
-    )
+    loss = rmse
+    if objective != "l2" and where is counter:
+        loss = measure(objective, make_objective(objective, goal, scene).residuals(final[None]))
     if sharpened is not None:
         current = yield from _towards_mirror(
-            source, sharpened, current, strategy, scale, src_r, tgt_r, free_params, counter, stages
+            source, sharpened, current, strategy, scale, src_r, tgt_r, free_params, first, stages
         )
     return FitResult(
         source=source,
         target=current,
         strategy=strategy,
         loss=loss,
-        renders=counter.images,
+        renders=counter.images + (first.images if first is not counter else 0),
         seconds=time.perf_counter() - t0,
         irradiance_scale=scale,
         scene=scene,
@@ -704,6 +749,52 @@ def _fit_body(
         objective=objective,
         relative_rmse=rmse,
     )
+
+
+def headlight_probe(scene: Scene) -> Scene:
+    """The point-light probe beside an environment probe: its own point lights (the mixed probe's) or the
+    paper's headlight, at the point probe's resolution."""
+    from matremap.core.scene import PROBE_RESOLUTION
+
+    lights = tuple(light.theta for light in scene.lights) or (0.0,)
+    return Scene.probe(lights, max(scene.resolution, PROBE_RESOLUTION["point"]))
+
+
+def _irradiance(source: Material, spec: ModelSpec, src_r: Renderer, tgt_r: Renderer, counter: _Counter) -> Steps[float]:
+    """The irradiance scale from the source's units to the target's on the counter's probe (1 within a family)."""
+    if same_units(source.model, spec.id):
+        return 1.0
+    white_s, white_t = white_reference(source.spec.family), white_reference(spec.family)
+    src = yield from counter.pixels(src_r, [white_s])
+    tgt = yield from counter.pixels(tgt_r, [white_t])
+    return irradiance_ratio(src[0], tgt[0], f"{source.spec.family} in {src_r.name}")
+
+
+#: how far below the L2 fit's an objective's stage may take a roughness: a factor on the lobe's width
+AROUND = 2.0
+
+
+def _clip_to(m: Material, params: Sequence[ParamSpec]) -> Material:
+    """``m`` with the values of ``params`` clipped into their (narrowed) bounds."""
+    return m.with_params({p.name: np.clip(m.values[p.name], *p.bounds) for p in params})
+
+
+def _around(fitted: Material, params: Sequence[ParamSpec]) -> list[ParamSpec]:
+    """``params`` with each roughness bounded below at its value in ``fitted`` over :data:`AROUND` (a factor on
+    alpha; its square on an exponent, whose lobe width goes as its inverse square root; for an exponent the
+    bound is above, where the lobe narrows)."""
+    out = []
+    for p in params:
+        if p.role == "roughness":
+            v = float(np.mean(fitted.values[p.name]))
+            lo, hi = p.bounds
+            if p.log:  # an exponent: the lobe narrows as it grows
+                hi = min(hi, v * AROUND**2)
+            else:
+                lo = max(lo, v / AROUND)
+            p = replace(p, bounds=(lo, hi)) if lo < hi else p
+        out.append(p)
+    return out
 
 
 def _resolved_goals(
@@ -771,40 +862,6 @@ def _source_goals(
     return goals
 
 
-def _descend(
-    strategy: str,
-    template: Material,
-    free_params: list[ParamSpec],
-    goals: Mapping[str, np.ndarray],
-    renderer: Renderer,
-    counter: _Counter,
-    stages: list[StageReport],
-    coarse: bool,
-    objective: str = "l2",
-) -> Steps[Material]:
-    """Run the strategy's stages from ``template``: diffuse then specular (two-stage), everything at
-    once (simple), or both and then everything (three-stage); under an objective other than L2, then every
-    free parameter under it from there. Each stage appends its report."""
-    current = yield from _strategy_stages(strategy, template, free_params, goals, renderer, counter, stages, coarse)
-    if objective == "l2":
-        return current
-    return (
-        yield from _run_stage(
-            FULL,
-            free_params,
-            current,
-            goals[FULL],
-            1.0,
-            renderer,
-            counter,
-            stages,
-            name=objective,
-            coarse=False,
-            objective=objective,
-        )
-    )
-
-
 def _strategy_stages(
     strategy: str,
     template: Material,
@@ -815,7 +872,8 @@ def _strategy_stages(
     stages: list[StageReport],
     coarse: bool,
 ) -> Steps[Material]:
-    """The stages of ``strategy`` under L2 (see :func:`_descend`)."""
+    """Run the strategy's stages under L2 from ``template``: diffuse then specular (two-stage), everything at
+    once (simple, separable), or both and then everything (three-stage); each stage appends its report."""
     current = template
     if strategy in ("two-stage", "three-stage"):
         total = float(np.sum(goals[FULL] ** 2)) or 1.0
@@ -955,7 +1013,7 @@ def _towards_mirror(
     w2 = w1 / SHARPEN_STEP**2 if rp_s.log else min(w1 * SHARPEN_STEP, rp_s.bounds[1])
     further = widened.with_params({rp_s.name: w2})
     goals = yield from _source_goals(further, strategy, scale, src_r, counter)
-    second = yield from _descend(strategy, fitted, free_params, goals, tgt_r, counter, stages, coarse=False)
+    second = yield from _strategy_stages(strategy, fitted, free_params, goals, tgt_r, counter, stages, coarse=False)
 
     def width(v: float, log: bool) -> float:  # a roughness-like measure of a lobe's width
         return v**-0.5 if log else v

@@ -73,9 +73,12 @@ finished points on the grid and gives every point a list of flag reasons. It is 
     decades. The MAD is floored at ``LOSS_MIN_SPREAD`` (0.05 in log units) so that a sweep of
     near-identical losses does not flag points that differ by a few per cent. Where a whole region
     of the grid fits badly, the MAD is large and few points stand out: this rule finds single
-    failed fits, not bad regions (the loss map shows those). A loss above ``LOSS_MAX`` (0.5: half the
-    image's energy unexplained) is flagged whatever the others: a sweep whose every fit failed the same way
-    (a source part drawn black, say) has no outlier, and was learned from.
+    failed fits, not bad regions (the loss map shows those). A loss above ``LOSS_MAX`` of the sweep's
+    objective (l2: 0.5, half the image's energy unexplained; ssim: 0.9 of 1 - SSIM, where a black or unrelated
+    image reads about 1, for the SSIM of a lobe that only resembles its source -- a pure-specular Ward as AS
+    under the mixed probe, 0.48-0.62 -- is a poor match, not none) is flagged whatever the others: a sweep
+    whose every fit failed the same way (a source part drawn black, say) has no outlier, and was learned
+    from.
 
 Only fitted target parameters are tested: those the model fits by default or the configuration
 frees, minus those it fixes. Rows whose swept values are not on the current grid keep their
@@ -106,6 +109,8 @@ LOSS_Z = 3.5
 LOSS_MIN = 0.02
 LOSS_MIN_SPREAD = 0.05
 LOSS_MAX = 0.5
+#: LOSS_MAX per objective (:mod:`matremap.core.objective`): their losses are measured on their own scales
+LOSS_MAX_BY_OBJECTIVE = {"l2": LOSS_MAX, "log": LOSS_MAX, "ssim": 0.9}
 #: RGB values whose channels agree within this (relative) are grey
 GREY_RTOL = 1e-4
 
@@ -233,7 +238,7 @@ def analyse(rows: Sequence[Mapping[str, Any]], grid: Grid | Mapping[str, Any] | 
 
     for r in ok:
         _value_tests(r, target, tested, flags[r["key"]], details[r["key"]])
-    _loss_test(ok, flags, details)
+    _loss_test(ok, flags, details, LOSS_MAX_BY_OBJECTIVE.get(_objective(config), LOSS_MAX))
 
     # one entry per reason, in a stable order
     order = {"failed": 0, "jump": 1, "above1": 2, "bound": 3, "loss": 4}
@@ -346,13 +351,24 @@ def _optimised(row: Mapping[str, Any]) -> set[str] | None:
     return out
 
 
-def _loss_test(ok: Sequence[Mapping[str, Any]], flags: dict[str, list[str]], details: dict[str, list[str]]) -> None:
+def _objective(config: Any) -> str:
+    """The objective of a sweep configuration (object or JSON form); ``l2`` when it does not say."""
+    value = config.get("objective", "l2") if isinstance(config, Mapping) else getattr(config, "objective", "l2")
+    return str(value)
+
+
+def _loss_test(
+    ok: Sequence[Mapping[str, Any]],
+    flags: dict[str, list[str]],
+    details: dict[str, list[str]],
+    loss_max: float = LOSS_MAX,
+) -> None:
     losses = [(r["key"], float(r["loss"])) for r in ok if r.get("loss") is not None and r["loss"] > 0]
     for key, loss in losses:
-        if loss > LOSS_MAX:  # no remapping at all, however many points share it
+        if loss > loss_max:  # no remapping at all, however many points share it
             flags[key].append("loss")
-            details[key].append(f"loss {loss:.3g} above {LOSS_MAX:g}: the fit found no match")
-    losses = [(k, v) for k, v in losses if v <= LOSS_MAX]
+            details[key].append(f"loss {loss:.3g} above {loss_max:g}: the fit found no match")
+    losses = [(k, v) for k, v in losses if v <= loss_max]
     if len(losses) < 3:
         return
     logs = np.log([v for _, v in losses])
