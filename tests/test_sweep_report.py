@@ -366,3 +366,17 @@ def test_a_sweep_whose_every_fit_found_no_match_is_flagged_and_not_learned_from(
         con.execute("UPDATE points SET loss = 1.0")
     with pytest.raises(MatremapError, match="every fit of the sweep found no match"):
         load_training_data(db)
+
+
+def test_no_match_is_judged_on_the_objectives_own_scale(ward_db):
+    """A loss of 0.6 is 'no match' as a relative RMSE, but a poor match as 1 - SSIM (a pure-specular Ward as AS
+    under the mixed probe reads 0.48-0.62, and dropping those rows left a sweep without its diffuse axis)."""
+    rows, grid, config = load(ward_db)
+    key = key_at(grid, (2, 2))
+    bad = copy.deepcopy(rows)
+    next(r for r in bad if r["key"] == key)["loss"] = 0.6
+    assert "loss" in analyse(bad, grid, config).flags[key]
+    ssim = {**config, "objective": "ssim"}
+    assert not any("above" in d for d in analyse(bad, grid, ssim).details[key])
+    next(r for r in bad if r["key"] == key)["loss"] = 0.95
+    assert any("above 0.9" in d for d in analyse(bad, grid, ssim).details[key])
