@@ -70,7 +70,7 @@ def load_training_data(db: str | Path, reverse: bool = False, exclude_flagged: b
     way back); ``exclude_flagged`` leaves out points the stability analysis flags."""
     from matremap.sweep.grid import Grid
     from matremap.sweep.run import SweepConfig
-    from matremap.sweep.stability import LOSS_MAX, analyse
+    from matremap.sweep.stability import LOSS_MAX, LOSS_MAX_BY_OBJECTIVE, analyse
 
     with SweepStore.open(db) as store:
         rows = store.rows()
@@ -90,11 +90,12 @@ def load_training_data(db: str | Path, reverse: bool = False, exclude_flagged: b
         kept = [r for r in ok if not analysis.flags.get(r["key"])]
         flagged = len(ok) - len(kept)
         # every point flagged: learn from them all, but never from fits that found no match
-        ok = kept or [r for r in ok if r.get("loss") is None or float(r["loss"]) <= LOSS_MAX]
+        most = LOSS_MAX_BY_OBJECTIVE.get(config.objective, LOSS_MAX)
+        ok = kept or [r for r in ok if r.get("loss") is None or float(r["loss"]) <= most]
         if not ok:
             raise MatremapError(
-                f"{db}: every fit of the sweep found no match (relative error above {LOSS_MAX:g}): there is nothing "
-                f"to learn a transform from; try --strategy simple, or another target model"
+                f"{db}: every fit of the sweep found no match ({config.objective} loss above {most:g}): there is "
+                f"nothing to learn a transform from; try --strategy simple, or another target model"
             )
     src_spec, tgt_spec = get_model(config.source.model), get_model(config.target)
     src_params = [r["source"] for r in ok]
