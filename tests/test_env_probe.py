@@ -140,6 +140,12 @@ def test_a_renderer_without_environment_probes_refuses_them_by_name(embedded):
     with pytest.raises(MatremapError):
         check_probe(PointOnly(), env_scene())
     assert probe_support(embedded, env_scene()) is None
+    m = Material.create("mitsuba06:diffuse")
+    for scene in (env_scene(), env_scene(rotations=(30.0, 150.0))):  # one view or several: refused alike
+        with pytest.raises(MatremapError, match="pointonly"):
+            render_pixels(PointOnly(), [m], scene)
+        with pytest.raises(MatremapError, match="pointonly"):
+            render_images(PointOnly(), [m], scene)
 
 
 def test_a_self_fit_under_a_coloured_environment_recovers_the_parameters():

@@ -134,9 +134,9 @@ def render_pixels(renderer: Renderer, materials: Sequence[Material], scene: Scen
     probe, :meth:`~matremap.core.scene.Scene.views`) is drawn view by view, each view's pixels multiplied
     by its weight (:meth:`~matremap.core.scene.Scene.view_weights`): renderers only ever see one view.
     """
+    check_probe(renderer, scene)
     views = scene.views()
     if len(views) > 1:
-        check_probe(renderer, scene)
         parts = [w * render_pixels(renderer, materials, v) for v, w in zip(views, scene.view_weights(), strict=True)]
         return np.concatenate(parts, axis=1).astype(np.float32, copy=False)
     fast = getattr(renderer, "render_pixels", None)
@@ -149,10 +149,10 @@ def render_pixels(renderer: Renderer, materials: Sequence[Material], scene: Scen
 def render_images(renderer: Renderer, materials: Sequence[Material], scene: Scene) -> np.ndarray:
     """Whole probe images, float32 [N, H, V W, 3]: the views side by side, each multiplied by its weight
     (as :func:`render_pixels` draws them; a one-view scene is ``renderer.render``)."""
+    check_probe(renderer, scene)
     views = scene.views()
     if len(views) == 1:
         return renderer.render(materials, scene)
-    check_probe(renderer, scene)
     parts = [w * renderer.render(materials, v) for v, w in zip(views, scene.view_weights(), strict=True)]
     return np.concatenate(parts, axis=2).astype(np.float32, copy=False)
 
