@@ -26,7 +26,7 @@ FAST_CLI = ["--rotations", "0:360:2", "--size", "48", "--env-lights", "32"]
 
 def gltf_library(folder: Path, red: float = 0.8) -> Path:
     """A glTF with three uniform materials: a red dielectric, a gold metal, and a clear-coated blue glass
-    (transmissive: refused, no fit sees transmission)."""
+    (transmissive: fitted on the transmission probe, where an opaque target fails the gate)."""
     folder.mkdir(parents=True, exist_ok=True)
     materials = [
         {"name": "red paint", "pbrMetallicRoughness": {"baseColorFactor": [red, 0.1, 0.1, 1], "metallicFactor": 0.0}},
@@ -41,7 +41,7 @@ def gltf_library(folder: Path, red: float = 0.8) -> Path:
         {
             "name": "coated",
             "pbrMetallicRoughness": {"baseColorFactor": [0.1, 0.2, 0.8, 1], "metallicFactor": 0.0},
-            "extensions": {  # glass under a coat: no fit sees transmission, so it is refused
+            "extensions": {  # glass under a coat: an opaque target cannot look like it
                 "KHR_materials_clearcoat": {"clearcoatFactor": 1.0},
                 "KHR_materials_transmission": {"transmissionFactor": 1.0},
             },
@@ -98,7 +98,7 @@ def test_a_folder_converts_in_one_run_with_a_summary_and_a_resume(tmp_path, caps
     result = run_batch([src], "mitsuba06:ward", out, workers=2, options=FAST, log=lambda m: None, progress=False)
     by_name = {r.material: r for r in result.rows}
     assert set(by_name) == {"red paint", "gold", "coated", "wall", "steel"}
-    assert by_name["coated"].verdict == "refused" and "transmission" in by_name["coated"].reason
+    assert by_name["coated"].verdict == "failed" and "transmission probe" in by_name["coated"].reason
     for name in ("red paint", "gold", "wall", "steel"):
         r = by_name[name]
         assert r.verdict == "passed", (name, r.reason)
@@ -109,14 +109,14 @@ def test_a_folder_converts_in_one_run_with_a_summary_and_a_resume(tmp_path, caps
     red = json.loads((out / by_name["red paint"].slot / "material.json").read_text())["params"]["diffuseReflectance"]
     assert red[0] > 3 * red[1] and red[0] > 3 * red[2]
     assert by_name["wall"].route == "fit" and by_name["red paint"].route == "fit"
-    assert result.exit_code == 2  # one refused
-    assert "4 passed" in result.line() and "1 refused" in result.line()
+    assert result.exit_code == 3  # one failed by the gate
+    assert "4 passed" in result.line() and "1 failed" in result.line()
 
     rows = list(csv.DictReader((out / "summary.csv").open()))
-    assert len(rows) == 5 and {r["verdict"] for r in rows} == {"passed", "refused"}
+    assert len(rows) == 5 and {r["verdict"] for r in rows} == {"passed", "failed"}
     assert "fit_error" in rows[0]
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["counts"]["passed"] == 4 and summary["exit_code"] == 2
+    assert summary["counts"]["passed"] == 4 and summary["exit_code"] == 3
     page = (out / "index.html").read_text()
     assert all(name in page for name in ("red paint", "gold", "coated", "wall", "steel"))
 

@@ -26,12 +26,13 @@ def remap(src: Path, out: Path, *args: str) -> int:
     return main(["remap", str(src), "-o", str(out), *FAST, *args])
 
 
-@pytest.mark.parametrize("target", [PLASTIC, ["cycles:principled"]], ids=["mitsuba3", "cycles"])
-def test_a_transmissive_material_is_refused_naming_the_extension(tmp_path, capsys, target):
+def test_a_transmissive_material_onto_a_model_nothing_draws_it_for_is_refused(tmp_path, capsys):
+    """Mitsuba 3's rough plastic: its renderer does not draw the transmission probe and the embedded renderer does
+    not emulate it, so the glass's fit could not be judged (test_transmission_fit.py has the models it can be)."""
     src = CORPUS / "gltf-AttenuationTest" / "AttenuationTest.glb"
-    code = remap(src, tmp_path / "o", "--material", "R2_and_R4_ThicknessFac_1.0", "--to", *target)
+    code = remap(src, tmp_path / "o", "--material", "R2_and_R4_ThicknessFac_1.0", "--to", *PLASTIC)
     err = capsys.readouterr().err.strip().splitlines()
-    assert code == 2 and "KHR_materials_transmission (transmissionFactor 1)" in err[-1]
+    assert code == 2 and "transmits light" in err[-1] and "mitsuba3:roughplastic" in err[-1]
     assert "Traceback" not in "\n".join(err) and not (tmp_path / "o").exists()
 
 

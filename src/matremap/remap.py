@@ -1022,8 +1022,8 @@ def _output_name(
 
     if write is None:
         suffix = default_suffix(target, source_format) or None
-        if suffix is None and source_format == "gltf" and get_model(target).id == "gltf:metal-rough":
-            suffix = p.suffix.lower()  # a glTF onto its own model: .gltf or .glb as it came
+        if suffix is None and source_format == "gltf" and get_model(target).id in ("gltf:metal-rough", "gltf:pbr"):
+            suffix = p.suffix.lower()  # a glTF onto a glTF model: .gltf or .glb as it came
         name = f"{p.stem}{suffix}" if suffix else None
     else:
         from matremap.formats.confine import output_inside
@@ -1066,8 +1066,7 @@ def _fit_uniform(
         r = fit(
             source,
             target,
-            source_renderer=renderer_for(source.model),
-            target_renderer=job.target_renderer or renderer_for(target),
+            target_renderer=job.target_renderer,  # None: the model's own (uniform.fit)
             fix=full_fix,
             strategy=job.strategy,
             scene=probe,

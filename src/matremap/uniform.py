@@ -15,14 +15,16 @@ from typing import Any
 
 import numpy as np
 
+from matremap import transmissive
 from matremap.core import fit as core_fit
-from matremap.core.lockstep import Steps
+from matremap.core.lockstep import Steps, run
 from matremap.core.material import Material
 from matremap.core.models import ModelSpec
 from matremap.core.scene import Scene
 from matremap.dialects import get_model
 from matremap.dialects.mtlx import absorbed_layers
-from matremap.renderers.base import Renderer, render_images
+from matremap.errors import MatremapError
+from matremap.renderers.base import Renderer, probe_support, render_images
 from matremap.renderers.registry import get_renderer, resolve_renderer
 
 
@@ -40,23 +42,23 @@ def fit(
     coarse: bool | None = None,
     objective: str = "l2",
 ) -> core_fit.FitResult:
-    """:func:`matremap.core.fit.fit` with renderers given by name, object or None (the model's own)."""
-    spec = target_model if isinstance(target_model, ModelSpec) else get_model(target_model)
-    result = core_fit.fit(
-        source,
-        spec,
-        strategy,
-        scene,
-        resolve_renderer(source_renderer, source.model),
-        resolve_renderer(target_renderer, spec.id),
-        fix=fix,
-        free=free,
-        start=start,
-        coarse=coarse,
-        objective=objective,
+    """:func:`matremap.core.fit.fit` with renderers given by name, object or None (the model's own); a source
+    that transmits is fitted on the transmission probe (:mod:`matremap.transmissive`)."""
+    return run(
+        fit_steps(
+            source,
+            target_model,
+            strategy,
+            scene,
+            source_renderer,
+            target_renderer,
+            fix=fix,
+            free=free,
+            start=start,
+            coarse=coarse,
+            objective=objective,
+        )
     )
-    result.warnings.extend(absorbed_layers(source.model, source.values, spec.id, result.target.values))
-    return result
 
 
 def fit_steps(
@@ -76,21 +78,47 @@ def fit_steps(
     """:func:`fit` in ask/tell form (:func:`matremap.core.fit.fit_steps`): a generator of render requests for
     :func:`~matremap.core.lockstep.lockstep`. Renderer names are resolved when it starts."""
     spec = target_model if isinstance(target_model, ModelSpec) else get_model(target_model)
+    through = transmissive.setup(source, spec, scene, strategy, free, start, fix)
+    src_r = _probe_renderer(source_renderer, source.model, through)
+    tgt_r = _probe_renderer(target_renderer, spec.id, through)
     result = yield from core_fit.fit_steps(
         source,
         spec,
-        strategy,
-        scene,
-        resolve_renderer(source_renderer, source.model),
-        resolve_renderer(target_renderer, spec.id),
+        through.strategy,
+        through.scene,
+        src_r,
+        tgt_r,
         fix=fix,
-        free=free,
-        start=start,
+        free=through.free,
+        start=through.start or None,
         coarse=coarse,
         objective=objective,
     )
+    result.warnings.extend(through.notes)
     result.warnings.extend(absorbed_layers(source.model, source.values, spec.id, result.target.values))
     return result
+
+
+def _probe_renderer(name: str | Renderer | None, model: str, through: transmissive.TransmissiveFit) -> Renderer:
+    """The renderer of ``model`` (``name``, None for the model's own); when the fit is on the transmission probe
+    and the model's own renderer does not draw it, the embedded emulation, with a note (a renderer the user named
+    is kept, and refused by the fit in one line if it cannot)."""
+    renderer = resolve_renderer(name, model)
+    if name is not None or through.scene is None or probe_support(renderer, through.scene) is None:
+        return renderer
+    embedded = get_renderer("embedded")
+    if not embedded.can_render(model):
+        from matremap.renderers.embedded.transmission import INTERFACES
+
+        raise MatremapError(
+            f"the source transmits light: it is fitted on the transmission probe, which the {renderer.name} renderer "
+            f"does not draw and the embedded renderer does not emulate {model}; remap onto a model with transmission "
+            f"the embedded renderer draws ({', '.join(sorted(INTERFACES))})"
+        )
+    through.notes.append(
+        f"{model} drawn by the embedded emulation: the {renderer.name} renderer does not draw the transmission probe"
+    )
+    return embedded
 
 
 def comparison_strip(result: core_fit.FitResult, gap: int = 4, labels: bool = True) -> np.ndarray:

@@ -807,11 +807,14 @@ def _resolved_goals(
     goals = yield from _source_goals(source, strategy, scale, renderer, counter)
     which = FULL if strategy in JOINT else SPECULAR
     warnings: list[str] = []
-    sharpened = yield from _below_resolution(source, goals[which], which, renderer, counter)
+    # the transmission view resolves a narrow lobe in the blur of the background seen through it
+    sharpened = None
+    if scene.transmission is None:
+        sharpened = yield from _below_resolution(source, goals[which], which, renderer, counter)
     if sharpened is not None:
         warnings.append(_sharpened_note(source, sharpened, scene))
         goals = yield from _source_goals(sharpened[0], strategy, scale, renderer, counter)
-    else:
+    elif scene.transmission is None:
         warnings += _check_resolution(goals[which], scene)
     if not np.any(goals[FULL] > 0):
         raise MatremapError(

@@ -22,6 +22,11 @@ pixels one view after the other, and its image is the views side by side (``[H, 
 weighted by :meth:`Scene.view_weights` -- the inverse of the mean radiance a white Lambertian sphere has in
 it -- so that a bright environment does not drown a point-light view in the least squares (the weights
 multiply source and target renders alike, so a fit's optimum in one view is unchanged by them).
+
+**The transmission view** (issue 16). A point-light or environment view draws a material's reflection only; a
+scene may add a :class:`TransmissionProbe`, one more view in which the sphere stands in front of a tiled
+background under an environment, so that what a transmissive material lets through -- refracted, tinted,
+blurred -- is in the image (:mod:`matremap.renderers.embedded.transmission` draws it, on the same camera).
 """
 
 from __future__ import annotations
@@ -133,6 +138,62 @@ def _directional(env: str, lights: int, rotation: float, seed: int) -> tuple[np.
 
 
 @dataclass(frozen=True)
+class TransmissionProbe:
+    """The transmission view: the sphere in front of the tiled background under the map ``env`` ('builtin',
+    'constant' or an .exr/.hdr, digested like :class:`EnvironmentProbe`), its reflection drawn by ``lights``
+    directional lights of the map, a rough interface traced along ``samples`` fixed paths per pixel, ``bounces``
+    internal reflections followed (:class:`~matremap.renderers.embedded.transmission.TransmissionScene`)."""
+
+    env: str = "builtin"
+    lights: int = FIT_LIGHTS
+    samples: int = 8
+    bounces: int = 4
+    digest: str = ""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.lights, int) or not 1 <= self.lights <= 4096:
+            raise MatremapError(f"the transmission probe takes 1 to 4096 lights, got {self.lights!r}")
+        if not isinstance(self.samples, int) or not 1 <= self.samples <= 1024:
+            raise MatremapError(f"the transmission probe takes 1 to 1024 paths per pixel, got {self.samples!r}")
+        if not isinstance(self.bounces, int) or not 1 <= self.bounces <= 64:
+            raise MatremapError(f"the transmission probe follows 1 to 64 internal bounces, got {self.bounces!r}")
+
+    @classmethod
+    def of(cls, env: str | os.PathLike, **kw: Any) -> TransmissionProbe:
+        """The probe under the map ``env``, a file checked and digested now."""
+        lit = EnvironmentProbe.of(env)
+        return cls(env=lit.env, digest=lit.digest, **kw)
+
+    def label(self) -> str:
+        env = self.env if self.env in ("builtin", "constant") else os.path.basename(self.env)
+        return f"the sphere before a tiled background under {env}, {self.samples} paths per pixel"
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "env": self.env,
+            "lights": self.lights,
+            "samples": self.samples,
+            "bounces": self.bounces,
+            "digest": self.digest,
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> TransmissionProbe:
+        return cls(
+            env=str(d.get("env", "builtin")),
+            lights=int(d.get("lights", FIT_LIGHTS)),
+            samples=int(d.get("samples", 8)),
+            bounces=int(d.get("bounces", 4)),
+            digest=str(d.get("digest", "")),
+        )
+
+    def directional(self) -> tuple[np.ndarray, np.ndarray]:
+        """The directional lights [L, 3] towards them and RGB intensities [L, 3] drawing the reflection (the
+        map unturned, seed 0: what the transmission probe samples)."""
+        return _directional(self.env, self.lights, 0.0, 0)
+
+
+@dataclass(frozen=True)
 class Scene:
     resolution: int = 128
     lights: tuple[PointLight, ...] = (PointLight(),)
@@ -142,11 +203,13 @@ class Scene:
     fov: float | None = None
     #: an environment lighting the sphere in views of its own (see the module docstring)
     environment: EnvironmentProbe | None = None
+    #: one more view: the sphere before a tiled background, for what a material transmits (module docstring)
+    transmission: TransmissionProbe | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.resolution, int) or not 8 <= self.resolution <= 8192:
             raise MatremapError(f"scene resolution must be an integer in [8, 8192], got {self.resolution!r}")
-        if not self.lights and self.environment is None:
+        if not self.lights and self.environment is None and self.transmission is None:
             raise MatremapError("the scene needs at least one light")
         for light in self.lights:
             if not math.isfinite(light.theta) or not -90.0 < light.theta < 90.0:
@@ -177,39 +240,53 @@ class Scene:
         }
         if self.environment is not None:  # absent for the point-light probe: its keys stay as they were
             d["environment"] = self.environment.to_dict()
+        if self.transmission is not None:
+            d["transmission"] = self.transmission.to_dict()
         return d
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> Scene:
         lights = tuple(PointLight(**light) for light in d.get("lights", [{"theta": 0.0}]))
         kw = {k: d[k] for k in ("resolution", "camera_distance", "sphere_radius", "light_distance", "fov") if k in d}
-        env = d.get("environment")
-        return cls(lights=lights, environment=EnvironmentProbe.from_dict(env) if env else None, **kw)
+        env, through = d.get("environment"), d.get("transmission")
+        return cls(
+            lights=lights,
+            environment=EnvironmentProbe.from_dict(env) if env else None,
+            transmission=TransmissionProbe.from_dict(through) if through else None,
+            **kw,
+        )
 
     # -- views ---------------------------------------------------------------------------------
     @property
     def kind(self) -> str:
-        """``point`` (the paper's), ``env`` or ``mixed`` (point lights and an environment)."""
+        """``point`` (the paper's), ``env``, ``mixed`` (point lights and an environment) or ``transmission``
+        (any of them and the transmission view)."""
+        if self.transmission is not None:
+            return "transmission"
         if self.environment is None:
             return "point"
         return "mixed" if self.lights else "env"
 
     def describe(self) -> str:
         """The probe in words, for logs and reports."""
-        point = f"{len(self.lights)} point light(s) at {', '.join(f'{lt.theta:g}' for lt in self.lights)} deg"
-        if self.environment is None:
-            return f"point probe: {point}"
-        env = f"environment {self.environment.label()}"
-        return f"{self.kind} probe: " + (f"{point} + {env}" if self.lights else env)
+        parts = []
+        if self.lights:
+            parts.append(f"{len(self.lights)} point light(s) at {', '.join(f'{lt.theta:g}' for lt in self.lights)} deg")
+        if self.environment is not None:
+            parts.append(f"environment {self.environment.label()}")
+        if self.transmission is not None:
+            parts.append(f"transmission view: {self.transmission.label()}")
+        return f"{self.kind} probe: " + " + ".join(parts)
 
     def views(self) -> tuple[Scene, ...]:
         """The scenes of one view each that make up this one: the point-light view, then one per rotation
-        of the environment; a scene of one view is its own only view."""
+        of the environment, then the transmission view; a scene of one view is its own only view."""
         return _views(self)
 
     @property
     def view_count(self) -> int:
-        return (1 if self.lights else 0) + (len(self.environment.rotations) if self.environment else 0)
+        env = len(self.environment.rotations) if self.environment else 0
+        return (1 if self.lights else 0) + env + (1 if self.transmission else 0)
 
     def view_weights(self) -> np.ndarray:
         """Per view, 1 / (the mean radiance of a white Lambertian sphere in it); all 1 for a one-view scene."""
@@ -218,7 +295,10 @@ class Scene:
     @property
     def grey_lighting(self) -> bool:
         """Whether every light is white, so that a grey material renders a grey image (the fitter's grey
-        and packed shortcuts rely on it): point lights are; an environment's lights are when the map is grey."""
+        and packed shortcuts rely on it): point lights are; an environment's lights are when the map is grey; the
+        transmission view's background is coloured."""
+        if self.transmission is not None:
+            return False
         if self.environment is None:
             return True
         env = self.environment
@@ -279,11 +359,17 @@ def _grey(intensities: np.ndarray) -> bool:
 
 @lru_cache(maxsize=32)
 def _views(scene: Scene) -> tuple[Scene, ...]:
-    if scene.environment is None or (not scene.lights and len(scene.environment.rotations) == 1):
+    if scene.view_count == 1:
         return (scene,)
-    out = [replace(scene, environment=None)] if scene.lights else []
+    out = [replace(scene, environment=None, transmission=None)] if scene.lights else []
     env = scene.environment
-    out += [replace(scene, lights=(), environment=replace(env, rotations=(r,))) for r in env.rotations]
+    if env is not None:
+        out += [
+            replace(scene, lights=(), environment=replace(env, rotations=(r,)), transmission=None)
+            for r in env.rotations
+        ]
+    if scene.transmission is not None:
+        out.append(replace(scene, lights=(), environment=None))
     return tuple(out)
 
 
@@ -302,7 +388,7 @@ def white_radiance(view: Scene) -> float:
     """Mean luminance over the sphere pixels of a white Lambertian (albedo 1) in a one-view scene:
     sum over lights of E cos(theta_i) / pi (E = I / d^2 for a point light, the intensity for a directional
     one)."""
-    p = _sphere_hits(replace(view, lights=view.lights or (PointLight(),), environment=None))[2]
+    p = _sphere_hits(replace(view, lights=view.lights or (PointLight(),), environment=None, transmission=None))[2]
     n = p / np.linalg.norm(p, axis=-1, keepdims=True)
     total = np.zeros(len(p))
     for light in view.lights:
@@ -316,6 +402,11 @@ def white_radiance(view: Scene) -> float:
         for r in view.environment.rotations:
             d, i = view.environment.directional(r)
             total += np.maximum(n @ d.T, 0.0) @ (i @ LUMINANCE)
+    if view.transmission is not None:
+        from matremap.core.envmap import LUMINANCE
+
+        d, i = view.transmission.directional()
+        total += np.maximum(n @ d.T, 0.0) @ (i @ LUMINANCE)
     return float(np.mean(total) / math.pi)
 
 
@@ -325,7 +416,7 @@ def _sphere_hits(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     (the camera is the same in each)."""
     views = scene.view_count
     if views > 1:
-        single = replace(scene, lights=(PointLight(),), environment=None)
+        single = replace(scene, lights=(PointLight(),), environment=None, transmission=None)
         mask1, pix1, points1 = _sphere_hits(single)
         n = scene.resolution
         rows, cols = pix1 // n, pix1 % n
@@ -348,27 +439,48 @@ def _sphere_hits(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 #: the probes ``--probe`` names
-PROBES = ("point", "env", "mixed")
+PROBES = ("point", "env", "mixed", "transmission")
 #: the default image side of each probe: an environment view shades 64 lights per pixel where the point probe
 #: shades one; at 64 x 64 an environment fit under SSIM takes 1-2 s and lands within 1 % of the floor measured at
 #: 160 x 160 on the examples (benchmarks/ssim_floor.py)
-PROBE_RESOLUTION = {"point": 128, "env": 64, "mixed": 64}
+PROBE_RESOLUTION = {"point": 128, "env": 64, "mixed": 64, "transmission": 64}
 
 
 def parse_probe(text: str, lights: Iterable[float] = (0.0,), resolution: int | None = None) -> Scene:
     """The probe scene ``--probe`` names: ``point`` (the paper's, point ``lights`` at their angles), ``env`` or
     ``env:FILE`` (the sphere under the built-in studio or an .exr/.hdr lat-long map at the
-    :data:`FIT_ROTATIONS`), ``mixed`` or ``mixed:FILE`` (both); ``resolution`` None takes the probe's default."""
+    :data:`FIT_ROTATIONS`), ``mixed`` or ``mixed:FILE`` (both), ``transmission`` or ``transmission:FILE`` (the
+    point lights and the transmission view under the map); ``resolution`` None takes the probe's default."""
     kind, _, env = str(text).partition(":")
     if kind not in PROBES or (kind == "point" and env):
-        raise MatremapError(f"--probe {text!r}: give point, env, env:FILE.exr, mixed or mixed:FILE.exr")
+        raise MatremapError(
+            f"--probe {text!r}: give point, env, env:FILE.exr, mixed, mixed:FILE.exr, transmission or "
+            "transmission:FILE.exr"
+        )
     res = resolution or PROBE_RESOLUTION[kind]
     angles = tuple(float(t) for t in lights)
     if kind == "point":
         return Scene.probe(lights=angles, resolution=res)
+    if kind == "transmission":
+        return transmission_probe(Scene.probe(lights=angles, resolution=res), env or "builtin")
     probe = EnvironmentProbe.of(env or "builtin")
     point = tuple(PointLight(t) for t in angles) if kind == "mixed" else ()
     return Scene(resolution=res, lights=point, environment=probe)
+
+
+def transmission_probe(scene: Scene, env: str | os.PathLike | None = None) -> Scene:
+    """``scene`` with the transmission view added, for a material that lets light through: its point lights
+    (the headlight if it has none) at the transmission probe's resolution at most, and the transmission view under
+    ``env`` (default: the scene's environment's map, else the built-in studio). An environment's views are
+    dropped: the transmission view is drawn under its map already."""
+    if scene.transmission is not None:
+        return scene
+    name = env if env is not None else (scene.environment.env if scene.environment is not None else "builtin")
+    through = TransmissionProbe.of(name)
+    res = min(scene.resolution, PROBE_RESOLUTION["transmission"])
+    return replace(
+        scene, resolution=res, lights=scene.lights or (PointLight(),), environment=None, transmission=through
+    )
 
 
 def parse_lights(values: Iterable[str | float] | None) -> tuple[float, ...]:

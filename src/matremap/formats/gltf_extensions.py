@@ -195,15 +195,28 @@ COAT_LOOK = 0.5
 
 def layer_values(found: dict[str, dict[str, Any]]) -> dict[str, Any]:
     """The ``gltf:pbr`` layer parameters of a material whose clear coat (clearcoatFactor above
-    :data:`COAT_LOOK`) or coloured sheen (as :func:`lost_look` says) carries its look, when those layers have no
-    texture: the material is then read into ``gltf:pbr`` and its layers are fitted, not left out. Empty
-    otherwise (the material is read as ``gltf:metal-rough``, as before)."""
-    cc, sh = found.get(CLEARCOAT), found.get(SHEEN)
+    :data:`COAT_LOOK`), coloured sheen or transmission (as :func:`lost_look` says) carries its look, when those
+    layers have no texture: the material is then read into ``gltf:pbr`` and its layers are fitted (a transmission
+    on the transmission probe), not left out. Empty otherwise (the material is read as ``gltf:metal-rough``)."""
+    cc, sh, tr = found.get(CLEARCOAT), found.get(SHEEN), found.get(TRANSMISSION)
     coat = cc is not None and cc["clearcoatFactor"] > COAT_LOOK and not _textures(cc)
     sheen = sh is not None and SHEEN in " ".join(lost_look(found)) and not _textures(sh)
-    if not (coat or sheen):
+    through = tr is not None and TRANSMISSION in " ".join(lost_look(found)) and not _textures(tr)
+    vol = found.get(VOLUME)
+    if through and vol is not None and _textures(vol):
+        through = False  # a textured thickness or attenuation: not a uniform material
+    if not (coat or sheen or through):
         return {}
     out: dict[str, Any] = {}
+    if through and tr is not None:
+        out["transmission"] = tr["transmissionFactor"]
+        if vol is not None:
+            distance = vol["attenuationDistance"]
+            out |= {
+                "thickness": vol["thicknessFactor"],
+                "attenuationColor": list(vol["attenuationColor"]),
+                "attenuationDistance": 0.0 if not math.isfinite(distance) else distance,
+            }
     if cc is not None and not _textures(cc):
         out |= {"clearcoat": cc["clearcoatFactor"], "clearcoatRoughness": cc["clearcoatRoughnessFactor"]}
     if sh is not None and not _textures(sh):
@@ -237,13 +250,15 @@ def extension_notes(found: dict[str, dict[str, Any]], textured: bool = False) ->
             f"{_textures(sh)}: a faint sheen the fit does not see; {LEFT_BEHIND}"
         )
     tr = found.get(TRANSMISSION)
-    if tr is not None and TRANSMISSION not in lost:
+    if "transmission" in layers:
+        pass  # read into gltf:pbr above
+    elif tr is not None and TRANSMISSION not in lost:
         notes.append(
             f"{TRANSMISSION} factor {_g(tr['transmissionFactor'])}{_textures(tr)}: mostly opaque, the fit sees the "
             f"opaque base; {LEFT_BEHIND}"
         )
     vol = found.get(VOLUME)
-    if vol is not None:
+    if vol is not None and "transmission" not in layers:
         notes.append(
             f"{VOLUME} thickness {_g(vol['thicknessFactor'])}, attenuation colour {_rgb(vol['attenuationColor'])} "
             f"over {_g(vol['attenuationDistance'])}{_textures(vol)}: the volume under a transmissive surface; "

@@ -51,6 +51,7 @@ from matremap.formats.gltf_extensions import (
     SCHEMAS,
     SHEEN,
     SPECULAR,
+    TRANSMISSION,
     check_texture_info,
     extension_notes,
     layer_values,
@@ -214,6 +215,7 @@ def read(
     if layers:
         constants |= layers
         lost = [w for w in lost if not w.startswith(SHEEN)]
+        lost = [w for w in lost if "transmission" not in layers or not w.startswith(TRANSMISSION)]
     return MaterialAsset(
         path=p,
         format="gltf",

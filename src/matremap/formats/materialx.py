@@ -28,8 +28,9 @@ document without materials falls back to its shader nodes) and reads its surface
   shader's own layered model (:data:`LAYERED`: ``mtlx:standard_surface``, ``mtlx:open_pbr_surface``, ``gltf:pbr``),
   every input it models by name (OpenPBR's boolean ``geometry_thin_walled`` as 0 / 1; gltf_pbr's
   ``attenuation_distance`` default of "infinity" as gltf:pbr's 0), so that a fit carries the layer onto the
-  target's instead of dropping it (issue 16). A transmission above 0.5 stays lost: no fit sees transmission yet
-  (the probe is opaque);
+  target's instead of dropping it (issue 16). A transmission above 0.5 is read the same way where the shader's
+  model transmits in the transmission probe (``renderers/embedded/transmission.py`` ``INTERFACES``), and fitted
+  there; elsewhere it stays lost;
 * ``UsdPreviewSurface`` (MaterialX's ``ND_UsdPreviewSurface_surfaceshader``) maps one to one onto
   ``usd:preview_surface``, whose parameters are its input names; ``useSpecularWorkflow`` becomes the
   model's option, and a specular-workflow material is read by the same rule as in a USD file
@@ -464,14 +465,14 @@ def _shader_asset(ctx: _Ctx, shader: Any, name: str, index: int, doc: Any) -> Ma
     if cat not in SHADERS:
         raise MatremapError(f"{ctx.path}: material {name!r} uses a {cat!r} shader; matremap reads {', '.join(SHADERS)}")
     lost = lost_look(shader)
-    layered = cat in LAYERED and any(not _is_transmission(w) for w in lost)
+    layered = cat in LAYERED and any(not _is_transmission(w) or _transmits(LAYERED[cat]) for w in lost)
     reader = _ShaderReader(ctx, shader, doc, layered)
     fields = reader.params()
     if reader.model in _IOR_INPUTS:
         _check_ior(ctx, shader, fields, _IOR_INPUTS[reader.model])
     if layered:
         _distance_default(fields, shader)
-        lost = [w for w in lost if _is_transmission(w)]
+        lost = [w for w in lost if _is_transmission(w) and not _transmits(reader.model)]
     constants = {k: _constant(f) for k, f in fields.items() if not f.textured}
     textures = reader.textures(fields)
     normal = reader.normal()
@@ -588,8 +589,15 @@ def lost_look(shader: Any) -> list[str]:
 
 
 def _is_transmission(lost: str) -> bool:
-    """Whether an entry of :func:`lost_look` is a transmission (which no fit sees yet: the probe is opaque)."""
+    """Whether an entry of :func:`lost_look` is a transmission."""
     return lost.startswith("transmission")
+
+
+def _transmits(model: str) -> bool:
+    """Whether the model's transmission is drawn by the transmission probe (and so fitted, not lost)."""
+    from matremap.renderers.embedded.transmission import INTERFACES
+
+    return model in INTERFACES
 
 
 def _distance_default(fields: dict[str, _Field], shader: Any) -> None:

@@ -159,7 +159,13 @@ def render_images(renderer: Renderer, materials: Sequence[Material], scene: Scen
 
 def probe_support(renderer: Renderer, scene: Scene) -> str | None:
     """None when ``renderer`` draws ``scene``'s probe; else the reason. A renderer that draws environment
-    probes says so with ``environment_probe = True``; every renderer draws the point-light probe."""
+    probes says so with ``environment_probe = True``, the transmission view with ``transmission_probe = True``;
+    every renderer draws the point-light probe."""
+    if scene.transmission is not None and not getattr(renderer, "transmission_probe", False):
+        return (
+            f"the {renderer.name} renderer does not draw the transmission probe (what a transmissive material lets "
+            "through); fit with the embedded renderer"
+        )
     if scene.environment is None or getattr(renderer, "environment_probe", False):
         return None
     return (

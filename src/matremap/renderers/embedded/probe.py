@@ -114,6 +114,8 @@ class EmbeddedRenderer:
     name = "embedded"
     #: draws the probe under an environment (:class:`~matremap.core.scene.EnvironmentProbe`) as well
     environment_probe = True
+    #: draws the transmission view (:class:`~matremap.core.scene.TransmissionProbe`)
+    transmission_probe = True
     #: materials per call a caller should batch (:func:`matremap.core.lockstep.lockstep`): larger batches'
     #: [N, C, L, P] intermediates fall out of the CPU caches (8 measured best at 128^2, 16-64 ~10 % slower)
     batch_size = 8
@@ -143,6 +145,11 @@ class EmbeddedRenderer:
 
     def render(self, materials: Sequence[Material], scene: Scene) -> np.ndarray:
         materials = list(materials)
+        if scene.transmission is not None:  # the transmission view (renderers/embedded/transmission.py)
+            from matremap.renderers.embedded.transmission import render_view
+
+            check_can_render(self, materials)
+            return render_view(materials, scene)
         res = scene.resolution
         out = np.zeros((len(materials), res * res, 3), dtype=np.float32)
         pix = scene.pixel_indices()
@@ -158,6 +165,9 @@ class EmbeddedRenderer:
         """The sphere pixels of :meth:`render`, float32 [N, P, 3] in ``scene.pixel_indices()``
         order, without the image around them (the fitter's fast path)."""
         materials = list(materials)
+        if scene.transmission is not None:
+            images = self.render(materials, scene)
+            return np.take(images.reshape(len(materials), -1, 3), scene.pixel_indices(), axis=1)
         out = np.zeros((len(materials), scene.pixel_indices().size, 3), dtype=np.float32)
         for idx, radiance in self._shade(materials, scene):
             out[idx] = radiance.transpose(0, 2, 1)

@@ -39,8 +39,9 @@ interface's mirror reflection of the background is therefore not in the image.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -203,6 +204,43 @@ def gltf_equivalent(iface: Interface, thickness: float = 2.0 * SPHERE_RADIUS) ->
     }
 
 
+def openpbr_equivalent(iface: Interface) -> dict[str, Any]:
+    """The ``mtlx:open_pbr_surface`` transmission parameters that transmit as ``iface`` does (read back through
+    :func:`openpbr_interface`): transmission_weight, specular_ior (specular_weight 1), specular_roughness, a thin
+    wall or a volume; a volume's extinction as the transmission_color white light takes after transmission_depth
+    1 (OpenPBR 1.1 "Transmission": its entry tint is white, so a tinted interface over a volume keeps the
+    extinction only), a clear object's entry tint as transmission_color at depth 0. A grey weight is assumed."""
+    volume = not iface.thin_walled and bool(np.any(iface.sigma > 0.0))
+    colour = np.exp(-iface.sigma) if volume else iface.tint
+    return {
+        "base_metalness": 0.0,
+        "transmission_weight": float(iface.weight[0]),
+        "specular_weight": 1.0,
+        "specular_ior": float(iface.eta),
+        "specular_roughness": math.sqrt(iface.alpha),
+        "transmission_color": np.clip(colour, 0.0, 1.0).tolist(),
+        "transmission_depth": 1.0 if volume else 0.0,
+        "geometry_thin_walled": 1.0 if iface.thin_walled else 0.0,
+    }
+
+
+def _gltf_start(iface: Interface) -> tuple[dict[str, Any], tuple[str, ...]]:
+    values = gltf_equivalent(iface)
+    return values, ("transmission",) if values["attenuationDistance"] == 0.0 else ("transmission", "attenuationColor")
+
+
+def _openpbr_start(iface: Interface) -> tuple[dict[str, Any], tuple[str, ...]]:
+    return openpbr_equivalent(iface), ("transmission_weight", "transmission_color")
+
+
+#: model id -> the parameters that transmit as an :class:`Interface` does, and the continuous ones among them a
+#: fit frees (the structural ones, a thin wall or a volume, stay as read across)
+EQUIVALENTS: dict[str, Callable[[Interface], tuple[dict[str, Any], tuple[str, ...]]]] = {
+    "gltf:pbr": _gltf_start,
+    "mtlx:open_pbr_surface": _openpbr_start,
+}
+
+
 # -- the background -------------------------------------------------------------------------------------
 
 #: the tiles' colours (linear RGB): six hues at two brightnesses, so refraction moves and tints visible edges
@@ -354,11 +392,14 @@ def transmitted(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Long: the paths (entry, walls or the volume's internal bounces) are one loop read best together.
 
-    Radiance [res, res, 3] the material transmits to the camera through the sphere, and the sphere's mask."""
-    iface = interface_of(material)
+    Radiance [res, res, 3] the material transmits to the camera through the sphere, and the sphere's mask
+    (nothing for a model without transmission: it is opaque)."""
     env = env if env is not None else resolve(scene.env)
     surf = surface_pixels("sphere", scene.resolution)
     out = np.zeros((scene.resolution * scene.resolution, 3))
+    if material.model not in INTERFACES:
+        return out.reshape(scene.resolution, scene.resolution, 3), surf.mask()
+    iface = interface_of(material)
     if not np.any(iface.weight > 0.0):
         return out.reshape(scene.resolution, scene.resolution, 3), surf.mask()
     k = 1 if iface.alpha < SMOOTH_ALPHA else scene.samples
@@ -393,27 +434,62 @@ def transmitted(
     return out.reshape(scene.resolution, scene.resolution, 3), surf.mask()
 
 
+def transmits(material: Material) -> bool:
+    """Whether a uniform material lets light through (a model the probe reads, with a transmitted share > 0)."""
+    return material.model in INTERFACES and bool(np.any(interface_of(material).weight > 0.0))
+
+
+@lru_cache(maxsize=8)
+def _backdrop(scene: TransmissionScene) -> tuple[EnvMap, tuple[np.ndarray, np.ndarray], np.ndarray]:
+    """The map, its directional lights (unturned, seed 0) and the background seen past the sphere [res, res, 3]
+    (read-only), shared by every render of a scene."""
+    from matremap.core.scene import Scene
+
+    env = resolve(scene.env)
+    lights = directional_lights(env, scene.env_lights, 0.0)
+    rays = Scene(resolution=scene.resolution).camera_rays().reshape(-1, 3)
+    origins = np.broadcast_to([0.0, 0.0, CAMERA_Z], rays.shape)
+    seen = background(np.asarray(origins, dtype=float), rays, scene, env)
+    seen = seen.reshape(scene.resolution, scene.resolution, 3)
+    for a in (*lights, seen):
+        a.flags.writeable = False
+    return env, lights, seen
+
+
 def render(material: Material, scene: TransmissionScene | None = None) -> np.ndarray:
     """The transmission probe image [res, res, 3] (float32): on the sphere, the material's reflection of the
     environment (its BRDF under the directional lights) plus what it transmits; elsewhere the background."""
     from matremap.renderers.embedded.environment import SVBRDFRender
 
     scene = scene or TransmissionScene()
-    env = resolve(scene.env)
+    env, lights, seen = _backdrop(scene)
     through, mask = transmitted(material, scene, env)
-    lights = directional_lights(env, scene.env_lights, 0.0)
     reflected = SVBRDFRender(material.model, dict(material.values), dict(material.options), "sphere", scene.resolution)
     image = through + reflected.render(*lights).astype(float)
-    # the background seen past the sphere
-    from matremap.core.scene import Scene
-
-    rays = Scene(resolution=scene.resolution).camera_rays().reshape(-1, 3)
-    origins = np.broadcast_to([0.0, 0.0, CAMERA_Z], rays.shape)
-    seen = background(np.asarray(origins, dtype=float), rays, scene, env).reshape(image.shape)
     return np.where(mask[..., None], image, seen).astype(np.float32)
 
 
+def probe_scene(view: Any) -> TransmissionScene:
+    """The :class:`TransmissionScene` of a probe's transmission view (a :class:`~matremap.core.scene.Scene`
+    whose ``transmission`` is set): its resolution, map, lights, paths and bounces."""
+    t = view.transmission
+    return TransmissionScene(
+        resolution=view.resolution, env=t.env, env_lights=t.lights, bounces=t.bounces, samples=t.samples
+    )
+
+
+def render_view(materials: Sequence[Material], view: Any) -> np.ndarray:
+    """The transmission view of a probe, one image per material: float32 [N, res, res, 3]."""
+    scene = probe_scene(view)
+    return (
+        np.stack([render(m, scene) for m in materials])
+        if materials
+        else np.zeros((0, view.resolution, view.resolution, 3), np.float32)
+    )
+
+
 __all__ = [
+    "EQUIVALENTS",
     "INTERFACES",
     "PALETTE",
     "Crossing",
@@ -426,9 +502,13 @@ __all__ = [
     "gltf_equivalent",
     "gltf_interface",
     "interface_of",
+    "openpbr_equivalent",
     "openpbr_interface",
+    "probe_scene",
     "render",
+    "render_view",
     "sample_vndf",
     "smith_g1",
+    "transmits",
     "transmitted",
 ]
