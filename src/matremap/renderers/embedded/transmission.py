@@ -229,12 +229,50 @@ def mitsuba3_principled_interface(values: Mapping[str, Any]) -> Interface:
     )
 
 
+def cycles_principled_interface(values: Mapping[str, Any]) -> Interface:
+    """``cycles:principled``'s transmission: Blender 5.0 Cycles ``kernel/svm/closure.h``
+    (``CLOSURE_BSDF_PRINCIPLED_ID``, "Transmission component") and ``kernel/closure/bsdf_microfacet.h``.
+
+    A GGX glass closure of weight t (1 - Metallic), t = Transmission Weight, alpha = Roughness^2, relative IOR
+    the IOR socket (not adjusted by Specular IOR Level; 1/IOR from inside); its Fresnel the real dielectric one
+    remapped from [F0(IOR), 1] to [min(F0(IOR) Specular Tint, 1), 1] (the largest channel here: the probe takes
+    one share per crossing), unchanged when seen from inside with the outer cosine; what it transmits is tinted
+    by sqrt(min(Base Color, 1)). Cycles weighs and tints *every* crossing by that closure, so ``weight`` =
+    (t (1 - Metallic))^2 and ``tint`` = Base Color make the straight path exact and a path with k internal
+    reflections (t (1 - Metallic))^k too bright (exact for a full glass). Left out: the sheen and coat layers'
+    share above the glass, Multiscatter GGX's gain on the glass (1 + F_ms (1 - E)/E of Cycles' glass tables,
+    which brightens a rough glass's transmission too: :mod:`.cycles_glass`) and any Volume shader (no
+    absorption inside)."""
+    ior = max(_scalar(values, "IOR"), 1.0 + 1e-9)
+    f0_real = float(dielectric_f0(ior, 1.0, np.ones(3))[0])
+    f0 = float(np.max(np.clip(f0_real * np.maximum(_rgb(values, "Specular Tint"), 0.0), 0.0, 1.0)))
+
+    def fresnel(cos_outside: np.ndarray) -> np.ndarray:
+        real = fresnel_dielectric(np.clip(cos_outside, 1e-9, 1.0), ior)
+        s = np.clip((real - f0_real) / (1.0 - f0_real), 0.0, 1.0)
+        return f0 + (1.0 - f0) * s
+
+    share = np.clip(_scalar(values, "Transmission Weight"), 0.0, 1.0) * (
+        1.0 - np.clip(_scalar(values, "Metallic"), 0, 1)
+    )
+    return Interface(
+        weight=np.full(3, share * share),
+        eta=ior,
+        alpha=float(np.clip(_scalar(values, "Roughness"), 0.0, 1.0)) ** 2,
+        tint=np.clip(_rgb(values, "Base Color"), 0.0, 1.0),
+        sigma=np.zeros(3),
+        thin_walled=False,
+        fresnel=fresnel,
+    )
+
+
 #: model id -> the reading of its transmission
 INTERFACES: dict[str, Callable[[Mapping[str, Any]], Interface]] = {
     "gltf:pbr": gltf_interface,
     "mtlx:open_pbr_surface": openpbr_interface,
     "mtlx:standard_surface": standard_surface_interface,
     "mitsuba3:principled": mitsuba3_principled_interface,
+    "cycles:principled": cycles_principled_interface,
 }
 
 
@@ -487,6 +525,7 @@ __all__ = [
     "background",
     "beer_sigma",
     "cross",
+    "cycles_principled_interface",
     "far_side",
     "gltf_equivalent",
     "gltf_interface",
