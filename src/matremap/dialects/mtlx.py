@@ -118,7 +118,7 @@ OPEN_PBR_SURFACE = ModelSpec(
 
 STANDARD_SURFACE = ModelSpec(
     id="mtlx:standard_surface",
-    summary="Autodesk Standard Surface 1.0.1 (opaque): Oren-Nayar, artist-friendly metal, coat, sheen",
+    summary="Autodesk Standard Surface 1.0.1: Oren-Nayar, artist-friendly metal, coat, sheen, specular transmission",
     params=(
         _held("base", 1.0, doc="multiplier of base_color"),
         _rgb("base_color", "diffuse", 0.8, doc="diffuse albedo; the metal's reflectivity at normal incidence"),
