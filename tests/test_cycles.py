@@ -48,7 +48,7 @@ def test_principled_is_data_without_bpy():
     spec = get_model("cycles:principled")
     assert spec.param_names[:6] == ("Base Color", "Metallic", "Roughness", "IOR", "Specular IOR Level", "Specular Tint")
     layers = ("Coat Weight", "Coat Roughness", "Coat IOR", "Coat Tint", "Sheen Weight", "Sheen Roughness", "Sheen Tint")
-    assert spec.param_names[6:] == layers
+    assert spec.param_names[6:] == (*layers, "Transmission Weight")
     assert spec.family == "cycles"
     assert CyclesRenderer.can_render("cycles:glossy") and CyclesRenderer.can_render("cycles:principled")
     assert not CyclesRenderer.can_render("mitsuba06:ward")

@@ -211,3 +211,17 @@ def test_map_set_becomes_packed_image_textures_with_their_colour_spaces(cycles, 
     img = render_file(cycles, out, scene)
     ref = cycles.render([uniform], scene)[0]
     assert relative_rmse(img, ref, scene.mask()) < 5e-3
+
+
+@needs_bpy
+def test_transmission_weight_is_written_and_read_back(cycles, tmp_path):
+    """cycles:principled's Transmission Weight is a socket the file holds and the reader takes (no longer a
+    'no such parameter' note); past 0.5 the reader still lists the look as lost (glass)."""
+    from matremap.formats import read_asset
+
+    for t, lost in ((0.3, []), (0.8, ["Transmission Weight=0.8 (glass)"])):
+        out = tmp_path / f"glass{t}.blend"
+        write_asset(out, Material.create("cycles:principled", {"Roughness": 0.2, "Transmission Weight": t}))
+        asset = read_asset(out)
+        assert asset.model == "cycles:principled" and asset.constants["Transmission Weight"] == pytest.approx(t)
+        assert asset.lost == lost and not any("Transmission" in n for n in asset.notes)

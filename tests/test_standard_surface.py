@@ -98,7 +98,8 @@ def standard_surface_scalar(v: dict, wi, wo, c: int, multi: bool) -> float:
     w = col["specular"] * col["specular_color"]
     spec = fresnel_complex(ih, complex(ior, 0)) * ggx_fcos(wi, wo, r) * gain(f0, r)
     e_spec = float(ly.dielectric_albedo(mo, r, f0)) * gain(f0, r)
-    spec_layer = w * spec + (1 - w * e_spec) * sheen_layer
+    transmission_sheen_mix = (1 - col["transmission"]) * sheen_layer  # specular_btdf reflects nothing
+    spec_layer = w * spec + (1 - w * e_spec) * transmission_sheen_mix
     refl = col["base"] * col["base_color"]
     eta = gulbrandsen(refl, col["specular"] * col["specular_color"])
     metal = fresnel_complex(ih, eta) * ggx_fcos(wi, wo, r) * gain(min(max(refl, 0), 0.99), r)
@@ -135,6 +136,16 @@ CASES = [
         "sheen_color": [0.9, 0.2, 0.5],
         "sheen_roughness": 0.4,
         "diffuse_roughness": 0.3,
+    },
+    {
+        "base_color": [0.3, 0.5, 0.7],
+        "metalness": 0.2,
+        "specular_roughness": 0.3,
+        "sheen": 0.6,
+        "transmission": 0.7,
+        "transmission_color": [0.9, 0.5, 0.2],
+        "transmission_depth": 1.0,
+        "coat": 0.5,
     },
 ]
 PAIRS = [

@@ -152,6 +152,8 @@ def test_opaque_materials_transmit_nothing_and_others_are_refused():
     [
         ("gltf:pbr", {"baseColor": [0.6, 0.4, 0.2], "metallic": 0.0, "roughness": 0.5}, "transmission"),
         ("mtlx:open_pbr_surface", {"base_color": [0.6, 0.4, 0.2], "specular_roughness": 0.5}, "transmission_weight"),
+        ("mtlx:standard_surface", {"base_color": [0.6, 0.4, 0.2], "specular_roughness": 0.5}, "transmission"),
+        ("mitsuba3:principled", {"base_color": [0.6, 0.4, 0.2], "roughness": 0.5}, "spec_trans"),
     ],
 )
 def test_in_reflection_transmission_takes_the_diffuse_away(model, values, weight):
@@ -203,3 +205,37 @@ def test_gltf_equivalent_transmits_as_the_openpbr_source(values):
     b, _ = tr.transmitted(target, scene)
     rel = np.linalg.norm(a[mask] - b[mask]) / np.linalg.norm(a[mask])
     assert rel < 0.05, rel
+
+
+def test_standard_surface_transmission_reads_its_spec():
+    """Standard Surface 1.0.1 "Specular transmission": transmission (1 - metalness) through the specular lobe's
+    GGX and IOR; transmission_color a tint at depth 0, else Beer-Lambert over transmission_depth; thin_walled no
+    bending (the surrounding medium's IOR), a crossing losing the specular layer's reflection, and no interior."""
+
+    def iface(**kw):
+        values = {"transmission": 1.0, "specular_IOR": 1.6, "specular_roughness": 0.3, **kw}
+        return tr.interface_of(Material.create("mtlx:standard_surface", values))
+
+    solid = iface(transmission_color=[0.9, 0.5, 0.2], metalness=0.25)
+    assert solid.eta == 1.6 and solid.alpha == pytest.approx(0.09) and not solid.thin_walled
+    np.testing.assert_allclose(solid.weight, 0.75)
+    np.testing.assert_allclose(solid.tint, [0.9, 0.5, 0.2])
+    assert not solid.sigma.any()
+    cos = np.array([1.0, 0.5, 0.1])
+    np.testing.assert_allclose(solid.fresnel(cos), fresnel_dielectric(cos, 1.6))
+    deep = iface(transmission_color=[0.9, 0.5, 0.2], transmission_depth=2.0)
+    np.testing.assert_allclose(deep.tint, 1.0)
+    np.testing.assert_allclose(np.exp(-deep.sigma * 2.0), [0.9, 0.5, 0.2])
+    thin = iface(thin_walled=1.0, transmission_color=[0.5, 0.9, 0.6], specular=0.5)
+    assert thin.thin_walled and thin.eta == 1.0
+    np.testing.assert_allclose(thin.fresnel(cos), 0.5 * fresnel_dielectric(cos, 1.6))
+    np.testing.assert_allclose(thin.tint, [0.5, 0.9, 0.6])
+    # without a specular layer a thin wall loses nothing at its crossings: the white world comes through whole
+    through, mask = tr.transmitted(
+        Material.create(
+            "mtlx:standard_surface",
+            {"transmission": 1.0, "thin_walled": 1.0, "specular": 0.0, "specular_roughness": 0.0},
+        ),
+        WHITE_WORLD,
+    )
+    np.testing.assert_allclose(through[mask], 1.0, atol=1e-9)

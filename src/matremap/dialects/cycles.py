@@ -43,7 +43,7 @@ Diffuse Color   RGB in [0, 1], default 0 (no diffuse node); Lambertian Color/pi
 cycles:diffuse -- the Diffuse BSDF node with Roughness 0 (Lambert): Color/pi.
 
 cycles:principled -- the Principled BSDF node of Blender 5.0 with the sockets below (the others at
-their defaults: no subsurface, transmission, emission, thin film, Diffuse Roughness 0).
+their defaults: no subsurface, emission, thin film, Diffuse Roughness 0).
 Emulated by the embedded renderer (``renderers/embedded/evaluators/principled.py``, which follows
 ``kernel/svm/closure.h`` ``CLOSURE_BSDF_PRINCIPLED_ID`` and says where Cycles departs from the
 published model) and drawn by real Cycles with ``--target-renderer cycles``:
@@ -57,6 +57,10 @@ published model) and drawn by real Cycles with ``--target-renderer cycles``:
   Sheen Roughness: Zeltner et al.'s LTC sheen) and over that a coat (Coat Weight, Coat Roughness, Coat IOR:
   a GGX lobe with the real dielectric Fresnel and energy compensation whatever the distribution), whose
   Coat Tint absorbs along the refracted view (tint^(1/cos theta_t)). Both off by default (weights 0).
+  Transmission Weight t (default 0): below the metal, a GGX glass closure of weight t (Roughness, the IOR
+  itself -- not adjusted by Specular IOR Level --, F0 tinted by Specular Tint; what it transmits is tinted by
+  sqrt(Base Color) at each crossing) takes the share t of the dielectric: the specular lobe and the diffuse
+  under it keep 1 - t. In reflection the glass shows its GGX reflection (the transmission probe draws the rest).
 """
 
 from __future__ import annotations
@@ -157,6 +161,15 @@ PRINCIPLED = ModelSpec(
         ),
         ParamSpec(
             "Sheen Tint", "diffuse", (1.0,) * 3, (0.0, 1.0), channels=3, fit=False, doc="colour of the sheen layer"
+        ),
+        ParamSpec(
+            "Transmission Weight",
+            "other",
+            0.0,
+            (0.0, 1.0),
+            fit=False,
+            linear=False,
+            doc="share of the dielectric that is glass (refracts; held in fits: --free 'Transmission Weight')",
         ),
     ),
     options=(OptionSpec("distribution", ("multi_ggx", "ggx"), "multi_ggx", "microfacet distribution"),),

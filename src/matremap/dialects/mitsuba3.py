@@ -19,8 +19,9 @@ mitsuba3:roughplastic      distribution {beckmann*, ggx}; nonlinear {false*, tru
 mitsuba3:principled        base_color (0.5); roughness, metallic, specular (0.5), spec_tint,
                            anisotropic, sheen, sheen_tint, flatness, clearcoat,
                            clearcoat_gloss, spec_trans (scalars; those after specular held at
-                           0 in fits); emulated by the embedded renderer but for spec_trans,
-                           anisotropic and flatness
+                           0 in fits); emulated by the embedded renderer but for anisotropic
+                           and flatness (spec_trans: its reflection; what it transmits is drawn
+                           by the transmission probe)
 =========================  ====================================================================
 """
 

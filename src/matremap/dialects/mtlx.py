@@ -2,7 +2,7 @@
 
 Parameters are named exactly as the MaterialX 1.39 inputs of ``ND_open_pbr_surface_surfaceshader`` and
 ``ND_standard_surface_surfaceshader``, with their defaults. Only the opaque reflection of each shader is
-modelled, and OpenPBR's transmission: subsurface, thin film, emission, opacity, anisotropy and normal inputs are
+modelled, and each one's transmission: subsurface, thin film, emission, opacity, anisotropy and normal inputs are
 not parameters here (a file using them is refused by its reader, not silently flattened). OpenPBR's
 ``transmission_weight`` ("Translucent base") takes that share of the dielectric base's diffuse away in
 reflection (its specular reflection stays); what it transmits -- ``transmission_color`` and
@@ -32,8 +32,15 @@ the closure mixture with reflectance() the lobes' directional albedos
   coat_layer = coat coat_brdf + lerp(1, coat_color (1 - E_coat), coat) specular_mixture
   specular_mixture = metalness metal_brdf + (1 - metalness) specular_reflection_layer
   specular_reflection_layer = specular specular_color specular_brdf
-                              + (1 - specular specular_color E_specular) sheen_layer
+                              + (1 - specular specular_color E_specular) transmission_sheen_mix
+  transmission_sheen_mix = transmission transm_color specular_btdf + (1 - transmission) sheen_layer
   sheen_layer = sheen sheen_color sheen_brdf + (1 - sheen E_sheen) base base_color oren_nayar
+
+  ("Specular transmission"): specular_btdf reflects nothing, so in reflection ``transmission`` takes that share
+  of the sheen and diffuse away; what it transmits (transm_color = transmission_color at transmission_depth 0,
+  else Beer-Lambert inside; ``thin_walled``) is drawn by the transmission probe
+  (``renderers/embedded/transmission.py``). Not parameters: transmission_scatter (and its anisotropy),
+  transmission_dispersion, transmission_extra_roughness (their defaults 0).
 
   metal_brdf with Gulbrandsen's artist-friendly Fresnel (reflectivity base base_color, edge tint
   specular specular_color); Estevez-Kulla ("Charlie") sheen; Oren-Nayar diffuse (diffuse_roughness).
@@ -111,7 +118,7 @@ OPEN_PBR_SURFACE = ModelSpec(
 
 STANDARD_SURFACE = ModelSpec(
     id="mtlx:standard_surface",
-    summary="Autodesk Standard Surface 1.0.1 (opaque): Oren-Nayar, artist-friendly metal, coat, sheen",
+    summary="Autodesk Standard Surface 1.0.1: Oren-Nayar, artist-friendly metal, coat, sheen, specular transmission",
     params=(
         _held("base", 1.0, doc="multiplier of base_color"),
         _rgb("base_color", "diffuse", 0.8, doc="diffuse albedo; the metal's reflectivity at normal incidence"),
@@ -128,6 +135,10 @@ STANDARD_SURFACE = ModelSpec(
         _held("sheen", 0.0, doc="weight of the sheen lobe"),
         _rgb("sheen_color", "other", 1.0, fit=False, doc="colour of the sheen lobe"),
         _held("sheen_roughness", 0.3, doc="roughness of the sheen lobe"),
+        _held("transmission", 0.0, doc="share of the dielectric base that is specular transmission (refracts)"),
+        _rgb("transmission_color", "other", 1.0, fit=False, doc="tint of the transmission (see depth)"),
+        _held("transmission_depth", 0.0, (0.0, 1e6), doc="distance at which white light takes transmission_color"),
+        _held("thin_walled", 0.0, doc="1: a thin shell (no refraction), 0: the boundary of a solid"),
     ),
     options=(_MULTISCATTER,),
     diffuse_only={"metalness": 0.0, "specular": 0.0, "coat_IOR": 1.0},  # keeps the sheen and the coat's tint

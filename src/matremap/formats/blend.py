@@ -4,11 +4,11 @@ uniform Principled BSDF materials of a .blend read (through the same bpy worker)
 ``read(path, material=None)`` takes one material whose surface is a single Principled BSDF (Blender 5.0's
 sockets, the names ``cycles:principled`` uses) with none of its modelled sockets linked (a textured .blend
 material is refused in one line): Base Color, Metallic, Roughness, IOR, Specular IOR Level, Specular Tint,
-Coat Weight / Roughness / IOR / Tint, Sheen Weight / Roughness / Tint and the node's distribution become a
-``cycles:principled`` asset; Emission Color x Emission Strength and Alpha are carried (as emission and a
-blended opacity). What the model has no parameter for is noted where it is not at its off value (Subsurface,
-Anisotropic, Thin Film, Diffuse Roughness), and a Transmission Weight above 0.5 makes the look lost (glass,
-which no fit draws yet).
+Coat Weight / Roughness / IOR / Tint, Sheen Weight / Roughness / Tint, Transmission Weight and the node's
+distribution become a ``cycles:principled`` asset; Emission Color x Emission Strength and Alpha are carried (as
+emission and a blended opacity). What the model has no parameter for is noted where it is not at its off value
+(Subsurface, Anisotropic, Thin Film, Diffuse Roughness), and a Transmission Weight above 0.5 makes the look lost
+(glass, which no fit draws yet).
 
 ``write(out, result, source=None, force=False)`` takes a uniform :class:`~matremap.core.material.Material`
 or a :class:`~matremap.svbrdf.textures.MapSet` of converted maps of ``cycles:principled``,
@@ -64,7 +64,6 @@ UNMODELLED = {
     "Anisotropic": 0.0,
     "Thin Film Thickness": 0.0,
     "Diffuse Roughness": 0.0,
-    "Transmission Weight": 0.0,
 }
 #: a Transmission Weight past which the look is glass (refused for other models, as the other readers do)
 TRANSMISSION_LOOK = 0.5

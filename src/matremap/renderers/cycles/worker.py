@@ -89,28 +89,14 @@ class Probe:
         self.res = _probe_settings(scene, s)
         self.sphere = self._sphere(float(s["sphere_radius"]), s.get("geometry", "points"))
         scene.collection.objects.link(self.sphere)
+        if s.get("geometry", "points") == "points":
+            scene.collection.objects.link(_occluder(float(s["sphere_radius"])))
         self.light, self.lights = _probe_light(scene, s)
         self.key = key
 
     def _sphere(self, radius: float, geometry: str):
         if geometry == "points":
-            # a point cloud of one point: Cycles intersects it as a true sphere (exact normals)
-            mesh = bpy.data.meshes.new("vertex")
-            mesh.from_pydata([(0.0, 0.0, 0.0)], [], [])
-            obj = bpy.data.objects.new("sphere", mesh)
-            tree = bpy.data.node_groups.new("to_points", "GeometryNodeTree")
-            tree.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
-            tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
-            n_in = tree.nodes.new("NodeGroupInput")
-            n_out = tree.nodes.new("NodeGroupOutput")
-            to_points = tree.nodes.new("GeometryNodeMeshToPoints")
-            to_points.inputs["Radius"].default_value = radius
-            self.set_material_node = tree.nodes.new("GeometryNodeSetMaterial")
-            tree.links.new(n_in.outputs[0], to_points.inputs["Mesh"])
-            tree.links.new(to_points.outputs["Points"], self.set_material_node.inputs["Geometry"])
-            tree.links.new(self.set_material_node.outputs["Geometry"], n_out.inputs[0])
-            mod = obj.modifiers.new("to_points", "NODES")
-            mod.node_group = tree
+            obj, self.set_material_node = _point_sphere("sphere", radius)
             return obj
         segments, rings = (int(x) for x in geometry.split("x")) if "x" in geometry else (512, 256)
         self.set_material_node = None
@@ -168,6 +154,43 @@ class Probe:
             self.assign(mat)
             out[i] = _render_lights(scene, self.light, self.lights, res, path)
         return out
+
+
+def _point_sphere(name: str, radius: float):
+    """A point cloud of one point, which Cycles intersects as a true sphere (exact normals), and the Set
+    Material node that gives it its material."""
+    mesh = bpy.data.meshes.new(f"{name}_vertex")
+    mesh.from_pydata([(0.0, 0.0, 0.0)], [], [])
+    obj = bpy.data.objects.new(name, mesh)
+    tree = bpy.data.node_groups.new(f"{name}_to_points", "GeometryNodeTree")
+    tree.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    n_in = tree.nodes.new("NodeGroupInput")
+    n_out = tree.nodes.new("NodeGroupOutput")
+    to_points = tree.nodes.new("GeometryNodeMeshToPoints")
+    to_points.inputs["Radius"].default_value = radius
+    set_material = tree.nodes.new("GeometryNodeSetMaterial")
+    tree.links.new(n_in.outputs[0], to_points.inputs["Mesh"])
+    tree.links.new(to_points.outputs["Points"], set_material.inputs["Geometry"])
+    tree.links.new(set_material.outputs["Geometry"], n_out.inputs[0])
+    mod = obj.modifiers.new("to_points", "NODES")
+    mod.node_group = tree
+    return obj, set_material
+
+
+#: the occluder's radius, relative to the probe sphere's
+OCCLUDER_SCALE = 1.0 - 1e-6
+
+
+def _occluder(radius: float):
+    """An opaque sphere just inside the point-cloud probe sphere, unseen by the camera: Cycles skips a shadow
+    ray's own primitive, and the probe sphere is one primitive, so without it a light below a pixel's horizon
+    would reach a transmissive material (glass) straight through the sphere. A shadow ray towards a light
+    above the horizon moves away from the centre and never meets it; one below is blocked unless it passes
+    within sqrt(2e-5) rad (0.26 degrees) of the tangent plane."""
+    obj, _ = _point_sphere("occluder", radius * OCCLUDER_SCALE)
+    obj.visible_camera = False
+    return obj
 
 
 def _probe_settings(scene, s: dict) -> int:
@@ -491,6 +514,7 @@ PRINCIPLED_SOCKETS = (
     "Sheen Weight",
     "Sheen Roughness",
     "Sheen Tint",
+    "Transmission Weight",
 )
 
 

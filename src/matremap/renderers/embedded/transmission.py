@@ -50,6 +50,7 @@ from matremap.core.envmap import EnvMap, directional_lights, resolve
 from matremap.core.material import Material
 from matremap.core.optics import dielectric_f0, fresnel_dielectric
 from matremap.errors import MatremapError
+from matremap.renderers.embedded.evaluators.mitsuba3 import principled_eta
 from matremap.renderers.embedded.layering import modulated_ior
 from matremap.renderers.textured import surface_pixels
 
@@ -167,10 +168,112 @@ def openpbr_interface(values: Mapping[str, Any]) -> Interface:
     )
 
 
+def standard_surface_interface(values: Mapping[str, Any]) -> Interface:
+    """``mtlx:standard_surface``'s transmission: Autodesk Standard Surface v1.0.1, "Specular transmission".
+
+    The share transmission (1 - metalness) of the dielectric base is ``specular_btdf``: a GGX BTDF of
+    specular_roughness (transmission_extra_roughness, default 0, is not a parameter) and specular_IOR, its
+    dielectric Fresnel the share reflected at each crossing; transm_color = transmission_color when
+    transmission_depth is 0 (a tint, applied once, as OpenPBR's and MaterialX's standard_surface to
+    open_pbr_surface translation read it), else white with the interior's extinction
+    sigma = -ln(transmission_color) / transmission_depth. ``thin_walled`` 1: "light does not undergo refraction
+    ... the refractive index is set to that of the surrounding medium", so no bending; a crossing then loses
+    what the specular layer above reflects (specular specular_color times the Fresnel of specular_IOR), and a
+    depth > 0 leaves no tint (no interior). The coat over it all (coat_color, 1 - E_coat) is not applied, as
+    for OpenPBR."""
+    ior = max(_scalar(values, "specular_IOR"), 1.0 + 1e-9)
+    thin = _scalar(values, "thin_walled") >= 0.5
+    layer = _scalar(values, "specular") * float(np.max(_rgb(values, "specular_color")))
+
+    def fresnel(cos_outside: np.ndarray) -> np.ndarray:
+        f = fresnel_dielectric(np.clip(cos_outside, 1e-9, 1.0), ior)
+        return np.clip(layer * f, 0.0, 1.0) if thin else f
+
+    depth = _scalar(values, "transmission_depth")
+    colour = np.clip(_rgb(values, "transmission_color"), 0.0, 1.0)
+    weight = np.clip(_scalar(values, "transmission"), 0.0, 1.0) * (1.0 - np.clip(_scalar(values, "metalness"), 0, 1))
+    return Interface(
+        weight=np.full(3, weight),
+        eta=1.0 if thin else ior,
+        alpha=_scalar(values, "specular_roughness") ** 2,
+        tint=colour if depth <= 0.0 else np.ones(3),
+        sigma=beer_sigma(colour, depth) if not thin and depth > 0.0 else np.zeros(3),
+        thin_walled=thin,
+        fresnel=fresnel,
+    )
+
+
+def mitsuba3_principled_interface(values: Mapping[str, Any]) -> Interface:
+    """``mitsuba3:principled``'s transmission: Mitsuba 3.9 ``src/bsdfs/principled.cpp`` (``Principled::eval``).
+
+    The lobe ``sqrt(base_color) bsdf (1 - F) D G ...`` with ``bsdf = (1 - metallic) spec_trans``, GGX alpha
+    max(0.001, roughness^2), F the exact dielectric Fresnel of eta = 2/(1 - sqrt(0.08 specular)) - 1 (specular
+    0 read as 1e-3), at the boundary of a solid (``principledthin`` is the thin one) with no medium inside.
+    Mitsuba weighs *every* crossing by ``bsdf`` and tints it by sqrt(base_color) (an internal reflection by
+    ``bsdf F``, untinted); the probe weighs a path once, so ``weight`` = bsdf^2 and ``tint`` = base_color make the
+    straight path (in and out) exact, and a path with k internal reflections is bsdf^k too bright (exact at
+    spec_trans 1, metallic 0)."""
+    eta = max(float(principled_eta(_scalar(values, "specular"), _scalar(values, "spec_trans"))), 1.0 + 1e-9)
+
+    def fresnel(cos_outside: np.ndarray) -> np.ndarray:
+        return fresnel_dielectric(np.clip(cos_outside, 1e-9, 1.0), eta)
+
+    bsdf = (1.0 - _scalar(values, "metallic")) * _scalar(values, "spec_trans")
+    return Interface(
+        weight=np.full(3, bsdf * bsdf),
+        eta=eta,
+        alpha=max(0.001, _scalar(values, "roughness") ** 2),
+        tint=np.clip(_rgb(values, "base_color"), 0.0, 1.0),
+        sigma=np.zeros(3),
+        thin_walled=False,
+        fresnel=fresnel,
+    )
+
+
+def cycles_principled_interface(values: Mapping[str, Any]) -> Interface:
+    """``cycles:principled``'s transmission: Blender 5.0 Cycles ``kernel/svm/closure.h``
+    (``CLOSURE_BSDF_PRINCIPLED_ID``, "Transmission component") and ``kernel/closure/bsdf_microfacet.h``.
+
+    A GGX glass closure of weight t (1 - Metallic), t = Transmission Weight, alpha = Roughness^2, relative IOR
+    the IOR socket (not adjusted by Specular IOR Level; 1/IOR from inside); its Fresnel the real dielectric one
+    remapped from [F0(IOR), 1] to [min(F0(IOR) Specular Tint, 1), 1] (the largest channel here: the probe takes
+    one share per crossing), unchanged when seen from inside with the outer cosine; what it transmits is tinted
+    by sqrt(min(Base Color, 1)). Cycles weighs and tints *every* crossing by that closure, so ``weight`` =
+    (t (1 - Metallic))^2 and ``tint`` = Base Color make the straight path exact and a path with k internal
+    reflections (t (1 - Metallic))^k too bright (exact for a full glass). Left out: the sheen and coat layers'
+    share above the glass, Multiscatter GGX's gain on the glass (1 + F_ms (1 - E)/E of Cycles' glass tables,
+    which brightens a rough glass's transmission too: :mod:`.cycles_glass`) and any Volume shader (no
+    absorption inside)."""
+    ior = max(_scalar(values, "IOR"), 1.0 + 1e-9)
+    f0_real = float(dielectric_f0(ior, 1.0, np.ones(3))[0])
+    f0 = float(np.max(np.clip(f0_real * np.maximum(_rgb(values, "Specular Tint"), 0.0), 0.0, 1.0)))
+
+    def fresnel(cos_outside: np.ndarray) -> np.ndarray:
+        real = fresnel_dielectric(np.clip(cos_outside, 1e-9, 1.0), ior)
+        s = np.clip((real - f0_real) / (1.0 - f0_real), 0.0, 1.0)
+        return f0 + (1.0 - f0) * s
+
+    share = np.clip(_scalar(values, "Transmission Weight"), 0.0, 1.0) * (
+        1.0 - np.clip(_scalar(values, "Metallic"), 0, 1)
+    )
+    return Interface(
+        weight=np.full(3, share * share),
+        eta=ior,
+        alpha=float(np.clip(_scalar(values, "Roughness"), 0.0, 1.0)) ** 2,
+        tint=np.clip(_rgb(values, "Base Color"), 0.0, 1.0),
+        sigma=np.zeros(3),
+        thin_walled=False,
+        fresnel=fresnel,
+    )
+
+
 #: model id -> the reading of its transmission
 INTERFACES: dict[str, Callable[[Mapping[str, Any]], Interface]] = {
     "gltf:pbr": gltf_interface,
     "mtlx:open_pbr_surface": openpbr_interface,
+    "mtlx:standard_surface": standard_surface_interface,
+    "mitsuba3:principled": mitsuba3_principled_interface,
+    "cycles:principled": cycles_principled_interface,
 }
 
 
@@ -498,11 +601,13 @@ __all__ = [
     "background",
     "beer_sigma",
     "cross",
+    "cycles_principled_interface",
     "far_side",
     "gltf_equivalent",
     "gltf_interface",
     "interface_of",
     "openpbr_equivalent",
+    "mitsuba3_principled_interface",
     "openpbr_interface",
     "probe_scene",
     "render",
@@ -510,5 +615,6 @@ __all__ = [
     "sample_vndf",
     "smith_g1",
     "transmits",
+    "standard_surface_interface",
     "transmitted",
 ]

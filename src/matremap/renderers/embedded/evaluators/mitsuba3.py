@@ -26,7 +26,15 @@ the reflection of the front side, in Mitsuba's own terms (its ``wi`` is the view
   cos_light, F_x = (1 - cos_x)^5, R_r = 2 roughness (h.l)^2;
 * sheen: sheen (1 - metallic) (1 - h.l)^5 lerp(1, c_tint, sheen_tint) cos_light (no 1/pi, as Burley's).
 
-Not emulated: spec_trans > 0 (transmission), anisotropic > 0 and flatness > 0 (refused with one line; Mitsuba 3 draws
+* spec_trans (transmission, ``bsdf = (1 - metallic) spec_trans``): ``Principled::eval`` weighs only the diffuse
+  (with its retro-reflection) by ``brdf = (1 - metallic)(1 - spec_trans)``; the specular reflection, its Fresnel
+  (front side), the sheen and the clearcoat are unchanged. Its transmission lobe (``sqrt(base_color) bsdf``
+  times the rough dielectric BTDF) is not reflection and is drawn by the transmission probe
+  (``..transmission.mitsuba3_principled_interface``). With spec_trans > 0 a specular of 0 is read as 1e-3
+  (the constructor's and ``parameters_changed``'s "eta = 1 is not plausible for transmission"), so a faint
+  dielectric lobe remains.
+
+Not emulated: anisotropic > 0 and flatness > 0 (refused with one line; Mitsuba 3 draws
 them with ``--target-renderer mitsuba3``). Checked against the real Mitsuba 3 in
 tests/test_mitsuba3_principled_emulation.py. ``roughplastic`` is not emulated: Mitsuba 3's roughplastic
 diffuse layer differs from Mitsuba 0.6's (2-59 % relative RMSE, see :mod:`matremap.dialects.equivalence`).
@@ -77,16 +85,23 @@ def schlick_weight(cos) -> np.ndarray:
     return m * m * m * m * m
 
 
+def principled_eta(specular, spec_trans) -> np.ndarray:
+    """Mitsuba 3's principled IOR: eta = 2/(1 - sqrt(0.08 specular)) - 1, with a specular of 0 read as 1e-3
+    where spec_trans > 0 (principled.cpp: "zero specular is not plausible for transmission")."""
+    specular = np.where((np.asarray(spec_trans) > 0.0) & (np.asarray(specular) == 0.0), 1e-3, specular)
+    return 2.0 / (1.0 - np.sqrt(0.08 * specular)) - 1.0
+
+
 def principled(p, opt, g):
     """f * cos(theta_light) of Mitsuba 3's ``principled`` (see the module docstring)."""
-    for name in ("spec_trans", "anisotropic", "flatness"):
+    for name in ("anisotropic", "flatness"):
         if np.any(p[name] > 0.0):
             raise MatremapError(
                 f"mitsuba3:principled with {name} > 0 is not emulated by the embedded renderer; "
                 "draw it with Mitsuba 3 (--target-renderer mitsuba3 / --source-renderer mitsuba3)"
             )
     base, rough, metallic = p["base_color"], p["roughness"], p["metallic"]
-    eta = 2.0 / (1.0 - np.sqrt(0.08 * p["specular"])) - 1.0
+    eta = principled_eta(p["specular"], p["spec_trans"])
     weights = LUMINANCE.reshape((1, 3) + (1,) * (base.ndim - 2))
     lum = np.sum(base * weights, axis=1, keepdims=True) if base.shape[1] == 3 else base
     c_tint = np.where(lum > 0.0, base / np.where(lum > 0.0, lum, 1.0), 1.0)
@@ -114,7 +129,7 @@ def principled(p, opt, g):
     f_l, f_v = schlick_weight(g.cos_i), schlick_weight(g.cos_o)
     rr = 2.0 * rough * g.i_dot_h**2
     lobe = (1.0 - 0.5 * f_v) * (1.0 - 0.5 * f_l) + rr * (f_l + f_v + f_l * f_v * (rr - 1.0))
-    diffuse = (1.0 - metallic) * base * g.lambert * lobe
+    diffuse = (1.0 - metallic) * (1.0 - p["spec_trans"]) * base * g.lambert * lobe
     c_sheen = 1.0 + p["sheen_tint"] * (c_tint - 1.0)
     sheen = p["sheen"] * (1.0 - metallic) * w_h * c_sheen * g.cos_i
     return specular + clearcoat + diffuse + sheen

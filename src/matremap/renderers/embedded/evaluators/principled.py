@@ -61,7 +61,18 @@ layer leaves w clamp(1 - max over RGB of (its albedo / w), 0, 1) to what lies be
 
 Both default to off (weights 0), where w stays exactly 1 and the result is the base's bit for bit.
 
-Left out, as the dialect does not expose them: subsurface, transmission, emission, thin film, anisotropy,
+Transmission (``CLOSURE_BSDF_PRINCIPLED_ID``, "Transmission component", after the metal): when Transmission
+Weight t > 1e-5 a GGX glass closure (``bsdf_microfacet_ggx_glass_setup``) of weight t w, alpha = Roughness^2,
+relative IOR the socket's IOR (not adjusted by Specular IOR Level) and the generalized Schlick Fresnel with a
+negative exponent (the real dielectric Fresnel remapped to [min(F0(IOR) Specular Tint, 1), 1]), transmission
+tint sqrt(min(Base Color, 1)); then w *= 1 - t (no albedo layering). Its reflection is the GGX lobe times that
+Fresnel (``bsdf_microfacet_eval``); under Multiscatter GGX ``microfacet_ggx_preserve_energy`` on the glass
+multiplies it by 1 + F_ms (1 - E)/E with Fss = the transmission tint and E, E_avg Cycles' glass albedo tables
+(:mod:`..cycles_glass`). The probe's lights are in front of the sphere, so a light below a pixel's horizon is
+behind the sphere itself (its shadow ray is blocked), and only this reflection is seen on the opaque probe;
+what goes through is drawn by the transmission probe (``..transmission.cycles_principled_interface``).
+
+Left out, as the dialect does not expose them: subsurface, emission, thin film, anisotropy,
 alpha, Coat Normal, Diffuse Roughness (Oren-Nayar) and normal maps on other lobes.
 """
 
@@ -79,6 +90,7 @@ from matremap.core.optics import f0_from_ior, fresnel_dielectric, ior_from_f0
 from matremap.dialects.cycles import PRINCIPLED
 from matremap.renderers.embedded import layering as ly
 from matremap.renderers.embedded import microfacet as mf
+from matremap.renderers.embedded.cycles_glass import glass_multiscatter_scale
 from matremap.renderers.embedded.cycles_sheen_ltc import sheen_ltc_table
 from matremap.renderers.embedded.evaluators.cycles import ggx_albedo, multiscatter_scale
 
@@ -339,6 +351,7 @@ def principled_base(p, opt, g):
         metal = metal * multiscatter_scale(fss_metal, rough, g.cos_o)
     weight = np.where(metallic > 1e-5, 1.0 - metallic, 1.0)
     metal = np.where(metallic > 1e-5, metallic * metal, 0.0)
+    glass, weight = transmission_layer(p, g, weight, lobe, multi)
 
     # dielectric specular: the IOR adjusted by Specular IOR Level, the real Fresnel remapped to the tint
     f0 = f0_from_ior(ior)
@@ -364,7 +377,23 @@ def principled_base(p, opt, g):
     albedo = keep * (f0_tint + (1.0 - f0_tint) * s_est)
     cover = np.clip(1.0 - np.max(albedo, axis=1, keepdims=True), 0.0, 1.0)
     diffuse_weight = np.where(has_spec, weight * cover, weight)
-    return metal + spec + base * diffuse_weight * g.lambert
+    return metal + glass + spec + base * diffuse_weight * g.lambert
+
+
+def transmission_layer(p, g, weight, lobe, multi: bool) -> tuple[np.ndarray | float, np.ndarray]:
+    """The glass closure's reflection f cos(theta_light) at weight Transmission Weight ``weight``, and the weight
+    it leaves below ((1 - t) ``weight``); nothing and ``weight`` itself when no material has t > 1e-5."""
+    t = np.clip(p.get("Transmission Weight", 0.0), 0.0, 1.0)
+    on = t > CLOSURE_WEIGHT_CUTOFF
+    if not np.any(on):
+        return 0.0, weight
+    ior = np.maximum(p["IOR"], 1e-5)
+    f0 = np.clip(f0_from_ior(ior) * np.maximum(p["Specular Tint"], 0.0), 0.0, 1.0)
+    reflection = (f0 + (1.0 - f0) * dielectric_s(g.i_dot_h, ior)) * lobe
+    if multi:
+        fss = np.sqrt(np.clip(p["Base Color"], 0.0, 1.0))
+        reflection = reflection * glass_multiscatter_scale(fss, np.clip(p["Roughness"], 0.0, 1.0), g.cos_o, ior)
+    return np.where(on, t * weight * reflection, 0.0), np.where(on, (1.0 - t) * weight, weight)
 
 
 def dielectric_average_fresnel(eta) -> np.ndarray:

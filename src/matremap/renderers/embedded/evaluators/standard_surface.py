@@ -1,5 +1,5 @@
 """The embedded renderer's evaluator of ``mtlx:standard_surface``: Autodesk Standard Surface v1.0.1
-(opaque part) as f * cos(theta_light) on [N, C, L, P] arrays.
+(its reflection) as f * cos(theta_light) on [N, C, L, P] arrays.
 
 Source: the Autodesk Standard Surface specification, version 1.0.1.1 (Autodesk/standard-surface
 ``index.html``), section "Closures", whose closure formulas are evaluated with reflectance(brdf) the
@@ -14,6 +14,9 @@ numerically, :mod:`..layering`):
   (the section cites [Gulbrandsen2014]; the spec's OSL reference does the same).
 * "Specular reflection": specular specular_color specular_brdf + (1 - specular specular_color E_specular)
   sheen_layer, with specular_brdf GGX and the dielectric Fresnel of specular_IOR.
+* "Specular transmission": transmission_sheen_mix = transmission transm_color specular_btdf
+  + (1 - transmission) sheen_layer; the BTDF reflects nothing, so the reflection keeps (1 - transmission)
+  sheen_layer (what it transmits: ``..transmission.standard_surface_interface``).
 * "Sheen": sheen sheen_color sheen_brdf + (1 - sheen E_sheen) base_mix, sheen_brdf the Estevez-Kulla
   ("Charlie") distribution with sheen_roughness, under the visibility MaterialX 1.39 uses.
 * "Diffuse reflection": base_mix = base base_color diffuse_brdf, Oren-Nayar with sigma = diffuse_roughness
@@ -44,6 +47,15 @@ def sheen_layer(p, g) -> np.ndarray:
     )
 
 
+def transmission_sheen_mix(p, g) -> np.ndarray:
+    """The reflection of transmission transm_color specular_btdf + (1 - transmission) sheen_layer: the BTDF
+    reflects nothing."""
+    below = sheen_layer(p, g)
+    if not np.any(np.asarray(p["transmission"]) > 0.0):
+        return below
+    return (1.0 - np.clip(p["transmission"], 0.0, 1.0)) * below
+
+
 def specular_reflection_layer(p, g, below, multi: bool) -> np.ndarray:
     """specular specular_color specular_brdf + (1 - specular specular_color E_specular) below."""
     rough, ior = p["specular_roughness"], p["specular_IOR"]
@@ -67,7 +79,7 @@ def standard_surface(p, opt, g):
     """f * cos(theta_light) of Standard Surface (see the module docstring for each closure)."""
     multi = opt["multiscatter"] == "turquin"
     metalness = np.clip(p["metalness"], 0.0, 1.0)
-    dielectric = specular_reflection_layer(p, g, sheen_layer(p, g), multi)
+    dielectric = specular_reflection_layer(p, g, transmission_sheen_mix(p, g), multi)
     mixture = metalness * metal_brdf(p, g, multi) + (1.0 - metalness) * dielectric
     coat = np.clip(p["coat"], 0.0, 1.0)
     ior, rough = p["coat_IOR"], p["coat_roughness"]
