@@ -11,9 +11,10 @@ line, as a user runs it, onto each of the four other models (``mtlx:open_pbr_sur
 file. The table gives the exit code (0 passed the quality gate, 3 written but failed by it, 2 refused), the fit's
 relative RMSE on the probe, the layer parameters fitted on the target and the seconds of the whole command.
 
-Transmissive materials are not in the table: no fit sees transmission yet (the probe is opaque) and only
-``gltf:pbr`` and ``mtlx:open_pbr_surface`` have transmission parameters; such a source is refused in one line
-(exit 2) for other models (docs/models.md).
+``--set transmissive`` remaps glasses instead (fitted on the transmission probe, matremap.transmissive): the
+MaterialX examples OpenPBR glass and honey and Standard Surface tinted glass, the Khronos AttenuationTest's blue
+volume and thin blue glass, a Mitsuba 3 ``principled`` glass (spec_trans 1) and a Cycles Principled glass
+(Transmission Weight 1); the layers column then gives the target's transmission weight and colour.
 """
 
 from __future__ import annotations
@@ -113,6 +114,24 @@ CYCLES = {
         "Sheen Tint": [0.9, 0.5, 0.6],
     },
 }
+PRINCIPLED_GLASS = """<scene version="3.0.0">
+  <bsdf type="principled" id="glass">
+    <rgb name="base_color" value="0.75, 0.9, 0.55"/>
+    <float name="roughness" value="0.3"/>
+    <float name="specular" value="0.5"/>
+    <float name="spec_trans" value="1.0"/>
+  </bsdf>
+</scene>
+"""
+CYCLES_GLASS = {"Base Color": [0.95, 0.55, 0.35], "Roughness": 0.25, "IOR": 1.45, "Transmission Weight": 1.0}
+#: the transmission parameters of each target, shown in the table for ``--set transmissive``
+TRANSMISSION_PARAMS = {
+    "mtlx:open_pbr_surface": ("transmission_weight", "transmission_color"),
+    "mtlx:standard_surface": ("transmission", "transmission_color"),
+    "gltf:pbr": ("transmission", "attenuationColor"),
+    "cycles:principled": ("Transmission Weight", "Base Color"),
+    "mitsuba3:principled": ("spec_trans", "base_color"),
+}
 #: the layer parameters of each target, shown in the table
 LAYER_PARAMS = {
     "mtlx:open_pbr_surface": ("coat_weight", "fuzz_weight"),
@@ -160,7 +179,35 @@ def sources(folder: Path) -> list[tuple[str, Path, str | None, str]]:
     return out
 
 
-def run(src: Path, material: str | None, target: str, out: Path) -> dict:
+def transmissive_sources(folder: Path) -> list[tuple[str, Path, str | None, str]]:
+    """(label, file, material, its model) of the glasses, written into ``folder`` where not in the corpus."""
+    (folder / "principled_glass.xml").write_text(PRINCIPLED_GLASS)
+    attenuation = CORPUS / "gltf-AttenuationTest" / "AttenuationTest.glb"
+    out = [
+        ("OpenPBR glass", CORPUS / "mtlx-open_pbr_glass" / "open_pbr_glass.mtlx", None, "mtlx:open_pbr_surface"),
+        ("OpenPBR honey", CORPUS / "mtlx-open_pbr_honey" / "open_pbr_honey.mtlx", None, "mtlx:open_pbr_surface"),
+        (
+            "Standard Surface tinted glass",
+            CORPUS / "mtlx-standard_surface_glass_tinted" / "standard_surface_glass_tinted.mtlx",
+            None,
+            "mtlx:standard_surface",
+        ),
+        ("glTF AttenuationTest volume", attenuation, "R5_Attenuation_1.0", "gltf:pbr"),
+        ("glTF AttenuationTest thin", attenuation, "R1_Sample_1.5", "gltf:pbr"),
+        ("Mitsuba 3 principled glass", folder / "principled_glass.xml", "glass", "mitsuba3:principled"),
+    ]
+    from matremap.renderers.cycles.client import bpy_available
+
+    if bpy_available():
+        from matremap.core.material import Material
+        from matremap.formats.blend import write
+
+        write(folder / "cycles_glass.blend", Material.create("cycles:principled", CYCLES_GLASS), force=True)
+        out.append(("Cycles Principled glass", folder / "cycles_glass.blend", None, "cycles:principled"))
+    return out
+
+
+def run(src: Path, material: str | None, target: str, out: Path, shown: dict | None = None) -> dict:
     cmd = [str(Path(sys.executable).parent / "matremap"), "remap", str(src), "--to", target, "-o", str(out), "--force"]
     cmd += ["--material", material] if material else []
     t = time.perf_counter()
@@ -172,9 +219,9 @@ def run(src: Path, material: str | None, target: str, out: Path) -> dict:
     layers = {}
     if params:
         values = json.loads(params.group(1))
-        for k in LAYER_PARAMS[target]:
+        for k in (shown or LAYER_PARAMS)[target]:
             v = values.get(k)
-            layers[k] = max(v) if isinstance(v, list) else v
+            layers[k] = (max(v) if shown is None else [round(x, 2) for x in v]) if isinstance(v, list) else v
     last = [line for line in log.strip().splitlines() if line.startswith(("done", "written", "matremap:"))]
     return {
         "exit": p.returncode,
@@ -189,22 +236,30 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", nargs="*", default=[], help="sources whose label holds one of these words")
     ap.add_argument("--json", help="write the rows to this JSON file")
+    ap.add_argument("--set", choices=("layered", "transmissive"), default="layered", help="which sources")
     args = ap.parse_args(argv)
+    glass = args.set == "transmissive"
+    shown = TRANSMISSION_PARAMS if glass else None
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        print("| source | target | exit | fit rel. RMSE | target's layers (coat, sheen) | s |")
+        what = "transmission weight, colour" if glass else "coat, sheen"
+        print(f"| source | target | exit | fit rel. RMSE | target's layers ({what}) | s |")
         print("|---|---|---|---|---|---|")
-        for label, src, material, own in sources(folder):
+        for label, src, material, own in (transmissive_sources if glass else sources)(folder):
             if args.only and not any(w in label for w in args.only):
                 continue
             for target in TARGETS:
                 if target == own:
                     continue
-                r = run(src, material, target, folder / "out")
+                r = run(src, material, target, folder / "out", shown)
                 rows.append({"source": label, "target": target, **r})
                 fit = "-" if r["fit"] is None else f"{r['fit']:.4f}"
-                layers = ", ".join(f"{k} {v:.2f}" for k, v in r["layers"].items() if v is not None)
+                layers = ", ".join(
+                    f"{k} {v:.2f}" if isinstance(v, float) else f"{k} {v}"
+                    for k, v in r["layers"].items()
+                    if v is not None
+                )
                 print(f"| {label} | {target} | {r['exit']} | {fit} | {layers} | {r['s']:.1f} |", flush=True)
     passed = sum(r["exit"] == 0 for r in rows)
     print(

@@ -7,8 +7,8 @@ material is refused in one line): Base Color, Metallic, Roughness, IOR, Specular
 Coat Weight / Roughness / IOR / Tint, Sheen Weight / Roughness / Tint, Transmission Weight and the node's
 distribution become a ``cycles:principled`` asset; Emission Color x Emission Strength and Alpha are carried (as
 emission and a blended opacity). What the model has no parameter for is noted where it is not at its off value
-(Subsurface, Anisotropic, Thin Film, Diffuse Roughness), and a Transmission Weight above 0.5 makes the look lost
-(glass, which no fit draws yet).
+(Subsurface, Anisotropic, Thin Film, Diffuse Roughness). A Transmission Weight is read like the rest: a glass is
+fitted on the transmission probe (``matremap.transmissive``).
 
 ``write(out, result, source=None, force=False)`` takes a uniform :class:`~matremap.core.material.Material`
 or a :class:`~matremap.svbrdf.textures.MapSet` of converted maps of ``cycles:principled``,
@@ -65,8 +65,6 @@ UNMODELLED = {
     "Thin Film Thickness": 0.0,
     "Diffuse Roughness": 0.0,
 }
-#: a Transmission Weight past which the look is glass (refused for other models, as the other readers do)
-TRANSMISSION_LOOK = 0.5
 #: the sphere's segments x rings
 GEOMETRY = "128x64"
 
@@ -202,8 +200,7 @@ def read(path: str | os.PathLike, material: str | int | None = None, *, confinem
         for k, off in UNMODELLED.items()
         if k in inputs and _socket_value(inputs[k], 1) != off
     ]
-    transmission = _socket_value(inputs.get("Transmission Weight", 0.0), 1)
-    lost = [f"Transmission Weight={transmission:g} (glass)"] if transmission > TRANSMISSION_LOOK else []
+    lost: list[str] = []
     carried = {}
     strength = _socket_value(inputs.get("Emission Strength", 0.0), 1)
     colour = np.asarray(_socket_value(inputs.get("Emission Color", [1.0, 1.0, 1.0]), 3), dtype=float)

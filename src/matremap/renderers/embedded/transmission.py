@@ -327,6 +327,57 @@ def openpbr_equivalent(iface: Interface) -> dict[str, Any]:
     }
 
 
+def standard_surface_equivalent(iface: Interface) -> dict[str, Any]:
+    """The ``mtlx:standard_surface`` transmission parameters that transmit as ``iface`` does (read back through
+    :func:`standard_surface_interface`): as :func:`openpbr_equivalent`, in Standard Surface's names (transmission,
+    specular_IOR, specular_roughness, transmission_color at depth 1 for a volume, a tint at depth 0, thin_walled)."""
+    open_pbr = openpbr_equivalent(iface)
+    return {
+        "metalness": 0.0,
+        "transmission": open_pbr["transmission_weight"],
+        "specular": 1.0,
+        "specular_IOR": open_pbr["specular_ior"],
+        "specular_roughness": open_pbr["specular_roughness"],
+        "transmission_color": open_pbr["transmission_color"],
+        "transmission_depth": open_pbr["transmission_depth"],
+        "thin_walled": open_pbr["geometry_thin_walled"],
+    }
+
+
+def principled_specular(eta: float) -> float:
+    """Mitsuba 3 principled's ``specular`` of a relative IOR: the inverse of eta = 2 / (1 - sqrt(0.08 specular))
+    - 1 (``principled.cpp``), i.e. specular = F0 / 0.08 with F0 = ((eta - 1) / (eta + 1))^2, clipped to [0, 1]."""
+    return float(np.clip(((eta - 1.0) / (eta + 1.0)) ** 2 / 0.08, 0.0, 1.0))
+
+
+def mitsuba3_principled_equivalent(iface: Interface) -> dict[str, Any]:
+    """The ``mitsuba3:principled`` parameters that transmit as ``iface`` does on its straight path (read back
+    through :func:`mitsuba3_principled_interface`): spec_trans = sqrt(weight), the tint as base_color, specular of
+    the IOR, roughness sqrt(alpha). Mitsuba's principled is a solid without a medium: a thin wall or an
+    absorbing volume has no equivalent, and the fit takes the closest look (the extinction into the tint)."""
+    return {
+        "metallic": 0.0,
+        "spec_trans": math.sqrt(float(iface.weight[0])),
+        "base_color": np.clip(iface.tint * np.exp(-iface.sigma * 2.0 * SPHERE_RADIUS), 0.0, 1.0).tolist(),
+        "specular": principled_specular(iface.eta),
+        "roughness": max(math.sqrt(iface.alpha), 0.001),
+    }
+
+
+def cycles_principled_equivalent(iface: Interface) -> dict[str, Any]:
+    """The ``cycles:principled`` parameters that transmit as ``iface`` does on its straight path (read back
+    through :func:`cycles_principled_interface`): Transmission Weight = sqrt(weight), the tint as Base Color, the
+    IOR, Roughness sqrt(alpha); no thin wall and no absorption inside (the probe's extinction over the sphere's
+    diameter is folded into the Base Color as a start)."""
+    return {
+        "Metallic": 0.0,
+        "Transmission Weight": math.sqrt(float(iface.weight[0])),
+        "Base Color": np.clip(iface.tint * np.exp(-iface.sigma * 2.0 * SPHERE_RADIUS), 0.0, 1.0).tolist(),
+        "IOR": float(np.clip(iface.eta, 1.0, 4.0)),
+        "Roughness": math.sqrt(iface.alpha),
+    }
+
+
 def _gltf_start(iface: Interface) -> tuple[dict[str, Any], tuple[str, ...]]:
     values = gltf_equivalent(iface)
     return values, ("transmission",) if values["attenuationDistance"] == 0.0 else ("transmission", "attenuationColor")
@@ -336,11 +387,26 @@ def _openpbr_start(iface: Interface) -> tuple[dict[str, Any], tuple[str, ...]]:
     return openpbr_equivalent(iface), ("transmission_weight", "transmission_color")
 
 
+def _standard_surface_start(iface: Interface) -> tuple[dict[str, Any], tuple[str, ...]]:
+    return standard_surface_equivalent(iface), ("transmission", "transmission_color")
+
+
+def _mitsuba3_principled_start(iface: Interface) -> tuple[dict[str, Any], tuple[str, ...]]:
+    return mitsuba3_principled_equivalent(iface), ("spec_trans",)
+
+
+def _cycles_principled_start(iface: Interface) -> tuple[dict[str, Any], tuple[str, ...]]:
+    return cycles_principled_equivalent(iface), ("Transmission Weight",)
+
+
 #: model id -> the parameters that transmit as an :class:`Interface` does, and the continuous ones among them a
 #: fit frees (the structural ones, a thin wall or a volume, stay as read across)
 EQUIVALENTS: dict[str, Callable[[Interface], tuple[dict[str, Any], tuple[str, ...]]]] = {
     "gltf:pbr": _gltf_start,
     "mtlx:open_pbr_surface": _openpbr_start,
+    "mtlx:standard_surface": _standard_surface_start,
+    "mitsuba3:principled": _mitsuba3_principled_start,
+    "cycles:principled": _cycles_principled_start,
 }
 
 
@@ -592,6 +658,10 @@ def render_view(materials: Sequence[Material], view: Any) -> np.ndarray:
 
 
 __all__ = [
+    "cycles_principled_equivalent",
+    "mitsuba3_principled_equivalent",
+    "principled_specular",
+    "standard_surface_equivalent",
     "EQUIVALENTS",
     "INTERFACES",
     "PALETTE",
