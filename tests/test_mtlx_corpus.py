@@ -176,6 +176,10 @@ CASES = [
     ("mtlx-open_pbr_aluminum_brushed/open_pbr_aluminum_brushed.mtlx", 0, ""),
     ("mtlx-open_pbr_ketchup/open_pbr_ketchup.mtlx", 0, ""),
     ("mtlx-open_pbr_lightbulb/open_pbr_lightbulb.mtlx", 0, ""),
+    # glasses, fitted on the transmission probe: no glTF base looks like them
+    ("mtlx-open_pbr_glass/open_pbr_glass.mtlx", 3, "FAILED: fit_error"),
+    ("mtlx-open_pbr_honey/open_pbr_honey.mtlx", 3, "FAILED: fit_error"),
+    ("mtlx-standard_surface_glass_tinted/standard_surface_glass_tinted.mtlx", 3, "FAILED:"),
     (f"mtlx-standard_surface_brick_procedural/{EXAMPLES}/standard_surface_brick_procedural.mtlx", 0, ""),
     ("mtlx-standard_surface_chess_set/standard_surface_chess_set.mtlx", 0, ""),
     ("mtlx-standard_surface_chrome/standard_surface_chrome.mtlx", 0, ""),

@@ -114,15 +114,16 @@ def add_scene_args(p: argparse.ArgumentParser) -> None:
         type=int,
         default=None,
         metavar="N",
-        help="probe image side in pixels, N x N (default 128 for the point probe, 64 for env and mixed; the paper "
-        "used 512)",
+        help="probe image side in pixels, N x N (default 128 for the point probe, 64 for env, mixed and transmission; "
+        "the paper used 512)",
     )
 
 
 PROBE_HELP = (
     "the light fits are made under: point (the paper's point lights, --light), env (the sphere under the built-in "
-    "studio environment at 30, 150 and 270 degrees; env:FILE.exr for your own lat-long map) or mixed (both; "
-    "mixed:FILE.exr)"
+    "studio environment at 30, 150 and 270 degrees; env:FILE.exr for your own lat-long map), mixed (both; "
+    "mixed:FILE.exr) or transmission (the point lights and the sphere before a tiled background, what a glass "
+    "lets through; taken by itself for a source that transmits)"
 )
 
 

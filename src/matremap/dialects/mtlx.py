@@ -160,11 +160,11 @@ WHITE_REFERENCE = ("mtlx:standard_surface", {"base": 1.0, "base_color": 1.0, "sp
 
 #: the layers of the layered models (any dialect) a fit can lose: layer -> the parameter weighing it in
 LAYERS: dict[str, dict[str, str]] = {
-    OPEN_PBR_SURFACE.id: {"coat": "coat_weight", "sheen": "fuzz_weight"},
-    STANDARD_SURFACE.id: {"coat": "coat", "sheen": "sheen"},
-    "mitsuba3:principled": {"coat": "clearcoat", "sheen": "sheen"},
-    "gltf:pbr": {"coat": "clearcoat", "sheen": "sheenColor"},
-    "cycles:principled": {"coat": "Coat Weight", "sheen": "Sheen Weight"},
+    OPEN_PBR_SURFACE.id: {"coat": "coat_weight", "sheen": "fuzz_weight", "transmission": "transmission_weight"},
+    STANDARD_SURFACE.id: {"coat": "coat", "sheen": "sheen", "transmission": "transmission"},
+    "mitsuba3:principled": {"coat": "clearcoat", "sheen": "sheen", "transmission": "spec_trans"},
+    "gltf:pbr": {"coat": "clearcoat", "sheen": "sheenColor", "transmission": "transmission"},
+    "cycles:principled": {"coat": "Coat Weight", "sheen": "Sheen Weight", "transmission": "Transmission Weight"},
 }
 
 
