@@ -274,11 +274,15 @@ class _Problem:
     def columns(self, r0: np.ndarray, columns: list, images: np.ndarray) -> np.ndarray:
         """The Jacobian [residuals, variables] from the renders of :meth:`perturbations` (built by
         columns, returned as a Fortran-ordered view)."""
-        jac_t = np.zeros((self.size, r0.size))
         if self.objective is None:
             diffs = (images - self.goal).reshape(len(columns), -1) * (1.0 / self.norm) - r0
         else:
             diffs = self.objective.residuals(images) - r0
+        return self.columns_of(columns, diffs)
+
+    def columns_of(self, columns: list, diffs: np.ndarray) -> np.ndarray:
+        """The Jacobian from the residual differences [columns, residuals] of :meth:`perturbations`."""
+        jac_t = np.zeros((self.size, diffs.shape[1]))
         for (_, g, h), diff in zip(columns, diffs, strict=True):
             if len(g) == 1:
                 jac_t[g[0]] = diff / h[0]
@@ -467,11 +471,10 @@ class _Projected(_Problem):
     def affine_fit(self, base: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, Any]:
         """The residual at the affine optimum of one trial, and that optimum."""
         offset = self.offset(base, b) if np.any(self.lo) else base
-        target = self.goal - offset
+        target = varpro.channel_difference(self.goal, offset)
         if self.by_channel:
             by_channel = varpro.solve_channels(b, target, self.theta_lower, self.theta_upper)
-            image = offset + varpro.combine_channels(by_channel.theta, b)
-            return ((image - self.goal) * (1.0 / self.norm)).ravel(), by_channel
+            return varpro.affine_residual(offset, by_channel.theta, b, self.goal, 1.0 / self.norm).ravel(), by_channel
         a = varpro.design(b, self.layout)
         rhs = target.ravel()
         lower = np.array([self.theta_lower[u.param] for u in self.layout])
@@ -505,12 +508,13 @@ class _Projected(_Problem):
         else:  # perturbed bases, combined with the solved values
             columns = self.perturbations(x)
             pix = yield from self._render([m for c in columns for m in self.basis_materials(self.decode(c[0]))])
-            images = []
+            diffs = np.empty((len(columns), r0.size))
             for i in range(len(columns)):
                 base, b = self.basis(pix[i : i + 1])
                 offset = self.offset(base, b) if np.any(self.lo) else base
-                images.append(offset + varpro.combine_channels(sol.theta, b))
-            jac = self.columns(r0, columns, np.stack(images))
+                diffs[i] = varpro.affine_residual(offset, sol.theta, b, self.goal, 1.0 / self.norm).ravel()
+                diffs[i] -= r0
+            jac = self.columns_of(columns, diffs)
         if self.by_channel:
             return varpro.project_channels(jac, sol)
         return varpro.project_out(jac, sol.free_basis)
