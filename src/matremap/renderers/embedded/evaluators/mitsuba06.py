@@ -26,7 +26,7 @@ def _microfacet(distribution: str, alpha: np.ndarray, g) -> np.ndarray:
     """D G / (4 cos_o): the microfacet lobe times cos_i, without Fresnel."""
     d = mf.d_mitsuba06(distribution, g, alpha)
     gg = mf.g_mitsuba06(distribution, g.tan_i, g.tan_o, alpha)
-    return d * gg / (4.0 * g.cos_o)
+    return mf.into(np.divide, mf.into(np.multiply, d, gg), 4.0 * g.cos_o)
 
 
 def diffuse(p, opt, g):
@@ -83,9 +83,12 @@ def roughplastic(p, opt, g):
 
 def pbr(p, opt, g):
     f0 = p["F0"]
-    fresnel = f0 + (1.0 - f0) * g.schlick_weight  # Schlick
+    fresnel = mf.into(np.add, (1.0 - f0) * g.schlick_weight, f0)  # Schlick: F0 + (1 - F0)(1 - i.h)^5
     lobe = _microfacet(opt["distribution"], p["alpha"], g)
-    return (p["specularReflectance"] * fresnel) * lobe + p["diffuseReflectance"] * g.lambert
+    # (ks F) lobe + rho_d cos/pi; a factor ks of 1 and a term of rho_d 0 change no number: skipped
+    ks, rho_d = p["specularReflectance"], p["diffuseReflectance"]
+    spec = mf.into(np.multiply, fresnel if np.all(ks == 1.0) else ks * fresnel, lobe)
+    return spec if not np.any(rho_d) else spec + rho_d * g.lambert
 
 
 #: model id -> evaluator
