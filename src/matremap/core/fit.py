@@ -247,12 +247,15 @@ class _Problem:
             return self._last[1]
         self.evaluations += 1
         img = yield from self._pixels([x])
-        if self.objective is None:
-            r = ((img[0] - self.goal) / self.norm).ravel()
-        else:
-            r = self.objective.residuals(img)[0]
+        r = self._residual_of(img[0])
         self._last = (x.copy(), r)
         return r
+
+    def _residual_of(self, img: np.ndarray) -> np.ndarray:
+        """The residual of one render's pixels [P, C]."""
+        if self.objective is None:
+            return ((img - self.goal) / self.norm).ravel()
+        return self.objective.residuals(img[None])[0]
 
     def perturbations(self, x: np.ndarray) -> list[tuple[np.ndarray, list[int], np.ndarray]]:
         """The points of a forward-difference Jacobian at ``x``: (point, variables moved, their steps).
@@ -312,7 +315,7 @@ class _Problem:
                 candidates.append(xc)
         if rough is None and not linear:
             return x0
-        best, best_err, best_k = x0, np.inf, 1.0
+        best, best_err, best_k, best_img = x0, np.inf, 1.0, None
         images = yield from self._pixels(candidates)
         for xc, img in zip(candidates, images, strict=True):
             tt = float(np.sum(img * img))
@@ -320,12 +323,17 @@ class _Problem:
             k = k if k > 0 else 1.0
             err = float(np.sum((k * img - self.goal) ** 2))
             if err < best_err:
-                best, best_err, best_k = xc, err, k
+                best, best_err, best_k, best_img = xc, err, k, img
         x = best.copy()
         for i in linear:
             sl, p = self.slices[i], self.free[i]
             x[sl] = x[sl] + np.log(best_k) if p.log else x[sl] * best_k
-        return np.clip(x, self.lower, self.upper)
+        x = np.clip(x, self.lower, self.upper)
+        if best_img is not None and np.array_equal(x, best):
+            # the descent starts on a candidate: its residual is known (the renderer draws a material the same
+            # alone or in a batch), not a render more
+            self._last = (x.copy(), self._residual_of(best_img))
+        return x
 
     def solve(self, start: Material, coarse: bool = True) -> Steps[tuple[Material, Descent]]:
         x0 = self.encode(start)
