@@ -8,27 +8,16 @@ Smith G = 1 / (1 + Lambda(i) + Lambda(o)).
 
 All functions broadcast: ``cos_h``, ``tan2_h`` / ``tan_v`` are arrays of cosines, tan^2 of the
 half-vector angle and tangents of polar angles, ``alpha`` an array of roughness values. The hot ones work in
-place on their own temporaries (:func:`into`: the same operations in the same order, so the same numbers, with
-fewer allocations; a fit on the embedded renderer spends a third of its time in them).
+place on their own temporaries (:func:`~matremap.core.inplace.into`: the same numbers, fewer allocations).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from matremap.core.inplace import into
+
 ALPHA_MIN = 1e-4
-
-
-def into(ufunc: np.ufunc, a, b) -> np.ndarray:
-    """``ufunc(a, b)``, written into ``a`` when ``a`` is a float64 array that a caller made for the purpose and that
-    already has the result's shape (so overwriting it changes nothing else), else a new array."""
-    if type(a) is np.ndarray and a.ndim and a.dtype == np.float64:
-        if not isinstance(b, np.ndarray) or (b.dtype == np.float64 and b.ndim <= a.ndim and b.size <= a.size):
-            try:
-                return ufunc(a, b, out=a)
-            except ValueError:  # b broadcasts ``a`` to a larger shape
-                pass
-    return ufunc(a, b)
 
 
 def phong_exponent(alpha: np.ndarray) -> np.ndarray:
