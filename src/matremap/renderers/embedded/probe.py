@@ -19,6 +19,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from matremap.core.heap import keep_heap
 from matremap.core.material import Material, SVMaterial
 from matremap.core.scene import Scene
 from matremap.errors import MatremapError
@@ -128,6 +129,10 @@ class EmbeddedRenderer:
     #: materials per call a caller should batch (:func:`matremap.core.lockstep.lockstep`): larger batches'
     #: [N, C, L, P] intermediates fall out of the CPU caches (8 measured best at 128^2, 16-64 ~10 % slower)
     batch_size = 8
+
+    def __init__(self) -> None:
+        # a fit allocates probe-sized arrays thousands of times: keep them off fresh pages (core/heap.py)
+        keep_heap()
 
     def can_render(self, model_id: str) -> bool:
         from matremap.renderers.embedded.evaluators import EVALUATORS
