@@ -109,6 +109,17 @@ def sphere_frame(p: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return s, np.cross(n, s)
 
 
+def batch_params(materials: list[Material]) -> dict[str, np.ndarray]:
+    """The parameters of a batch of one model as [N, C, 1, 1] arrays, or [N, 1, 1, 1] when every value of every
+    material is grey (grey parameters shade the same in every channel: one is computed and broadcast). The test
+    is on Python floats: numpy's per-parameter comparisons cost more than the small renders they save."""
+    names = list(materials[0].values)
+    rows = [[m.values[name] for m in materials] for name in names]
+    if all(len(set(v.tolist())) == 1 for row in rows for v in row):
+        return {name: np.array([v[0] for v in row]).reshape(-1, 1, 1, 1) for name, row in zip(names, rows, strict=True)}
+    return {name: np.stack(row)[:, :, None, None] for name, row in zip(names, rows, strict=True)}
+
+
 def place(out: np.ndarray, idx: list[int], radiance: np.ndarray) -> None:
     """Write radiance [n, C, P] into the rows ``idx`` of pixels ``out`` [N, P, 3] (float32), channel by channel:
     numpy's transposed copy into the interleaved channels costs four times as much."""
@@ -191,13 +202,7 @@ class EmbeddedRenderer:
         for i, m in enumerate(materials):
             groups.setdefault((m.model, tuple(sorted(m.options.items()))), []).append(i)
         for (model, options), idx in groups.items():
-            params = {
-                name: np.stack([materials[i].values[name] for i in idx])[:, :, None, None]
-                for name in materials[idx[0]].values
-            }
-            # grey parameters shade the same in every channel: compute one and broadcast
-            if all(np.all(v == v[:, :1]) for v in params.values()):
-                params = {k: v[:, :1] for k, v in params.items()}
+            params = batch_params([materials[i] for i in idx])
             radiance = None
             # runs of lights sized for a full batch whatever this one's size, so that a material's pixels
             # are summed in the same order alone or in a batch (bit for bit)
