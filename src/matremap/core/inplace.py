@@ -4,10 +4,12 @@ same numbers) with fewer allocations, for the embedded renderer's evaluators, wh
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 
-def into(ufunc: np.ufunc, a, b) -> np.ndarray:
+def into(ufunc: np.ufunc, a: Any, b: Any) -> Any:
     """``ufunc(a, b)``, written into ``a`` when ``a`` is a float64 array that a caller made for the purpose and that
     already has the result's shape (so overwriting it changes nothing else), else a new array."""
     if type(a) is np.ndarray and a.ndim and a.dtype == np.float64:

@@ -542,10 +542,11 @@ def _mu_terms(cos_theta) -> tuple[np.ndarray, np.ndarray] | None:
 
 def _read_only(a: np.ndarray) -> bool:
     """Whether neither ``a`` nor any array it views can be written through."""
-    while isinstance(a, np.ndarray):
-        if a.flags.writeable:
+    view: object = a
+    while isinstance(view, np.ndarray):
+        if view.flags.writeable:
             return False
-        a = a.base
+        view = view.base
     return True
 
 
