@@ -116,8 +116,11 @@ def batch_params(materials: list[Material]) -> dict[str, np.ndarray]:
     names = list(materials[0].values)
     rows = [[m.values[name] for m in materials] for name in names]
     if all(len(set(v.tolist())) == 1 for row in rows for v in row):
-        return {name: np.array([v[0] for v in row]).reshape(-1, 1, 1, 1) for name, row in zip(names, rows, strict=True)}
-    return {name: np.stack(row)[:, :, None, None] for name, row in zip(names, rows, strict=True)}
+        return {
+            name: np.array([v[0] for v in row], dtype=float).reshape(-1, 1, 1, 1)
+            for name, row in zip(names, rows, strict=True)
+        }
+    return {name: np.array(row, dtype=float)[:, :, None, None] for name, row in zip(names, rows, strict=True)}
 
 
 def place(out: np.ndarray, idx: list[int], radiance: np.ndarray) -> None:
