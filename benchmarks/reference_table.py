@@ -1,11 +1,11 @@
 """Compare our Ward -> AS fits with the table published by the paper's authors.
 
 Source ``mitsuba06:ward`` (variant ward, no diffuse), target ``mitsuba06:pbr`` (distribution as),
-headlight, two-stage. For every row of tests/data/reference/mitsuba-ward2mitsuba-as.csv prints the
+headlight, two-stage (or ``--strategy``). For every row of tests/data/reference/mitsuba-ward2mitsuba-as.csv prints the
 deviation of alpha2 and of the slope F0/rho_s, then max / median / 95th percentile for the rows
 with alpha1 >= 0.03 and, separately, for alpha1 = 0.005 (sub-pixel highlights).
 
-    python benchmarks/reference_table.py [--size 128] [--every 1] [--verbose]
+    python benchmarks/reference_table.py [--size 128] [--every 1] [--strategy two-stage] [--verbose]
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--size", type=int, default=128)
     ap.add_argument("--every", type=int, default=1, help="use every n-th row")
+    ap.add_argument("--strategy", default="two-stage", help="the fit's strategy (default: two-stage, the default)")
     ap.add_argument("--verbose", action="store_true", help="print every row")
     args = ap.parse_args()
     if not TABLE.is_file():
@@ -49,7 +50,7 @@ def main() -> int:
             {"variant": "ward", "alpha": r["alpha1"], "specularReflectance": r["specular1"], "diffuseReflectance": 0},
         )
         t = time.perf_counter()
-        res = fit(src, "mitsuba06:pbr", scene=scene, fix={"distribution": "as"})
+        res = fit(src, "mitsuba06:pbr", args.strategy, scene=scene, fix={"distribution": "as"})
         secs.append(time.perf_counter() - t)
         renders.append(res.renders)
         a2, f0 = res.target.values["alpha"][0], res.target.values["F0"][0]
@@ -64,7 +65,7 @@ def main() -> int:
             )
     dev_a, dev_k, a1s = np.abs(dev_a) * 100, np.abs(dev_k) * 100, np.array(a1s)
     print(
-        f"\n{len(rows)} rows, {args.size}x{args.size}, median {np.median(secs) * 1000:.1f} ms and "
+        f"\n{len(rows)} rows, {args.size}x{args.size}, {args.strategy}, median {np.median(secs) * 1000:.1f} ms and "
         f"{np.median(renders):.0f} renders per fit\n"
     )
     print(

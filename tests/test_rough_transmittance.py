@@ -237,3 +237,25 @@ def test_unwritable_cache_dir_is_not_fatal(small_tables, monkeypatch, tmp_path):
     t = rt.transmittance("beckmann", np.linspace(0.0, 1.0, 5), 0.2, 1.5)
     assert np.all(np.isfinite(t)) and np.all((t >= 0) & (t <= 1))
     assert blocker.is_file()
+
+
+def test_a_probes_cosines_give_the_same_transmittance_from_the_cache_and_it_stays_bounded():
+    """Read-only cosine arrays (a probe's geometry) have their mu terms kept (rt._mu_terms): the values are those
+    of a writeable copy, bit for bit, on both sides of the interface; a writeable array or a read-only view of
+    one is not cached; the cache holds at most MU_TERMS_SIZE arrays."""
+    rng = np.random.default_rng(4)
+    mu = rng.uniform(0.0, 1.0, (1, 500))
+    mu[0, :3] = (0.0, 1.0, 1e-9)
+    frozen = mu.copy()
+    frozen.flags.writeable = False
+    for alpha, eta in ((0.2, 1.6), (0.05, 1 / 1.6), (np.array([[[[0.3]]], [[[0.7]]]]), 1.3)):
+        first = rt.transmittance("ggx", frozen, alpha, eta)
+        again = rt.transmittance("ggx", frozen, alpha, eta)
+        plain = rt.transmittance("ggx", mu.copy(), alpha, eta)
+        assert np.array_equal(first, plain) and np.array_equal(again, plain)
+    assert rt._mu_terms(mu) is None and rt._mu_terms(mu[:, :10].view()) is None
+    for _ in range(3 * rt.MU_TERMS_SIZE):
+        other = rng.uniform(0.0, 1.0, (1, 50))
+        other.flags.writeable = False
+        rt.transmittance("beckmann", other, 0.3, 1.5)
+    assert len(rt._MU_TERMS) <= rt.MU_TERMS_SIZE

@@ -147,7 +147,10 @@ def _answer(
         for start in range(0, len(order), size):
             stats.calls += 1
             parts.append(render(renderer, order[start : start + size], scene))
-        pixels = np.concatenate(parts) if parts else np.zeros((0, scene.pixel_indices().size, 3), np.float32)
+        if len(parts) == 1:  # one call (at most batch_size images): its pixels, not a copy
+            pixels = parts[0]
+        else:
+            pixels = np.concatenate(parts) if parts else np.zeros((0, scene.pixel_indices().size, 3), np.float32)
         stats.rendered += len(order)
     except RendererUnavailable:
         raise

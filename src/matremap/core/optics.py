@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from matremap.core.inplace import into
+
 ArrayLike = np.ndarray | float
 
 
@@ -44,14 +46,22 @@ def fresnel_dielectric(cos_theta_i: ArrayLike, eta: ArrayLike) -> np.ndarray:
     """
     ci = np.asarray(cos_theta_i, dtype=float)
     eta = np.asarray(eta, dtype=float)
-    eta_eff = np.where(ci > 0, eta, 1.0 / eta)
-    ci = np.abs(ci)
-    sin2_t = (1.0 - ci * ci) / (eta_eff * eta_eff)
+    if np.all(ci > 0):  # light from outside everywhere (a BRDF's i.h): the same numbers without the selection
+        eta_eff = eta
+    else:
+        eta_eff = np.where(ci > 0, eta, 1.0 / eta)
+        ci = np.abs(ci)
+    # written into its own temporaries (into): the same operations in the same order
+    c2 = ci * ci
+    cos2_t = np.subtract(1.0, c2, out=c2) if isinstance(c2, np.ndarray) else 1.0 - c2
+    sin2_t = into(np.divide, cos2_t, eta_eff * eta_eff)  # (1 - ci^2) / eta^2
     tir = sin2_t >= 1.0
     ct = np.sqrt(np.maximum(1.0 - sin2_t, 0.0))
-    rs = (ci - eta_eff * ct) / (ci + eta_eff * ct)
-    rp = (eta_eff * ci - ct) / (eta_eff * ci + ct)
-    f = 0.5 * (rs * rs + rp * rp)
+    et = eta_eff * ct
+    rs = into(np.divide, ci - et, into(np.add, et, ci))
+    eci = eta_eff * ci
+    rp = into(np.divide, eci - ct, into(np.add, eci, ct))
+    f = into(np.multiply, into(np.add, into(np.multiply, rs, rs), into(np.multiply, rp, rp)), 0.5)
     return np.where(tir, 1.0, f)
 
 

@@ -207,6 +207,36 @@ def solve_channels(basis: np.ndarray, b: np.ndarray, lower: np.ndarray, upper: n
     return ChannelSolution(theta, free, basis)
 
 
+def channel_difference(image: np.ndarray, offset: np.ndarray) -> np.ndarray:
+    """``image - offset`` for an image [P, channels] and an offset [P, channels] or [P, 1], column by column (the
+    same differences; numpy broadcasts [P, 1] against [P, 3] three elements at a time, several times slower)."""
+    out = np.empty(image.shape)
+    for c in range(image.shape[1]):
+        np.subtract(image[:, c], offset[:, min(c, offset.shape[1] - 1)], out=out[:, c])
+    return out
+
+
+def affine_residual(
+    offset: np.ndarray, theta: np.ndarray, basis: np.ndarray, goal: np.ndarray, scale: float
+) -> np.ndarray:
+    """``((offset + combine_channels(theta, basis)) - goal) * scale`` [P, channels], column by column: the same
+    operations in the same order (so the same numbers), without broadcasting [P, 1] against [P, 3]; one grey basis
+    image is scaled per channel in place of a [P, 1] x [1, 3] matrix product (one product per element either way)."""
+    single = basis.shape[0] == 1 and basis.shape[2] == 1
+    combined = None if single else combine_channels(theta, basis)
+    out = np.empty(goal.shape)
+    for c in range(goal.shape[1]):
+        col = out[:, c]
+        if combined is None:
+            np.multiply(basis[0, :, 0], theta[0, c], out=col)
+        else:
+            col[...] = combined[:, c]
+        col += offset[:, min(c, offset.shape[1] - 1)]
+        col -= goal[:, c]
+        col *= scale
+    return out
+
+
 def combine_channels(theta: np.ndarray, basis: np.ndarray) -> np.ndarray:
     """sum_j theta[j, c] basis[j, :, c] -> [P, channels] (``basis`` [L, P, 1] or [L, P, channels])."""
     if basis.shape[2] == 1:
@@ -227,7 +257,11 @@ def project_channels(jac: np.ndarray, solution: ChannelSolution) -> np.ndarray:
             bf = basis[f, :, 0]  # [F, P]
             flat = out.reshape(out.shape[0], ch * n)
             coef = np.linalg.solve(bf @ bf.T, bf @ flat)
-            flat -= bf.T @ coef
+            if len(bf) == 1:  # one product per element, as the [P, 1] x [1, k] matrix product, column by column
+                for k in range(flat.shape[1]):
+                    flat[:, k] -= bf[0] * coef[0, k]
+            else:
+                flat -= bf.T @ coef
         return out.reshape(-1, n)
     for c in range(ch):
         f = free[:, c]

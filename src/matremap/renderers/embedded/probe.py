@@ -19,6 +19,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from matremap.core.heap import keep_heap
 from matremap.core.material import Material, SVMaterial
 from matremap.core.scene import Scene
 from matremap.errors import MatremapError
@@ -108,6 +109,31 @@ def sphere_frame(p: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return s, np.cross(n, s)
 
 
+def batch_params(materials: list[Material]) -> dict[str, np.ndarray]:
+    """The parameters of a batch of one model as [N, C, 1, 1] arrays, or [N, 1, 1, 1] when every value of every
+    material is grey (grey parameters shade the same in every channel: one is computed and broadcast). The test
+    is on Python floats: numpy's per-parameter comparisons cost more than the small renders they save."""
+    names = list(materials[0].values)
+    rows = [[m.values[name] for m in materials] for name in names]
+    if all(len(set(v.tolist())) == 1 for row in rows for v in row):
+        return {
+            name: np.array([v[0] for v in row], dtype=float).reshape(-1, 1, 1, 1)
+            for name, row in zip(names, rows, strict=True)
+        }
+    return {name: np.array(row, dtype=float)[:, :, None, None] for name, row in zip(names, rows, strict=True)}
+
+
+def place(out: np.ndarray, idx: list[int], radiance: np.ndarray) -> None:
+    """Write radiance [n, C, P] into the rows ``idx`` of pixels ``out`` [N, P, 3] (float32), channel by channel:
+    numpy's transposed copy into the interleaved channels costs four times as much."""
+    rows = slice(None) if len(idx) == len(out) else idx
+    target = out[rows] if isinstance(rows, list) else out
+    for c in range(3):
+        target[:, :, c] = radiance[:, min(c, radiance.shape[1] - 1)]
+    if isinstance(rows, list):
+        out[rows] = target
+
+
 class EmbeddedRenderer:
     """Numpy renderer emulating renderer dialects (``mitsuba06:*``, ``blender27:*``, ``cycles:*``)."""
 
@@ -119,6 +145,10 @@ class EmbeddedRenderer:
     #: materials per call a caller should batch (:func:`matremap.core.lockstep.lockstep`): larger batches'
     #: [N, C, L, P] intermediates fall out of the CPU caches (8 measured best at 128^2, 16-64 ~10 % slower)
     batch_size = 8
+
+    def __init__(self) -> None:
+        # a fit allocates probe-sized arrays thousands of times: keep them off fresh pages (core/heap.py)
+        keep_heap()
 
     def can_render(self, model_id: str) -> bool:
         from matremap.renderers.embedded.evaluators import EVALUATORS
@@ -170,7 +200,7 @@ class EmbeddedRenderer:
             return np.take(images.reshape(len(materials), -1, 3), scene.pixel_indices(), axis=1)
         out = np.zeros((len(materials), scene.pixel_indices().size, 3), dtype=np.float32)
         for idx, radiance in self._shade(materials, scene):
-            out[idx] = radiance.transpose(0, 2, 1)
+            place(out, idx, radiance)
         return out
 
     def _shade(self, materials: list[Material], scene: Scene):
@@ -185,21 +215,17 @@ class EmbeddedRenderer:
         for i, m in enumerate(materials):
             groups.setdefault((m.model, tuple(sorted(m.options.items()))), []).append(i)
         for (model, options), idx in groups.items():
-            params = {
-                name: np.stack([materials[i].values[name] for i in idx])[:, :, None, None]
-                for name in materials[idx[0]].values
-            }
-            # grey parameters shade the same in every channel: compute one and broadcast
-            if all(np.all(v == v[:, :1]) for v in params.values()):
-                params = {k: v[:, :1] for k, v in params.items()}
+            params = batch_params([materials[i] for i in idx])
             radiance = None
             # runs of lights sized for a full batch whatever this one's size, so that a material's pixels
             # are summed in the same order alone or in a batch (bit for bit)
             lights = max(1, CHUNK_ELEMENTS // (self.batch_size * geo.lit.shape[1]))
             for chunk in geo.chunks(lights):
                 fcos = EVALUATORS[model](params, dict(options), chunk.local)
-                # unlit points have finite stand-in geometry and zero irradiance
-                part = (fcos * chunk.irradiance).sum(axis=2)
+                # unlit points have finite stand-in geometry and zero irradiance; one light (the point probes):
+                # its term is the sum (numpy's sum over an axis of one copies it, at eight times the cost)
+                weighted = fcos * chunk.irradiance
+                part = weighted[:, :, 0] if weighted.shape[2] == 1 else weighted.sum(axis=2)
                 radiance = part if radiance is None else radiance + part
             assert radiance is not None
             yield idx, radiance

@@ -254,9 +254,12 @@ def _mu_map(inside, alpha, etap):
     return mu_c, w, y0, lam / (y1 - y0), (1.0 - lam) * (2.0 / np.pi)
 
 
-def _x_of_mu(inside, mu, alpha, etap):
+def _x_of_mu(inside, mu, alpha, etap, asin_sqrt_mu=None):
+    """The mu coordinate of the tables (``asin_sqrt_mu``: asin(sqrt(clip(mu, 0, 1))) when known)."""
     mu_c, w, y0, c1, c2 = _mu_map(inside, alpha, etap)
-    return c1 * (np.arcsinh((mu - mu_c) / w) - y0) + c2 * np.arcsin(np.sqrt(np.clip(mu, 0.0, 1.0)))
+    if asin_sqrt_mu is None:
+        asin_sqrt_mu = np.arcsin(np.sqrt(np.clip(mu, 0.0, 1.0)))
+    return c1 * (np.arcsinh((mu - mu_c) / w) - y0) + c2 * asin_sqrt_mu
 
 
 def _invert(f, x, lo, hi, iters=64):
@@ -334,7 +337,7 @@ def _ae_taps(d, alpha, etap):
     return ia, _cr_weights(ta), ie, _cr_weights(te)
 
 
-def _eval_pairs(d, tabs, mu, alpha, etap, inside, shape):
+def _eval_pairs(d, tabs, mu, alpha, etap, inside, shape, asin_sqrt_mu=None):
     """Few (alpha, eta') pairs (arrays of one shape, broadcasting with mu to ``shape``): reduce the
     tables to one mu-curve per pair, then interpolate along mu."""
     a_k, e_k, in_k = (np.ravel(v) for v in np.broadcast_arrays(alpha, etap, inside))
@@ -352,7 +355,7 @@ def _eval_pairs(d, tabs, mu, alpha, etap, inside, shape):
     coef = np.stack(
         [p1, 0.5 * (p2 - p0), p0 - 2.5 * p1 + 2.0 * p2 - 0.5 * p3, 1.5 * (p1 - p2) + 0.5 * (p3 - p0)], axis=-1
     ).ravel()
-    i, t = _cell(_x_of_mu(inside, mu, alpha, etap) * (_N_MU - 1), _N_MU)
+    i, t = _cell(_x_of_mu(inside, mu, alpha, etap, asin_sqrt_mu) * (_N_MU - 1), _N_MU)
     pair_shape = np.broadcast_shapes(np.shape(alpha), np.shape(etap), np.shape(inside))
     base = np.broadcast_to((np.arange(a_k.size).reshape(pair_shape) * (_N_MU - 1) + i) * 4, shape).ravel()
     t = np.broadcast_to(t, shape).ravel()
@@ -471,6 +474,7 @@ def transmittance(distribution: str, cos_theta, alpha, eta) -> np.ndarray:
     NaN inputs (or eta <= 0) give NaN."""
     d = _canonical(distribution)
     tabs = _tables(d)
+    terms = _mu_terms(cos_theta)
     mu = np.asarray(cos_theta, dtype=float)
     alpha = np.asarray(alpha, dtype=float)
     eta = np.asarray(eta, dtype=float)
@@ -478,6 +482,16 @@ def transmittance(distribution: str, cos_theta, alpha, eta) -> np.ndarray:
     n = int(np.prod(shape))
     if n == 0:
         return np.zeros(shape)
+    if terms is not None:  # a probe's cosines, all in [0, 1]: their terms are known
+        with np.errstate(invalid="ignore"):
+            usable = bool(np.all(np.isfinite(alpha) & np.isfinite(eta) & (eta > 0)))
+        pair_shape = np.broadcast_shapes(alpha.shape, eta.shape)
+        if usable and 16 * int(np.prod(pair_shape)) <= n:
+            alpha = np.clip(alpha, ALPHA_MIN, ALPHA_MAX[d])
+            inside = eta < 1.0
+            etap = np.clip(np.where(inside, 1.0 / eta, eta), 1.0, ETA_MAX)
+            out = _eval_pairs(d, tabs, terms[0], alpha, etap, inside, shape, terms[1])
+            return np.clip(out, 0.0, 1.0).reshape(shape)
     with np.errstate(invalid="ignore"):
         bad = ~(np.isfinite(mu) & np.isfinite(alpha) & np.isfinite(eta) & (eta > 0))
     if bad.any():  # placeholders; NaN is put back at the end
@@ -499,6 +513,41 @@ def transmittance(distribution: str, cos_theta, alpha, eta) -> np.ndarray:
     if bad.any():
         out[np.broadcast_to(bad, shape)] = np.nan
     return out
+
+
+#: mu-only terms of read-only cosine arrays (a probe's geometry, evaluated again at every render): id -> (the
+#: array, kept so that its id stays its own; clip(mu, MU_MIN, 1); asin(sqrt(that))), the most recent last
+_MU_TERMS: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+MU_TERMS_SIZE = 8
+
+
+def _mu_terms(cos_theta) -> tuple[np.ndarray, np.ndarray] | None:
+    """(clip(mu, MU_MIN, 1), asin(sqrt(that))) of a read-only float64 array of cosines in [0, 1] (finite), kept
+    for the next call with the same array; None for any other input (computed as before by the caller). Read-only
+    arrays (and views of read-only arrays) cannot change under the cache: the probe's geometry is made so."""
+    if not isinstance(cos_theta, np.ndarray) or cos_theta.dtype != np.float64 or not _read_only(cos_theta):
+        return None
+    hit = _MU_TERMS.pop(id(cos_theta), None)
+    if hit is None or hit[0] is not cos_theta:
+        with np.errstate(invalid="ignore"):
+            if not bool(np.all((cos_theta >= 0.0) & (cos_theta <= 1.0))):  # NaN, the far side: the general path
+                return None
+        mu = np.clip(cos_theta, MU_MIN, 1.0)
+        hit = (cos_theta, mu, np.arcsin(np.sqrt(np.clip(mu, 0.0, 1.0))))
+    _MU_TERMS[id(cos_theta)] = hit
+    while len(_MU_TERMS) > MU_TERMS_SIZE:
+        del _MU_TERMS[next(iter(_MU_TERMS))]
+    return hit[1], hit[2]
+
+
+def _read_only(a: np.ndarray) -> bool:
+    """Whether neither ``a`` nor any array it views can be written through."""
+    view: object = a
+    while isinstance(view, np.ndarray):
+        if view.flags.writeable:
+            return False
+        view = view.base
+    return True
 
 
 def diffuse_fresnel_reflectance(distribution: str, alpha, eta) -> np.ndarray:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from matremap.core.inplace import into
 from matremap.core.optics import fresnel_conductor, fresnel_dielectric
 from matremap.dialects.mitsuba06 import DIFFUSE, PBR, PHONG, ROUGHCONDUCTOR, ROUGHPLASTIC, WARD
 from matremap.renderers.embedded import microfacet as mf
@@ -26,7 +27,7 @@ def _microfacet(distribution: str, alpha: np.ndarray, g) -> np.ndarray:
     """D G / (4 cos_o): the microfacet lobe times cos_i, without Fresnel."""
     d = mf.d_mitsuba06(distribution, g, alpha)
     gg = mf.g_mitsuba06(distribution, g.tan_i, g.tan_o, alpha)
-    return d * gg / (4.0 * g.cos_o)
+    return into(np.divide, into(np.multiply, d, gg), 4.0 * g.cos_o)
 
 
 def diffuse(p, opt, g):
@@ -70,22 +71,30 @@ def roughplastic(p, opt, g):
 
     distribution, alpha = opt["distribution"], np.maximum(p["alpha"], mf.ALPHA_MIN)
     eta = p["intIOR"] / p["extIOR"]
-    spec = p["specularReflectance"] * fresnel_dielectric(g.i_dot_h, eta) * _microfacet(distribution, alpha, g)
-    rho_d = p["diffuseReflectance"]
+    ks, rho_d = p["specularReflectance"], p["diffuseReflectance"]
+    # (ks F) lobe: a ks of 1 changes no number, and a ks of 0 (the diffuse part) makes +0 of the finite F lobe
+    spec = None
+    if np.any(ks):
+        fresnel = fresnel_dielectric(g.i_dot_h, eta)
+        spec = into(np.multiply, fresnel if np.all(ks == 1.0) else ks * fresnel, _microfacet(distribution, alpha, g))
     if not np.any(rho_d > 0):
-        return spec
+        return spec if spec is not None else ks * g.lambert
     fdr = diffuse_fresnel_reflectance(distribution, alpha, 1.0 / eta)
     rho = rho_d / (1.0 - rho_d * fdr) if opt["nonlinear"] == "true" else rho_d / (1.0 - fdr)
     t12 = transmittance(distribution, g.cos_i, alpha, eta)
     t21 = transmittance(distribution, g.cos_o, alpha, eta)
-    return spec + rho * (g.lambert * t12 * t21 / (eta * eta))
+    diffuse = rho * into(np.divide, into(np.multiply, g.lambert * t12, t21), eta * eta)
+    return diffuse if spec is None else into(np.add, spec, diffuse)
 
 
 def pbr(p, opt, g):
     f0 = p["F0"]
-    fresnel = f0 + (1.0 - f0) * g.schlick_weight  # Schlick
+    fresnel = into(np.add, (1.0 - f0) * g.schlick_weight, f0)  # Schlick: F0 + (1 - F0)(1 - i.h)^5
     lobe = _microfacet(opt["distribution"], p["alpha"], g)
-    return (p["specularReflectance"] * fresnel) * lobe + p["diffuseReflectance"] * g.lambert
+    # (ks F) lobe + rho_d cos/pi; a factor ks of 1 and a term of rho_d 0 change no number: skipped
+    ks, rho_d = p["specularReflectance"], p["diffuseReflectance"]
+    spec = into(np.multiply, fresnel if np.all(ks == 1.0) else ks * fresnel, lobe)
+    return spec if not np.any(rho_d) else spec + rho_d * g.lambert
 
 
 #: model id -> evaluator
