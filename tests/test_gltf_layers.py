@@ -296,7 +296,7 @@ VELVET = {
 
 
 def test_layers_table_names_the_gltf_layers():
-    assert LAYERS[MODEL] == {"coat": "clearcoat", "sheen": "sheenColor"}
+    assert LAYERS[MODEL] == {"coat": "clearcoat", "sheen": "sheenColor", "transmission": "transmission"}
     for weight in LAYERS[MODEL].values():
         assert weight in get_model(MODEL).param_names
 

@@ -297,14 +297,14 @@ def test_write_refuses_other_models_and_writes_nothing(tmp_path):
 
 def test_standard_surface_transmission_is_written_and_read_back(tmp_path):
     """transmission, transmission_color, transmission_depth and the boolean thin_walled go into the document,
-    which MaterialX validates, and come back into mtlx:standard_surface (a coat makes the reader keep the model;
-    the transmission itself is still listed as lost, which the reader's refusal logic decides)."""
+    which MaterialX validates, and come back into mtlx:standard_surface (the transmission is read, not lost: it
+    is fitted on the transmission probe)."""
     values = {"coat": 1.0, "transmission": 0.9, "transmission_color": [0.9, 0.6, 0.3], "transmission_depth": 2.0}
     m = Material.create("mtlx:standard_surface", {**values, "thin_walled": 1.0})
     out = write(tmp_path / "glass.mtlx", m)
     validates(out)
     assert '<input name="thin_walled" type="boolean" value="true" />' in out.read_text()
     asset = read(out)
-    assert asset.model == "mtlx:standard_surface" and asset.lost == ["transmission=0.9"]
+    assert asset.model == "mtlx:standard_surface" and asset.lost == []
     for k, v in {**values, "thin_walled": 1.0}.items():
         assert asset.constants[k] == v, k

@@ -244,12 +244,47 @@ def held_values(map_set: MapSet, summary: MapSummary, target: str) -> dict[str, 
 def complete_fix(source_model: str, values: Mapping[str, Any], target: str, fix: Mapping[str, Any]) -> dict[str, Any]:
     """The user's target fixes, plus a choice for each target parameter that decides what the
     target's parameters mean and that the user left open: a glTF ``metallic`` is 1 for a source
-    without a diffuse part (a metal), else 0."""
+    without a diffuse part (a metal), else 0 (a uniform partial metal: :func:`hold_partial_metal`)."""
     out = dict(fix)
     for name, value, _ in get_model(target).specialisations:
         if name not in out:
             out[name] = value if _no_diffuse(source_model, values) else 0.0
     return out
+
+
+def free_partial_metal(
+    source: Material, job: RemapJob, fix: dict[str, Any], log: Callable[[str], None]
+) -> tuple[RemapJob, dict[str, Any], dict[str, float]]:
+    """A uniform source that is a partial metal (its own glTF ``metallic``, OpenPBR ``base_metalness``, Cycles
+    ``Metallic``, ... strictly between 0 and 1): the target's metalness, where the user left it open, is freed and
+    started at the source's (returned: name -> start), and fitted with the ``simple`` strategy: its base colour is
+    both its diffuse and its metal's colour, which the staged strategies' diffuse-only and specular-only parts
+    split apart. Held at 0 and fitted in stages, 58 of the 98 MetalRoughSpheresNoTextures spheres failed the gate
+    onto UsdPreviewSurface (sphere mat_36, metallic 0.83: 0.98; freed: 0.0001). The models mix their metal in
+    differently (UsdPreviewSurface's Storm whitens a partial metal's highlight), so the value is fitted, not
+    copied."""
+    partial = _partial_metal(source.model, qty.material_values(source))
+    names = [name for name, _, _ in get_model(job.target).specialisations if name not in job.fix]
+    if partial is None or not names:
+        return job, fix, {}
+    log(f"partial metal: {', '.join(names)} freed from the source's {partial:.3g}, fitted with the simple strategy")
+    return (
+        replace(job, strategy="simple"),
+        {k: v for k, v in fix.items() if k not in names},
+        dict.fromkeys(names, partial),
+    )
+
+
+def _partial_metal(model: str, values: Mapping[str, Any]) -> float | None:
+    """The source's own metalness where it is one uniform value strictly between 0 and 1, else None."""
+    for name, _, _ in get_model(model).specialisations:
+        v = values.get(name)
+        if v is None or isinstance(v, (tuple, str)):
+            continue
+        a = np.asarray(v, dtype=float).reshape(-1)
+        if a.size == 1 and 0.0 < a[0] < 1.0:
+            return float(a[0])
+    return None
 
 
 def _no_diffuse(model: str, values: Mapping[str, Any]) -> bool:
@@ -1041,7 +1076,11 @@ def _output_name(
 
 
 def _fit_uniform(
-    source: Material, job: RemapJob, full_fix: dict[str, Any], log: Callable[[str], None]
+    source: Material,
+    job: RemapJob,
+    full_fix: dict[str, Any],
+    log: Callable[[str], None],
+    metal: Mapping[str, float] | None = None,
 ) -> tuple[Any, RemapJob]:
     """The fit of a uniform remap (and the job with the strategy it used). A layer the source has and the target
     too is freed (:func:`~matremap.dialects.mtlx.freed_layers`, started at the source's) and fitted both
@@ -1052,8 +1091,10 @@ def _fit_uniform(
 
     target = job.target
     free, start = freed_layers(source.model, source.values, get_model(target), held=job.fix)
+    layered = bool(free)
+    free, start = free + list(metal or {}), {**start, **(metal or {})}  # a partial metal's metalness
     strategies = [job.strategy]
-    if free:
+    if layered:
         log(
             f"layers: the source's layers are fitted with {target}'s ({', '.join(free)} freed, started at the source's)"
         )
@@ -1108,7 +1149,8 @@ def _remap_uniform(
         write_image(stage / "compare.png", comparison_strip(same), force=True)
         return copied
     full_fix = complete_fix(source.model, qty.material_values(source), target, job.fix)
-    r, job = _fit_uniform(source, job, full_fix, log)
+    job, full_fix, metal = free_partial_metal(source, job, full_fix, log)
+    r, job = _fit_uniform(source, job, full_fix, log, metal)
     for w in r.warnings:
         log(f"warning: {w}")
     measure = "relative L2 error" if r.objective == "l2" else f"{r.objective} loss"
