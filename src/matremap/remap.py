@@ -958,9 +958,9 @@ def _remap_file(
     kept = kept and same_options(asset.constants, target, job.fix)
     if asset.lost and not kept:  # a material onto its own model keeps its layers; anything else loses them
         raise MatremapError(
-            f"{p}: material {asset.name!r} carries its look in {'; '.join(asset.lost)}, which matremap's models do "
-            f"not have (no coat, transmission or sheen yet): converting the rest to {target} would be wrong, so it "
-            "is not converted"
+            f"{p}: material {asset.name!r} carries its look in {'; '.join(asset.lost)}, which matremap does not "
+            f"convert (a layer on a textured material, or one no model draws): converting the rest to {target} "
+            "would be wrong, so it is not converted"
         )
     layers = [
         w

@@ -16,10 +16,11 @@ extension registry, ratified versions):
   ``attenuationDistance`` > 0 (default infinity), ``attenuationColor`` RGB in [0, 1] (default 1).
 
 ``ior`` and ``specular`` drive ``gltf:metal-rough``; emissive strength goes into the carried emission
-(:mod:`matremap.formats.gltf_read`). The others are layers no matremap model has yet: a glTF written over
-its source keeps them as they are (the copy leaves them alone); for any other target the reader's notes
-name exactly what is left behind, and a material whose look depends on one (mostly transmissive: glass;
-a coloured sheen: velvet) is listed in ``asset.lost`` and refused for other targets.
+(:mod:`matremap.formats.gltf_read`). The layers: a glTF written over its source keeps them as they are (the
+copy leaves them alone). A material without textures whose look a layer carries (a clear coat above 0.5, a
+coloured sheen, any transmission) is read into ``gltf:pbr`` and its layers fitted (:func:`layer_values`; a
+transmission on the transmission probe); a faint layer is noted; a textured material whose look depends on one
+(a transmission, a coloured sheen) is listed in ``asset.lost`` and refused for other targets.
 """
 
 from __future__ import annotations
@@ -175,11 +176,13 @@ LEFT_BEHIND = "a glTF output keeps it as it is; other targets have no such layer
 
 
 def lost_look(found: dict[str, dict[str, Any]]) -> list[str]:
-    """The extensions that carry the material's look and that no matremap model has: mostly transmissive
-    (transmission above 0.5, or textured: glass) or a coloured sheen (above 0.5, or textured: velvet)."""
+    """The extensions that carry the material's look: any transmission (its share of the base goes through: a
+    glass, or a part of one) or a coloured sheen (above 0.5, or textured: velvet). On a material without textures
+    :func:`layer_values` reads them into ``gltf:pbr``; on a textured one they are lost (refused for other
+    models)."""
     lost = []
     tr = found.get(TRANSMISSION)
-    if tr and (tr["transmissionFactor"] > 0.5 or ("transmissionTexture" in tr and tr["transmissionFactor"] > 0)):
+    if tr and tr["transmissionFactor"] > 0:
         lost.append(f"{TRANSMISSION} (transmissionFactor {_g(tr['transmissionFactor'])}{_textures(tr)})")
     sh = found.get(SHEEN)
     if sh and (max(sh["sheenColorFactor"]) > 0.5 or ("sheenColorTexture" in sh and max(sh["sheenColorFactor"]) > 0)):
@@ -252,11 +255,8 @@ def extension_notes(found: dict[str, dict[str, Any]], textured: bool = False) ->
     tr = found.get(TRANSMISSION)
     if "transmission" in layers:
         pass  # read into gltf:pbr above
-    elif tr is not None and TRANSMISSION not in lost:
-        notes.append(
-            f"{TRANSMISSION} factor {_g(tr['transmissionFactor'])}{_textures(tr)}: mostly opaque, the fit sees the "
-            f"opaque base; {LEFT_BEHIND}"
-        )
+    elif tr is not None and TRANSMISSION not in " ".join(lost):
+        notes.append(f"{TRANSMISSION} factor 0: nothing goes through")
     vol = found.get(VOLUME)
     if vol is not None and "transmission" not in layers:
         notes.append(

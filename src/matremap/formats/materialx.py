@@ -28,7 +28,7 @@ document without materials falls back to its shader nodes) and reads its surface
   shader's own layered model (:data:`LAYERED`: ``mtlx:standard_surface``, ``mtlx:open_pbr_surface``, ``gltf:pbr``),
   every input it models by name (OpenPBR's boolean ``geometry_thin_walled`` as 0 / 1; gltf_pbr's
   ``attenuation_distance`` default of "infinity" as gltf:pbr's 0), so that a fit carries the layer onto the
-  target's instead of dropping it (issue 16). A transmission above 0.5 is read the same way where the shader's
+  target's instead of dropping it (issue 16). Any transmission is read the same way where the shader's
   model transmits in the transmission probe (``renderers/embedded/transmission.py`` ``INTERFACES``), and fitted
   there; elsewhere it stays lost;
 * ``UsdPreviewSurface`` (MaterialX's ``ND_UsdPreviewSurface_surfaceshader``) maps one to one onto
@@ -541,13 +541,13 @@ def _check_ior(ctx: _Ctx, shader: Any, fields: dict[str, _Field], names: tuple[s
 
 #: inputs that carry a material's look where gltf:metal-rough has nothing to put them: (weight input, what
 #: it weights, the value past which the look is lost). A coloured coat over a white metal is Standard
-#: Surface's copper; transmission is glass; sheen is velvet.
+#: Surface's copper; any transmission lets part of the base through (glass); sheen is velvet.
 _LOOK = {
     "coat": ("coat_color", 0.05),
     "coat_weight": ("coat_color", 0.05),
     "clearcoat": (None, 0.5),
-    "transmission": (None, 0.5),
-    "transmission_weight": (None, 0.5),
+    "transmission": (None, 0.0),
+    "transmission_weight": (None, 0.0),
     "sheen": (None, 0.5),
     "fuzz_weight": (None, 0.5),
 }
