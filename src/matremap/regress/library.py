@@ -233,6 +233,46 @@ PAIRS: tuple[Pair, ...] = (
         source_params={"distribution": "ggx"},
         fix={"metallic": 1.0},
     ),
+    # the layered models' base layers (issue 16): glTF dielectrics into OpenPBR and Standard Surface and back, swept
+    # from each side (no reverse: the forward domain is the grid, roughness 1 inside; the target's roughness bound
+    # there is the answer, so those points are kept). Not their metals: an OpenPBR or Standard Surface metal
+    # source's base colour is read as a diffuse quantity by the sweep (its specialisation is not applied on the
+    # source side) and the F82 metal's F0 held out at 0.026, above the library's 0.02. Coats, sheens and
+    # transmission are on no sweep's axes: a textured layered material is refused in one line.
+    *(
+        Pair(
+            f"gltf-{kind}-{short}",
+            "gltf:metal-rough",
+            model,
+            grid,
+            source_params={"metallic": metal},
+            fix={metalness: metal},
+            reverse=False,
+            keep_flagged=True,
+        )
+        for short, model, metalness in (
+            ("openpbr", "mtlx:open_pbr_surface", "base_metalness"),
+            ("standardsurface", "mtlx:standard_surface", "metalness"),
+        )
+        for kind, metal, grid in (("dielectric", 0.0, "roughness=0.05:1:8,baseColor=0:1:5,ior=1.3:1.8:3"),)
+    ),
+    *(
+        Pair(
+            f"{short}-{kind}-gltf",
+            model,
+            "gltf:metal-rough",
+            grid.format(roughness=roughness, ior=ior),
+            source_params={metalness: metal},
+            fix={"metallic": metal},
+            reverse=False,
+            keep_flagged=True,
+        )
+        for short, model, metalness, roughness, ior in (
+            ("openpbr", "mtlx:open_pbr_surface", "base_metalness", "specular_roughness", "specular_ior"),
+            ("standardsurface", "mtlx:standard_surface", "metalness", "specular_roughness", "specular_IOR"),
+        )
+        for kind, metal, grid in (("dielectric", 0.0, "{roughness}=0.05:1:8,base_color=0:1:5,{ior}=1.3:1.8:3"),)
+    ),
 )
 
 
