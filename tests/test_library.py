@@ -168,3 +168,31 @@ def test_no_route_names_the_nearest_transforms_with_every_option(capsys):
     assert main(["transforms"]) == 0
     listing = capsys.readouterr().out
     assert "mitsuba06:ward (variant=balanced) -> mitsuba06:pbr (distribution=as)" in listing  # defaults shown
+
+
+def test_a_textured_gltf_dielectric_goes_onto_openpbr_through_the_library(tmp_path, capsys):
+    """Khronos BoxTextured (a textured dielectric) onto OpenPBR takes the shipped gltf-dielectric-openpbr route
+    (before it, a sweep), and the written base colour map is the source's texture: OpenPBR's base layer draws a
+    glTF dielectric's diffuse the same (checked on the files, decoded by OpenImageIO, not by matremap's score)."""
+    pytest.importorskip("colour", reason="the quality gate needs colour-science")
+    from pathlib import Path
+
+    oiio = pytest.importorskip("OpenImageIO")
+
+    def read_image(path):  # the stored (sRGB-encoded) values, as OpenImageIO decodes the PNG
+        f = oiio.ImageInput.open(str(path))
+        try:
+            return f.read_image(format="float")
+        finally:
+            f.close()
+
+    corpus = Path(__file__).parent / "data" / "corpus" / "gltf-BoxTextured"
+    out = tmp_path / "out"
+    code = main(["remap", str(corpus / "BoxTextured.gltf"), "--to", "mtlx:open_pbr_surface", "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 0, err[-600:]
+    assert "gltf-dielectric-openpbr" in err and "sweeping" not in err
+    written = read_image(out / "BoxTextured_base_color.png")[..., :3]
+    source = read_image(corpus / "CesiumLogoFlat.png")[..., :3]
+    assert written.shape[:2] == source.shape[:2]
+    assert np.mean(np.abs(written - source)) < 0.02
