@@ -76,3 +76,114 @@ def test_the_smooth_glasses_reflect_nothing_under_point_lights_in_mitsuba_either
     scene = Scene.probe([0.0, 45.0], resolution=32)
     materials = [Material.create("mitsuba3:dielectric", {}), Material.create("mitsuba3:thindielectric", {})]
     assert not Mitsuba3Renderer().render(materials, scene).any()
+
+
+# -- what they let through ----------------------------------------------------------------------------
+
+
+def test_a_glass_is_read_as_mitsuba_applies_it():
+    from matremap.core.optics import fresnel_dielectric
+    from matremap.renderers.embedded import transmission as tr
+
+    solid = tr.interface_of(Material.create("mitsuba3:dielectric", {"specular_transmittance": [0.9, 0.6, 0.3]}))
+    assert np.allclose(solid.tint, [0.81, 0.36, 0.09]) and np.all(solid.weight == 1.0)  # once per crossing: in, out
+    assert solid.eta == pytest.approx(1.5046 / 1.000277) and solid.alpha == 0.0 and not solid.thin_walled
+    thin = tr.interface_of(Material.create("mitsuba3:thindielectric", {"int_ior": 2.0, "ext_ior": 1.0}))
+    cos = np.linspace(0.05, 1.0, 20)
+    r = fresnel_dielectric(cos, 2.0)
+    # a wall (two of the probe's crossings) lets through 1 - R', R' = 2R / (1 + R): the slab's reflections summed
+    assert np.allclose((1.0 - thin.fresnel(cos)) ** 2, 1.0 - 2.0 * r / (1.0 + r)) and thin.thin_walled
+    ggx = tr.interface_of(Material.create("mitsuba3:roughdielectric", {"distribution": "ggx", "alpha": 0.3}))
+    beckmann = tr.interface_of(Material.create("mitsuba3:roughdielectric", {"distribution": "beckmann", "alpha": 0.3}))
+    assert ggx.alpha == 0.3 and beckmann.alpha == pytest.approx(0.3 * 0.517, abs=1e-3)
+
+
+@pytest.mark.parametrize("model", ["mitsuba3:dielectric", "mitsuba3:roughdielectric", "mitsuba3:thindielectric"])
+def test_a_transmission_read_across_onto_a_glass_transmits_as_it_did(model):
+    from matremap.renderers.embedded import transmission as tr
+
+    thin = model == "mitsuba3:thindielectric"
+    source = Material.create(
+        "mtlx:open_pbr_surface",
+        {
+            "transmission_weight": 1.0,
+            "specular_ior": 1.45,
+            "specular_roughness": 0.2,
+            "transmission_color": [0.9, 0.7, 0.5],
+            "geometry_thin_walled": 1.0 if thin else 0.0,
+        },
+    )
+    iface = tr.interface_of(source)
+    values, freed = tr.EQUIVALENTS[model](iface)
+    back = tr.interface_of(Material.create(model, values))
+    assert "specular_transmittance" in freed
+    assert np.allclose(back.tint, iface.tint) and back.eta == pytest.approx(iface.eta)
+    if model == "mitsuba3:roughdielectric":
+        assert back.alpha == pytest.approx(iface.alpha) and "alpha" in freed
+
+
+RES = 48
+
+
+def _through(m: Material, samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """The embedded probe's and Mitsuba 3's transmission of ``m`` (grey tiles, black environment)."""
+    import sys
+    from pathlib import Path
+
+    pytest.importorskip("scipy")
+    from matremap.core.envmap import constant
+    from matremap.renderers.embedded import transmission as tr
+    from matremap.renderers.mitsuba3.plugins import bsdf_dict
+    from matremap.renderers.mitsuba3.transmission_reference import render_reference
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from transmission_probe import compare
+
+    scene = tr.TransmissionScene(resolution=RES, env=constant(0.0), bounces=12, samples=samples)
+    ours = tr.transmitted(m, scene)[0]
+    ref = render_reference(1.0, 0.0, resolution=RES, spp=256, bsdf=bsdf_dict(m.model, dict(m.options), m)[0])
+    return compare(ours, ref, RES)
+
+
+@needs_mitsuba
+@pytest.mark.parametrize(
+    "model, values, samples, mean_tol, rmse_tol",
+    [
+        ("mitsuba3:dielectric", {"specular_transmittance": [0.9, 0.6, 0.3]}, 1, 0.005, 0.02),
+        ("mitsuba3:dielectric", {"int_ior": 1.333, "ext_ior": 1.6789}, 1, 0.015, 0.06),
+        (
+            "mitsuba3:roughdielectric",
+            {"distribution": "ggx", "alpha": 0.1, "int_ior": 1.5, "ext_ior": 1.0},
+            64,
+            0.02,
+            0.05,
+        ),
+        (
+            "mitsuba3:roughdielectric",
+            {"distribution": "beckmann", "alpha": 0.3, "int_ior": 1.5, "ext_ior": 1.0},
+            64,
+            0.03,
+            0.06,
+        ),
+        (
+            "mitsuba3:thindielectric",
+            {"int_ior": 2.0, "ext_ior": 1.0, "specular_reflectance": [0.0, 0.0, 0.0]},
+            1,
+            0.005,
+            0.05,
+        ),
+        ("mitsuba3:thindielectric", {}, 1, 0.035, 0.08),
+    ],
+    ids=["tinted", "eta-below-1", "rough-ggx", "rough-beckmann", "thin-no-interreflection", "thin-bk7"],
+)
+def test_what_a_glass_lets_through_is_what_mitsuba_traces(grey_tiles, model, values, samples, mean_tol, rmse_tol):
+    mean, rmse = _through(Material.create(model, values), samples)
+    assert np.all(np.abs(mean) < mean_tol), mean
+    assert rmse < rmse_tol, rmse
+
+
+@pytest.fixture
+def grey_tiles(monkeypatch):
+    from matremap.renderers.embedded import transmission as tr
+
+    monkeypatch.setattr(tr, "PALETTE", np.ones_like(tr.PALETTE))
