@@ -187,3 +187,70 @@ def grey_tiles(monkeypatch):
     from matremap.renderers.embedded import transmission as tr
 
     monkeypatch.setattr(tr, "PALETTE", np.ones_like(tr.PALETTE))
+
+
+# -- end to end ---------------------------------------------------------------------------------------
+
+BK7_ROUGH = """<scene version="3.0.0">
+    <bsdf type="roughdielectric" id="glass">
+        <string name="int_ior" value="bk7"/>
+        <string name="ext_ior" value="air"/>
+        <string name="distribution" value="ggx"/>
+        <float name="alpha" value="0.1"/>
+    </bsdf>
+</scene>
+"""
+
+
+def test_a_mitsuba_glass_is_read_and_written_back_as_its_plugin(tmp_path):
+    from matremap.formats import read_asset
+    from matremap.formats.mitsuba_xml import write
+
+    (tmp_path / "glass.xml").write_text(BK7_ROUGH)
+    m = read_asset(tmp_path / "glass.xml", "glass").material()
+    assert m.model == "mitsuba3:roughdielectric" and m.options["distribution"] == "ggx"
+    assert float(m.values["int_ior"][0]) == 1.5046 and float(m.values["ext_ior"][0]) == 1.000277
+    out = write(tmp_path / "out.xml", m)
+    assert read_asset(out, read_asset(out).name).material() == m
+    if HAS_MITSUBA:
+        import mitsuba as mi
+
+        mi.set_variant("scalar_rgb")
+        assert "RoughDielectric" in str(mi.load_file(str(out)).shapes()[0].bsdf())
+
+
+def test_a_rough_bk7_glass_remapped_onto_gltf_keeps_its_transmission(tmp_path, capsys):
+    pygltflib = pytest.importorskip("pygltflib", reason="pip install pygltflib")
+    from matremap.cli import main
+
+    (tmp_path / "glass.xml").write_text(BK7_ROUGH)
+    # metallic 0: remap holds a glTF target's metallic at 1 for a source without a diffuse part (a metal) unless told
+    code = main(
+        ["remap", str(tmp_path / "glass.xml"), "--to", "gltf:pbr", "--fix", "metallic=0", "-o", str(tmp_path / "out")]
+    )
+    said = capsys.readouterr()
+    text = said.out + said.err
+    assert code == 0, text
+    fit_error = float(text.split("relative L2 error ")[1].split()[0])
+    assert fit_error < 0.05  # measured 0.023
+    out = next((tmp_path / "out").rglob("*.gltf"))
+    g = pygltflib.GLTF2().load(str(out))
+    ext = g.materials[0].extensions
+    assert (
+        "KHR_materials_transmission" in g.extensionsUsed
+        and ext["KHR_materials_transmission"]["transmissionFactor"] > 0.95
+    )
+    assert ext["KHR_materials_ior"]["ior"] == pytest.approx(1.5, abs=0.02)
+    assert g.materials[0].pbrMetallicRoughness.roughnessFactor == pytest.approx(0.316, abs=0.05)  # sqrt(alpha)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="remap.complete_fix holds a glTF target's metallic at 1 for a source without a diffuse part, a glass too "
+    "(fit error 0.73); a source that transmits should hold it at 0 (a change to remap.py, reported)",
+)
+def test_a_glass_is_not_taken_for_a_metal(tmp_path, capsys):
+    from matremap.cli import main
+
+    (tmp_path / "glass.xml").write_text(BK7_ROUGH)
+    assert main(["remap", str(tmp_path / "glass.xml"), "--to", "gltf:pbr", "-o", str(tmp_path / "out")]) == 0
