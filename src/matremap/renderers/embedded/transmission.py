@@ -22,6 +22,11 @@ by the functions of :data:`INTERFACES`:
   tint of the interface when transmission_depth is 0 (or the object thin-walled), else the colour white light
   takes after transmission_depth inside (sigma = -ln(transmission_color) / transmission_depth);
   ``geometry_thin_walled`` 1 makes the surface a thin shell.
+* ``mitsuba3:dielectric``, ``roughdielectric``, ``thindielectric`` (Mitsuba 3.9 ``src/bsdfs/``): the boundary of a
+  solid of eta = int_ior / ext_ior (below 1 too) with the exact Fresnel, specular_transmittance applied at every
+  refraction (so squared on the straight path), Beckmann traced as an equivalent GGX alpha; the thin slab without
+  bending, its internal reflections summed into each wall (:func:`mitsuba3_dielectric_interface`,
+  :func:`mitsuba3_thindielectric_interface`).
 
 Tracing (:func:`transmitted`): a camera ray enters the sphere through a microfacet normal drawn from the GGX
 distribution of visible normals (Heitz 2018, "Sampling the GGX distribution of visible normals", JCGT 7(4)),
