@@ -216,7 +216,21 @@ def test_bitmaps_raw_vs_srgb_normalmap_and_bumpmap(tmp_path):
         ("this is not xml <", "not valid XML"),
         ('<?xml version="1.0"?><materialx version="1.39"/>', "not a Mitsuba scene"),
         ('<scene version="3.0.0"><shape type="sphere"/></scene>', "holds no <bsdf>"),
-        ('<scene version="3.0.0"><bsdf type="dielectric"/></scene>', "dielectric BSDF: its look is transmission"),
+        (
+            '<scene version="3.0.0"><bsdf type="roughdielectric"><float name="alpha_u" value="0.1"/>'
+            '<float name="alpha_v" value="0.3"/></bsdf></scene>',
+            "anisotropic roughness (alpha_u 0.1, alpha_v 0.3) is not supported for a roughdielectric",
+        ),
+        (
+            '<scene version="3.0.0"><bsdf type="dielectric"><texture type="bitmap" name="specular_transmittance">'
+            '<string name="filename" value="t.png"/></texture></bsdf></scene>',
+            "a textured glass is not converted",
+        ),
+        (
+            '<scene version="3.0.0"><bsdf type="dielectric"><float name="int_ior" value="1.5"/>'
+            '<float name="ext_ior" value="1.5"/></bsdf></scene>',
+            "Mitsuba 3 refuses equal IORs",
+        ),
         (
             '<scene version="3.0.0"><bsdf type="diffuse"><float name="roughness" value="0.1"/></bsdf></scene>',
             "unknown parameter(s) roughness",
@@ -476,6 +490,9 @@ def test_mitsuba_probe_lights_match_scene_conventions():
         "mitsuba3:roughconductor-anisotropic",
         "mitsuba3:roughplastic",
         "mitsuba3:principled",
+        "mitsuba3:dielectric",
+        "mitsuba3:roughdielectric",
+        "mitsuba3:thindielectric",
     )
 
 

@@ -1,6 +1,7 @@
 """Every public Mitsuba scene of tests/data/corpus (mitsuba-blender's test scenes, BSD-3-Clause) remapped
 with the command line, as a user would: it converts -- the written file loads in its own library -- or is
-refused with one line naming the feature (exit 2), never a traceback. Textured diffuse and roughplastic
+refused with one line naming the feature (exit 2), or is fitted, written and failed by the quality gate (exit 3:
+a glass onto a target that cannot transmit), never a traceback. Textured diffuse and roughplastic
 scenes (no public licensed one exists; written here) convert and pass the quality gate."""
 
 from __future__ import annotations
@@ -18,12 +19,18 @@ from matremap.svbrdf.textures import ImageInfo, write_image_like
 CORPUS = Path(__file__).resolve().parent / "data" / "corpus"
 FAST = ["--rotations", "0:360:2", "--size", "48", "--env-lights", "32"]
 
-#: corpus folder -> None (converts onto glTF) or the words its one-line refusal must hold
+#: fitted and written, failed by the quality gate (exit 3)
+GATE = "FAILED: fit_error"
+#: the corpus's glasses: water inside a medium of IOR 1.6789 (relative IOR 0.79), tinted; gltf:metal-rough has no
+#: transmission, so the closest look it has is far (fit error 0.6-0.93 on the transmission probe)
+GLASS = GATE
+
+#: corpus folder -> None (converts onto glTF), GATE, or the words its one-line refusal must hold
 EXPECTED = {
-    "mitsuba-blendbsdf": "is a dielectric BSDF",
+    "mitsuba-blendbsdf": "blends only two BSDFs of one model",  # a diffuse and a dielectric
     "mitsuba-bumpmap": "Texture::eval_1_grad",
     "mitsuba-conductor": None,
-    "mitsuba-dielectric": "its look is transmission",
+    "mitsuba-dielectric": GLASS,
     "mitsuba-diffuse": None,
     "mitsuba-mask": None,
     "mitsuba-normalmap": None,
@@ -31,10 +38,10 @@ EXPECTED = {
     "mitsuba-principled": "principled anisotropic 0.6 (anisotropy)",  # its clearcoat 0.8 alone would be fitted
     "mitsuba-roughconductor_anisotropic": None,  # alpha_u 0.4 / alpha_v 0.2: fit error 0.2455, passes
     "mitsuba-roughconductor_isotropic": None,
-    "mitsuba-roughdielectric_isotropic": "its look is transmission",
+    "mitsuba-roughdielectric_isotropic": GLASS,
     "mitsuba-roughplastic": None,
     "mitsuba-test1": None,
-    "mitsuba-thindielectric": "its look is transmission",
+    "mitsuba-thindielectric": GLASS,
     "mitsuba-twosided_1": None,
     "mitsuba-twosided_2": "Mitsuba 3 refuses too",  # a dielectric back side: Mitsuba fails to load it
 }
@@ -53,6 +60,12 @@ def test_corpus_scene_onto_gltf_converts_or_is_refused_in_one_line(tmp_path, cap
     err = capsys.readouterr().err
     assert "Traceback" not in err
     why = EXPECTED[folder]
+    if why == GATE:
+        last = err.strip().splitlines()[-1]
+        assert code == 3 and GATE in last, last
+        out = cc.find_output_file(tmp_path / "out")
+        assert out is not None and out.suffix == ".gltf" and cc.file_loads(out)[0]
+        return
     if why is not None:
         last = err.strip().splitlines()[-1]
         assert code == 2 and why in last and str(src) in last, last

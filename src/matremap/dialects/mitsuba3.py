@@ -1,6 +1,7 @@
 """Mitsuba 3's BSDF plugins, as matremap fits them (drawn by the real Mitsuba 3: :mod:`matremap.renderers.mitsuba3`).
 
-Source: Mitsuba 3.9 ``src/bsdfs/{diffuse,roughconductor,roughplastic,principled}.cpp``.
+Source: Mitsuba 3.9 ``src/bsdfs/{diffuse,roughconductor,roughplastic,principled,dielectric,roughdielectric,
+thindielectric}.cpp``.
 
 =========================  ====================================================================
 model                      parameters (Mitsuba 3's names; RGB unless noted)
@@ -22,7 +23,21 @@ mitsuba3:principled        base_color (0.5); roughness, metallic, specular (0.5)
                            0 in fits); emulated by the embedded renderer but for anisotropic
                            and flatness (spec_trans: its reflection; what it transmits is drawn
                            by the transmission probe)
+mitsuba3:dielectric        int_ior (scalar, 1.5046: bk7), ext_ior (scalar, 1.000277: air; held);
+                           specular_reflectance, specular_transmittance (1; held unless freed)
+mitsuba3:roughdielectric   distribution {beckmann*, ggx}; alpha (scalar, 0.1; isotropic only);
+                           the rest as dielectric
+mitsuba3:thindielectric    as dielectric: a thin slab (no bending), its internal reflections summed
 =========================  ====================================================================
+
+The three glasses (``dielectric.cpp``, ``roughdielectric.cpp``, ``thindielectric.cpp``): a smooth interface and a
+thin slab reflect a delta lobe only (nothing under the probe's point lights); the rough one reflects
+specular_reflectance F(i.h, int_ior/ext_ior) D G / (4 cos_view) with Mitsuba's exact dielectric Fresnel
+(``fresnel.h``) and the separable Smith G of ``microfacet.h``. What they let through is drawn by the transmission
+probe (:data:`matremap.renderers.embedded.transmission.INTERFACES`). A fit moves int_ior (the look of both
+reflection and refraction) and alpha; ext_ior (the medium around) and specular_reflectance (Mitsuba: "should never
+be touched" for realism) are held; specular_transmittance is held at 1 too, and freed when a transmissive source is
+fitted onto the model (its tint is the only colour a glass has).
 """
 
 from __future__ import annotations
@@ -252,6 +267,55 @@ PRINCIPLED = ModelSpec(
     reflectance=Metalness("base_color", "metallic", SpecularLevel("specular")),
 )
 
+
+def _glass_params() -> tuple[ParamSpec, ...]:
+    """The parameters every Mitsuba 3 glass has (``dielectric.cpp``: bk7 inside, air outside by default)."""
+    return (
+        ParamSpec("int_ior", "fresnel", 1.5046, (1.0, 4.0), doc="interior IOR (bk7)"),
+        ParamSpec("ext_ior", "other", 1.000277, (1.0, 4.0), fit=False, doc="exterior IOR (air), held"),
+        _rgb("specular_reflectance", "specular", 1.0, 1.0, fit=False, doc="reflection multiplier, held at 1"),
+        _rgb(
+            "specular_transmittance",
+            "other",
+            1.0,
+            1.0,
+            fit=False,
+            doc="transmission multiplier (per crossing), held at 1 unless a transmissive source frees it",
+        ),
+    )
+
+
+DIELECTRIC = ModelSpec(
+    id="mitsuba3:dielectric",
+    summary="smooth glass, exact dielectric Fresnel (Mitsuba 3 dielectric); a mirror lobe and refraction",
+    params=_glass_params(),
+    diffuse_only=None,
+    specular_only={},
+    reflectance=Dielectric("int_ior", "ext_ior"),
+)
+
+ROUGHDIELECTRIC = ModelSpec(
+    id="mitsuba3:roughdielectric",
+    summary="rough glass, exact dielectric Fresnel (Mitsuba 3 roughdielectric, isotropic)",
+    params=(_alpha(), *_glass_params()),
+    options=(_distribution(),),
+    diffuse_only=None,
+    specular_only={},
+    reflectance=Dielectric("int_ior", "ext_ior"),
+)
+
+THINDIELECTRIC = ModelSpec(
+    id="mitsuba3:thindielectric",
+    summary="thin glass slab, no refraction, internal reflections summed (Mitsuba 3 thindielectric)",
+    params=_glass_params(),
+    diffuse_only=None,
+    specular_only={},
+    reflectance=Dielectric("int_ior", "ext_ior"),
+)
+
+#: the glasses: their look is mostly what they let through (the transmission probe)
+GLASSES = (DIELECTRIC, ROUGHDIELECTRIC, THINDIELECTRIC)
+
 #: the models of this dialect, in the order they are listed
 MODELS = (
     DIFFUSE,
@@ -259,6 +323,7 @@ MODELS = (
     ROUGHCONDUCTOR_ANISOTROPIC,
     ROUGHPLASTIC,
     PRINCIPLED,
+    *GLASSES,
 )
 #: a white Lambertian surface of albedo 1 in this renderer family (irradiance matching)
 WHITE_REFERENCE = ("mitsuba3:diffuse", {"reflectance": 1.0})

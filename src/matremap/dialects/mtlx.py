@@ -165,6 +165,11 @@ LAYERS: dict[str, dict[str, str]] = {
     "mitsuba3:principled": {"coat": "clearcoat", "sheen": "sheen", "transmission": "spec_trans"},
     "gltf:pbr": {"coat": "clearcoat", "sheen": "sheenColor", "transmission": "transmission"},
     "cycles:principled": {"coat": "Coat Weight", "sheen": "Sheen Weight", "transmission": "Transmission Weight"},
+    # Mitsuba 3's glasses transmit whatever their parameters: the multiplier of what goes through stands for a weight
+    **{
+        glass: {"transmission": "specular_transmittance"}
+        for glass in ("mitsuba3:dielectric", "mitsuba3:roughdielectric", "mitsuba3:thindielectric")
+    },
 }
 
 

@@ -15,8 +15,9 @@ Sources: the Mitsuba 3.9 plugin reference (``src/bsdfs/*.cpp``: ``diffuse``, ``c
 * ``roughconductor`` with ``alpha_u`` = ``alpha_v`` is isotropic ``alpha``; ``alpha_u`` != ``alpha_v``
   (numbers) is ``mitsuba3:roughconductor-anisotropic``, in the tangent frame of the surface (dp/du);
   anisotropic roughness maps are refused.
-* ``dielectric``, ``roughdielectric``, ``thindielectric`` are read (their IORs checked) and refused:
-  their look is transmission, which no matremap model has yet.
+* ``dielectric``, ``roughdielectric``, ``thindielectric``: the model of the same name (uniform only: a texture
+  is refused; roughdielectric isotropic only, ``alpha_u`` = ``alpha_v`` read as ``alpha``); a fit from one is made
+  on the transmission probe (:mod:`matremap.transmissive`).
 * ``int_ior`` / ``ext_ior`` given by name use :data:`IOR_TABLE` (Mitsuba 3.9 ``ior.h``, after Hecht,
   *Optics*, 4th ed.); a ``roughconductor`` without ``eta``/``k``/``material`` is Mitsuba's perfect
   mirror (``material=none``), with ``eta``/``k`` it is ``material=custom``; ``principled``'s ``eta``
@@ -52,7 +53,6 @@ from matremap.formats.mitsuba_params import BsdfValues
 from matremap.formats.mitsuba_plugins import (
     ACCEPTED,
     FORMAT,
-    IOR_TABLE,
     PLUGINS,
     TRANSMISSIVE,
     WRAPPERS,
@@ -240,8 +240,6 @@ class BsdfReader:
     def core(self, core: ET.Element, plugin: str, parts: Parts) -> None:
         """Read core BSDF ``core`` (plugin ``plugin``) into ``parts``."""
         label = parts.label
-        if plugin in TRANSMISSIVE:
-            self.transmissive(core, plugin, label)
         if plugin not in PLUGINS:
             raise self.fail(
                 f"material {label!r} is a {plugin!r} BSDF; matremap reads {', '.join(PLUGINS)} "
@@ -265,24 +263,6 @@ class BsdfReader:
             Material.create(parts.model, uniform)  # names, ranges and options, with the model's own messages
         except MatremapError as e:
             raise self.fail(f"material {label!r}: {e}", core) from None
-
-    def transmissive(self, core: ET.Element, plugin: str, label: str) -> None:
-        """Read a dielectric's IORs (so a broken one says so), then refuse it: its look is transmission."""
-        what = f'<bsdf type="{plugin}"> {label!r}'
-        props = self.props(core, what)
-        iors = []
-        for name in ("int_ior", "ext_ior"):
-            p = props.get(name)
-            if p is not None and p.kind == "string" and p.value.strip().lower() not in IOR_TABLE:
-                raise self.fail(f"{what}: {name}={p.value!r} is not one of Mitsuba's named IORs", core)
-            if p is not None:
-                iors.append(f"{name} {p.value}")
-        detail = f" ({', '.join(iors)})" if iors else ""
-        raise self.fail(
-            f"material {label!r} is a {plugin} BSDF{detail}: its look is transmission (refraction through the "
-            "surface), which no matremap target model has yet; it is not converted",
-            core,
-        )
 
     def unwrap(self, el: ET.Element, parts: Parts) -> ET.Element:
         """The core BSDF inside ``el``'s wrappers; what each wrapper keeps goes into ``parts``."""

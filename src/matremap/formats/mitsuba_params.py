@@ -1,6 +1,7 @@
 """The parameters of one Mitsuba 3 core BSDF read as a ``mitsuba3:*`` model's constants and textures.
 
-Sources: Mitsuba 3.9 ``src/bsdfs/{diffuse,conductor,roughconductor,plastic,roughplastic,principled}.cpp``
+Sources: Mitsuba 3.9 ``src/bsdfs/{diffuse,conductor,roughconductor,plastic,roughplastic,principled,dielectric,
+roughdielectric,thindielectric}.cpp``
 and ``include/mitsuba/render/microfacet.h`` (alpha is clamped to >= 1e-4). The rules are listed in
 :mod:`matremap.formats.mitsuba_bsdfs`; this module applies them to one element's properties.
 """
@@ -70,6 +71,9 @@ class BsdfValues:
             "roughplastic": self.roughplastic,
             "plastic": self.plastic,
             "principled": self.principled,
+            "dielectric": self.glass,
+            "roughdielectric": self.glass,
+            "thindielectric": self.glass,
         }[self.plugin]()
 
     # -- one parameter -------------------------------------------------------------------------
@@ -231,6 +235,42 @@ class BsdfValues:
             )
         self.constants[name] = IOR_TABLE[key]
         self.notes.append(f"{name} {prop.value!r} = {IOR_TABLE[key]:g} (Mitsuba's IOR table)")
+
+    def glass(self) -> None:
+        """``dielectric``, ``roughdielectric`` (isotropic), ``thindielectric`` (Mitsuba 3.9 ``src/bsdfs/``): the
+        IORs (numbers or names), the two multipliers and roughdielectric's alpha, all uniform (a glass is fitted on
+        the transmission probe, which draws uniform materials: a texture is refused). Mitsuba refuses equal IORs
+        for a dielectric and roughdielectric, and so does this; an interior IOR below the exterior one (eta < 1,
+        e.g. water inside a denser medium) is read as it is, with a note."""
+        textured = sorted(name for name, p in self.props.items() if p.kind == "texture")
+        if textured:
+            raise self.fail(
+                f"{', '.join(textured)} given by a texture: a textured glass is not converted (the transmission probe "
+                "draws uniform materials); give it as a number or colour"
+            )
+        if self.plugin == "roughdielectric":
+            au, av = self.props.get("alpha_u"), self.props.get("alpha_v")
+            if au is not None and av is not None and au.value != av.value:
+                raise self.fail(
+                    f"anisotropic roughness (alpha_u {au.value}, alpha_v {av.value}) is not supported for a "
+                    "roughdielectric; give one alpha"
+                )
+            self.isotropic_alpha()
+            self.take("alpha")
+        for name in ("int_ior", "ext_ior"):
+            self.ior(name)
+        for name in ("specular_reflectance", "specular_transmittance"):
+            self.take(name)
+        spec = self.spec
+        int_ior = float(self.constants.get("int_ior", spec.param("int_ior").default))
+        ext_ior = float(self.constants.get("ext_ior", spec.param("ext_ior").default))
+        if int_ior == ext_ior and self.plugin != "thindielectric":
+            raise self.fail(f"int_ior and ext_ior are both {int_ior:g}; Mitsuba 3 refuses equal IORs, so does this")
+        if int_ior < ext_ior:
+            self.notes.append(
+                f"int_ior {int_ior:g} below ext_ior {ext_ior:g}: relative IOR {int_ior / ext_ior:.4g} < 1 (a medium "
+                "less dense than the one around); a target that assumes air outside takes the closest look it has"
+            )
 
     def principled(self) -> None:
         """base_color, the scalar lobes, and specular (given as such or as ``eta``)."""

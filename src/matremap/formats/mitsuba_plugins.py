@@ -50,6 +50,9 @@ PLUGINS = {
     "principled": "mitsuba3:principled",
     "conductor": "mitsuba3:roughconductor",
     "plastic": "mitsuba3:roughplastic",
+    "dielectric": "mitsuba3:dielectric",
+    "roughdielectric": "mitsuba3:roughdielectric",
+    "thindielectric": "mitsuba3:thindielectric",
 }
 MODELS = (
     "mitsuba3:diffuse",
@@ -57,6 +60,9 @@ MODELS = (
     "mitsuba3:roughconductor-anisotropic",
     "mitsuba3:roughplastic",
     "mitsuba3:principled",
+    "mitsuba3:dielectric",
+    "mitsuba3:roughdielectric",
+    "mitsuba3:thindielectric",
 )
 #: models written with another plugin than their name says
 MODEL_PLUGINS = {"mitsuba3:roughconductor-anisotropic": "roughconductor"}
@@ -79,6 +85,7 @@ PRINCIPLED_SCALARS = (
 )
 _CONDUCTOR = ("material", "eta", "k", "specular_reflectance")
 _PLASTIC = ("int_ior", "ext_ior", "nonlinear", "specular_reflectance", "diffuse_reflectance")
+_GLASS = ("int_ior", "ext_ior", "specular_reflectance", "specular_transmittance")
 #: parameters each plugin accepts (Mitsuba 3 plugin reference)
 ACCEPTED = {
     "diffuse": ("reflectance",),
@@ -87,9 +94,16 @@ ACCEPTED = {
     "roughplastic": ("distribution", "alpha", *_PLASTIC, "sample_visible"),
     "plastic": _PLASTIC,
     "principled": ("base_color", "specular", "eta", *PRINCIPLED_SCALARS, "sample_visible"),
+    "dielectric": _GLASS,
+    "roughdielectric": ("distribution", "alpha", "alpha_u", "alpha_v", *_GLASS, "sample_visible"),
+    "thindielectric": _GLASS,
 }
 #: parameters Mitsuba 3 takes as plain numbers, not textures
-CONSTANT_ONLY = {"roughplastic": ("alpha", "int_ior", "ext_ior"), "principled": ("specular", "eta")}
+CONSTANT_ONLY = {
+    "roughplastic": ("alpha", "int_ior", "ext_ior"),
+    "principled": ("specular", "eta"),
+    **{glass: ("int_ior", "ext_ior") for glass in ("dielectric", "roughdielectric", "thindielectric")},
+}
 NO_EFFECT = ("sample_visible",)  # changes sampling only, not the expected image
 
 

@@ -2,8 +2,8 @@
 spheres of their own, or a copy of a Mitsuba scene with its BSDFs replaced.
 
 Source: the Mitsuba 3 scene format and plugin reference (``diffuse``, ``roughconductor``,
-``roughplastic``, ``principled``, ``normalmap``, ``mask``, ``twosided``, ``bitmap``, the ``area`` emitter,
-``<include>``), Mitsuba 3.9.
+``roughplastic``, ``principled``, ``dielectric``, ``roughdielectric``, ``thindielectric``, ``normalmap``, ``mask``,
+``twosided``, ``bitmap``, the ``area`` emitter, ``<include>``), Mitsuba 3.9.
 
 * A converted BSDF is its plugin with Mitsuba's parameter names; maps are copied beside the scene as
   ``bitmap`` textures (``raw`` for data maps; converted to linear EXR where Mitsuba would decode a file
@@ -87,6 +87,11 @@ def bsdf_element(m: Material, textures: Mapping[str, ET.Element]) -> ET.Element:
         ET.SubElement(bsdf, "boolean", {"name": "nonlinear", "value": m.options["nonlinear"]})
         value("specular_reflectance")
         value("diffuse_reflectance")
+    elif plugin in ("dielectric", "roughdielectric", "thindielectric"):
+        for name in ("alpha",) if plugin == "roughdielectric" else ():
+            value(name)
+        for name in ("int_ior", "ext_ior", "specular_reflectance", "specular_transmittance"):
+            value(name)
     else:
         for name in ("base_color", *PRINCIPLED_SCALARS, "specular"):
             value(name)

@@ -22,6 +22,11 @@ by the functions of :data:`INTERFACES`:
   tint of the interface when transmission_depth is 0 (or the object thin-walled), else the colour white light
   takes after transmission_depth inside (sigma = -ln(transmission_color) / transmission_depth);
   ``geometry_thin_walled`` 1 makes the surface a thin shell.
+* ``mitsuba3:dielectric``, ``roughdielectric``, ``thindielectric`` (Mitsuba 3.9 ``src/bsdfs/``): the boundary of a
+  solid of eta = int_ior / ext_ior (below 1 too) with the exact Fresnel, specular_transmittance applied at every
+  refraction (so squared on the straight path), Beckmann traced as an equivalent GGX alpha; the thin slab without
+  bending, its internal reflections summed into each wall (:func:`mitsuba3_dielectric_interface`,
+  :func:`mitsuba3_thindielectric_interface`).
 
 Tracing (:func:`transmitted`): a camera ray enters the sphere through a microfacet normal drawn from the GGX
 distribution of visible normals (Heitz 2018, "Sampling the GGX distribution of visible normals", JCGT 7(4)),
@@ -267,6 +272,81 @@ def cycles_principled_interface(values: Mapping[str, Any]) -> Interface:
     )
 
 
+def mitsuba3_dielectric_interface(values: Mapping[str, Any]) -> Interface:
+    """``mitsuba3:dielectric`` and ``mitsuba3:roughdielectric``'s transmission: Mitsuba 3.9 ``src/bsdfs/
+    dielectric.cpp`` and ``roughdielectric.cpp`` (``sample``/``eval``, the transmission branch).
+
+    The boundary of a solid of relative IOR eta = int_ior / ext_ior (below 1 too: a medium less dense than the one
+    around, which reflects totally past its critical angle when entered), its exact dielectric Fresnel
+    (``fresnel.h``) the share reflected at each crossing, smooth or of the roughness alpha (``roughdielectric``'s
+    Beckmann is traced as the GGX alpha that lets as much through, :func:`beckmann_as_ggx`). Mitsuba multiplies
+    *every* refraction by specular_transmittance (and every reflection by specular_reflectance); the probe tints a
+    path once, so ``tint`` = specular_transmittance^2 and ``weight`` 1 make the straight path (in and out) exact; an
+    internal reflection is not multiplied by specular_reflectance (exact at its default 1, which Mitsuba says
+    should never be touched). No medium inside: Mitsuba's own ``interior`` medium is a shape's, not the BSDF's."""
+    eta = _scalar(values, "int_ior") / _scalar(values, "ext_ior")
+
+    def fresnel(cos_outside: np.ndarray) -> np.ndarray:
+        return fresnel_dielectric(np.clip(cos_outside, 1e-9, 1.0), eta)
+
+    st = np.clip(_rgb(values, "specular_transmittance"), 0.0, 1.0)
+    alpha = _scalar(values, "alpha") if "alpha" in values else 0.0
+    if "alpha" in values and values.get("distribution", "beckmann") == "beckmann":
+        alpha = beckmann_as_ggx(alpha)
+    return Interface(
+        weight=np.ones(3),
+        eta=eta,
+        alpha=alpha,
+        tint=st * st,
+        sigma=np.zeros(3),
+        thin_walled=False,
+        fresnel=fresnel,
+    )
+
+
+def beckmann_as_ggx(alpha: float) -> float:
+    """The GGX alpha the probe traces for Mitsuba's Beckmann ``alpha`` (the probe samples GGX only): a Beckmann
+    glass lets more through than a GGX one of the same alpha (its lobe has no long tail to be masked; Mitsuba
+    3.9, IOR 1.5, grey tiles: the GGX probe's mean is 2 % darker at alpha 0.05, 6 % at 0.1, 21 % at 0.3, 23 % at
+    0.5). Measured against it, c alpha with c = 0.7 - 0.167 ln(alpha / 0.1) kept in [0.5, 0.8] transmits as
+    much (mean within 1-2 %, blurred relative RMSE 0.03-0.045 at 0.05-0.5): an empirical fit, not a derived
+    equivalence (benchmarks/transmission_probe.py --mitsuba-glass, tests/test_mitsuba3_glass.py)."""
+    if alpha <= 0.0:
+        return alpha
+    return alpha * float(np.clip(0.7 - 0.167 * math.log(alpha / 0.1), 0.5, 0.8))
+
+
+def thin_slab_fresnel(cos_outside: np.ndarray, eta: float) -> np.ndarray:
+    """The share a probe's thin-wall crossing reflects so that a wall (two crossings) lets through what
+    Mitsuba's ``thindielectric`` does: 1 - R' with R' = R + T^2 R / (1 - R^2) = 2R / (1 + R) (``thindielectric.cpp``:
+    the slab's internal reflections summed), R the exact Fresnel of eta; so 1 - sqrt((1 - R) / (1 + R))."""
+    r = fresnel_dielectric(np.clip(cos_outside, 1e-9, 1.0), eta)
+    return 1.0 - np.sqrt((1.0 - r) / (1.0 + r))
+
+
+def mitsuba3_thindielectric_interface(values: Mapping[str, Any]) -> Interface:
+    """``mitsuba3:thindielectric``'s transmission: Mitsuba 3.9 ``src/bsdfs/thindielectric.cpp``
+    (``eval_null_transmission``): a thin slab crossed without bending (a null interaction), letting through
+    (1 - R') specular_transmittance at each wall with R' = 2R / (1 + R) of eta = int_ior / ext_ior (the slab's
+    internal reflections summed; the probe's own thin wall has none, so its Fresnel is
+    :func:`thin_slab_fresnel`). A thin wall in the probe's terms: no bending (eta 1), the tint
+    specular_transmittance at each wall, weight 1."""
+    eta = _scalar(values, "int_ior") / _scalar(values, "ext_ior")
+
+    def fresnel(cos_outside: np.ndarray) -> np.ndarray:
+        return thin_slab_fresnel(cos_outside, eta)
+
+    return Interface(
+        weight=np.ones(3),
+        eta=eta,
+        alpha=0.0,
+        tint=np.clip(_rgb(values, "specular_transmittance"), 0.0, 1.0),
+        sigma=np.zeros(3),
+        thin_walled=True,
+        fresnel=fresnel,
+    )
+
+
 #: model id -> the reading of its transmission
 INTERFACES: dict[str, Callable[[Mapping[str, Any]], Interface]] = {
     "gltf:pbr": gltf_interface,
@@ -274,18 +354,22 @@ INTERFACES: dict[str, Callable[[Mapping[str, Any]], Interface]] = {
     "mtlx:standard_surface": standard_surface_interface,
     "mitsuba3:principled": mitsuba3_principled_interface,
     "cycles:principled": cycles_principled_interface,
+    "mitsuba3:dielectric": mitsuba3_dielectric_interface,
+    "mitsuba3:roughdielectric": mitsuba3_dielectric_interface,
+    "mitsuba3:thindielectric": mitsuba3_thindielectric_interface,
 }
 
 
 def interface_of(material: Material) -> Interface:
-    """The :class:`Interface` of a uniform material; a model the probe cannot read is refused."""
+    """The :class:`Interface` of a uniform material (its reader sees its options among its values); a model the
+    probe cannot read is refused."""
     reader = INTERFACES.get(material.model)
     if reader is None:
         raise MatremapError(
             f"the transmission probe draws {', '.join(sorted(INTERFACES))}, not {material.model}; "
             "remap the material onto one of them first"
         )
-    return reader(material.values)
+    return reader({**material.options, **material.values})
 
 
 def gltf_equivalent(iface: Interface, thickness: float = 2.0 * SPHERE_RADIUS) -> dict[str, Any]:
@@ -378,6 +462,38 @@ def cycles_principled_equivalent(iface: Interface) -> dict[str, Any]:
     }
 
 
+#: the alpha a smooth transmission is read across onto ``roughdielectric`` at: just above Mitsuba's floor (1e-4,
+#: the bound), so that the start is kept (a start on a bound is moved inside, to ~1e-3, where the directional lights
+#: of the environment draw sharp highlights on the sphere: from an OpenPBR smooth glass, fit error 0.69 there,
+#: 0.14 here, 0.0000 onto ``dielectric``)
+GLASS_ALPHA_FLOOR = 1.01e-4
+
+
+def mitsuba3_glass_equivalent(iface: Interface, model: str) -> dict[str, Any]:
+    """The parameters of a Mitsuba 3 glass (``model``) that transmit as ``iface`` does (read back through
+    :func:`mitsuba3_dielectric_interface` / :func:`mitsuba3_thindielectric_interface`): int_ior the relative IOR
+    (at least 1) in vacuum (ext_ior 1), roughdielectric's alpha the GGX alpha (distribution ggx);
+    specular_transmittance the square root of the tint for a solid (Mitsuba applies it at both crossings), the
+    tint itself for a thin wall onto ``thindielectric`` (once per wall, as the probe), and the square root of a
+    solid's tint onto ``thindielectric``. The weight (grey) and an interior's extinction over the sphere's
+    diameter are folded into the tint as a start: Mitsuba's glasses carry no medium."""
+    colour = np.clip(iface.tint * iface.weight * np.exp(-iface.sigma * 2.0 * SPHERE_RADIUS), 0.0, 1.0)
+    thin = model == "mitsuba3:thindielectric"
+    values: dict[str, Any] = {
+        "int_ior": float(np.clip(iface.eta, 1.0, 4.0)),
+        "ext_ior": 1.0,
+        "specular_transmittance": (colour if thin and iface.thin_walled else np.sqrt(colour)).tolist(),
+    }
+    if model == "mitsuba3:roughdielectric":  # the probe's alpha is GGX's
+        values.update(alpha=float(np.clip(iface.alpha, GLASS_ALPHA_FLOOR, 1.0)), distribution="ggx")
+    return values
+
+
+def _mitsuba3_glass_start(model: str) -> Callable[[Interface], tuple[dict[str, Any], tuple[str, ...]]]:
+    freed = ("alpha", "specular_transmittance") if model == "mitsuba3:roughdielectric" else ("specular_transmittance",)
+    return lambda iface: (mitsuba3_glass_equivalent(iface, model), freed)
+
+
 def _gltf_start(iface: Interface) -> tuple[dict[str, Any], tuple[str, ...]]:
     values = gltf_equivalent(iface)
     return values, ("transmission",) if values["attenuationDistance"] == 0.0 else ("transmission", "attenuationColor")
@@ -407,6 +523,10 @@ EQUIVALENTS: dict[str, Callable[[Interface], tuple[dict[str, Any], tuple[str, ..
     "mtlx:standard_surface": _standard_surface_start,
     "mitsuba3:principled": _mitsuba3_principled_start,
     "cycles:principled": _cycles_principled_start,
+    **{
+        m: _mitsuba3_glass_start(m)
+        for m in ("mitsuba3:dielectric", "mitsuba3:roughdielectric", "mitsuba3:thindielectric")
+    },
 }
 
 
@@ -660,6 +780,11 @@ def render_view(materials: Sequence[Material], view: Any) -> np.ndarray:
 __all__ = [
     "cycles_principled_equivalent",
     "mitsuba3_principled_equivalent",
+    "mitsuba3_dielectric_interface",
+    "mitsuba3_glass_equivalent",
+    "mitsuba3_thindielectric_interface",
+    "thin_slab_fresnel",
+    "beckmann_as_ggx",
     "principled_specular",
     "standard_surface_equivalent",
     "EQUIVALENTS",

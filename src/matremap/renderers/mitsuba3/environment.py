@@ -60,6 +60,10 @@ from matremap.renderers.textured import check_normal_map, check_options, split_t
 NOT_TEXTURABLE = {
     "mitsuba3:roughplastic": ("alpha", "int_ior", "ext_ior"),
     "mitsuba3:principled": ("specular",),
+    **{
+        g: ("int_ior", "ext_ior")
+        for g in ("mitsuba3:dielectric", "mitsuba3:roughdielectric", "mitsuba3:thindielectric")
+    },
 }
 
 #: default samples per pixel: 1.0-1.3 % relative RMS noise (diffuse; GGX conductor alpha 0.1; builtin map, 128^2)

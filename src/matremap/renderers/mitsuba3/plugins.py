@@ -92,7 +92,37 @@ def bsdf_dict(model: str, options: dict[str, str], m: Material) -> tuple[dict[st
             d[name] = scalar(name)
             b.append(Binding(name, f"{name}.value", False))
         return d, b
+    if model in GLASS_PLUGINS:
+        return glass_dict(model, options, m)
     raise MatremapError(f"renderer 'mitsuba3' cannot render model {model}")  # pragma: no cover
+
+
+#: the glass models and their plugins (dielectric.cpp, roughdielectric.cpp, thindielectric.cpp)
+GLASS_PLUGINS = {
+    "mitsuba3:dielectric": "dielectric",
+    "mitsuba3:roughdielectric": "roughdielectric",
+    "mitsuba3:thindielectric": "thindielectric",
+}
+
+
+def glass_dict(model: str, options: dict[str, str], m: Material) -> tuple[dict[str, Any], list[Binding]]:
+    """A glass's plugin dictionary. Its IORs are constructor arguments (Mitsuba keeps only ``eta``, which
+    ``mi.traverse`` exposes): the probe writes ``eta`` = int_ior / ext_ior per material (``probe.ETA_MODELS``)."""
+    d: dict[str, Any] = {
+        "type": GLASS_PLUGINS[model],
+        "int_ior": float(m.values["int_ior"][0]),
+        "ext_ior": float(m.values["ext_ior"][0]),
+        "specular_reflectance": {"type": "rgb", "value": [float(x) for x in m.values["specular_reflectance"]]},
+        "specular_transmittance": {"type": "rgb", "value": [float(x) for x in m.values["specular_transmittance"]]},
+    }
+    b = [
+        Binding("specular_reflectance", "specular_reflectance.value", True),
+        Binding("specular_transmittance", "specular_transmittance.value", True),
+    ]
+    if model == "mitsuba3:roughdielectric":
+        d.update(distribution=options["distribution"], alpha=float(m.values["alpha"][0]))
+        b.append(Binding("alpha", "alpha.value", False))
+    return d, b
 
 
 #: the models Mitsuba 3 draws: those of its dialect

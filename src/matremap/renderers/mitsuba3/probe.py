@@ -62,6 +62,7 @@ from matremap.errors import MatremapError
 from matremap.renderers.base import EnvironmentLight, EnvironmentRender, check_can_render, check_environment
 from matremap.renderers.mitsuba3.environment import NOT_TEXTURABLE, Mitsuba3EnvironmentRender
 from matremap.renderers.mitsuba3.plugins import (
+    GLASS_PLUGINS,
     INSTALL_HINT,
     MODELS,
     Binding,
@@ -74,6 +75,9 @@ from matremap.renderers.mitsuba3.plugins import (
     mitsuba_installed,
     probe_sensor,
 )
+
+#: models whose IORs Mitsuba keeps as one ``eta`` = int_ior / ext_ior, set through ``mi.traverse``
+ETA_MODELS = ("mitsuba3:roughplastic", *GLASS_PLUGINS)
 
 
 class _Loaded:
@@ -99,7 +103,7 @@ class _Loaded:
             self.params[key] = mi.Color3f(*(float(x) for x in v)) if b.rgb else mi.Float(float(v[0]))
             self.current[b.param] = v.copy()
             changed = True
-        if self.model == "mitsuba3:roughplastic":
+        if self.model in ETA_MODELS:
             eta = m.values["int_ior"] / m.values["ext_ior"]
             old_eta = self.current.get("eta")
             if old_eta is None or not np.array_equal(old_eta, eta):
@@ -142,7 +146,7 @@ class _Bsdf:
         self.bsdf = mitsuba_call(mi, "load the BSDF", mi.load_dict, bsdf)
         self.params = mi.traverse(self.bsdf)
         self.current: dict[str, np.ndarray] = {b.param: m.values[b.param].copy() for b in self.bindings}
-        if m.model == "mitsuba3:roughplastic":
+        if m.model in ETA_MODELS:
             self.current["eta"] = m.values["int_ior"] / m.values["ext_ior"]
 
     def set(self, m: Material) -> None:
@@ -155,7 +159,7 @@ class _Bsdf:
             self.params[b.key] = mi.Color3f(*(float(x) for x in v)) if b.rgb else mi.Float(float(v[0]))
             self.current[b.param] = v.copy()
             changed = True
-        if self.model == "mitsuba3:roughplastic":
+        if self.model in ETA_MODELS:
             eta = m.values["int_ior"] / m.values["ext_ior"]
             if not np.array_equal(self.current["eta"], eta):
                 self.params["eta"] = mi.Float(float(eta[0]))
@@ -320,7 +324,7 @@ class Mitsuba3Renderer:
         bsdf, bindings = bsdf_dict(m.model, options, m)
         loaded = _Loaded(self.mi, self.scene_dict(scene, light, bsdf), bindings, m.model)
         loaded.current = {b.param: m.values[b.param].copy() for b in bindings}
-        if m.model == "mitsuba3:roughplastic":
+        if m.model in ETA_MODELS:
             loaded.current["eta"] = m.values["int_ior"] / m.values["ext_ior"]
         self._cache[key] = loaded
         while len(self._cache) > self.cache_size:

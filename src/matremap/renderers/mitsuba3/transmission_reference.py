@@ -54,10 +54,12 @@ def render_reference(
     plane_half_size: float = 12.0,
     tile: float = 0.5,
     seed: int = 0,
+    bsdf: dict[str, Any] | None = None,
 ) -> np.ndarray:
     """Linear radiance [res, res, 3] of the probe's sphere (relative IOR ``eta``, GGX ``alpha``, extinction
     ``sigma`` per scene unit inside) before the tiled plane, path-traced by Mitsuba 3 (``scalar_rgb``) with
-    ``spp`` samples per pixel; ``eta`` 1 and no sphere is the plane alone."""
+    ``spp`` samples per pixel; ``eta`` 1 and no sphere is the plane alone. ``bsdf``: the sphere's Mitsuba BSDF
+    dictionary instead of :func:`glass_bsdf` (a ``mitsuba3:*`` glass as it is, e.g. a tinted or thin one)."""
     import mitsuba as mi
 
     if not mi.variant():
@@ -98,12 +100,12 @@ def render_reference(
             "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}},
         },
     }
-    if not math.isclose(eta, 1.0) or alpha > 0.0 or absorbs:
+    if bsdf is not None or not math.isclose(eta, 1.0) or alpha > 0.0 or absorbs:
         sphere: dict[str, Any] = {
             "type": "sphere",
             "center": [0.0, 0.0, 0.0],
             "radius": scene.sphere_radius,
-            "bsdf": glass_bsdf(eta, alpha),
+            "bsdf": bsdf if bsdf is not None else glass_bsdf(eta, alpha),
         }
         if absorbs:
             sphere["interior"] = {

@@ -36,7 +36,17 @@ the reflection of the front side, in Mitsuba's own terms (its ``wi`` is the view
 
 Not emulated: anisotropic > 0 and flatness > 0 (refused with one line; Mitsuba 3 draws
 them with ``--target-renderer mitsuba3``). Checked against the real Mitsuba 3 in
-tests/test_mitsuba3_principled_emulation.py. ``roughplastic`` is not emulated: Mitsuba 3's roughplastic
+tests/test_mitsuba3_principled_emulation.py.
+
+The glasses, their reflection only (what they let through is the transmission probe's): ``dielectric`` and
+``thindielectric`` (``dielectric.cpp``, ``thindielectric.cpp``) reflect a delta lobe, which no point light reaches:
+zero, as every mirror of the embedded renderer. ``roughdielectric`` (``roughdielectric.cpp``, ``eval``, the
+reflection branch): specular_reflectance F(i.h, int_ior/ext_ior) D G / (4 cos_view) -- Mitsuba's exact dielectric
+Fresnel (``fresnel.h``; an eta below 1 reflects totally past its critical angle), its Beckmann or GGX D and the
+separable Smith G (``MicrofacetDistribution::G``, the same G1 as roughconductor's; ``sample_visible`` changes
+sampling only). Checked against the real Mitsuba 3 in tests/test_mitsuba3_glass.py.
+
+``roughplastic`` is not emulated: Mitsuba 3's roughplastic
 diffuse layer differs from Mitsuba 0.6's (2-59 % relative RMSE, see :mod:`matremap.dialects.equivalence`).
 """
 
@@ -45,7 +55,15 @@ from __future__ import annotations
 import numpy as np
 
 from matremap.core.optics import fresnel_conductor, fresnel_dielectric
-from matremap.dialects.mitsuba3 import DIFFUSE, PRINCIPLED, ROUGHCONDUCTOR, ROUGHCONDUCTOR_ANISOTROPIC
+from matremap.dialects.mitsuba3 import (
+    DIELECTRIC,
+    DIFFUSE,
+    PRINCIPLED,
+    ROUGHCONDUCTOR,
+    ROUGHCONDUCTOR_ANISOTROPIC,
+    ROUGHDIELECTRIC,
+    THINDIELECTRIC,
+)
 from matremap.dialects.mitsuba3_conductors import CONDUCTOR_RGB
 from matremap.errors import MatremapError
 from matremap.renderers.embedded import microfacet as mf
@@ -152,8 +170,25 @@ def roughconductor_anisotropic(p, opt, g):
     return p["specular_reflectance"] * conductor_fresnel(p, opt, g) * (d * gg / (4.0 * g.cos_o))
 
 
+def delta_glass(p, opt, g):
+    """``dielectric`` / ``thindielectric``: a delta reflection, zero under point lights."""
+    return 0.0 * p["specular_reflectance"] * g.cos_o
+
+
+def roughdielectric(p, opt, g):
+    """Mitsuba 3's ``roughdielectric`` reflection (see the module docstring)."""
+    eta = p["int_ior"] / p["ext_ior"]
+    distribution, alpha = opt["distribution"], p["alpha"]
+    d = mf.d_mitsuba06(distribution, g, alpha)
+    gg = mf.g_mitsuba06(distribution, g.tan_i, g.tan_o, alpha)
+    return p["specular_reflectance"] * fresnel_dielectric(g.i_dot_h, eta) * (d * gg / (4.0 * g.cos_o))
+
+
 #: model id -> evaluator
 EVALUATORS = {
+    DIELECTRIC.id: delta_glass,
+    ROUGHDIELECTRIC.id: roughdielectric,
+    THINDIELECTRIC.id: delta_glass,
     DIFFUSE.id: diffuse,
     ROUGHCONDUCTOR.id: roughconductor,
     ROUGHCONDUCTOR_ANISOTROPIC.id: roughconductor_anisotropic,
