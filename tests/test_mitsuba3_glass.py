@@ -244,12 +244,9 @@ def test_a_rough_bk7_glass_remapped_onto_gltf_keeps_its_transmission(tmp_path, c
     assert g.materials[0].pbrMetallicRoughness.roughnessFactor == pytest.approx(0.316, abs=0.05)  # sqrt(alpha)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="remap.complete_fix holds a glTF target's metallic at 1 for a source without a diffuse part, a glass too "
-    "(fit error 0.73); a source that transmits should hold it at 0 (a change to remap.py, reported)",
-)
 def test_a_glass_is_not_taken_for_a_metal(tmp_path, capsys):
+    """A glass has no diffuse part; remap took such a source for a metal and held glTF's metallic at 1 (fit error
+    0.73). A source that transmits is a dielectric (remap.glass_is_dielectric)."""
     from matremap.cli import main
 
     (tmp_path / "glass.xml").write_text(BK7_ROUGH)

@@ -252,6 +252,17 @@ def complete_fix(source_model: str, values: Mapping[str, Any], target: str, fix:
     return out
 
 
+def glass_is_dielectric(source: Material, target: str, fix: dict[str, Any], held: Mapping[str, Any]) -> dict[str, Any]:
+    """``fix`` with the target's metalness at 0 where the source lets light through: :func:`complete_fix` takes a
+    source without a diffuse part for a metal, and a Mitsuba 3 glass has none (bk7 onto glTF: 0.73 held a metal,
+    0.023 a dielectric). The user's ``--fix`` (``held``) stays."""
+    from matremap.renderers.embedded.transmission import transmits
+
+    if not transmits(source):
+        return fix
+    return {**fix, **{name: 0.0 for name, _, _ in get_model(target).specialisations if name not in held}}
+
+
 def free_partial_metal(
     source: Material, job: RemapJob, fix: dict[str, Any], log: Callable[[str], None]
 ) -> tuple[RemapJob, dict[str, Any], dict[str, float]]:
@@ -1149,6 +1160,7 @@ def _remap_uniform(
         write_image(stage / "compare.png", comparison_strip(same), force=True)
         return copied
     full_fix = complete_fix(source.model, qty.material_values(source), target, job.fix)
+    full_fix = glass_is_dielectric(source, target, full_fix, job.fix)
     job, full_fix, metal = free_partial_metal(source, job, full_fix, log)
     r, job = _fit_uniform(source, job, full_fix, log, metal)
     for w in r.warnings:
