@@ -123,6 +123,15 @@ PRINCIPLED_GLASS = """<scene version="3.0.0">
   </bsdf>
 </scene>
 """
+MITSUBA_GLASS = """<scene version="3.0.0">
+  <bsdf type="roughdielectric" id="glass">
+    <string name="int_ior" value="bk7"/>
+    <string name="ext_ior" value="air"/>
+    <string name="distribution" value="ggx"/>
+    <float name="alpha" value="0.1"/>
+  </bsdf>
+</scene>
+"""
 CYCLES_GLASS = {"Base Color": [0.95, 0.55, 0.35], "Roughness": 0.25, "IOR": 1.45, "Transmission Weight": 1.0}
 #: the transmission parameters of each target, shown in the table for ``--set transmissive``
 TRANSMISSION_PARAMS = {
@@ -182,6 +191,7 @@ def sources(folder: Path) -> list[tuple[str, Path, str | None, str]]:
 def transmissive_sources(folder: Path) -> list[tuple[str, Path, str | None, str]]:
     """(label, file, material, its model) of the glasses, written into ``folder`` where not in the corpus."""
     (folder / "principled_glass.xml").write_text(PRINCIPLED_GLASS)
+    (folder / "rough_glass.xml").write_text(MITSUBA_GLASS)
     attenuation = CORPUS / "gltf-AttenuationTest" / "AttenuationTest.glb"
     out = [
         ("OpenPBR glass", CORPUS / "mtlx-open_pbr_glass" / "open_pbr_glass.mtlx", None, "mtlx:open_pbr_surface"),
@@ -195,6 +205,7 @@ def transmissive_sources(folder: Path) -> list[tuple[str, Path, str | None, str]
         ("glTF AttenuationTest volume", attenuation, "R5_Attenuation_1.0", "gltf:pbr"),
         ("glTF AttenuationTest thin", attenuation, "R1_Sample_1.5", "gltf:pbr"),
         ("Mitsuba 3 principled glass", folder / "principled_glass.xml", "glass", "mitsuba3:principled"),
+        ("Mitsuba 3 roughdielectric bk7", folder / "rough_glass.xml", "glass", "mitsuba3:roughdielectric"),
     ]
     from matremap.renderers.cycles.client import bpy_available
 
