@@ -180,3 +180,22 @@ def test_a_glass_onto_a_model_that_cannot_transmit_fails_the_gate(tmp_path):
     assert res.returncode == 3, res.stdout + res.stderr
     assert "transmission probe" in res.stdout + res.stderr
     assert "does not transmit light" in res.stdout + res.stderr
+
+
+def test_a_sweep_of_a_glass_fits_each_point_on_the_transmission_probe(tmp_path):
+    """Sweeps fit through the same façade: every point of a glass's sweep is made on the transmission probe, its
+    transmission carried (before, a glass was fitted on the point probe, where it is a dark mirror)."""
+    import sqlite3
+
+    src = tmp_path / "glass.json"
+    src.write_text(json.dumps({"model": "gltf:pbr", "params": {**glass().to_dict()["params"]}}))
+    db = tmp_path / "db.sqlite"
+    cmd = [sys.executable, "-m", "matremap", "sweep", "--source", str(src), "--to", "mtlx:open_pbr_surface"]
+    cmd += ["--grid", "roughness=0.2;0.4", "--db", str(db), "--workers", "1", "--no-progress"]
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stdout + res.stderr
+    rows = sqlite3.connect(db).execute("select loss, target, warnings from points").fetchall()
+    assert len(rows) == 2
+    for loss, target, warnings in rows:
+        assert loss < 0.1 and "transmission probe" in warnings
+        assert json.loads(target)["transmission_weight"] > 0.9
