@@ -47,7 +47,7 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -58,6 +58,9 @@ from matremap.errors import MatremapError
 from matremap.renderers.embedded.evaluators.mitsuba3 import principled_eta
 from matremap.renderers.embedded.layering import modulated_ior
 from matremap.renderers.textured import surface_pixels
+
+if TYPE_CHECKING:
+    from matremap.core.scene import Scene
 
 #: the evaluation camera and sphere (renderers/textured.py)
 CAMERA_Z = 8.0
@@ -758,16 +761,17 @@ def render(material: Material, scene: TransmissionScene | None = None) -> np.nda
     return np.where(mask[..., None], image, seen).astype(np.float32)
 
 
-def probe_scene(view: Any) -> TransmissionScene:
+def probe_scene(view: Scene) -> TransmissionScene:
     """The :class:`TransmissionScene` of a probe's transmission view (a :class:`~matremap.core.scene.Scene`
     whose ``transmission`` is set): its resolution, map, lights, paths and bounces."""
     t = view.transmission
+    assert t is not None, "a transmission view"
     return TransmissionScene(
         resolution=view.resolution, env=t.env, env_lights=t.lights, bounces=t.bounces, samples=t.samples
     )
 
 
-def render_view(materials: Sequence[Material], view: Any) -> np.ndarray:
+def render_view(materials: Sequence[Material], view: Scene) -> np.ndarray:
     """The transmission view of a probe, one image per material: float32 [N, res, res, 3]."""
     scene = probe_scene(view)
     return (
