@@ -1177,7 +1177,8 @@ def _remap_uniform(
         )
     else:
         scene = r.scene
-        src = render_images(get_renderer(r.source_renderer), [part(source, FULL) or source], scene)[0]
+        fitted = r.source  # the source as fitted: itself, or a glass widened to the target's narrowest lobe
+        src = render_images(get_renderer(r.source_renderer), [part(fitted, FULL) or fitted], scene)[0]
         src = src * r.irradiance_scale
         tgt = render_images(get_renderer(r.target_renderer), [r.target], scene)[0]
         checks += image_checks([("probe render", src, tgt)], scene.mask(), job.thresholds)

@@ -37,6 +37,8 @@ class TransmissiveFit:
     free: list[str]
     start: dict[str, Any]
     notes: list[str] = field(default_factory=list)
+    #: the source as fitted: itself, or widened to the target's narrowest lobe (:func:`widened`)
+    source: Material | None = None
 
 
 def setup(
@@ -73,6 +75,16 @@ def setup(
         )
         return out
     values, freed = reader(iface)
+    narrowest = smoothest(spec, values)
+    if narrowest is not None and iface.alpha < narrowest:
+        wider = widened(source, narrowest)
+        if wider is not None:
+            out.source = wider
+            out.notes.append(
+                f"the source's lobe (GGX alpha {iface.alpha:.3g}) is narrower than {spec.id}'s narrowest (alpha "
+                f"{narrowest:.3g}, alike at any resolution the probe has): fitted, and judged, at that width"
+            )
+            values, freed = reader(interface_of(wider))
     held = set(fix or {})
     moved = set(freed) | {p.name for p in spec.params if p.fit}
     start = {k: inside(spec, k, v) if k in moved else v for k, v in values.items() if k not in held}
@@ -82,6 +94,39 @@ def setup(
         f"transmission read across onto {spec.id} and fitted ({', '.join(n for n in freed if n not in held)} freed)"
     )
     return out
+
+
+def smoothest(spec: ModelSpec, values: Mapping[str, Any]) -> float | None:
+    """The narrowest GGX alpha ``spec`` lets through with: its interface at the lower bound of its roughness (the
+    read-across ``values`` otherwise; Mitsuba's principled: 0.001), None without a roughness parameter."""
+    from matremap.core.fit import roughness_of
+    from matremap.renderers.embedded.transmission import interface_of
+
+    rp = roughness_of(spec)
+    if rp is None or rp.log:
+        return None
+    return interface_of(Material.create(spec.id, {**values, rp.name: rp.bounds[0]})).alpha
+
+
+def widened(source: Material, alpha: float) -> Material | None:
+    """``source`` with its roughness raised until its interface's alpha reaches ``alpha`` (bisection on the
+    parameter, whatever its mapping to alpha); None when it has no roughness parameter or cannot reach it. A lobe
+    below the probe's resolution: the point and environment lights draw a near-mirror's highlight as bright points
+    a perfect mirror does not have, so a smooth glass onto a model that cannot be as smooth (Mitsuba's principled,
+    alpha >= 0.001) failed the gate on highlights no image would show."""
+    from matremap.core.fit import roughness_of
+    from matremap.renderers.embedded.transmission import interface_of
+
+    rp = roughness_of(source.spec)
+    if rp is None or rp.log:
+        return None
+    lo, hi = float(np.mean(source.values[rp.name])), rp.bounds[1]
+    if interface_of(source.with_params({rp.name: hi})).alpha < alpha:
+        return None
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if interface_of(source.with_params({rp.name: mid})).alpha < alpha else (lo, mid)
+    return source.with_params({rp.name: hi})
 
 
 #: how far inside its bounds a started value on one is put, as a share of the range
@@ -101,4 +146,4 @@ def inside(spec: ModelSpec, name: str, value: Any) -> Any:
     return float(moved) if moved.ndim == 0 else moved.tolist()
 
 
-__all__ = ["JOINT_STRATEGY", "NUDGE", "TransmissiveFit", "inside", "setup"]
+__all__ = ["JOINT_STRATEGY", "NUDGE", "TransmissiveFit", "inside", "setup", "smoothest", "widened"]

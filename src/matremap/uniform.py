@@ -82,7 +82,7 @@ def fit_steps(
     src_r = _probe_renderer(source_renderer, source.model, through)
     tgt_r = _probe_renderer(target_renderer, spec.id, through)
     result = yield from core_fit.fit_steps(
-        source,
+        through.source or source,
         spec,
         through.strategy,
         through.scene,
