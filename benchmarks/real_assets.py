@@ -600,8 +600,15 @@ def output_colour(path: Path, asset: Asset, n_input_materials: int | None) -> tu
         doc, _ = cc.gltf_load(path)
         same = n_input_materials is not None and len(doc.get("materials", [])) == n_input_materials
         material = asset.material if same else 0
+    elif kind == "mtlx":
+        # a MaterialX document written for one --material keeps every material by name: read that one (the
+        # first material of the chess set's copy is another piece, which read as the queen's colour lost)
+        material = asset.material
     try:
-        return cc.material_colour(path, material), ok, msg
+        try:
+            return cc.material_colour(path, material), ok, msg
+        except KeyError:  # a document of the converted material alone
+            return cc.material_colour(path, None), ok, msg
     except Exception as e:  # noqa: BLE001
         return None, ok, f"{msg}; colour: {type(e).__name__}: {e}"[:200]
 
