@@ -396,17 +396,14 @@ def white_radiance(view: Scene) -> float:
         d2 = np.sum(to_light * to_light, axis=-1)
         cos = np.maximum(np.sum(to_light * n, axis=-1) / np.sqrt(d2), 0.0)
         total += view.light_intensity(light) / d2 * cos
-    if view.environment is not None:
-        from matremap.core.envmap import LUMINANCE
-
-        for r in view.environment.rotations:
-            d, i = view.environment.directional(r)
-            total += np.maximum(n @ d.T, 0.0) @ (i @ LUMINANCE)
+    directional = [view.environment.directional(r) for r in view.environment.rotations] if view.environment else []
     if view.transmission is not None:
+        directional.append(view.transmission.directional())
+    if directional:
         from matremap.core.envmap import LUMINANCE
 
-        d, i = view.transmission.directional()
-        total += np.maximum(n @ d.T, 0.0) @ (i @ LUMINANCE)
+        for d, i in directional:
+            total += np.maximum(n @ d.T, 0.0) @ (i @ LUMINANCE)
     return float(np.mean(total) / math.pi)
 
 
