@@ -198,6 +198,8 @@ def parametric_mapping(kind: str, name: str, m: Mapping[str, Any], at: str) -> l
         uses_roughness = m.get("roughness", True)
         if not isinstance(uses_roughness, bool):
             raise MatremapError(f"{at}.roughness must be true or false")
+        if "tint" in m:
+            numbers(m["tint"], f"{at}.tint", (3,))
         if not uses_roughness:
             numbers(m.get("coef"), f"{at}.coef", (1,))
             return ["reflectance"]
