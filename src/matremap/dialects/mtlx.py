@@ -56,7 +56,7 @@ from typing import Any
 import numpy as np
 
 from matremap.core.models import ModelSpec, OptionSpec, ParamSpec
-from matremap.core.reflectance import Dielectric
+from matremap.core.reflectance import Dielectric, Metalness
 
 
 def _rgb(name: str, role: str, default: float, fit: bool = True, doc: str = "") -> ParamSpec:
@@ -113,7 +113,7 @@ OPEN_PBR_SURFACE = ModelSpec(
             {"roles": {"base_color": "specular", "specular_ior": "other"}, "diffuse_only": None, "specular_only": {}},
         ),
     ),
-    reflectance=Dielectric("specular_ior"),
+    reflectance=Metalness("base_color", "base_metalness", Dielectric("specular_ior")),
 )
 
 STANDARD_SURFACE = ModelSpec(
@@ -150,7 +150,7 @@ STANDARD_SURFACE = ModelSpec(
             {"roles": {"base_color": "specular", "specular_IOR": "other"}, "diffuse_only": None, "specular_only": {}},
         ),
     ),
-    reflectance=Dielectric("specular_IOR"),
+    reflectance=Metalness("base_color", "metalness", Dielectric("specular_IOR")),
 )
 
 #: the models of this dialect, in the order they are listed
@@ -262,6 +262,39 @@ def _layer_colour(values: Mapping[str, Any], layer: Layer) -> np.ndarray:
         top = float(np.max(c))
         return c / top if top > 0 else np.ones(3)
     return np.array(c)
+
+
+def layers_on(model: str, values: Mapping[str, Any]) -> list[str]:
+    """The layers (:data:`LAYERS`) a material of ``model`` has: those whose weight is above 0."""
+    return [
+        layer
+        for layer, weight in LAYERS.get(model, {}).items()
+        if float(np.max(np.asarray(values.get(weight, 0.0), dtype=float))) > 0.0
+    ]
+
+
+def layer_textures(model: str, maps: Iterable[str]) -> list[str]:
+    """The parameters among ``maps`` (a material's textured parameters) that are a layer's weight, colour or
+    roughness (:data:`LAYERS`, :data:`LAYER_PARAMS`)."""
+    names = set(LAYERS.get(model, {}).values())
+    for layer in LAYER_PARAMS.get(model, {}).values():
+        names |= {n for n in (layer.weight, layer.colour, layer.roughness) if n is not None}
+    return [m for m in maps if m in names]
+
+
+def coat_tint(model: str, values: Mapping[str, Any]) -> np.ndarray | None:
+    """What a coloured coat does to the colour of everything under it, lerp(1, coat colour, coat weight) per
+    channel ([..., 3], values may be maps), or None for a model without a coat colour. Standard Surface 1.0.1
+    ("Coating": the base is multiplied by coat_color where coat is 1) and OpenPBR 1.1 (coat_color is the square
+    of the coat's normal-incidence transmittance: light crosses it twice) both tint so; their (1 - E_coat)
+    terms are left out: this is the hue the base is seen with, for the gate's map checks, not a render."""
+    layer = LAYER_PARAMS.get(model, {}).get("coat")
+    if layer is None or layer.colour is None:
+        return None
+    weight = np.asarray(values.get(layer.weight, 0.0), dtype=float)
+    colour = np.asarray(values.get(layer.colour, 1.0), dtype=float)
+    weight = weight[..., None] if weight.ndim else weight
+    return 1.0 + np.clip(weight, 0.0, 1.0) * (colour - 1.0)
 
 
 def absorbed_layers(
