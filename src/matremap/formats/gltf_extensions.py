@@ -19,8 +19,11 @@ extension registry, ratified versions):
 (:mod:`matremap.formats.gltf_read`). The layers: a glTF written over its source keeps them as they are (the
 copy leaves them alone). A material without textures whose look a layer carries (a clear coat above 0.5, a
 coloured sheen, any transmission) is read into ``gltf:pbr`` and its layers fitted (:func:`layer_values`; a
-transmission on the transmission probe); a faint layer is noted; a textured material whose look depends on one
-(a transmission, a coloured sheen) is listed in ``asset.lost`` and refused for other targets.
+transmission on the transmission probe); so is a textured material whose coat or sheen is uniform (no texture of
+its own values: the layer is fitted once and held while the sweep fits the base maps under it); a faint layer is
+noted; a layer with textures of its own, or a transmission over textured base maps, is listed in ``asset.lost`` and
+refused for other targets. A coat's own normal map (``clearcoatNormalTexture``) is noted: the target's coat
+follows the base's normal map.
 """
 
 from __future__ import annotations
@@ -172,14 +175,19 @@ def _textures(values: dict[str, Any]) -> str:
     return f" with {', '.join(names)}" if names else ""
 
 
-LEFT_BEHIND = "a glTF output keeps it as it is; other targets have no such layer, so it is left out"
+def _value_textures(values: dict[str, Any]) -> list[str]:
+    """The textures that vary a layer's values (not its own normal map, which a coat may have)."""
+    return [k for k in values if k.endswith("Texture") and not k.endswith("NormalTexture")]
+
+
+LEFT_BEHIND = "a glTF output keeps it as it is; other targets leave it out"
 
 
 def lost_look(found: dict[str, dict[str, Any]]) -> list[str]:
     """The extensions that carry the material's look: any transmission (its share of the base goes through: a
-    glass, or a part of one) or a coloured sheen (above 0.5, or textured: velvet). On a material without textures
-    :func:`layer_values` reads them into ``gltf:pbr``; on a textured one they are lost (refused for other
-    models)."""
+    glass, or a part of one), a coloured sheen (above 0.5, or textured: velvet) or a clear coat above
+    :data:`COAT_LOOK` with textures of its own values. :func:`layer_values` reads the uniform ones into
+    ``gltf:pbr``; the others are lost (refused for other models)."""
     lost = []
     tr = found.get(TRANSMISSION)
     if tr and tr["transmissionFactor"] > 0:
@@ -187,6 +195,9 @@ def lost_look(found: dict[str, dict[str, Any]]) -> list[str]:
     sh = found.get(SHEEN)
     if sh and (max(sh["sheenColorFactor"]) > 0.5 or ("sheenColorTexture" in sh and max(sh["sheenColorFactor"]) > 0)):
         lost.append(f"{SHEEN} (a coloured sheen: sheenColorFactor {_rgb(sh['sheenColorFactor'])}{_textures(sh)})")
+    cc = found.get(CLEARCOAT)
+    if cc and cc["clearcoatFactor"] > COAT_LOOK and _value_textures(cc):
+        lost.append(f"{CLEARCOAT} (clearcoatFactor {_g(cc['clearcoatFactor'])} with {', '.join(_value_textures(cc))})")
     return lost
 
 
@@ -196,15 +207,17 @@ LAYERED_MODEL = "gltf:pbr"
 COAT_LOOK = 0.5
 
 
-def layer_values(found: dict[str, dict[str, Any]]) -> dict[str, Any]:
+def layer_values(found: dict[str, dict[str, Any]], textured: bool = False) -> dict[str, Any]:
     """The ``gltf:pbr`` layer parameters of a material whose clear coat (clearcoatFactor above
     :data:`COAT_LOOK`), coloured sheen or transmission (as :func:`lost_look` says) carries its look, when those
-    layers have no texture: the material is then read into ``gltf:pbr`` and its layers are fitted (a transmission
-    on the transmission probe), not left out. Empty otherwise (the material is read as ``gltf:metal-rough``)."""
+    layers' values have no texture: the material is then read into ``gltf:pbr`` and its layers are fitted (a
+    transmission on the transmission probe), not left out. ``textured``: the base has maps; a uniform coat or
+    sheen is read (held over the maps' sweep), a transmission is not (the evaluation of maps draws reflection
+    only). Empty otherwise (the material is read as ``gltf:metal-rough``)."""
     cc, sh, tr = found.get(CLEARCOAT), found.get(SHEEN), found.get(TRANSMISSION)
-    coat = cc is not None and cc["clearcoatFactor"] > COAT_LOOK and not _textures(cc)
-    sheen = sh is not None and SHEEN in " ".join(lost_look(found)) and not _textures(sh)
-    through = tr is not None and TRANSMISSION in " ".join(lost_look(found)) and not _textures(tr)
+    coat = cc is not None and cc["clearcoatFactor"] > COAT_LOOK and not _value_textures(cc)
+    sheen = sh is not None and SHEEN in " ".join(lost_look(found)) and not _value_textures(sh)
+    through = tr is not None and TRANSMISSION in " ".join(lost_look(found)) and not _textures(tr) and not textured
     vol = found.get(VOLUME)
     if through and vol is not None and _textures(vol):
         through = False  # a textured thickness or attenuation: not a uniform material
@@ -220,9 +233,9 @@ def layer_values(found: dict[str, dict[str, Any]]) -> dict[str, Any]:
                 "attenuationColor": list(vol["attenuationColor"]),
                 "attenuationDistance": 0.0 if not math.isfinite(distance) else distance,
             }
-    if cc is not None and not _textures(cc):
+    if cc is not None and not _value_textures(cc):
         out |= {"clearcoat": cc["clearcoatFactor"], "clearcoatRoughness": cc["clearcoatRoughnessFactor"]}
-    if sh is not None and not _textures(sh):
+    if sh is not None and not _value_textures(sh):
         out |= {"sheenColor": list(sh["sheenColorFactor"]), "sheenRoughness": sh["sheenRoughnessFactor"]}
     return out
 
@@ -233,18 +246,31 @@ def extension_notes(found: dict[str, dict[str, Any]], textured: bool = False) ->
     for a material without textures)."""
     notes = []
     lost = " ".join(lost_look(found))
-    layers = layer_values(found) if not textured else {}
+    layers = layer_values(found, textured)
     if layers:
         what = ", ".join(f"{k} {_g(v) if isinstance(v, float) else _rgb(v)}" for k, v in layers.items())
-        notes.append(f"read into {LAYERED_MODEL} ({what}): its layers are fitted, not left out")
+        held = " (uniform over the maps: fitted once, held while the sweep fits the maps)" if textured else ""
+        exts = [
+            e
+            for e, k in ((CLEARCOAT, "clearcoat"), (SHEEN, "sheenColor"), (TRANSMISSION, "transmission"))
+            if k in layers
+        ]
+        notes.append(
+            f"read into {LAYERED_MODEL} ({what}; {', '.join(exts)}): its layers are fitted, not left out{held}"
+        )
     cc = found.get(CLEARCOAT)
-    if cc is not None and "clearcoat" not in layers:
+    if cc is not None and "clearcoat" in layers and "clearcoatNormalTexture" in cc:
+        notes.append(
+            f"{CLEARCOAT}.clearcoatNormalTexture, the coat's own normal map, is not converted: the target's coat "
+            "follows the base's normal map (a glTF copy of the file keeps it)"
+        )
+    if cc is not None and "clearcoat" not in layers and CLEARCOAT not in lost:
         if cc["clearcoatFactor"] == 0:
             notes.append(f"{CLEARCOAT} has clearcoatFactor 0: no coat")
         else:
             notes.append(
                 f"{CLEARCOAT} factor {_g(cc['clearcoatFactor'])}, roughness {_g(cc['clearcoatRoughnessFactor'])}"
-                f"{_textures(cc)}: matremap's models have no coat, so the fit sees the base layer only; {LEFT_BEHIND}"
+                f"{_textures(cc)}: a faint coat (at most {COAT_LOOK}) the fit does not see; {LEFT_BEHIND}"
             )
     sh = found.get(SHEEN)
     if sh is not None and SHEEN not in lost and "sheenColor" not in layers:

@@ -208,10 +208,9 @@ def read(
     carried = textures.read_carried(m, pbr, found)
     notes += extension_notes(found, textured=bool(maps))
     note_unknown(ext, obj, notes)
-    # a coat or sheen carrying the look of a uniform material: read into gltf:pbr, where it is fitted (a textured
-    # one stays gltf:metal-rough, its layers noted and kept in a glTF copy: textured layered materials are not
-    # converted yet)
-    layers, lost = (layer_values(found) if not maps else {}), lost_look(found)
+    # a coat or sheen carrying the look: read into gltf:pbr, where it is fitted (over textured maps: fitted once
+    # and held through the sweep); a layer with textures of its own stays in asset.lost
+    layers, lost = layer_values(found, textured=bool(maps)), lost_look(found)
     if layers:
         constants |= layers
         lost = [w for w in lost if not w.startswith(SHEEN)]

@@ -430,9 +430,10 @@ def layer_extensions(exts: dict[str, Any], consts: dict[str, Any], keep_unread: 
     """Set (or drop, where the layer is off) the layer extensions of a ``gltf:pbr`` result's uniform values:
     KHR_materials_clearcoat (clearcoatFactor > 0), _sheen (a sheen colour not black), _transmission
     (transmissionFactor > 0) and _volume (thicknessFactor > 0; attenuationDistance 0 is glTF's default,
-    infinity, so it is left out). The ratified READMEs' property names; a replaced extension loses its textures
-    (the result's values are uniform). ``keep_unread``: in a copy of a glTF source, a transmission or volume the
-    result has off is the source's, which the reader does not read into gltf:pbr (only its coat and sheen): kept."""
+    infinity, so it is left out). The ratified READMEs' property names; a replaced extension loses the textures
+    of its values (the result's values are uniform), not a coat's own normal map. ``keep_unread``: in a copy of a
+    glTF source, a transmission or volume the result has off is the source's, which the reader does not read into
+    gltf:pbr (only its coat and sheen): kept."""
 
     def one(name: str) -> float:
         return float(np.asarray(consts[name], dtype=float).reshape(-1)[0])
@@ -458,7 +459,9 @@ def layer_extensions(exts: dict[str, Any], consts: dict[str, Any], keep_unread: 
     }
     for name, ext in values.items():
         if ext is not None:
-            exts[name] = ext
+            # the coat's own normal map is no value of the layer: a copy keeps it (matremap's coats use the base's)
+            own = (exts.get(name) or {}).get("clearcoatNormalTexture") if name == CLEARCOAT else None
+            exts[name] = ext if own is None else {**ext, "clearcoatNormalTexture": own}
         elif not (keep_unread and name in (TRANSMISSION, VOLUME)):
             exts.pop(name, None)
 

@@ -558,9 +558,14 @@ _WHITE_COAT = 0.5
 def lost_look(shader: Any) -> list[str]:
     """The inputs that carry the material's look and that gltf:metal-rough has nothing for: a coloured coat
     over the base (Standard Surface's copper is a white metal under a copper coat; a textured coat colour,
-    the tiled brass), transmission (glass), sheen (velvet)."""
+    the tiled brass), transmission (glass), sheen (velvet), and any of these weights fed by a texture (before,
+    read as no layer at all: a coat masked by an image was dropped with exit 0)."""
     lost = []
     for weight, (colour, limit) in _LOOK.items():
+        inp = shader.getInput(weight)
+        if inp is not None and (inp.getAttribute("nodename") or inp.getAttribute("nodegraph")):
+            lost.append(f"{weight} textured")  # a layer over part of the surface (read into its model, refused)
+            continue
         w = _float_input(shader, weight)
         if w is None or w <= 0.0:
             continue
