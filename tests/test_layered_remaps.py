@@ -231,28 +231,3 @@ def test_a_textured_or_non_principled_blend_material_is_refused_in_one_line(tmp_
     code, log = remap(capsys, src, "gltf:pbr", tmp_path / "out")
     last = log.strip().splitlines()[-1]
     assert code == 2 and "Principled BSDF" in last and "ShaderNodeAddShader" in last and not (tmp_path / "out").exists()
-
-
-@needs_materialx
-def test_a_textured_layered_material_is_refused_in_one_line_not_swept(tmp_path, capsys):
-    """A sweep's quantities (roughness, F0, diffuse) have no layer: a textured coated Standard Surface is refused
-    before any work (it was refused before too, as a lost coat colour), naming the layer."""
-    from matremap.svbrdf.textures import ImageInfo, write_image_like
-
-    folder = tmp_path / "in"
-    folder.mkdir()
-    y, x = np.mgrid[0:16, 0:16] / 15.0
-    base = np.stack([0.6 + 0.3 * x, 0.5 + 0.2 * y, 0.4 + 0 * x], -1).astype(np.float32)
-    write_image_like(folder / "base.png", base, ImageInfo("png", "uint8", 3, 0, 0, "srgb"), force=True)
-    text = COPPER.read_text().replace(
-        '<input name="base_color" type="color3" value="1, 1, 1" />',
-        '<input name="base_color" type="color3" nodename="img" />',
-    )
-    image = '<image name="img" type="color3"><input name="file" type="filename" value="base.png" /></image>'
-    src = folder / "copper.mtlx"
-    src.write_text(text.replace("<standard_surface", image + "\n  <standard_surface", 1))
-    assert read_asset(src).model == "mtlx:standard_surface" and read_asset(src).textured
-    code, log = remap(capsys, src, "gltf:pbr", tmp_path / "out")
-    last = log.strip().splitlines()[-1]
-    assert code == 2 and "textured layered materials are not converted yet" in last and "(coat)" in last
-    assert not (tmp_path / "out").exists()
