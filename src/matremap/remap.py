@@ -613,7 +613,7 @@ def remap_into(
     t = time.perf_counter()
     identity = identity_route(map_set, target, job.fix)
     conversion = _convert_maps(folder, map_set, summary, job, target_renderer, identity, log, seconds)
-    texels, outside, clipped, tpath, cached = conversion
+    texels, outside, clipped, constant, tpath, cached = conversion
     seconds["convert"] = time.perf_counter() - t
     result_set = load_map_set(folder / "maps")
     result_summary = summarise(result_set, limits=(SAMPLE_LIMIT,), render_side=side)
@@ -626,9 +626,9 @@ def remap_into(
         ),
         Check(
             "clamped",
-            clipped / max(texels * values_per_texel(result_set), 1),
+            (clipped + constant) / max(texels * values_per_texel(result_set), 1),
             job.thresholds.clamped,
-            f"values clipped to the target's bounds or the files' range: {clipped}",
+            _clamped_where(clipped, constant),
         ),
     ]
     checks += map_quality(map_set, summary.sample(), result_set, result_summary.sample(), job.thresholds)
@@ -663,6 +663,12 @@ def remap_into(
     return RemapResult(
         tpath, cached, folder / "maps", html, outside, texels, mean, seconds, verdict, identity is not None
     )
+
+
+def _clamped_where(clipped: int, constant: int) -> str:
+    """What the ``clamped`` measure counted: values clipped, and texels one constant stands for."""
+    parts = [f"values clipped to the target's bounds or the files' range: {clipped}"] if clipped or not constant else []
+    return "; ".join(parts + ([f"texels whose F0 one constant approximates: {constant}"] if constant else []))
 
 
 def values_per_texel(map_set: MapSet) -> int:
@@ -707,16 +713,17 @@ def _convert_maps(
     identity: Equivalence | None,
     log: Callable[[str], None],
     seconds: dict[str, float],
-) -> tuple[int, int, int, Path | None, bool]:
+) -> tuple[int, int, int, int, Path | None, bool]:
     """``folder/maps``: the maps copied (identity), blended per texel from each kind's conversion (maps
     that mix metal and dielectric), or converted through one transform. Returns (texels, texels outside
-    the training domain, values clipped, the transform file or None, whether it came from a cache); the
-    time spent finding the transform goes to ``seconds["transform"]``."""
+    the training domain, values clipped, texels whose F0 a parameter written as one constant approximates
+    (:func:`matremap.svbrdf.convert.one_constant`), the transform file or None, whether it came from a cache);
+    the time spent finding the transform goes to ``seconds["transform"]``."""
     target = job.target
     if identity is not None:
         log(f"identity: {_identity_words(identity)}: the maps are copied, nothing is fitted")
         copy_map_set(map_set, folder / "maps", identity)
-        return int(np.prod(map_set.size)), 0, 0, None, True
+        return int(np.prod(map_set.size)), 0, 0, 0, None, True
     mixed = mixed_parameter(map_set, summary)
     params = summary.sample()
     if mixed is not None:  # metal and dielectric texels: blended per texel
@@ -731,7 +738,7 @@ def _convert_maps(
             lambda kind, out: remap_into(out, kind, replace(job, evaluate=False), log).maps,
             log,
         )
-        return texels, outside, 0, None, False
+        return texels, outside, 0, 0, None, False
     held = held_values(map_set, summary, target)
     # the maps' ranges stand for them where only their extremes matter (is any texel diffuse?)
     fix = complete_fix(map_set.model, {**map_set.constants, **summary.ranges(), **held}, target, job.fix)
@@ -750,7 +757,8 @@ def _convert_maps(
         + (f"; {report.outside} outside the training domain (see maps/{MASK_NAME})" if report.outside else "")
     )
     # values the transform asked for beyond the target's bounds, and values beyond what the files hold
-    return int(report.texels), int(report.outside), int(report.clipped + report.bounded), tpath, cached
+    clipped = int(report.clipped + report.bounded)
+    return int(report.texels), int(report.outside), clipped, int(report.approximated), tpath, cached
 
 
 def _transform_for(
