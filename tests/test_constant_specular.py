@@ -121,6 +121,18 @@ def no_sweep(monkeypatch, tmp_path):
     return started
 
 
+def test_the_bronze_onto_principled_is_refused_in_one_line_before_any_fit(tmp_path, capsys, no_sweep):
+    """Its F0 (a Ward specular map, 0.05 to 0.14) varies: refused before the sweep, nothing written. It was refused
+    after 120 fits (4.2 s) by the environment render."""
+    out = tmp_path / "out"
+    code = main(["remap", str(EXAMPLES / "bronze"), "--to", "mitsuba3:principled", "-o", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and not out.exists()
+    assert no_sweep == []  # no fit ran
+    assert not any(line.startswith(("sweep:", "learn:", "convert:", "transform:")) for line in err)
+    assert "specular" in err[-1] and "the maps' F0 varies" in err[-1] and "cycles:principled" in err[-1]
+
+
 def test_a_uniform_specular_map_onto_principled_writes_one_specular_mitsuba_loads(tmp_path, capsys, no_sweep):
     """The bronze's albedo and roughness with a uniform F0 of 0.04: swept once, written with one specular (the median
     of what the learned transform asks for, texel by texel) in maps/material.json and in the Mitsuba XML, which

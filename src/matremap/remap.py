@@ -42,7 +42,7 @@ from matremap.core.envmap import resolve as resolve_envmap
 from matremap.core.imageio import write_image, write_text
 from matremap.core.material import Material, SVMaterial
 from matremap.core.scene import Scene, parse_probe
-from matremap.dialects import get_model
+from matremap.dialects import get_model, list_models
 from matremap.dialects.equivalence import Equivalence, equivalence
 from matremap.dialects.mtlx import LAYERS, freed_layers
 from matremap.errors import MatremapError, TransformChecksumError
@@ -734,7 +734,14 @@ def _convert_maps(
             mixed,
             target,
             job.fix,
-            lambda kind, kind_params: check_before_rendering(kind, kind_params, {}, target, target_renderer),
+            lambda kind, kind_params: check_before_rendering(
+                kind,
+                kind_params,
+                {},
+                target,
+                target_renderer,
+                complete_fix(kind.model, {**kind.constants, **kind_params}, target, job.fix),
+            ),
             lambda kind, out: remap_into(out, kind, replace(job, evaluate=False), log).maps,
             log,
         )
@@ -742,7 +749,7 @@ def _convert_maps(
     held = held_values(map_set, summary, target)
     # the maps' ranges stand for them where only their extremes matter (is any texel diffuse?)
     fix = complete_fix(map_set.model, {**map_set.constants, **summary.ranges(), **held}, target, job.fix)
-    check_before_rendering(map_set, params, held, target, target_renderer)
+    check_before_rendering(map_set, params, held, target, target_renderer, fix)
     t0 = time.perf_counter()
     transform, tpath, cached = _transform_for(map_set, summary, fix, target_renderer, job, log)
     seconds["transform"] = time.perf_counter() - t0
@@ -833,13 +840,24 @@ def copy_map_set(map_set: MapSet, dest: Path, eq: Equivalence) -> None:
 
 
 def check_before_rendering(
-    map_set: MapSet, params: Mapping[str, Any], held: Mapping[str, float], target: str, target_renderer: str
+    map_set: MapSet,
+    params: Mapping[str, Any],
+    held: Mapping[str, float],
+    target: str,
+    target_renderer: str,
+    fix: Mapping[str, Any],
 ) -> None:
     """What can be known before a sweep: the target's renderer draws it and is installed, and the
     renderers that draw the target take as textures the parameters that the maps' varying quantities
-    (roughness, F0, diffuse albedo, read from the maps themselves) will drive."""
+    (roughness, F0, diffuse albedo, read from the maps themselves) will drive, the target held as ``fix``
+    says (metallic: a metal's F0 drives its base colour, a dielectric's its specular level). A parameter
+    taken as one number only (Mitsuba 3 principled's ``specular``) is written as one constant, the median
+    (:func:`matremap.svbrdf.convert.one_constant`), where the maps' F0 does not vary as the gate's ``flat``
+    check counts it (:func:`~matremap.svbrdf.quality.varies`); where it does, the constant would fail that
+    check, so it is refused here, before the sweep."""
     from matremap.renderers.registry import can_draw, get_renderer, texture_refusal
     from matremap.svbrdf.convert import target_param
+    from matremap.svbrdf.quality import varies
 
     if not can_draw(target_renderer, target):
         raise MatremapError(f"renderer {target_renderer!r} cannot draw {target}; {renderer_for(target)!r} does")
@@ -848,14 +866,47 @@ def check_before_rendering(
     shape = sample(probe).shape[:2] if probe is not None else (1, 1)
     quantities = _quantity_sample(map_set.spec, {**map_set.constants, **params, **held}, shape)
     tgt = get_model(target)
-    driven = [
-        name
-        for q, values in quantities.items()
-        if np.ptp(np.asarray(values, dtype=float)) > 1e-6 and (name := target_param(tgt, q)) is not None
-    ]
+    metal = tgt.specialise(fix).diffuse_only is None
+    constant = tgt.reflectance.constant_param(metal) if tgt.reflectance is not None else None
+    driven = []
+    for q, values in quantities.items():
+        name = target_param(tgt, q, metal)
+        if name is None or np.ptp(np.asarray(values, dtype=float)) <= 1e-6:
+            continue
+        if name == constant and varies(values):
+            raise MatremapError(f"{texture_refusal(target, [name])}, and {_varying_f0(values, name, target)}")
+        if name != constant:
+            driven.append(name)
     why = texture_refusal(target, driven)
     if why is not None:
         raise MatremapError(f"{why}, and the maps vary it; choose a target that takes it as a map")
+
+
+def _varying_f0(f0: Any, name: str, target: str) -> str:
+    """The refusal's reason: how the maps' F0 varies, and targets that take the parameter it drives as a map
+    (those that express F0 as the target does first, a principled BSDF for a principled BSDF)."""
+    from matremap.renderers.registry import texture_refusal
+    from matremap.svbrdf.convert import target_param
+    from matremap.svbrdf.quality import VARIES, luminance
+
+    lo, hi = np.percentile(luminance(np.asarray(f0, dtype=float).reshape(-1, 3)), [5, 95])
+    tgt = get_model(target)
+
+    def order(m: Any) -> tuple[bool, bool, str]:
+        return type(m.reflectance) is not type(tgt.reflectance), m.family != tgt.family, m.id
+
+    others = [
+        m.id
+        for m in sorted(list_models(), key=order)
+        if qty.diffuse_param(m) is not None
+        and (driven := target_param(m, "reflectance", metal=False)) is not None
+        and texture_refusal(m.id, [driven]) is None
+    ]
+    return (
+        f"the maps' F0 varies ({lo:.3g} to {hi:.3g} over the middle 90% of the texels; the quality gate calls a "
+        f"spread over {VARIES:g} varying): one {name} would flatten it; choose a target that takes it as a map"
+        + (f", e.g. {' or '.join(others[:2])}" if others else "")
+    )
 
 
 def _quantity_sample(spec: Any, values: Mapping[str, Any], shape: tuple[int, ...]) -> dict[str, np.ndarray]:
