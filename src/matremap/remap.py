@@ -42,7 +42,7 @@ from matremap.core.envmap import resolve as resolve_envmap
 from matremap.core.imageio import write_image, write_text
 from matremap.core.material import Material, SVMaterial
 from matremap.core.scene import Scene, parse_probe
-from matremap.dialects import get_model
+from matremap.dialects import get_model, list_models
 from matremap.dialects.equivalence import Equivalence, equivalence
 from matremap.dialects.mtlx import absorbed_layers, coat_tint, freed_layers, layer_textures, layers_on
 from matremap.errors import MatremapError, TransformChecksumError
@@ -613,7 +613,7 @@ def remap_into(
     t = time.perf_counter()
     identity = identity_route(map_set, target, job.fix)
     conversion = _convert_maps(folder, map_set, summary, job, target_renderer, identity, log, seconds)
-    texels, outside, clipped, tpath, cached = conversion
+    texels, outside, clipped, constant, tpath, cached = conversion
     seconds["convert"] = time.perf_counter() - t
     result_set = load_map_set(folder / "maps")
     result_summary = summarise(result_set, limits=(SAMPLE_LIMIT,), render_side=side)
@@ -626,9 +626,9 @@ def remap_into(
         ),
         Check(
             "clamped",
-            clipped / max(texels * values_per_texel(result_set), 1),
+            (clipped + constant) / max(texels * values_per_texel(result_set), 1),
             job.thresholds.clamped,
-            f"values clipped to the target's bounds or the files' range: {clipped}",
+            _clamped_where(clipped, constant),
         ),
     ]
     checks += map_quality(map_set, summary.sample(), result_set, result_summary.sample(), job.thresholds)
@@ -663,6 +663,12 @@ def remap_into(
     return RemapResult(
         tpath, cached, folder / "maps", html, outside, texels, mean, seconds, verdict, identity is not None
     )
+
+
+def _clamped_where(clipped: int, constant: int) -> str:
+    """What the ``clamped`` measure counted: values clipped, and texels one constant stands for."""
+    parts = [f"values clipped to the target's bounds or the files' range: {clipped}"] if clipped or not constant else []
+    return "; ".join(parts + ([f"texels whose F0 one constant approximates: {constant}"] if constant else []))
 
 
 def values_per_texel(map_set: MapSet) -> int:
@@ -707,16 +713,17 @@ def _convert_maps(
     identity: Equivalence | None,
     log: Callable[[str], None],
     seconds: dict[str, float],
-) -> tuple[int, int, int, Path | None, bool]:
+) -> tuple[int, int, int, int, Path | None, bool]:
     """``folder/maps``: the maps copied (identity), blended per texel from each kind's conversion (maps
     that mix metal and dielectric), or converted through one transform. Returns (texels, texels outside
-    the training domain, values clipped, the transform file or None, whether it came from a cache); the
-    time spent finding the transform goes to ``seconds["transform"]``."""
+    the training domain, values clipped, texels whose F0 a parameter written as one constant approximates
+    (:func:`matremap.svbrdf.convert.one_constant`), the transform file or None, whether it came from a cache);
+    the time spent finding the transform goes to ``seconds["transform"]``."""
     target = job.target
     if identity is not None:
         log(f"identity: {_identity_words(identity)}: the maps are copied, nothing is fitted")
         copy_map_set(map_set, folder / "maps", identity)
-        return int(np.prod(map_set.size)), 0, 0, None, True
+        return int(np.prod(map_set.size)), 0, 0, 0, None, True
     mixed = mixed_parameter(map_set, summary)
     params = summary.sample()
     if mixed is not None:  # metal and dielectric texels: blended per texel
@@ -727,15 +734,22 @@ def _convert_maps(
             mixed,
             target,
             job.fix,
-            lambda kind, kind_params: check_before_rendering(kind, kind_params, {}, target, target_renderer),
+            lambda kind, kind_params: check_before_rendering(
+                kind,
+                kind_params,
+                {},
+                target,
+                target_renderer,
+                complete_fix(kind.model, {**kind.constants, **kind_params}, target, job.fix),
+            ),
             lambda kind, out: remap_into(out, kind, replace(job, evaluate=False), log).maps,
             log,
         )
-        return texels, outside, 0, None, False
+        return texels, outside, 0, 0, None, False
     held = held_values(map_set, summary, target)
     # the maps' ranges stand for them where only their extremes matter (is any texel diffuse?)
     fix = complete_fix(map_set.model, {**map_set.constants, **summary.ranges(), **held}, target, job.fix)
-    check_before_rendering(map_set, params, held, target, target_renderer)
+    check_before_rendering(map_set, params, held, target, target_renderer, fix)
     t0 = time.perf_counter()
     fix, job = hold_layers(map_set, summary, held, fix, job, log)
     transform, tpath, cached = _transform_for(map_set, summary, fix, target_renderer, job, log)
@@ -751,7 +765,8 @@ def _convert_maps(
         + (f"; {report.outside} outside the training domain (see maps/{MASK_NAME})" if report.outside else "")
     )
     # values the transform asked for beyond the target's bounds, and values beyond what the files hold
-    return int(report.texels), int(report.outside), int(report.clipped + report.bounded), tpath, cached
+    clipped = int(report.clipped + report.bounded)
+    return int(report.texels), int(report.outside), clipped, int(report.approximated), tpath, cached
 
 
 def _transform_for(
@@ -826,13 +841,24 @@ def copy_map_set(map_set: MapSet, dest: Path, eq: Equivalence) -> None:
 
 
 def check_before_rendering(
-    map_set: MapSet, params: Mapping[str, Any], held: Mapping[str, float], target: str, target_renderer: str
+    map_set: MapSet,
+    params: Mapping[str, Any],
+    held: Mapping[str, float],
+    target: str,
+    target_renderer: str,
+    fix: Mapping[str, Any],
 ) -> None:
     """What can be known before a sweep: the target's renderer draws it and is installed, and the
     renderers that draw the target take as textures the parameters that the maps' varying quantities
-    (roughness, F0, diffuse albedo, read from the maps themselves) will drive."""
+    (roughness, F0, diffuse albedo, read from the maps themselves) will drive, the target held as ``fix``
+    says (metallic: a metal's F0 drives its base colour, a dielectric's its specular level). A parameter
+    taken as one number only (Mitsuba 3 principled's ``specular``) is written as one constant, the median
+    (:func:`matremap.svbrdf.convert.one_constant`), where the maps' F0 does not vary as the gate's ``flat``
+    check counts it (:func:`~matremap.svbrdf.quality.varies`); where it does, the constant would fail that
+    check, so it is refused here, before the sweep."""
     from matremap.renderers.registry import can_draw, get_renderer, texture_refusal
     from matremap.svbrdf.convert import target_param
+    from matremap.svbrdf.quality import varies
 
     if not can_draw(target_renderer, target):
         raise MatremapError(f"renderer {target_renderer!r} cannot draw {target}; {renderer_for(target)!r} does")
@@ -841,14 +867,47 @@ def check_before_rendering(
     shape = sample(probe).shape[:2] if probe is not None else (1, 1)
     quantities = _quantity_sample(map_set.spec, {**map_set.constants, **params, **held}, shape)
     tgt = get_model(target)
-    driven = [
-        name
-        for q, values in quantities.items()
-        if np.ptp(np.asarray(values, dtype=float)) > 1e-6 and (name := target_param(tgt, q)) is not None
-    ]
+    metal = tgt.specialise(fix).diffuse_only is None
+    constant = tgt.reflectance.constant_param(metal) if tgt.reflectance is not None else None
+    driven = []
+    for q, values in quantities.items():
+        name = target_param(tgt, q, metal)
+        if name is None or np.ptp(np.asarray(values, dtype=float)) <= 1e-6:
+            continue
+        if name == constant and varies(values):
+            raise MatremapError(f"{texture_refusal(target, [name])}, and {_varying_f0(values, name, target)}")
+        if name != constant:
+            driven.append(name)
     why = texture_refusal(target, driven)
     if why is not None:
         raise MatremapError(f"{why}, and the maps vary it; choose a target that takes it as a map")
+
+
+def _varying_f0(f0: Any, name: str, target: str) -> str:
+    """The refusal's reason: how the maps' F0 varies, and targets that take the parameter it drives as a map
+    (those that express F0 as the target does first, a principled BSDF for a principled BSDF)."""
+    from matremap.renderers.registry import texture_refusal
+    from matremap.svbrdf.convert import target_param
+    from matremap.svbrdf.quality import VARIES, luminance
+
+    lo, hi = np.percentile(luminance(np.asarray(f0, dtype=float).reshape(-1, 3)), [5, 95])
+    tgt = get_model(target)
+
+    def order(m: Any) -> tuple[bool, bool, str]:
+        return type(m.reflectance) is not type(tgt.reflectance), m.family != tgt.family, m.id
+
+    others = [
+        m.id
+        for m in sorted(list_models(), key=order)
+        if qty.diffuse_param(m) is not None
+        and (driven := target_param(m, "reflectance", metal=False)) is not None
+        and texture_refusal(m.id, [driven]) is None
+    ]
+    return (
+        f"the maps' F0 varies ({lo:.3g} to {hi:.3g} over the middle 90% of the texels; the quality gate calls a "
+        f"spread over {VARIES:g} varying): one {name} would flatten it; choose a target that takes it as a map"
+        + (f", e.g. {' or '.join(others[:2])}" if others else "")
+    )
 
 
 def _quantity_sample(spec: Any, values: Mapping[str, Any], shape: tuple[int, ...]) -> dict[str, np.ndarray]:

@@ -66,6 +66,12 @@ class Reflectance(ABC):
         """The parameter a ``*_specular`` map file binds by naming convention (None: no such file)."""
         return None
 
+    def constant_param(self, metal: bool = True) -> str | None:
+        """The parameter a map of F0 drives when the renderer takes it as one number only, not a texture
+        (None: it may be a map). :meth:`write_f0` still writes it per texel; the map writer writes one
+        value (:mod:`matremap.svbrdf.convert`)."""
+        return None
+
     @abstractmethod
     def f0(self, values: Mapping[str, Any], channels: Channels) -> np.ndarray:
         """F0 per channel [..., 3] from parameter arrays (scalars [...], RGB [..., 3])."""
@@ -246,10 +252,13 @@ class MetalRough(Reflectance):
 class SpecularLevel(Reflectance):
     """A grey dielectric F0 given as a level: F0 = ``scale`` x the parameter (Burley 2012, "Physically-based
     shading at Disney", §5.3: ``specular`` in [0, 1] maps to F0 in [0, 0.08]; Mitsuba 3's ``principled`` takes
-    eta = 2 / (1 - sqrt(0.08 specular)) - 1, the same F0). Written back as the channel mean / ``scale``."""
+    eta = 2 / (1 - sqrt(0.08 specular)) - 1, the same F0). Written back as the channel mean / ``scale``.
+    ``texture=False``: the renderer takes the level as one number (Mitsuba 3's ``principled.cpp`` reads
+    ``props.get<float>("specular", 0.5f)``), see :meth:`Reflectance.constant_param`."""
 
     param: str
     scale: float = 0.08
+    texture: bool = True
 
     @property
     def params(self) -> tuple[str, ...]:
@@ -261,6 +270,9 @@ class SpecularLevel(Reflectance):
 
     def driven_param(self, metal: bool = True) -> str:
         return self.param
+
+    def constant_param(self, metal: bool = True) -> str | None:
+        return None if self.texture else self.param
 
     def f0(self, values: Mapping[str, Any], channels: Channels) -> np.ndarray:
         return as_rgb(self.scale * as_floats(values[self.param]), 1)
@@ -298,6 +310,10 @@ class Metalness(Reflectance):
     def driven_param(self, metal: bool = True) -> str:
         """A metal's base colour, or the dielectric part's parameter."""
         return self.base_color if metal else self.dielectric.driven_param(False)
+
+    def constant_param(self, metal: bool = True) -> str | None:
+        """None for a metal (its base colour takes a map), else the dielectric part's."""
+        return None if metal else self.dielectric.constant_param(False)
 
     def f0(self, values: Mapping[str, Any], channels: Channels) -> np.ndarray:
         m = as_floats(values[self.metallic])[..., None]

@@ -263,8 +263,9 @@ PRINCIPLED = ModelSpec(
             {"roles": {"base_color": "specular", "specular": "other"}, "diffuse_only": None, "specular_only": {}},
         ),
     ),
-    # F0: a metal's base colour, a dielectric's 0.08 specular (spec_tint held at 0)
-    reflectance=Metalness("base_color", "metallic", SpecularLevel("specular")),
+    # F0: a metal's base colour, a dielectric's 0.08 specular (spec_tint held at 0); Mitsuba 3 takes specular as
+    # a float, not a texture: a map set's dielectric F0 is written as one specular (svbrdf.convert)
+    reflectance=Metalness("base_color", "metallic", SpecularLevel("specular", texture=False)),
 )
 
 

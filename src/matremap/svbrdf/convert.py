@@ -37,6 +37,7 @@ from matremap.dialects import get_model
 from matremap.errors import MatremapError
 from matremap.regress import quantities as qty
 from matremap.regress.transform import Transform
+from matremap.svbrdf.quality import VARIES
 from matremap.svbrdf.textures import ImageInfo, MapReader, MapSet, MapWriter, map_values, output_info
 
 MASK_NAME = "outside_domain.png"
@@ -45,6 +46,8 @@ MANIFEST_NAME = "material.json"
 UNIFORM_OUTPUT = 1e-6
 #: quantity -> the file-name convention its maps get
 _CONVENTION = {"roughness": "roughness", "reflectance": "specular", "diffuse": "diffuse"}
+#: F0 steps counted between 0 and 1 to find the median F0 of a parameter written as one constant (1e-5 apart)
+F0_STEPS = 100_001
 
 
 @dataclass
@@ -59,6 +62,9 @@ class ConvertReport:
     clipped: int = 0
     #: values the transform asked for beyond what the target model accepts, clipped to its bounds
     bounded: int = 0
+    #: texels whose F0 lies beyond :data:`~matremap.svbrdf.quality.VARIES` from a parameter written as one
+    #: constant (:func:`one_constant`)
+    approximated: int = 0
 
     @property
     def outside_fraction(self) -> float:
@@ -90,6 +96,16 @@ def source_params(spec: ModelSpec, quantity: str) -> list[str]:
     if quantity == "reflectance" and spec.reflectance is not None:
         return list(spec.reflectance.map_params)
     return []
+
+
+def constant_param(t: Transform) -> str | None:
+    """The target parameter that the transform's F0 drives and that the target's renderers take as one
+    number only (Mitsuba 3 principled's ``specular``): written as one constant, not a map, or None."""
+    tgt = get_model(t.target)
+    last = t.steps[-1] if t.method == "chain" else t
+    if tgt.reflectance is None or "reflectance" not in last.mappings:
+        return None
+    return tgt.reflectance.constant_param(tgt.specialise(last.template).diffuse_only is None)
 
 
 def target_param(spec: ModelSpec, quantity: str, metal: bool = True) -> str | None:
@@ -124,6 +140,8 @@ class _Plan:
     constants: dict[str, Any]
     size: tuple[int, int]
     rows: int
+    #: the target parameter written as one constant (:func:`constant_param`), whose F0 the mask group counts
+    constant: str | None = None
 
 
 def _bands(height: int, rows: int) -> list[tuple[int, int]]:
@@ -201,6 +219,8 @@ def _run(plan: _Plan, outputs: list[_Output], progress_every: int = 0, progress=
     bounded: dict[str, int] = {}
     first: dict[str, Any] = {}
     ranges: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    count_f0 = plan.constant is not None and any(o.param is None for o in outputs)  # once: in the mask's group
+    f0_counts = np.zeros(F0_STEPS, dtype=np.int64) if count_f0 else None
     try:
         for name, path in plan.maps.items():
             info = plan.infos[name]
@@ -214,6 +234,9 @@ def _run(plan: _Plan, outputs: list[_Output], progress_every: int = 0, progress=
             outside += int(np.count_nonzero(off))
             if i == 0:
                 first = {k: np.asarray(v)[(0,) * (np.ndim(off))].tolist() for k, v in out.items()}
+            if f0_counts is not None:
+                f0 = qty.read(get_model(t.target), out)["reflectance"].mean(axis=-1)
+                f0_counts += np.bincount(_f0_step(f0).ravel(), minlength=F0_STEPS)
             for o, w in writers:
                 w.write_rows(y0, off.astype(np.float32) if o.param is None else out[o.param])
                 if o.param is not None:
@@ -223,7 +246,8 @@ def _run(plan: _Plan, outputs: list[_Output], progress_every: int = 0, progress=
         for _, w in writers:
             w.close()
         clipped = {o.param: w.clipped for o, w in writers if o.param}
-        return {"outside": outside, "clipped": clipped, "bounded": bounded, "first": first, "ranges": ranges}
+        done = {"outside": outside, "clipped": clipped, "bounded": bounded, "first": first, "ranges": ranges}
+        return {**done, "f0_counts": f0_counts}
     finally:
         for r in readers.values():
             r.close()
@@ -232,6 +256,48 @@ def _run(plan: _Plan, outputs: list[_Output], progress_every: int = 0, progress=
                 w.close()
             except Exception:  # noqa: BLE001 - the first error is the one to report
                 pass
+
+
+def _f0_step(f0: np.ndarray) -> np.ndarray:
+    """F0 in [0, 1] as the index of its step of :data:`F0_STEPS`."""
+    return np.rint(np.clip(f0, 0.0, 1.0) * (F0_STEPS - 1)).astype(np.int64)
+
+
+def one_constant(t: Transform, name: str, f0_counts: np.ndarray) -> tuple[float, int, str | None]:
+    """The value of ``name`` (:func:`constant_param`) written for every texel: the one that gives the median F0
+    the texels ask for (``f0_counts``: texels per F0 step), through the target's own write-back; the texels whose
+    F0 lies more than :data:`~matremap.svbrdf.quality.VARIES` from it (the gate counts them with the clamped values);
+    and a note when they ask for more than one F0 (None when all ask for the same)."""
+    tgt = get_model(t.target)
+    last = t.steps[-1] if t.method == "chain" else t
+    steps = np.arange(F0_STEPS) / (F0_STEPS - 1)
+    total = int(f0_counts.sum())
+    cum = np.cumsum(f0_counts)  # the middle texel's F0, or the mean of the two middle ones' (numpy's median)
+    lo, hi = (int(np.searchsorted(cum, 0.5 * total, side=side)) for side in ("left", "right"))
+    median = 0.5 * float(steps[lo] + steps[min(hi, F0_STEPS - 1)]) if total else 0.0
+    written = qty.write(tgt, {"reflectance": np.full((1, 3), median)}, last.template)
+    value = float(np.ravel(written[name])[0])
+    off = int(f0_counts[np.abs(steps - median) > VARIES].sum())
+    asked = steps[f0_counts > 0]
+    if asked.size <= 1:
+        return value, 0, None
+    note = (
+        f"{name}: {t.target} takes it as one number, not a map: written as {value:.4g} (F0 {median:.4g}, the median "
+        f"the texels ask for, which range over {asked.min():.4g}-{asked.max():.4g}); {off} texels "
+        f"({100 * off / max(total, 1):.1f}%) ask for an F0 more than {VARIES:g} from it"
+    )
+    return value, off, note
+
+
+def _write_constant(t: Transform, name: str | None, result: dict[str, Any], notes: list[str]) -> int:
+    """Put the one value of the parameter ``name`` (:func:`one_constant`, none when None) among the values the
+    manifest takes (``result["first"]``), with its note; return the texels it approximates."""
+    if name is None:
+        return 0
+    value, approximated, note = one_constant(t, name, result["f0_counts"])
+    result["first"][name] = value
+    notes += [note] if note else []
+    return approximated
 
 
 def _band_range(values: Any, seen: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray]:
@@ -319,15 +385,7 @@ def convert(
     planned = _plan_outputs(map_set, t, out, out_format, notes)
     final_normal = out / map_set.normal.name if map_set.normal else None
     finals = [p for _, p, _ in planned] + ([final_normal] if final_normal else []) + [out / MANIFEST_NAME]
-    if len({f.name for f in finals}) != len(finals):
-        raise MatremapError(f"two outputs would share a name in {out}; rename the normal map")
-    inputs = {f.resolve() for f in map_set.files}
-    for f in finals:
-        if f.resolve() in inputs:
-            raise MatremapError(f"writing {f} would overwrite an input; choose another output folder")
-    files = AtomicFiles(force, make_folders=True, exists_hint="choose an empty output folder or pass --force")
-    for f in finals:
-        files.check(f)
+    files = _output_files(map_set, out, finals, force)
     with files:
         outputs = [
             _Output(name, path, str(files.stage(path)), info, cost=_cost(name, info)) for name, path, info in planned
@@ -340,10 +398,12 @@ def convert(
             _constants(map_set, t),
             (height, width),
             rows,
+            constant_param(t),
         )
         results = _execute(plan, outputs, workers, progress)
         outside = results[0]["outside"]
         clipped, bounded = _clip_counts(results, outputs, t.target, notes)
+        approximated = _write_constant(t, plan.constant, results[0], notes)
         kept = _drop_uniform(outputs, results, files, notes)
         doc = _manifest(map_set, t, kept, results[0]["first"], final_normal, outside)
         files.write_text(out / MANIFEST_NAME, json.dumps(doc, indent=1) + "\n")
@@ -365,7 +425,23 @@ def convert(
         notes,
         clipped=clipped,
         bounded=bounded,
+        approximated=approximated,
     )
+
+
+def _output_files(map_set: MapSet, out: Path, finals: Sequence[Path], force: bool) -> AtomicFiles:
+    """The all-or-nothing writer of ``finals`` in ``out``, refused when two share a name, one would overwrite an
+    input, or (without ``force``) one exists."""
+    if len({f.name for f in finals}) != len(finals):
+        raise MatremapError(f"two outputs would share a name in {out}; rename the normal map")
+    inputs = {f.resolve() for f in map_set.files}
+    for f in finals:
+        if f.resolve() in inputs:
+            raise MatremapError(f"writing {f} would overwrite an input; choose another output folder")
+    files = AtomicFiles(force, make_folders=True, exists_hint="choose an empty output folder or pass --force")
+    for f in finals:
+        files.check(f)
+    return files
 
 
 def _clip_counts(
@@ -392,7 +468,8 @@ def _plan_outputs(
     map_set: MapSet, t: Transform, out: Path, out_format: str | None, notes: list[str]
 ) -> list[tuple[str | None, Path, ImageInfo]]:
     """(target parameter or None for the domain mask, file, image format) of every map the transform
-    drives; an IOR or absorption coefficient goes to float EXR (it does not fit an 8/16-bit file)."""
+    drives; an IOR or absorption coefficient goes to float EXR (it does not fit an 8/16-bit file). A parameter
+    written as one constant (:func:`constant_param`) has no map."""
     src, tgt = get_model(t.source), get_model(t.target)
     last = t.steps[-1] if t.method == "chain" else t
     height, width = map_set.size
@@ -402,7 +479,7 @@ def _plan_outputs(
     metal = tgt.specialise(last.template).diffuse_only is None
     for q, m in last.mappings.items():
         name = target_param(tgt, q, metal)
-        if name is None or m.get("kind") == "constant":
+        if name is None or m.get("kind") == "constant" or name == constant_param(t):
             continue
         srcs = [n for n in source_params(src, q) if n in map_set.info]
         base = (

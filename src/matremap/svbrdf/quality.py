@@ -50,6 +50,8 @@ DELTA_E_TOLERANCE = 10.0
 SATURATED = 0.2
 #: a target colour is "flat" when its spread is below this fraction of the source's
 FLAT_RATIO = 0.02
+#: a source colour "varies" when the 5-95 percentile spread of its luminance exceeds this (a reflectance, 0-1)
+VARIES = 1e-3
 
 
 @dataclass(frozen=True)
@@ -264,6 +266,12 @@ def _spread(a: np.ndarray) -> float:
     return float(np.percentile(a, 95) - np.percentile(a, 5)) if a.size else 0.0
 
 
+def varies(rgb: Any) -> bool:
+    """Whether colours [..., 3] vary as the ``flat`` check counts it: a target that is constant where such
+    a source varies fails it."""
+    return _spread(luminance(np.asarray(rgb, dtype=np.float64).reshape(-1, 3))) > VARIES
+
+
 def map_checks(
     source: Mapping[str, np.ndarray], target: Mapping[str, np.ndarray], thresholds: Thresholds
 ) -> list[Check]:
@@ -281,7 +289,7 @@ def map_checks(
         if h > worst_hue:
             worst_hue, hue_where = h, f"{q} map"
         ys, yt = luminance(s), luminance(t)
-        if _spread(ys) > 1e-3 and (_spread(yt) <= FLAT_RATIO * _spread(ys) or not np.any(yt > 0)):
+        if varies(s) and (_spread(yt) <= FLAT_RATIO * _spread(ys) or not np.any(yt > 0)):
             flat.append(q)
     out.append(Check("hue_shift", worst_hue, thresholds.hue_shift, hue_where))
     out.append(
@@ -303,6 +311,7 @@ def sample(a: Any, limit: int = 512) -> Any:
 
 __all__ = [
     "DELTA_E_TOLERANCE",
+    "VARIES",
     "Check",
     "Thresholds",
     "Verdict",
@@ -313,4 +322,5 @@ __all__ = [
     "luminance_error",
     "map_checks",
     "sample",
+    "varies",
 ]
