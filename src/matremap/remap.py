@@ -44,7 +44,14 @@ from matremap.core.material import Material, SVMaterial
 from matremap.core.scene import Scene, parse_probe
 from matremap.dialects import get_model, list_models
 from matremap.dialects.equivalence import Equivalence, equivalence
-from matremap.dialects.mtlx import absorbed_layers, coat_tint, freed_layers, layer_textures, layers_on
+from matremap.dialects.mtlx import (
+    absorbed_layers,
+    coat_tint,
+    freed_layers,
+    layer_textures,
+    layer_weights,
+    layers_on,
+)
 from matremap.errors import MatremapError, TransformChecksumError
 from matremap.regress import quantities as qty
 from matremap.regress.transform import Transform
@@ -61,7 +68,7 @@ from matremap.svbrdf.mapstats import (
     summarise,
     with_medians,
 )
-from matremap.svbrdf.mixed import mixed_parameter, remap_mixed
+from matremap.svbrdf.mixed import layer_parameter, mixed_parameter, remap_mixed
 from matremap.svbrdf.quality import Check, Thresholds, Verdict, image_checks, map_checks, sample
 from matremap.svbrdf.textures import MapSet, load_map_set, map_values, read_image, texel_limit
 
@@ -724,7 +731,7 @@ def _convert_maps(
         log(f"identity: {_identity_words(identity)}: the maps are copied, nothing is fitted")
         copy_map_set(map_set, folder / "maps", identity)
         return int(np.prod(map_set.size)), 0, 0, 0, None, True
-    mixed = mixed_parameter(map_set, summary)
+    mixed = mixed_parameter(map_set, summary) or layer_parameter(map_set, summary)
     params = summary.sample()
     if mixed is not None:  # metal and dielectric texels: blended per texel
         texels, outside = remap_mixed(
@@ -742,7 +749,7 @@ def _convert_maps(
                 target_renderer,
                 complete_fix(kind.model, {**kind.constants, **kind_params}, target, job.fix),
             ),
-            lambda kind, out: remap_into(out, kind, replace(job, evaluate=False), log).maps,
+            lambda kind, out: convert_kind(kind, out, job, log),
             log,
         )
         return texels, outside, 0, 0, None, False
@@ -767,6 +774,24 @@ def _convert_maps(
     # values the transform asked for beyond the target's bounds, and values beyond what the files hold
     clipped = int(report.clipped + report.bounded)
     return int(report.texels), int(report.outside), clipped, int(report.approximated), tpath, cached
+
+
+def convert_kind(kind: MapSet, out: Path, job: RemapJob, log: Callable[[str], None]) -> MapSet:
+    """One kind of a map set blended per texel (:func:`~matremap.svbrdf.mixed.remap_mixed`), converted into
+    ``out``: remapped as a map set, or, where no map is left (a uniform base under a coat mask), fitted as one
+    material (:func:`_fit_uniform`, its layers freed) whose values are the kind's constants."""
+    if kind.maps:
+        return load_map_set(remap_into(out, kind, replace(job, evaluate=False), log).maps)
+    source = Material.create(kind.model, {k: v for k, v in kind.constants.items()})
+    fix = complete_fix(source.model, qty.material_values(source), job.target, job.fix)
+    job, fix, metal = free_partial_metal(source, job, fix, log)
+    r, _ = _fit_uniform(source, job, fix, log, metal)
+    log(f"fit: {kind.root.name} as one material onto {job.target}, relative error {r.loss:.4f}")
+    out.mkdir(parents=True, exist_ok=False)
+    params = r.target.to_dict()["params"]
+    doc = {"model": r.target.model, "maps": {}, "params": params, "provenance": {"transform": f"fit ({r.loss:.4f})"}}
+    write_text(out / "material.json", json.dumps(doc, indent=1) + "\n")
+    return MapSet(r.target.model, {}, out, kind.size, kind.normal, params)
 
 
 def _transform_for(
@@ -1074,12 +1099,14 @@ def _remap_file(
 
 
 def refuse_textured_layers(path: Path, asset: Any, target: str) -> None:
-    """Refuse, before any work, a material whose layer varies over its maps (a coat weight map, a sheen colour
-    map: a sweep's quantities, roughness, F0 and diffuse, have no layer), or that lets light through over
-    textured maps (the evaluation of maps draws reflection only). A uniform layer over textured maps is
-    converted (:func:`hold_layers`)."""
-    textured = layer_textures(asset.model, asset.textures)
-    on = layers_on(asset.model, {**asset.constants, **dict.fromkeys(textured, 1.0)})
+    """Refuse, before any work, a material whose layer's colour or roughness varies over its maps (a sheen colour
+    map, a coat roughness map: a sweep's quantities, roughness, F0 and diffuse, have no layer), or that lets light
+    through over textured maps (the evaluation of maps draws reflection only). A uniform layer over textured maps
+    is converted (:func:`hold_layers`), and so is a coat or sheen whose weight alone is a map (blended per texel
+    between the material with the layer and without it, :mod:`matremap.svbrdf.mixed`)."""
+    blended = layer_weights(get_model(asset.model))  # a coat or sheen mask: blended per texel (svbrdf/mixed.py)
+    textured = [n for n in layer_textures(asset.model, asset.textures) if n not in blended]
+    on = layers_on(asset.model, {**asset.constants, **dict.fromkeys(asset.textures, 1.0)})
     why = None
     if textured:
         why = f"its layer varies over the maps ({', '.join(textured)} textured)"

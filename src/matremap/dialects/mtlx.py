@@ -273,6 +273,20 @@ def layers_on(model: str, values: Mapping[str, Any]) -> list[str]:
     ]
 
 
+#: the layers a weight map may blend per texel (:func:`layer_weights`)
+BLENDED_LAYERS = ("coat", "sheen")
+
+
+def layer_weights(spec: ModelSpec) -> list[str]:
+    """The scalar weights of ``spec``'s coat and sheen (:data:`LAYERS`): the parameters whose map blends a
+    layered and a bare material per texel, as each model mixes its layer in linearly by its weight (OpenPBR 1.1
+    coat_weight and fuzz_weight, Standard Surface 1.0.1 coat and sheen, glTF clearcoat, Cycles Coat Weight and
+    Sheen Weight, Mitsuba 3 principled clearcoat and sheen)."""
+    layers = LAYERS.get(spec.id, {})
+    names = [layers[layer] for layer in BLENDED_LAYERS if layer in layers]
+    return [n for n in names if spec.param(n).channels == 1]
+
+
 def layer_textures(model: str, maps: Iterable[str]) -> list[str]:
     """The parameters among ``maps`` (a material's textured parameters) that are a layer's weight, colour or
     roughness (:data:`LAYERS`, :data:`LAYER_PARAMS`)."""

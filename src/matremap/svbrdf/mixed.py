@@ -1,4 +1,5 @@
-"""Map sets that mix metal and dielectric texels (a glTF metallic map holding both 0 and 1).
+"""Map sets that mix two kinds of material per texel: metal and dielectric texels (a glTF metallic map holding
+both 0 and 1), or texels with and without a layer (a coat weight map: ClearCoatTest's Partial_Coated).
 
 One transform maps one kind of material: a glTF metal's base colour is its F0, a dielectric's is its
 albedo. :func:`remap_mixed` therefore converts the map set twice, each time with the mixed parameter
@@ -15,9 +16,16 @@ takes that kind's value everywhere. The texels outside the training domain are t
 a transform that contributes to them (the union over the kinds with a non-zero weight).
 
 The target must express both kinds: one without a diffuse parameter (a conductor) cannot draw the
-dielectric texels and is refused before any sweep. The blend reads and writes the maps in bands of
-rows: memory does not grow with the map size; the shares of each kind come from counts taken while the
-maps were summarised (:class:`~matremap.svbrdf.mapstats.Specialisation`).
+dielectric texels and is refused before any sweep.
+
+A layer's weight map (:func:`layer_parameter`: a coat or sheen weight, :func:`~matremap.dialects.mtlx.layer_weights`)
+is blended the same way: the map set converted with the layer at its full weight (its layer fitted once and held,
+:func:`matremap.remap.hold_layers`) and without it, blended by the weight, as every layered model mixes its coat and
+sheen in linearly by their weight (the target's own weight becomes the source's map times its fitted value). A kind
+with no maps left (a uniform base under a coat mask) is fitted as one uniform material.
+
+The blend reads and writes the maps in bands of rows: memory does not grow with the map size; the shares of
+each kind come from counts taken while the maps were summarised (:class:`~matremap.svbrdf.mapstats.Specialisation`).
 """
 
 from __future__ import annotations
@@ -44,8 +52,8 @@ from matremap.svbrdf.textures import ImageInfo, MapReader, MapSet, MapWriter, lo
 #: the hidden folder inside the staging folder that holds the two kinds while they are converted
 KINDS = ".kinds"
 
-#: (map set held at one kind, output folder) -> the folder of the converted maps
-ConvertKind = Callable[[MapSet, Path], Path]
+#: (map set held at one kind, output folder) -> the converted map set
+ConvertKind = Callable[[MapSet, Path], MapSet]
 #: (map set held at one kind, its parameter arrays) -> None, or raises what a sweep would fail on
 CheckKind = Callable[[MapSet, Mapping[str, Any]], None]
 
@@ -60,14 +68,23 @@ class Mixed:
     metal: float
     dielectric: float
     counts: Specialisation
+    #: the two kinds' names: the one at ``metal``'s value, the one at ``dielectric``'s (a layer: the layer's name
+    #: and "bare")
+    kinds: tuple[str, str] = ("metal", "dielectric")
+    #: the layer whose weight the parameter is (None: a specialisation, metal and dielectric)
+    layer: str | None = None
 
     def weight(self, values: np.ndarray) -> np.ndarray:
         """The metal's share per texel of the mixed parameter's ``values``, in [0, 1]."""
         return weight(values, self.metal, self.dielectric)
 
+    def value(self, kind: str) -> float:
+        """The mixed parameter's value that holds a texel wholly at ``kind``."""
+        return self.metal if kind == self.kinds[0] else self.dielectric
+
     def share(self, kind: str) -> float:
-        """The fraction of texels that hold some of ``kind`` ("metal" or "dielectric")."""
-        n = self.counts.some_value if kind == "metal" else self.counts.some_other
+        """The fraction of texels that hold some of ``kind`` (one of :attr:`kinds`)."""
+        n = self.counts.some_value if kind == self.kinds[0] else self.counts.some_other
         return n / max(self.counts.texels, 1)
 
     def pure(self, kind: str) -> bool:
@@ -91,6 +108,22 @@ def mixed_parameter(map_set: MapSet, summary: MapSummary) -> Mixed | None:
     return None
 
 
+def layer_parameter(map_set: MapSet, summary: MapSummary) -> Mixed | None:
+    """The first layer weight (a coat's, a sheen's: :func:`~matremap.dialects.mtlx.layer_weights`) given as a map
+    that is not uniform, or None: such maps are remapped per texel, with the layer and without it."""
+    from matremap.dialects.mtlx import LAYERS, layer_weights
+
+    layers = {w: layer for layer, w in LAYERS.get(map_set.model, {}).items()}
+    for name in layer_weights(map_set.spec):
+        stats = summary.stats.get(name)
+        if stats is None or stats.hi - stats.lo <= 2 * TOLERANCE or stats.specialisation is None:
+            continue
+        counts = stats.specialisation
+        layer = layers[name]
+        return Mixed(name, float(counts.value), float(counts.other), counts, (layer, "bare"), layer)
+    return None
+
+
 def expressing_models(family: str) -> list[str]:
     """Models with a diffuse and a specular part (the target's family first)."""
     both = [s.id for s in list_models() if qty.diffuse_param(s) is not None and s.reflectance is not None]
@@ -103,6 +136,9 @@ def check_target(mixed: Mixed, target: str, fix: Mapping[str, Any]) -> None:
     from matremap.renderers.registry import texture_refusal
 
     spec = get_model(target)
+    if mixed.layer is not None:
+        _check_layer_target(mixed, spec, fix)
+        return
     if qty.diffuse_param(spec) is None:
         how = f"{mixed.name} {mixed.dielectric:g}" if mixed.pure("dielectric") else f"{mixed.name} < {mixed.metal:g}"
         raise MatremapError(
@@ -116,6 +152,24 @@ def check_target(mixed: Mixed, target: str, fix: Mapping[str, Any]) -> None:
         raise MatremapError(f"{why}, and the metal and dielectric texels need it as a map; fix it with --fix")
 
 
+def _check_layer_target(mixed: Mixed, spec: ModelSpec, fix: Mapping[str, Any]) -> None:
+    """A layer blended per texel varies the target's own weight of that layer and its base parameters (the
+    kinds' fits differ): each must be a map its renderers take."""
+    from matremap.dialects.mtlx import LAYERS
+    from matremap.renderers.registry import texture_refusal
+
+    varied = [LAYERS.get(spec.id, {}).get(mixed.layer or "")]
+    varied += [getattr(qty.roughness_param(spec), "name", None), getattr(qty.diffuse_param(spec), "name", None)]
+    if spec.reflectance is not None:  # the kinds' F0 differs too (an IOR fitted under a coat and without it)
+        varied.append(spec.reflectance.driven_param(spec.specialise(fix).diffuse_only is None))
+    why = texture_refusal(spec.id, [n for n in varied if n is not None and n not in fix])
+    if why is not None:
+        raise MatremapError(
+            f"{why}, and the texels with and without the {mixed.layer} ({mixed.name} map) need it as a map; choose "
+            "a target that takes it as a map"
+        )
+
+
 def kind_map_set(map_set: MapSet, mixed: Mixed, kind: str, dest: Path) -> MapSet:
     """The map set with the mixed parameter held at one ``kind``'s value, as a manifest in ``dest`` that
     refers to the source's files (nothing is copied)."""
@@ -125,7 +179,7 @@ def kind_map_set(map_set: MapSet, mixed: Mixed, kind: str, dest: Path) -> MapSet
         return os.path.relpath(Path(f).resolve(), dest.resolve())
 
     maps = {k: f for k, f in map_set.maps.items() if k != mixed.name}
-    value = mixed.metal if kind == "metal" else mixed.dielectric
+    value = mixed.value(kind)
     doc: dict[str, Any] = {
         "model": map_set.model,
         "maps": {k: rel(f) for k, f in maps.items()},
@@ -135,6 +189,8 @@ def kind_map_set(map_set: MapSet, mixed: Mixed, kind: str, dest: Path) -> MapSet
     if map_set.normal is not None:
         doc["normal"] = rel(map_set.normal)
     write_text(dest / MANIFEST_NAME, json.dumps(doc, indent=1) + "\n")
+    if not maps:  # a uniform kind (a uniform base under a coat mask): no maps to load, fitted as one material
+        return MapSet(map_set.model, {}, dest, map_set.size, map_set.normal, dict(doc["params"]))
     return load_map_set(dest)
 
 
@@ -149,26 +205,27 @@ def remap_mixed(
     convert_kind: ConvertKind,
     log: Callable[[str], None],
 ) -> tuple[int, int]:
-    """Convert ``map_set`` once as a metal and once as a dielectric (``convert_kind``: through each kind's
-    own transform; ``check`` runs for both before either is converted) and write the per-texel blend
-    into ``folder/"maps"``. Returns the texel count and the texels outside the training domain."""
+    """Convert ``map_set`` once as each kind (a metal and a dielectric; with the layer and bare) (``convert_kind``:
+    through each kind's own transform, or one fit for a kind without maps; ``check`` runs for both before either
+    is converted) and write the per-texel blend into ``folder/"maps"``. Returns the texel count and the texels
+    outside the training domain."""
     check_target(mixed, target, fix)
     kinds = folder / KINDS
-    sets = {kind: kind_map_set(map_set, mixed, kind, kinds / kind) for kind in ("metal", "dielectric")}
+    sets = {kind: kind_map_set(map_set, mixed, kind, kinds / kind) for kind in mixed.kinds}
     for kind, ms in sets.items():
-        value = mixed.metal if kind == "metal" else mixed.dielectric
-        check(ms, {**params, mixed.name: value})
+        check(ms, {**params, mixed.name: mixed.value(kind)})
+    first, second = mixed.kinds
     log(
-        f"mixed: {mixed.name} varies per texel (metal on {100 * mixed.share('metal'):.0f}%, dielectric on "
-        f"{100 * mixed.share('dielectric'):.0f}% of the texels): converting each kind through its own transform "
+        f"mixed: {mixed.name} varies per texel ({first} on {100 * mixed.share(first):.0f}%, {second} on "
+        f"{100 * mixed.share(second):.0f}% of the texels): converting each kind through its own transform "
         "and blending them by the map"
     )
     converted = {}
     for kind, ms in sets.items():
-        log(f"mixed: the {kind} ({mixed.name} {mixed.metal if kind == 'metal' else mixed.dielectric:g})")
-        converted[kind] = load_map_set(convert_kind(ms, kinds / f"{kind}-out"))
+        log(f"mixed: the {kind} ({mixed.name} {mixed.value(kind):g})")
+        converted[kind] = convert_kind(ms, kinds / f"{kind}-out")
     texels = int(np.prod(map_set.size))
-    outside = blend(converted["metal"], converted["dielectric"], mixed, folder / "maps", map_set)
+    outside = blend(converted[first], converted[second], mixed, folder / "maps", map_set)
     for kind, ms in converted.items():  # what was applied, with its provenance
         t = ms.root.parent / "transform.json"
         if t.is_file():
@@ -208,15 +265,15 @@ def _full(value: Any, channels: int, shape: tuple[int, int]) -> np.ndarray:
     return np.broadcast_to(a if a.ndim == 3 else a.reshape(-1)[:3], (*shape, 3))
 
 
-def _info(spec: ModelSpec, name: str, sides: list[MapSet], constants: list[Any]) -> ImageInfo:
+def _info(spec: ModelSpec, name: str, sides: list[MapSet], constants: list[Any], weights: ImageInfo) -> ImageInfo:
     """The file format of a blended map: the converted maps' own (a float one if either side's is), else
-    one like the other maps (sRGB for colours in 8/16-bit files; float EXR when either side's constant,
-    and so the blend between them, lies outside [0, 1])."""
+    one like the other maps (the source's ``weights`` map where the sides have none; sRGB for colours in
+    8/16-bit files; float EXR when either side's constant, and so the blend between them, lies outside [0, 1])."""
     infos = [ms.info[name] for ms in sides if name in ms.info]
     if infos:
         return next((i for i in infos if not i.integer), infos[0])
     p = spec.param(name)
-    base = next(i for ms in sides for i in ms.info.values())
+    base = next((i for ms in sides for i in ms.info.values()), weights)
     colour = p.channels == 3 and p.role in ("diffuse", "specular", "fresnel")
     info = base.like(channels=p.channels, colorspace="srgb" if colour and base.integer else "linear", path="")
     values = np.concatenate([np.asarray(c, dtype=float).reshape(-1) for c in constants])
@@ -225,12 +282,13 @@ def _info(spec: ModelSpec, name: str, sides: list[MapSet], constants: list[Any])
     return info
 
 
-def _file_name(name: str, sides: list[MapSet], info: ImageInfo) -> str:
-    """A converted map's own file name, else ``<prefix>_<param>`` beside the other maps."""
+def _file_name(name: str, sides: list[MapSet], info: ImageInfo, weights: Path) -> str:
+    """A converted map's own file name, else ``<prefix>_<param>`` beside the other maps (or named after the
+    source's ``weights`` map where the sides have none)."""
     own = next((ms.maps[name].name for ms in sides if name in ms.maps), None)
     if own is not None:
         return own
-    stem = next(f.stem for ms in sides for f in ms.maps.values())
+    stem = next((f.stem for ms in sides for f in ms.maps.values()), weights.stem)
     return f"{stem.rsplit('_', 1)[0] if '_' in stem else 'material'}_{name}{info.suffix}"
 
 
@@ -246,8 +304,15 @@ class _Blended:
     info: ImageInfo
 
 
-def _plan(metal: MapSet, dielectric: MapSet) -> tuple[list[_Blended], dict[str, Any]]:
-    """The maps to blend and the parameters that stay constants (options included)."""
+def _plan(
+    metal: MapSet, dielectric: MapSet, weights: Path, info: ImageInfo, layer: str | None = None
+) -> tuple[list[_Blended], dict[str, Any]]:
+    """The maps to blend and the parameters that stay constants (options included); ``weights``, ``info``: the
+    source's map of the mixed parameter and its format. ``layer``: the layer the first side has and the second
+    has not; the target's colour and roughness of that layer are the first side's everywhere (where the layer's
+    weight is 0 they draw nothing; blended, a held coat roughness became a map running to 0)."""
+    from matremap.dialects.mtlx import LAYER_PARAMS
+
     spec = metal.spec
     sides = [metal, dielectric]
     a, b = _sources(metal), _sources(dielectric)
@@ -259,19 +324,21 @@ def _plan(metal: MapSet, dielectric: MapSet) -> tuple[list[_Blended], dict[str, 
             )
     constants: dict[str, Any] = {k: v for k, v in metal.constants.items() if k in spec.option_names}
     roles = [spec.specialise(ms.constants) for ms in sides]  # a parameter one kind does not use takes the other's
+    own = LAYER_PARAMS.get(spec.id, {}).get(layer or "")
+    first_only = {own.colour, own.roughness} if own is not None else set()
     plan = []
     for p in spec.params:
         if p.name not in a and p.name not in b:
             continue
         va = a[p.name] if p.name in a else b[p.name]
-        vb = b[p.name] if p.name in b else va
+        vb = b[p.name] if p.name in b and p.name not in first_only else va
         used = [r.param(p.name).role != "other" for r in roles]
         va, vb = (vb, vb) if used == [False, True] else (va, va) if used == [True, False] else (va, vb)
         if not _is_map(va) and not _is_map(vb) and np.allclose(va, vb):
             constants[p.name] = va
             continue
-        info = _info(spec, p.name, sides, [v for v in (va, vb) if not _is_map(v)])
-        plan.append(_Blended(p.name, p.channels, va, vb, _file_name(p.name, sides, info), info))
+        out = _info(spec, p.name, sides, [v for v in (va, vb) if not _is_map(v)], info)
+        plan.append(_Blended(p.name, p.channels, va, vb, _file_name(p.name, sides, out, weights), out))
     return plan, constants
 
 
@@ -280,7 +347,7 @@ def blend(metal: MapSet, dielectric: MapSet, mixed: Mixed, dest: Path, source: M
     outside-domain masks where they contribute, the normal map, ``material.json``), band by band; returns
     the number of texels outside the training domain. A failure leaves no ``dest``."""
     spec = metal.spec
-    plan, constants = _plan(metal, dielectric)
+    plan, constants = _plan(metal, dielectric, source.maps[mixed.name], source.info[mixed.name], mixed.layer)
     dest.mkdir(parents=True, exist_ok=False)
     try:
         outside = _blend_bands(plan, mixed, dest, source, [metal, dielectric])
@@ -371,7 +438,7 @@ def _provenance(
             f"per texel by {mixed.name}: {m} where {mixed.name} is {mixed.metal:g}, {d} where it is "
             f"{mixed.dielectric:g}, blended linearly in between"
         ),
-        "transforms": {"metal": m, "dielectric": d},
-        "blend": {"parameter": mixed.name, "metal": mixed.metal, "dielectric": mixed.dielectric},
+        "transforms": {mixed.kinds[0]: m, mixed.kinds[1]: d},
+        "blend": {"parameter": mixed.name, mixed.kinds[0]: mixed.metal, mixed.kinds[1]: mixed.dielectric},
         "outside_domain": {"file": MASK_NAME, "texels": outside},
     }
