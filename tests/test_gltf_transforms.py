@@ -217,8 +217,9 @@ def test_clearcoat_on_another_uv_set_and_texcoord_1_carried_inputs_are_said():
     a = read(TTMT, "EmissionTest1Mat")  # emission on TEXCOORD_1, no remapped textures (maps' set 0)
     assert "emission" in a.carried and a.carried["emission"].texture is None
     assert any("emissiveTexture uses TEXCOORD_1" in n for n in a.notes)
-    cc = read(TTMT, "ClearcoatTest0Mat")  # a coat of factor 1 whose weight is a texture: not converted, said so
-    assert cc.lost == ["KHR_materials_clearcoat (clearcoatFactor 1 with clearcoatTexture)"]
+    cc = read(TTMT, "ClearcoatTest0Mat")  # a coat mask under a texture transform: read as a map, the transform baked
+    assert cc.lost == [] and cc.model == "gltf:pbr" and list(cc.textures) == ["clearcoat"]
+    assert any(n.startswith("clearcoatTexture: KHR_texture_transform") and "baked" in n for n in cc.notes)
 
 
 # ------------------------------------------------------------------------------------------------

@@ -22,8 +22,9 @@ coloured sheen, any transmission) is read into ``gltf:pbr`` and its layers fitte
 transmission on the transmission probe); so is a textured material whose coat or sheen is uniform (no texture of
 its own values: the layer is fitted once and held while the sweep fits the base maps under it); a faint layer is
 noted; a layer with textures of its own, or a transmission over textured base maps, is listed in ``asset.lost`` and
-refused for other targets. A coat's own normal map (``clearcoatNormalTexture``) is noted: the target's coat
-follows the base's normal map.
+refused for other targets, except a coat's weight texture (``clearcoatTexture``: read as the ``clearcoat`` map,
+the material blended per texel with the coat and without it). A coat's own normal map (``clearcoatNormalTexture``)
+is noted: the target's coat follows the base's normal map.
 """
 
 from __future__ import annotations
@@ -196,9 +197,15 @@ def lost_look(found: dict[str, dict[str, Any]]) -> list[str]:
     if sh and (max(sh["sheenColorFactor"]) > 0.5 or ("sheenColorTexture" in sh and max(sh["sheenColorFactor"]) > 0)):
         lost.append(f"{SHEEN} (a coloured sheen: sheenColorFactor {_rgb(sh['sheenColorFactor'])}{_textures(sh)})")
     cc = found.get(CLEARCOAT)
-    if cc and cc["clearcoatFactor"] > COAT_LOOK and _value_textures(cc):
-        lost.append(f"{CLEARCOAT} (clearcoatFactor {_g(cc['clearcoatFactor'])} with {', '.join(_value_textures(cc))})")
+    if cc and cc["clearcoatFactor"] > COAT_LOOK and _coat_textures(cc):
+        lost.append(f"{CLEARCOAT} (clearcoatFactor {_g(cc['clearcoatFactor'])} with {', '.join(_coat_textures(cc))})")
     return lost
+
+
+def _coat_textures(cc: dict[str, Any]) -> list[str]:
+    """A coat's textures that matremap does not convert: its roughness's (its weight's, ``clearcoatTexture``, is
+    read as the ``clearcoat`` map and blended per texel; its normal map is noted)."""
+    return [k for k in _value_textures(cc) if k != "clearcoatTexture"]
 
 
 #: the model a glTF material is read into when a layer carries its look (:func:`layer_values`)
@@ -215,7 +222,7 @@ def layer_values(found: dict[str, dict[str, Any]], textured: bool = False) -> di
     sheen is read (held over the maps' sweep), a transmission is not (the evaluation of maps draws reflection
     only). Empty otherwise (the material is read as ``gltf:metal-rough``)."""
     cc, sh, tr = found.get(CLEARCOAT), found.get(SHEEN), found.get(TRANSMISSION)
-    coat = cc is not None and cc["clearcoatFactor"] > COAT_LOOK and not _value_textures(cc)
+    coat = cc is not None and cc["clearcoatFactor"] > COAT_LOOK and not _coat_textures(cc)
     sheen = sh is not None and SHEEN in " ".join(lost_look(found)) and not _value_textures(sh)
     through = tr is not None and TRANSMISSION in " ".join(lost_look(found)) and not _textures(tr) and not textured
     vol = found.get(VOLUME)
@@ -233,7 +240,7 @@ def layer_values(found: dict[str, dict[str, Any]], textured: bool = False) -> di
                 "attenuationColor": list(vol["attenuationColor"]),
                 "attenuationDistance": 0.0 if not math.isfinite(distance) else distance,
             }
-    if cc is not None and not _value_textures(cc):
+    if cc is not None and not _coat_textures(cc):
         out |= {"clearcoat": cc["clearcoatFactor"], "clearcoatRoughness": cc["clearcoatRoughnessFactor"]}
     if sh is not None and not _value_textures(sh):
         out |= {"sheenColor": list(sh["sheenColorFactor"]), "sheenRoughness": sh["sheenRoughnessFactor"]}
@@ -249,7 +256,8 @@ def extension_notes(found: dict[str, dict[str, Any]], textured: bool = False) ->
     layers = layer_values(found, textured)
     if layers:
         what = ", ".join(f"{k} {_g(v) if isinstance(v, float) else _rgb(v)}" for k, v in layers.items())
-        held = " (uniform over the maps: fitted once, held while the sweep fits the maps)" if textured else ""
+        uniform = textured and not (CLEARCOAT in found and "clearcoatTexture" in found[CLEARCOAT])
+        held = " (uniform over the maps: fitted once, held while the sweep fits the maps)" if uniform else ""
         exts = [
             e
             for e, k in ((CLEARCOAT, "clearcoat"), (SHEEN, "sheenColor"), (TRANSMISSION, "transmission"))
@@ -259,6 +267,11 @@ def extension_notes(found: dict[str, dict[str, Any]], textured: bool = False) ->
             f"read into {LAYERED_MODEL} ({what}; {', '.join(exts)}): its layers are fitted, not left out{held}"
         )
     cc = found.get(CLEARCOAT)
+    if cc is not None and "clearcoat" in layers and "clearcoatTexture" in cc:
+        notes.append(
+            f"{CLEARCOAT}.clearcoatTexture masks the coat: the material is converted with the coat and without it, "
+            "and the two blended per texel by the mask"
+        )
     if cc is not None and "clearcoat" in layers and "clearcoatNormalTexture" in cc:
         notes.append(
             f"{CLEARCOAT}.clearcoatNormalTexture, the coat's own normal map, is not converted: the target's coat "

@@ -45,6 +45,7 @@ from matremap.formats.gltf_container import (
     parse_container,
 )
 from matremap.formats.gltf_extensions import (
+    CLEARCOAT,
     EMISSIVE_STRENGTH,
     IOR,
     LAYERED_MODEL,
@@ -197,7 +198,10 @@ def read(
     doc.extensions = found
     constants = read_factors(p, where, pbr, found)
     textures = MaterialTextures(FileReader(p, doc, data, confinement), where, notes)
+    layers = layer_values(found)
     maps = textures.read_maps(pbr, found.get(SPECULAR, {}), constants)
+    if "clearcoat" in layers and "clearcoatTexture" in found[CLEARCOAT]:  # a coat mask: R, times clearcoatFactor
+        maps["clearcoat"] = textures.read_coat_weight(found[CLEARCOAT]["clearcoatTexture"], layers["clearcoat"])
     normal = textures.read_normal(m)
     doc.uv_set = textures.uv_set
     if normal is not None and not maps:
@@ -360,6 +364,12 @@ class MaterialTextures:
                 f"the textures use TEXCOORD_{self.uv_set}: the maps are laid on that UV set (a glTF output keeps it)"
             )
         return textures
+
+    def read_coat_weight(self, info: dict[str, Any], factor: float) -> TextureRef:
+        """KHR_materials_clearcoat's ``clearcoatTexture``: the coat's weight in its R channel, times
+        ``clearcoatFactor``."""
+        tex = self.remapped(info, "clearcoatTexture")
+        return self.ref(tex, (channel(0, tex.channels),), False, factor)
 
     def read_normal(self, m: dict[str, Any]) -> TextureRef | None:
         """The normal map (its scale is noted, not applied); a transformed one is baked and turned."""

@@ -87,7 +87,7 @@ def result_values(result: Any) -> tuple[dict[str, Any], dict[str, np.ndarray], P
             raise MatremapError(
                 f"{f}: {IOR} has no texture, so a map of ior cannot be written to glTF; use a uniform ior"
             )
-        if name in LAYER_EXTENSIONS:
+        if name in LAYER_EXTENSIONS and name not in LAYER_MAPS:
             raise MatremapError(
                 f"{f}: a map of {name} (a layer extension's texture) is not written to glTF yet; use a uniform {name}"
             )
@@ -215,6 +215,15 @@ def specular_image(
     if spec_f != 1.0 or any(v != 1.0 for v in tint_f) or "specular" in maps or tint_tex is not None:
         return {"specularFactor": spec_f, "specularColorFactor": tint_f}, image
     return {}, image
+
+
+def clearcoat_image(maps: dict[str, np.ndarray], exts: dict[str, Any]) -> NewImage | None:
+    """A ``clearcoat`` map as KHR_materials_clearcoat's ``clearcoatTexture`` (its R channel, a linear PNG; the
+    factor is then 1), replacing the copied extension's own (``exts``)."""
+    if "clearcoat" not in maps:
+        return None
+    old = (exts.get(CLEARCOAT) or {}).get("clearcoatTexture")
+    return NewImage("clearcoat", png(code(maps["clearcoat"], False)), "image/png", old)
 
 
 def normal_image(mat: dict[str, Any], normal: Path | None, source_normal: TextureRef | None) -> NewImage | None:
@@ -364,6 +373,7 @@ def plan_material(doc: dict[str, Any], rep: Replacement) -> list[NewImage]:
     ]
     rep.spec_ext, spec_image = specular_image(rep.consts, rep.maps, rep.old_spec)
     images += [spec_image, normal_image(mat, rep.normal, rep.source_normal if rep.copied else None)]
+    images += [clearcoat_image(rep.maps, mat.get("extensions") or {})]
     if opacity is not None and not rep.copied:
         mat["alphaMode"] = "MASK" if opacity.settings.get("mode") == "mask" else "BLEND"
         if "cutoff" in opacity.settings:
@@ -403,7 +413,7 @@ def finish_material(doc: dict[str, Any], rep: Replacement, infos: dict[str, dict
     else:
         exts.pop(SPECULAR, None)
     if "clearcoat" in rep.consts:
-        layer_extensions(exts, rep.consts, keep_unread=rep.copied)
+        layer_extensions(exts, rep.consts, keep_unread=rep.copied, coat_texture=infos.get("clearcoat"))
     elif rep.source_layered:
         for name in (CLEARCOAT, SHEEN):
             exts.pop(name, None)
@@ -426,14 +436,21 @@ LAYER_EXTENSIONS = {
 }
 
 
-def layer_extensions(exts: dict[str, Any], consts: dict[str, Any], keep_unread: bool = False) -> None:
+#: gltf:pbr's layer parameters the writer takes as maps (each into its extension's texture)
+LAYER_MAPS = ("clearcoat",)
+
+
+def layer_extensions(
+    exts: dict[str, Any], consts: dict[str, Any], keep_unread: bool = False, coat_texture: dict[str, Any] | None = None
+) -> None:
     """Set (or drop, where the layer is off) the layer extensions of a ``gltf:pbr`` result's uniform values:
     KHR_materials_clearcoat (clearcoatFactor > 0), _sheen (a sheen colour not black), _transmission
     (transmissionFactor > 0) and _volume (thicknessFactor > 0; attenuationDistance 0 is glTF's default,
     infinity, so it is left out). The ratified READMEs' property names; a replaced extension loses the textures
     of its values (the result's values are uniform), not a coat's own normal map. ``keep_unread``: in a copy of a
     glTF source, a transmission or volume the result has off is the source's, which the reader does not read into
-    gltf:pbr (only its coat and sheen): kept."""
+    gltf:pbr (only its coat and sheen): kept. ``coat_texture``: the textureInfo of a ``clearcoat`` map (then
+    clearcoatFactor 1 times its R channel)."""
 
     def one(name: str) -> float:
         return float(np.asarray(consts[name], dtype=float).reshape(-1)[0])
@@ -441,9 +458,14 @@ def layer_extensions(exts: dict[str, Any], consts: dict[str, Any], keep_unread: 
     def rgb(name: str) -> list[float]:
         return [float(x) for x in np.broadcast_to(np.asarray(consts[name], dtype=float), (3,))]
 
+    coat = {"clearcoatFactor": 1.0, "clearcoatTexture": coat_texture} if coat_texture is not None else None
     values: dict[str, dict[str, Any] | None] = {
-        CLEARCOAT: {"clearcoatFactor": one("clearcoat"), "clearcoatRoughnessFactor": one("clearcoatRoughness")}
-        if one("clearcoat") > 0
+        CLEARCOAT: {
+            "clearcoatFactor": one("clearcoat"),
+            "clearcoatRoughnessFactor": one("clearcoatRoughness"),
+            **(coat or {}),
+        }
+        if one("clearcoat") > 0 or coat is not None
         else None,
         SHEEN: {"sheenColorFactor": rgb("sheenColor"), "sheenRoughnessFactor": one("sheenRoughness")}
         if max(rgb("sheenColor")) > 0
