@@ -85,25 +85,32 @@ def test_the_clearcoat_wicker_is_read_with_its_coat_and_its_coat_normal_map_is_s
     assert any("clearcoatNormalTexture, the coat's own normal map, is not converted" in n for n in a.notes)
 
 
-def test_a_coat_whose_weight_is_a_texture_is_refused_for_other_targets_in_one_line(tmp_path, capsys):
-    """ClearCoatTest's Partial_Coated: a uniform base under a coat masked by a texture (its weight varies). Before,
-    the coat was left out with a note and exit 0."""
-    a = read_asset(COAT_TEST, "Partial_Coated")
-    assert a.lost == ["KHR_materials_clearcoat (clearcoatFactor 1 with clearcoatTexture)"]
-    code, log = remap(capsys, COAT_TEST, "mtlx:open_pbr_surface", tmp_path / "out", "--material", "Partial_Coated")
+def test_a_coat_whose_roughness_is_a_texture_is_refused_for_other_targets_in_one_line(tmp_path, capsys):
+    """ClearCoatTest's RoughVariations_Coated: the coat's roughness varies over a texture, which no sweep quantity
+    carries. Before, the coat was left out with a note and exit 0."""
+    a = read_asset(COAT_TEST, "RoughVariations_Coated")
+    assert a.lost == ["KHR_materials_clearcoat (clearcoatFactor 1 with clearcoatRoughnessTexture)"]
+    out = tmp_path / "out"
+    code, log = remap(capsys, COAT_TEST, "mtlx:open_pbr_surface", out, "--material", "RoughVariations_Coated")
     last = log.strip().splitlines()[-1]
-    assert code == 2 and "clearcoatTexture" in last and "not converted" in last
-    assert not (tmp_path / "out").exists()
+    assert code == 2 and "clearcoatRoughnessTexture" in last and "not converted" in last
+    assert not out.exists()
 
 
 @needs_materialx
-def test_a_textured_coat_weight_in_materialx_is_refused_before_any_work(tmp_path, capsys):
-    src = textured_copper(tmp_path / "in", coat_image=True)
+def test_a_textured_coat_roughness_in_materialx_is_refused_before_any_work(tmp_path, capsys):
+    src = textured_copper(tmp_path / "in")
+    text = src.read_text().replace(
+        '<input name="coat_roughness" type="float" value="0.20000000298023224" />',
+        '<input name="coat_roughness" type="float" nodename="img_r" />',
+    )
+    image = '<image name="img_r" type="float"><input name="file" type="filename" value="base.png" /></image>'
+    src.write_text(text.replace("<standard_surface", image + "\n  <standard_surface", 1))
     asset = read_asset(src)
-    assert layer_textures(asset.model, asset.textures) == ["coat"]
+    assert "coat_roughness" in layer_textures(asset.model, asset.textures)
     code, log = remap(capsys, src, "gltf:pbr", tmp_path / "out")
     last = log.strip().splitlines()[-1]
-    assert code == 2 and "its layer varies over the maps (coat textured)" in last
+    assert code == 2 and "its layer varies over the maps (coat_roughness textured)" in last
     assert "sweep:" not in log and not (tmp_path / "out").exists()
 
 
@@ -197,3 +204,86 @@ def test_a_reflectance_tint_is_learned_only_where_the_hue_changes():
     alpha = rng.uniform(0.05, 0.6, 40)
     with_alpha = fit_reflectance(alpha, s1, s1 * (0.8 + 0.2 * alpha[:, None]) * [1.0, 0.5, 0.3])
     assert with_alpha["roughness"] and with_alpha["tint"][0] > 2.5 * with_alpha["tint"][2]
+
+
+# ------------------------------------------------------------------------------------------------
+# a coat mask: the material converted with the coat and without it, blended per texel by the mask
+
+
+def _mask(path: Path, name: str) -> np.ndarray:
+    from matremap.svbrdf.textures import read_image
+
+    return np.asarray(read_image(path, "linear", colour=False)[0], dtype=float)[..., 0]
+
+
+@needs_materialx
+def test_clearcoattest_partial_coated_onto_openpbr_writes_a_coat_weight_map_that_follows_the_mask(tmp_path, capsys):
+    """ClearCoatTest's Partial_Coated: a uniform blue base under a coat masked by clearcoatTexture (before: the coat
+    was left out, exit 0). Each kind is fitted as one material (no base map is left) and the two are blended."""
+    out = tmp_path / "out"
+    code, log = remap(capsys, COAT_TEST, "mtlx:open_pbr_surface", out, "--material", "Partial_Coated")
+    assert code == 0 and "PASSED" in log, log[-800:]
+    assert "mixed: clearcoat varies per texel" in log
+    doc = json.loads((out / "maps" / "material.json").read_text())
+    coat = _mask(out / "maps" / doc["maps"]["coat_weight"], "coat_weight")
+    src = read_asset(COAT_TEST, "Partial_Coated").to_map_set(tmp_path / "src")
+    from matremap.svbrdf.textures import load_map_set
+
+    source = load_map_set(src)
+    mask = _mask(source.maps["clearcoat"], "clearcoat")
+    assert coat.shape == mask.shape and np.corrcoef(coat.ravel(), mask.ravel())[0, 1] > 0.999
+    assert coat[mask < 1e-3].max() < 1e-3 and coat.max() > 0.2  # no coat where the mask has none
+    import MaterialX as mx
+
+    from matremap.formats.mtlx_document import validate
+
+    d = mx.createDocument()
+    mx.readFromXmlFile(d, str(written(out)))
+    assert validate(d) == (True, "")  # valid against MaterialX's own standard libraries
+
+
+def test_clearcoattest_partial_coated_onto_gltf_writes_the_mask_as_a_clearcoat_texture(tmp_path, capsys):
+    out = tmp_path / "out"
+    code, log = remap(capsys, COAT_TEST, "gltf:pbr", out, "--material", "Partial_Coated")
+    assert code == 0 and "PASSED" in log, log[-800:]
+    import io
+
+    import pygltflib
+    from PIL import Image
+
+    g = pygltflib.GLTF2().load(str(written(out)))
+    m = next(m for m in g.materials if m.name == "Partial_Coated")
+    cc = m.extensions["KHR_materials_clearcoat"]
+    assert cc["clearcoatFactor"] == 1.0 and cc["clearcoatRoughnessFactor"] == pytest.approx(0.03)
+    image = g.images[g.textures[cc["clearcoatTexture"]["index"]].source]
+    view = g.bufferViews[image.bufferView]
+    data = g.binary_blob()[view.byteOffset : view.byteOffset + view.byteLength]
+    red = np.asarray(Image.open(io.BytesIO(data)).convert("RGB"), dtype=float)[..., 0] / 255
+    src = read_asset(COAT_TEST, "Partial_Coated").to_map_set(tmp_path / "src")
+    from matremap.svbrdf.textures import load_map_set
+
+    mask = _mask(load_map_set(src).maps["clearcoat"], "clearcoat")
+    assert red.shape == mask.shape and np.abs(red - mask).max() < 1.5 / 255
+
+
+def test_a_coat_mask_onto_a_target_that_takes_its_specular_as_a_constant_is_refused_before_any_work(tmp_path, capsys):
+    """Mitsuba 3's principled takes ``specular`` as one number; the kinds' fits differ in it."""
+    out = tmp_path / "out"
+    code, log = remap(capsys, COAT_TEST, "mitsuba3:principled", out, "--material", "Partial_Coated")
+    last = log.strip().splitlines()[-1]
+    assert code == 2 and "specular of mitsuba3:principled as a constant" in last and "clearcoat map" in last
+    assert "fit:" not in log and not out.exists()
+
+
+@needs_materialx
+def test_a_textured_base_under_a_coat_mask_blends_a_coated_and_a_bare_conversion(tmp_path, capsys):
+    """The Standard Surface copper's coat weight fed by an image (a ramp in x) over a textured dielectric base:
+    both kinds are swept, the target's coat weight map follows the source's."""
+    src = textured_copper(tmp_path / "in", metalness=0.0, coat_image=True)
+    out = tmp_path / "out"
+    code, log = remap(capsys, src, "mtlx:open_pbr_surface", out)
+    assert code == 0 and "PASSED" in log, log[-800:]
+    doc = json.loads((out / "maps" / "material.json").read_text())
+    coat = _mask(out / "maps" / doc["maps"]["coat_weight"], "coat_weight")
+    ramp = _mask(tmp_path / "in" / "coat.png", "coat")
+    assert np.corrcoef(coat.ravel(), ramp.ravel())[0, 1] > 0.999 and coat[:, 0].max() < 1e-3
