@@ -15,6 +15,12 @@ relative RMSE on the probe, the layer parameters fitted on the target and the se
 MaterialX examples OpenPBR glass and honey and Standard Surface tinted glass, the Khronos AttenuationTest's blue
 volume and thin blue glass, a Mitsuba 3 ``principled`` glass (spec_trans 1) and a Cycles Principled glass
 (Transmission Weight 1); the layers column then gives the target's transmission weight and colour.
+
+``--set textured`` remaps textured materials under a layer (docs/models.md, "Textured materials under a uniform
+layer"): the Khronos ClearcoatWicker (a uniform coat over its maps) and ClearCoatTest's Partial_Coated (a coat mask
+over a uniform base), and the MaterialX Standard Surface copper with an image as its base colour (as a dielectric,
+as a metal, and with its coat weight fed by an image too: a coat mask over textured maps). The fit column then gives
+the evaluation's mean 1 - SSIM under the environment, and the layers column the written coat (a value, or "map").
 """
 
 from __future__ import annotations
@@ -218,6 +224,34 @@ def transmissive_sources(folder: Path) -> list[tuple[str, Path, str | None, str]
     return out
 
 
+def textured_sources(folder: Path) -> list[tuple[str, Path, str | None, str]]:
+    """(label, file, material, its model) of the textured layered materials (the copper variants written into
+    ``folder`` by the tests' own fixture, tests/test_held_layers.py)."""
+    sys.path.insert(0, str(ROOT / "tests"))
+    from test_held_layers import COAT_TEST, WICKER, textured_copper
+
+    return [
+        ("glTF ClearcoatWicker (uniform coat)", WICKER, None, "gltf:pbr"),
+        ("glTF ClearCoatTest Partial_Coated (coat mask)", COAT_TEST, "Partial_Coated", "gltf:pbr"),
+        ("SS dielectric, image base, copper coat", textured_copper(folder / "d", 0.0), None, "mtlx:standard_surface"),
+        ("SS metal, image base, copper coat", textured_copper(folder / "m", 1.0), None, "mtlx:standard_surface"),
+        ("SS image base, coat mask", textured_copper(folder / "c", 0.0, True), None, "mtlx:standard_surface"),
+    ]
+
+
+def written_layers(out: Path, target: str) -> dict:
+    """The coat and sheen of a textured remap's written maps: a value, or "map"."""
+    doc_file = out / "maps" / "material.json"
+    if not doc_file.is_file():
+        return {}
+    doc = json.loads(doc_file.read_text())
+    layers = {}
+    for k in LAYER_PARAMS[target]:
+        v = "map" if k in doc.get("maps", {}) else doc.get("params", {}).get(k)
+        layers[k] = max(v) if isinstance(v, list) else v
+    return layers
+
+
 def run(src: Path, material: str | None, target: str, out: Path, shown: dict | None = None) -> dict:
     cmd = [str(Path(sys.executable).parent / "matremap"), "remap", str(src), "--to", target, "-o", str(out), "--force"]
     cmd += ["--material", material] if material else []
@@ -234,6 +268,8 @@ def run(src: Path, material: str | None, target: str, out: Path, shown: dict | N
             v = values.get(k)
             layers[k] = (max(v) if shown is None else [round(x, 2) for x in v]) if isinstance(v, list) else v
     last = [line for line in log.strip().splitlines() if line.startswith(("done", "written", "matremap:"))]
+    if fit is None and (ssim := re.search(r"mean 1-SSIM ([0-9.]+)", log)):  # a textured remap: its evaluation
+        fit, layers = ssim, written_layers(out, target)
     return {
         "exit": p.returncode,
         "fit": float(fit.group(1)) if fit else None,
@@ -247,17 +283,19 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", nargs="*", default=[], help="sources whose label holds one of these words")
     ap.add_argument("--json", help="write the rows to this JSON file")
-    ap.add_argument("--set", choices=("layered", "transmissive"), default="layered", help="which sources")
+    ap.add_argument("--set", choices=("layered", "transmissive", "textured"), default="layered", help="which sources")
     args = ap.parse_args(argv)
     glass = args.set == "transmissive"
+    listed = {"layered": sources, "transmissive": transmissive_sources, "textured": textured_sources}[args.set]
     shown = TRANSMISSION_PARAMS if glass else None
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         what = "transmission weight, colour" if glass else "coat, sheen"
-        print(f"| source | target | exit | fit rel. RMSE | target's layers ({what}) | s |")
+        measure = "mean 1 - SSIM" if args.set == "textured" else "fit rel. RMSE"
+        print(f"| source | target | exit | {measure} | target's layers ({what}) | s |")
         print("|---|---|---|---|---|---|")
-        for label, src, material, own in (transmissive_sources if glass else sources)(folder):
+        for label, src, material, own in listed(folder):
             if args.only and not any(w in label for w in args.only):
                 continue
             for target in TARGETS:
