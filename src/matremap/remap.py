@@ -1141,6 +1141,8 @@ def hold_layers(
     log(f"library: not used (its transforms were learned on materials without a {' or '.join(on)})")
     job = replace(job, library=False)
     source = Material.create(map_set.spec.id, base_values(map_set, summary, held))
+    white = {c: [1.0, 1.0, 1.0] for c in invented_colours(source, job.target) if c not in job.fix}
+    job, fix = replace(job, fix={**job.fix, **white}), {**fix, **white}
     free, _ = freed_layers(source.model, source.values, get_model(job.target), held=job.fix)
     staged = "three-stage" if job.strategy == "two-stage" else job.strategy
     sweep_job = staged_strategy(replace(job, strategy=staged), log)
@@ -1161,6 +1163,24 @@ def hold_layers(
         "fits the base maps under them"
     )
     return {**fix, **values}, sweep_job
+
+
+def invented_colours(source: Material, target: str) -> list[str]:
+    """The target's layer colours (a coat colour, a sheen tint) whose layer the source has with no colour (a glTF
+    clear coat, a white coat): held white over maps. Freed, the fit at the typical texel may darken the coat
+    instead of the base, and the held dark coat then leaves the brighter texels out of the base's range (the
+    ClearcoatWicker onto Standard Surface: coat_color 0.33 grey, every texel outside the learned domain; held white,
+    0.0085)."""
+    from matremap.dialects.mtlx import LAYER_PARAMS, layer_colour
+
+    own, theirs = LAYER_PARAMS.get(target, {}), LAYER_PARAMS.get(source.model, {})
+    out = []
+    for name, layer in own.items():
+        if layer.colour is None or layer.weighted_colour or name not in theirs:
+            continue
+        if np.allclose(layer_colour(source.values, theirs[name]), 1.0):
+            out.append(layer.colour)
+    return out
 
 
 def unswept_params(

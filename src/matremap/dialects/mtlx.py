@@ -229,7 +229,7 @@ def freed_layers(
         weight = _layer_amount(source_values, src)
         if tgt is None or weight <= 0.0:
             continue
-        colour = _layer_colour(source_values, src)
+        colour = layer_colour(source_values, src)
         rough = float(np.mean(source_values.get(src.roughness, 0.5))) if src.roughness else 0.5
         rough = 1.0 - rough if src.gloss else rough
         values: dict[str, Any] = {tgt.weight: weight}
@@ -253,7 +253,7 @@ def _layer_amount(values: Mapping[str, Any], layer: Layer) -> float:
     return float(np.max(np.asarray(values.get(layer.weight, 0.0), dtype=float)))
 
 
-def _layer_colour(values: Mapping[str, Any], layer: Layer) -> np.ndarray:
+def layer_colour(values: Mapping[str, Any], layer: Layer) -> np.ndarray:
     """A layer's colour as RGB (white where the model has none; glTF's sheenColor divided by its weight)."""
     if layer.colour is None:
         return np.ones(3)
