@@ -54,6 +54,7 @@ PLASTIC = ("mitsuba3:roughplastic", GGX)
 GLTF = ("gltf:metal-rough", [])
 ALLOW_CORPUS = ["--allow-path", str(CORPUS)]  # documents whose fileprefix reaches a shared Images folder
 CYCLES = ("cycles:principled", [])
+OPENPBR = ("mtlx:open_pbr_surface", [])
 USD = ("usd:preview_surface", [])
 USD_SUFFIXES = (".usda", ".usdc", ".usdz", ".usd")
 
@@ -153,9 +154,17 @@ ASSETS: list[Asset] = [
     Asset(
         "ClearcoatWicker",
         "gltf-ClearcoatWicker/ClearcoatWicker.glb",
-        "gltf:metal-rough",
-        [GLTF, CONDUCTOR, PLASTIC, CYCLES],
-        note="textured, metallicFactor 1 x texture 0, clearcoat",
+        "gltf:pbr",  # textured under a uniform coat: read into gltf:pbr, the coat held over the sweep (issue 16)
+        [GLTF, CONDUCTOR, PLASTIC, CYCLES, OPENPBR],
+        note="textured, metallicFactor 1 x texture 0, under a uniform clear coat (1, 0.1) with a coat normal map",
+    ),
+    Asset(
+        "ClearCoatTest-mask",
+        "gltf-ClearCoatTest/ClearCoatTest.glb",
+        "gltf:pbr",
+        [OPENPBR, CYCLES],
+        material="Partial_Coated",
+        note="a uniform blue base under a coat masked by clearcoatTexture (blended per texel)",
     ),
     Asset(
         "MRSNoTex-gold-r0",
