@@ -782,7 +782,7 @@ def convert_kind(kind: MapSet, out: Path, job: RemapJob, log: Callable[[str], No
     material (:func:`_fit_uniform`, its layers freed) whose values are the kind's constants."""
     if kind.maps:
         return load_map_set(remap_into(out, kind, replace(job, evaluate=False), log).maps)
-    source = Material.create(kind.model, {k: v for k, v in kind.constants.items()})
+    source = Material.create(kind.model, dict(kind.constants))
     fix = complete_fix(source.model, qty.material_values(source), job.target, job.fix)
     job, fix, metal = free_partial_metal(source, job, fix, log)
     r, _ = _fit_uniform(source, job, fix, log, metal)
@@ -1170,7 +1170,7 @@ def invented_colours(source: Material, target: str) -> list[str]:
     clear coat, a white coat): held white over maps. Freed, the fit at the typical texel may darken the coat
     instead of the base, and the held dark coat then leaves the brighter texels out of the base's range (the
     ClearcoatWicker onto Standard Surface: coat_color 0.33 grey, every texel outside the learned domain; held white,
-    0.0085)."""
+    0.0014)."""
     from matremap.dialects.mtlx import LAYER_PARAMS, layer_colour
 
     own, theirs = LAYER_PARAMS.get(target, {}), LAYER_PARAMS.get(source.model, {})
