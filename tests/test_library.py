@@ -196,3 +196,39 @@ def test_a_textured_gltf_dielectric_goes_onto_openpbr_through_the_library(tmp_pa
     source = read_image(corpus / "CesiumLogoFlat.png")[..., :3]
     assert written.shape[:2] == source.shape[:2]
     assert np.mean(np.abs(written - source)) < 0.02
+
+
+def test_a_textured_gltf_metal_goes_onto_openpbr_through_the_library(tmp_path, capsys):
+    """The examples' textured glTF brass (metallic 1) onto OpenPBR takes the shipped gltf-metal-openpbr route (a
+    metal's F0 read from OpenPBR's base colour: before, its sweep gave no F0 axis), and the written base colour map
+    follows the source's, channel by channel (decoded by OpenImageIO, not by matremap's score)."""
+    pytest.importorskip("colour", reason="the quality gate needs colour-science")
+    from pathlib import Path
+
+    oiio = pytest.importorskip("OpenImageIO")
+
+    def read_image(path):
+        f = oiio.ImageInput.open(str(path))
+        try:
+            return np.asarray(f.read_image(format="float"))[..., :3]
+        finally:
+            f.close()
+
+    example = Path(__file__).parents[1] / "examples" / "brass-gltf"
+    out = tmp_path / "out"
+    code = main(["remap", str(example / "brass.gltf"), "--to", "mtlx:open_pbr_surface", "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 0, err[-600:]
+    assert "gltf-metal-openpbr" in err and "sweeping" not in err
+    written = next(out.glob("*base_color*"))
+    w, s = read_image(written), read_image(example / "brass_basecolor.png")
+    assert w.shape == s.shape
+    for c in range(3):  # the texture's pattern (F0 times k(roughness) per texel: 0.966 measured)
+        assert np.corrcoef(w[..., c].ravel(), s[..., c].ravel())[0, 1] > 0.95
+    ratio = linear(w).reshape(-1, 3).mean(axis=0) / linear(s).reshape(-1, 3).mean(axis=0)
+    assert 0.8 < ratio.mean() < 1.1 and np.ptp(ratio) < 0.03  # the brass's hue (0.92 on every channel measured)
+
+
+def linear(srgb: np.ndarray) -> np.ndarray:
+    """sRGB-encoded values to linear (IEC 61966-2-1)."""
+    return np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)

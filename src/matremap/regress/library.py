@@ -235,10 +235,9 @@ PAIRS: tuple[Pair, ...] = (
     ),
     # the layered models' base layers (issue 16): glTF dielectrics into OpenPBR and Standard Surface and back, swept
     # from each side (no reverse: the forward domain is the grid, roughness 1 inside; the target's roughness bound
-    # there is the answer, so those points are kept). Not their metals: an OpenPBR or Standard Surface metal
-    # source's base colour is read as a diffuse quantity by the sweep (its specialisation is not applied on the
-    # source side) and the F82 metal's F0 held out at 0.026, above the library's 0.02. Coats, sheens and
-    # transmission are on no sweep's axes: a textured layered material is refused in one line.
+    # there is the answer, so those points are kept), and glTF metals into them (F0 through the base colour,
+    # held-out 0.016). Not their metals back onto glTF: the F82 metal's F0 held out at 0.023, above the library's
+    # 0.02 (swept on demand). No transform has a layer: a textured layered material is swept for its own maps.
     *(
         Pair(
             f"gltf-{kind}-{short}",
@@ -254,7 +253,10 @@ PAIRS: tuple[Pair, ...] = (
             ("openpbr", "mtlx:open_pbr_surface", "base_metalness"),
             ("standardsurface", "mtlx:standard_surface", "metalness"),
         )
-        for kind, metal, grid in (("dielectric", 0.0, "roughness=0.05:1:8,baseColor=0:1:5,ior=1.3:1.8:3"),)
+        for kind, metal, grid in (
+            ("dielectric", 0.0, "roughness=0.05:1:8,baseColor=0:1:5,ior=1.3:1.8:3"),
+            ("metal", 1.0, "roughness=0.05:1:8,baseColor=0.05:1:8"),
+        )
     ),
     *(
         Pair(
