@@ -144,13 +144,15 @@ def test_write_all_replaces_every_material_in_place(tmp_path, pattern, suffix):
         after = b["materials"][i]
         kept_ext = {k: v for k, v in (before.get("extensions") or {}).items() if "ior" not in k and "specular" not in k}
         after_ext = {k: v for k, v in (after.get("extensions") or {}).items() if k in kept_ext}
-        if isinstance(want.get(name), MapSet) and "clearcoat" in want[name].maps:  # a coat mask: a new texture
-            # (its pixels are checked by test_held_layers.py); the coat's other values are kept
+        coat_maps = {"clearcoat": "clearcoatTexture", "clearcoatRoughness": "clearcoatRoughnessTexture"}
+        written = [t for k, t in coat_maps.items() if isinstance(want.get(name), MapSet) and k in want[name].maps]
+        factors = [t.replace("Texture", "Factor") for t in written]
+        if written:  # a coat mask or roughness map: a new texture, its factor 1 (the pixels: test_held_layers.py)
             kept_ext, after_ext = (
-                {k: {f: x for f, x in v.items() if f != "clearcoatTexture"} for k, v in e.items()}
+                {k: {f: x for f, x in v.items() if f not in written + factors} for k, v in e.items()}
                 for e in (kept_ext, after_ext)
             )
-            assert "clearcoatTexture" in after["extensions"]["KHR_materials_clearcoat"]
+            assert set(written) <= set(after["extensions"]["KHR_materials_clearcoat"])
         assert gv.resolved(out, after_ext) == gv.resolved(src, kept_ext)
         if name not in want:
             assert gv.resolved(out, after) == gv.resolved(src, before)

@@ -85,32 +85,49 @@ def test_the_clearcoat_wicker_is_read_with_its_coat_and_its_coat_normal_map_is_s
     assert any("clearcoatNormalTexture, the coat's own normal map, is not converted" in n for n in a.notes)
 
 
-def test_a_coat_whose_roughness_is_a_texture_is_refused_for_other_targets_in_one_line(tmp_path, capsys):
-    """ClearCoatTest's RoughVariations_Coated: the coat's roughness varies over a texture, which no sweep quantity
-    carries. Before, the coat was left out with a note and exit 0."""
-    a = read_asset(COAT_TEST, "RoughVariations_Coated")
-    assert a.lost == ["KHR_materials_clearcoat (clearcoatFactor 1 with clearcoatRoughnessTexture)"]
+@needs_materialx
+def test_clearcoattest_rough_variations_writes_a_coat_roughness_map_that_follows_the_source(tmp_path, capsys):
+    """ClearCoatTest's RoughVariations_Coated: the coat's roughness varies over clearcoatRoughnessTexture (before:
+    the coat left out with a note, exit 0). The material is fitted at five levels of it and interpolated per
+    texel; the target's coat roughness map rises with the source's."""
     out = tmp_path / "out"
     code, log = remap(capsys, COAT_TEST, "mtlx:open_pbr_surface", out, "--material", "RoughVariations_Coated")
-    last = log.strip().splitlines()[-1]
-    assert code == 2 and "clearcoatRoughnessTexture" in last and "not converted" in last
-    assert not out.exists()
+    assert code == 0 and "PASSED" in log, log[-800:]
+    assert "mixed: clearcoatRoughness varies per texel (coat roughness from" in log
+    doc = json.loads((out / "maps" / "material.json").read_text())
+    rough = _mask(out / "maps" / doc["maps"]["coat_roughness"], "coat_roughness")
+    src = read_asset(COAT_TEST, "RoughVariations_Coated").to_map_set(tmp_path / "src")
+    from matremap.svbrdf.textures import load_map_set
+
+    source = _mask(load_map_set(src).maps["clearcoatRoughness"], "clearcoatRoughness")
+    assert rough.shape == source.shape and np.corrcoef(rough.ravel(), source.ravel())[0, 1] > 0.99
+    assert np.allclose(doc["params"]["coat_color"], 1.0)  # no colour the glTF coat has not
+
+
+def test_a_coat_roughness_map_onto_gltf_is_written_as_a_clearcoat_roughness_texture(tmp_path, capsys):
+    out = tmp_path / "out"
+    code, log = remap(capsys, COAT_TEST, "gltf:pbr", out, "--material", "RoughVariations_Coated")
+    assert code == 0 and "PASSED" in log, log[-800:]
+    import pygltflib
+
+    g = pygltflib.GLTF2().load(str(written(out)))
+    cc = next(m for m in g.materials if m.name == "RoughVariations_Coated").extensions["KHR_materials_clearcoat"]
+    assert cc["clearcoatRoughnessFactor"] == 1.0 and "clearcoatRoughnessTexture" in cc
 
 
 @needs_materialx
-def test_a_textured_coat_roughness_in_materialx_is_refused_before_any_work(tmp_path, capsys):
+def test_a_textured_coat_colour_in_materialx_is_refused_before_any_work(tmp_path, capsys):
     src = textured_copper(tmp_path / "in")
     text = src.read_text().replace(
-        '<input name="coat_roughness" type="float" value="0.20000000298023224" />',
-        '<input name="coat_roughness" type="float" nodename="img_r" />',
+        '<input name="coat_color" type="color3" value="0.96467984, 0.37626296, 0.25818297" />',
+        '<input name="coat_color" type="color3" nodename="img" />',
     )
-    image = '<image name="img_r" type="float"><input name="file" type="filename" value="base.png" /></image>'
-    src.write_text(text.replace("<standard_surface", image + "\n  <standard_surface", 1))
+    src.write_text(text)
     asset = read_asset(src)
-    assert "coat_roughness" in layer_textures(asset.model, asset.textures)
+    assert "coat_color" in layer_textures(asset.model, asset.textures)
     code, log = remap(capsys, src, "gltf:pbr", tmp_path / "out")
     last = log.strip().splitlines()[-1]
-    assert code == 2 and "its layer varies over the maps (coat_roughness textured)" in last
+    assert code == 2 and "its layer varies over the maps (coat_color textured)" in last
     assert "sweep:" not in log and not (tmp_path / "out").exists()
 
 

@@ -48,6 +48,7 @@ from matremap.dialects.mtlx import (
     absorbed_layers,
     coat_tint,
     freed_layers,
+    layer_roughnesses,
     layer_textures,
     layer_weights,
     layers_on,
@@ -68,7 +69,7 @@ from matremap.svbrdf.mapstats import (
     summarise,
     with_medians,
 )
-from matremap.svbrdf.mixed import layer_parameter, mixed_parameter, remap_mixed
+from matremap.svbrdf.mixed import layer_levels, layer_parameter, mixed_parameter, remap_mixed
 from matremap.svbrdf.quality import Check, Thresholds, Verdict, image_checks, map_checks, sample
 from matremap.svbrdf.textures import MapSet, load_map_set, map_values, read_image, texel_limit
 
@@ -731,7 +732,7 @@ def _convert_maps(
         log(f"identity: {_identity_words(identity)}: the maps are copied, nothing is fitted")
         copy_map_set(map_set, folder / "maps", identity)
         return int(np.prod(map_set.size)), 0, 0, 0, None, True
-    mixed = mixed_parameter(map_set, summary) or layer_parameter(map_set, summary)
+    mixed = mixed_parameter(map_set, summary) or layer_parameter(map_set, summary) or layer_levels(map_set, summary)
     params = summary.sample()
     if mixed is not None:  # metal and dielectric texels: blended per texel
         texels, outside = remap_mixed(
@@ -783,6 +784,8 @@ def convert_kind(kind: MapSet, out: Path, job: RemapJob, log: Callable[[str], No
     if kind.maps:
         return load_map_set(remap_into(out, kind, replace(job, evaluate=False), log).maps)
     source = Material.create(kind.model, dict(kind.constants))
+    white = {c: [1.0, 1.0, 1.0] for c in invented_colours(source, job.target) if c not in job.fix}
+    job = replace(job, fix={**job.fix, **white})  # the kinds are blended: no colour one of them invents
     fix = complete_fix(source.model, qty.material_values(source), job.target, job.fix)
     job, fix, metal = free_partial_metal(source, job, fix, log)
     r, _ = _fit_uniform(source, job, fix, log, metal)
@@ -1099,12 +1102,14 @@ def _remap_file(
 
 
 def refuse_textured_layers(path: Path, asset: Any, target: str) -> None:
-    """Refuse, before any work, a material whose layer's colour or roughness varies over its maps (a sheen colour
-    map, a coat roughness map: a sweep's quantities, roughness, F0 and diffuse, have no layer), or that lets light
-    through over textured maps (the evaluation of maps draws reflection only). A uniform layer over textured maps
-    is converted (:func:`hold_layers`), and so is a coat or sheen whose weight alone is a map (blended per texel
-    between the material with the layer and without it, :mod:`matremap.svbrdf.mixed`)."""
-    blended = layer_weights(get_model(asset.model))  # a coat or sheen mask: blended per texel (svbrdf/mixed.py)
+    """Refuse, before any work, a material whose layer's colour varies over its maps (a sheen colour map: a sweep's
+    quantities, roughness, F0 and diffuse, have no layer), or that lets light through over textured maps (the
+    evaluation of maps draws reflection only). A uniform layer over textured maps is converted
+    (:func:`hold_layers`), and so is a coat or sheen whose weight or roughness is a map (blended per texel between
+    the material with the layer and without it, or between a few levels of its roughness,
+    :mod:`matremap.svbrdf.mixed`)."""
+    # a coat or sheen mask, a layer's roughness map: blended per texel (svbrdf/mixed.py)
+    blended = [*layer_weights(get_model(asset.model)), *layer_roughnesses(asset.model)]
     textured = [n for n in layer_textures(asset.model, asset.textures) if n not in blended]
     on = layers_on(asset.model, {**asset.constants, **dict.fromkeys(asset.textures, 1.0)})
     why = None

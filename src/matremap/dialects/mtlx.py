@@ -287,6 +287,12 @@ def layer_weights(spec: ModelSpec) -> list[str]:
     return [n for n in names if spec.param(n).channels == 1]
 
 
+def layer_roughnesses(model: str) -> list[str]:
+    """The roughness (or gloss) parameters of ``model``'s layers (:data:`LAYER_PARAMS`): a map of one is blended per
+    texel between a few levels of it (:class:`matremap.svbrdf.mixed.Levels`)."""
+    return [layer.roughness for layer in LAYER_PARAMS.get(model, {}).values() if layer.roughness is not None]
+
+
 def layer_textures(model: str, maps: Iterable[str]) -> list[str]:
     """The parameters among ``maps`` (a material's textured parameters) that are a layer's weight, colour or
     roughness (:data:`LAYERS`, :data:`LAYER_PARAMS`)."""

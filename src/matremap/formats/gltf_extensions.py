@@ -202,10 +202,13 @@ def lost_look(found: dict[str, dict[str, Any]]) -> list[str]:
     return lost
 
 
+#: a coat's textures read as maps (its weight's and its roughness's, each blended per texel; its normal map is noted)
+COAT_MAPS = {"clearcoatTexture": "clearcoat", "clearcoatRoughnessTexture": "clearcoatRoughness"}
+
+
 def _coat_textures(cc: dict[str, Any]) -> list[str]:
-    """A coat's textures that matremap does not convert: its roughness's (its weight's, ``clearcoatTexture``, is
-    read as the ``clearcoat`` map and blended per texel; its normal map is noted)."""
-    return [k for k in _value_textures(cc) if k != "clearcoatTexture"]
+    """A coat's textures that matremap does not convert (none of the ratified extension's: see :data:`COAT_MAPS`)."""
+    return [k for k in _value_textures(cc) if k not in COAT_MAPS]
 
 
 #: the model a glTF material is read into when a layer carries its look (:func:`layer_values`)
@@ -256,7 +259,7 @@ def extension_notes(found: dict[str, dict[str, Any]], textured: bool = False) ->
     layers = layer_values(found, textured)
     if layers:
         what = ", ".join(f"{k} {_g(v) if isinstance(v, float) else _rgb(v)}" for k, v in layers.items())
-        uniform = textured and not (CLEARCOAT in found and "clearcoatTexture" in found[CLEARCOAT])
+        uniform = textured and not (CLEARCOAT in found and set(COAT_MAPS) & set(found[CLEARCOAT]))
         held = " (uniform over the maps: fitted once, held while the sweep fits the maps)" if uniform else ""
         exts = [
             e
@@ -271,6 +274,11 @@ def extension_notes(found: dict[str, dict[str, Any]], textured: bool = False) ->
         notes.append(
             f"{CLEARCOAT}.clearcoatTexture masks the coat: the material is converted with the coat and without it, "
             "and the two blended per texel by the mask"
+        )
+    if cc is not None and "clearcoat" in layers and "clearcoatRoughnessTexture" in cc:
+        notes.append(
+            f"{CLEARCOAT}.clearcoatRoughnessTexture varies the coat's roughness: the material is converted at a few "
+            "levels of it and interpolated per texel"
         )
     if cc is not None and "clearcoat" in layers and "clearcoatNormalTexture" in cc:
         notes.append(

@@ -200,8 +200,13 @@ def read(
     textures = MaterialTextures(FileReader(p, doc, data, confinement), where, notes)
     layers = layer_values(found)
     maps = textures.read_maps(pbr, found.get(SPECULAR, {}), constants)
-    if "clearcoat" in layers and "clearcoatTexture" in found[CLEARCOAT]:  # a coat mask: R, times clearcoatFactor
-        maps["clearcoat"] = textures.read_coat_weight(found[CLEARCOAT]["clearcoatTexture"], layers["clearcoat"])
+    if "clearcoat" in layers:  # a coat mask (R of clearcoatTexture), a coat roughness map (G of its texture)
+        for slot, (name, c) in {
+            "clearcoatTexture": ("clearcoat", 0),
+            "clearcoatRoughnessTexture": ("clearcoatRoughness", 1),
+        }.items():
+            if slot in found[CLEARCOAT]:
+                maps[name] = textures.read_layer_map(found[CLEARCOAT][slot], slot, c, layers[name])
     normal = textures.read_normal(m)
     doc.uv_set = textures.uv_set
     if normal is not None and not maps:
@@ -365,11 +370,11 @@ class MaterialTextures:
             )
         return textures
 
-    def read_coat_weight(self, info: dict[str, Any], factor: float) -> TextureRef:
-        """KHR_materials_clearcoat's ``clearcoatTexture``: the coat's weight in its R channel, times
-        ``clearcoatFactor``."""
-        tex = self.remapped(info, "clearcoatTexture")
-        return self.ref(tex, (channel(0, tex.channels),), False, factor)
+    def read_layer_map(self, info: dict[str, Any], slot: str, c: int, factor: float) -> TextureRef:
+        """A layer extension's texture (KHR_materials_clearcoat: ``clearcoatTexture`` R, the coat's weight;
+        ``clearcoatRoughnessTexture`` G, its roughness), channel ``c`` times its factor."""
+        tex = self.remapped(info, slot)
+        return self.ref(tex, (channel(c, tex.channels),), False, factor)
 
     def read_normal(self, m: dict[str, Any]) -> TextureRef | None:
         """The normal map (its scale is noted, not applied); a transformed one is baked and turned."""

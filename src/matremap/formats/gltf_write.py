@@ -217,13 +217,20 @@ def specular_image(
     return {}, image
 
 
-def clearcoat_image(maps: dict[str, np.ndarray], exts: dict[str, Any]) -> NewImage | None:
-    """A ``clearcoat`` map as KHR_materials_clearcoat's ``clearcoatTexture`` (its R channel, a linear PNG; the
-    factor is then 1), replacing the copied extension's own (``exts``)."""
-    if "clearcoat" not in maps:
+#: gltf:pbr's coat maps -> KHR_materials_clearcoat's texture and the channel it is read from
+COAT_SLOTS = {"clearcoat": ("clearcoatTexture", 0), "clearcoatRoughness": ("clearcoatRoughnessTexture", 1)}
+
+
+def coat_image(maps: dict[str, np.ndarray], exts: dict[str, Any], name: str) -> NewImage | None:
+    """A ``clearcoat`` or ``clearcoatRoughness`` map as KHR_materials_clearcoat's texture (its R or G channel of
+    a linear PNG; the factor is then 1), replacing the copied extension's own (``exts``)."""
+    if name not in maps:
         return None
-    old = (exts.get(CLEARCOAT) or {}).get("clearcoatTexture")
-    return NewImage("clearcoat", png(code(maps["clearcoat"], False)), "image/png", old)
+    slot, c = COAT_SLOTS[name]
+    old = (exts.get(CLEARCOAT) or {}).get(slot)
+    pixels = np.zeros((*maps[name].shape[:2], 3))
+    pixels[..., c] = maps[name]
+    return NewImage(name, png(code(pixels, False)), "image/png", old)
 
 
 def normal_image(mat: dict[str, Any], normal: Path | None, source_normal: TextureRef | None) -> NewImage | None:
@@ -373,7 +380,7 @@ def plan_material(doc: dict[str, Any], rep: Replacement) -> list[NewImage]:
     ]
     rep.spec_ext, spec_image = specular_image(rep.consts, rep.maps, rep.old_spec)
     images += [spec_image, normal_image(mat, rep.normal, rep.source_normal if rep.copied else None)]
-    images += [clearcoat_image(rep.maps, mat.get("extensions") or {})]
+    images += [coat_image(rep.maps, mat.get("extensions") or {}, slot) for slot in COAT_SLOTS]
     if opacity is not None and not rep.copied:
         mat["alphaMode"] = "MASK" if opacity.settings.get("mode") == "mask" else "BLEND"
         if "cutoff" in opacity.settings:
@@ -413,7 +420,8 @@ def finish_material(doc: dict[str, Any], rep: Replacement, infos: dict[str, dict
     else:
         exts.pop(SPECULAR, None)
     if "clearcoat" in rep.consts:
-        layer_extensions(exts, rep.consts, keep_unread=rep.copied, coat_texture=infos.get("clearcoat"))
+        coat = {COAT_SLOTS[n][0]: infos[n] for n in COAT_SLOTS if n in infos}
+        layer_extensions(exts, rep.consts, keep_unread=rep.copied, coat_textures=coat)
     elif rep.source_layered:
         for name in (CLEARCOAT, SHEEN):
             exts.pop(name, None)
@@ -437,11 +445,14 @@ LAYER_EXTENSIONS = {
 
 
 #: gltf:pbr's layer parameters the writer takes as maps (each into its extension's texture)
-LAYER_MAPS = ("clearcoat",)
+LAYER_MAPS = ("clearcoat", "clearcoatRoughness")
 
 
 def layer_extensions(
-    exts: dict[str, Any], consts: dict[str, Any], keep_unread: bool = False, coat_texture: dict[str, Any] | None = None
+    exts: dict[str, Any],
+    consts: dict[str, Any],
+    keep_unread: bool = False,
+    coat_textures: dict[str, dict[str, Any]] | None = None,
 ) -> None:
     """Set (or drop, where the layer is off) the layer extensions of a ``gltf:pbr`` result's uniform values:
     KHR_materials_clearcoat (clearcoatFactor > 0), _sheen (a sheen colour not black), _transmission
@@ -449,8 +460,8 @@ def layer_extensions(
     infinity, so it is left out). The ratified READMEs' property names; a replaced extension loses the textures
     of its values (the result's values are uniform), not a coat's own normal map. ``keep_unread``: in a copy of a
     glTF source, a transmission or volume the result has off is the source's, which the reader does not read into
-    gltf:pbr (only its coat and sheen): kept. ``coat_texture``: the textureInfo of a ``clearcoat`` map (then
-    clearcoatFactor 1 times its R channel)."""
+    gltf:pbr (only its coat and sheen): kept. ``coat_textures``: the textureInfos of ``clearcoat`` and
+    ``clearcoatRoughness`` maps by slot (their factors are then 1)."""
 
     def one(name: str) -> float:
         return float(np.asarray(consts[name], dtype=float).reshape(-1)[0])
@@ -458,14 +469,15 @@ def layer_extensions(
     def rgb(name: str) -> list[float]:
         return [float(x) for x in np.broadcast_to(np.asarray(consts[name], dtype=float), (3,))]
 
-    coat = {"clearcoatFactor": 1.0, "clearcoatTexture": coat_texture} if coat_texture is not None else None
+    factors = {"clearcoatTexture": "clearcoatFactor", "clearcoatRoughnessTexture": "clearcoatRoughnessFactor"}
+    coat = {**{factors[k]: 1.0 for k in coat_textures or {}}, **(coat_textures or {})} or None
     values: dict[str, dict[str, Any] | None] = {
         CLEARCOAT: {
             "clearcoatFactor": one("clearcoat"),
             "clearcoatRoughnessFactor": one("clearcoatRoughness"),
             **(coat or {}),
         }
-        if one("clearcoat") > 0 or coat is not None
+        if one("clearcoat") > 0 or "clearcoatTexture" in (coat or {})
         else None,
         SHEEN: {"sheenColorFactor": rgb("sheenColor"), "sheenRoughnessFactor": one("sheenRoughness")}
         if max(rgb("sheenColor")) > 0

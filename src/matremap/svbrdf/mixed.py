@@ -78,9 +78,19 @@ class Mixed:
         """The metal's share per texel of the mixed parameter's ``values``, in [0, 1]."""
         return weight(values, self.metal, self.dielectric)
 
+    def weights(self, values: np.ndarray) -> list[np.ndarray]:
+        """Each kind's share per texel, in the order of :attr:`kinds` (they sum to 1)."""
+        w = self.weight(values)
+        return [w, 1.0 - w]
+
     def value(self, kind: str) -> float:
         """The mixed parameter's value that holds a texel wholly at ``kind``."""
         return self.metal if kind == self.kinds[0] else self.dielectric
+
+    def describe(self) -> str:
+        """How the texels divide between the kinds, for the log."""
+        first, second = self.kinds
+        return f"{first} on {100 * self.share(first):.0f}%, {second} on {100 * self.share(second):.0f}% of the texels"
 
     def share(self, kind: str) -> float:
         """The fraction of texels that hold some of ``kind`` (one of :attr:`kinds`)."""
@@ -90,6 +100,66 @@ class Mixed:
     def pure(self, kind: str) -> bool:
         """Whether every texel holding some of ``kind`` holds it whole (no intermediate values)."""
         return self.counts.between == 0
+
+
+@dataclass(frozen=True)
+class Levels:
+    """A layer's roughness given as a map (a coat roughness texture): the material is converted at a few
+    ``levels`` of it, evenly over the map's range, and each texel interpolated linearly between the two levels
+    around its value (hat weights: a piecewise-linear map of the layer's roughness, as a sweep along it would
+    learn, that the per-texel blend applies)."""
+
+    name: str
+    levels: tuple[float, ...]
+    layer: str
+
+    @property
+    def kinds(self) -> tuple[str, ...]:
+        return tuple(f"{self.name}={v:g}" for v in self.levels)
+
+    def value(self, kind: str) -> float:
+        return self.levels[self.kinds.index(kind)]
+
+    def weights(self, values: np.ndarray) -> list[np.ndarray]:
+        """The hat weight of each level per texel (values outside the levels take the nearest one)."""
+        v = np.clip(np.asarray(values, dtype=np.float32), self.levels[0], self.levels[-1])
+        out = []
+        for i, level in enumerate(self.levels):
+            w = np.zeros_like(v)
+            if i > 0:
+                lo = self.levels[i - 1]
+                w = np.where((v >= lo) & (v <= level), (v - lo) / (level - lo), w)
+            if i + 1 < len(self.levels):
+                hi = self.levels[i + 1]
+                w = np.where((v >= level) & (v < hi), (hi - v) / (hi - level), w)
+            out.append(w)
+        return out
+
+    def describe(self) -> str:
+        return f"{self.layer} roughness from {self.levels[0]:g} to {self.levels[-1]:g}, {len(self.levels)} levels"
+
+
+#: levels a layer roughness map is converted at (:class:`Levels`)
+LEVELS = 5
+
+
+def layer_levels(map_set: MapSet, summary: MapSummary) -> Levels | None:
+    """The first layer (a coat, a sheen) the material has whose roughness is a map that varies, or None."""
+    from matremap.dialects.mtlx import LAYER_PARAMS, LAYERS
+
+    values = {**map_set.constants, **dict.fromkeys(map_set.maps, 1.0)}
+    for layer, own in LAYER_PARAMS.get(map_set.model, {}).items():
+        weight_name = LAYERS[map_set.model][layer]
+        on = float(np.max(np.asarray(values.get(weight_name, 0.0), dtype=float))) > 0.0
+        stats = summary.stats.get(own.roughness or "")
+        if not on or stats is None or stats.hi - stats.lo <= 2 * TOLERANCE:
+            continue
+        levels = tuple(round(float(v), 6) for v in np.linspace(stats.lo, stats.hi, LEVELS))
+        return Levels(own.roughness or "", levels, layer)
+    return None
+
+
+Blend = Mixed | Levels
 
 
 def mixed_parameter(map_set: MapSet, summary: MapSummary) -> Mixed | None:
@@ -130,13 +200,13 @@ def expressing_models(family: str) -> list[str]:
     return sorted(both, key=lambda m: (m.split(":", 1)[0] != family, m))
 
 
-def check_target(mixed: Mixed, target: str, fix: Mapping[str, Any]) -> None:
+def check_target(mixed: Blend, target: str, fix: Mapping[str, Any]) -> None:
     """Refuse, in one line, a target that cannot express both kinds, or that cannot take as a map the
     parameter the blend will vary (a Cycles ``Metallic`` that becomes the source's map)."""
     from matremap.renderers.registry import texture_refusal
 
     spec = get_model(target)
-    if mixed.layer is not None:
+    if isinstance(mixed, Levels) or mixed.layer is not None:
         _check_layer_target(mixed, spec, fix)
         return
     if qty.diffuse_param(spec) is None:
@@ -152,25 +222,27 @@ def check_target(mixed: Mixed, target: str, fix: Mapping[str, Any]) -> None:
         raise MatremapError(f"{why}, and the metal and dielectric texels need it as a map; fix it with --fix")
 
 
-def _check_layer_target(mixed: Mixed, spec: ModelSpec, fix: Mapping[str, Any]) -> None:
-    """A layer blended per texel varies the target's own weight of that layer and its base parameters (the
-    kinds' fits differ): each must be a map its renderers take."""
-    from matremap.dialects.mtlx import LAYERS
+def _check_layer_target(mixed: Blend, spec: ModelSpec, fix: Mapping[str, Any]) -> None:
+    """A layer blended per texel varies the target's own weight (or roughness) of that layer and its base
+    parameters (the kinds' fits differ): each must be a map its renderers take."""
+    from matremap.dialects.mtlx import LAYER_PARAMS, LAYERS
     from matremap.renderers.registry import texture_refusal
 
-    varied = [LAYERS.get(spec.id, {}).get(mixed.layer or "")]
+    own = LAYER_PARAMS.get(spec.id, {}).get(mixed.layer or "")
+    varied = [LAYERS.get(spec.id, {}).get(mixed.layer or "")] if isinstance(mixed, Mixed) else []
+    varied += [own.roughness if own is not None and not own.gloss else None] if isinstance(mixed, Levels) else []
     varied += [getattr(qty.roughness_param(spec), "name", None), getattr(qty.diffuse_param(spec), "name", None)]
     if spec.reflectance is not None:  # the kinds' F0 differs too (an IOR fitted under a coat and without it)
         varied.append(spec.reflectance.driven_param(spec.specialise(fix).diffuse_only is None))
     why = texture_refusal(spec.id, [n for n in varied if n is not None and n not in fix])
     if why is not None:
+        what = f"with and without the {mixed.layer}" if isinstance(mixed, Mixed) else f"of each {mixed.layer} roughness"
         raise MatremapError(
-            f"{why}, and the texels with and without the {mixed.layer} ({mixed.name} map) need it as a map; choose "
-            "a target that takes it as a map"
+            f"{why}, and the texels {what} ({mixed.name} map) need it as a map; choose a target that takes it as a map"
         )
 
 
-def kind_map_set(map_set: MapSet, mixed: Mixed, kind: str, dest: Path) -> MapSet:
+def kind_map_set(map_set: MapSet, mixed: Blend, kind: str, dest: Path) -> MapSet:
     """The map set with the mixed parameter held at one ``kind``'s value, as a manifest in ``dest`` that
     refers to the source's files (nothing is copied)."""
     dest.mkdir(parents=True, exist_ok=False)
@@ -198,7 +270,7 @@ def remap_mixed(
     folder: Path,
     map_set: MapSet,
     params: Mapping[str, Any],
-    mixed: Mixed,
+    mixed: Blend,
     target: str,
     fix: Mapping[str, Any],
     check: CheckKind,
@@ -214,18 +286,16 @@ def remap_mixed(
     sets = {kind: kind_map_set(map_set, mixed, kind, kinds / kind) for kind in mixed.kinds}
     for kind, ms in sets.items():
         check(ms, {**params, mixed.name: mixed.value(kind)})
-    first, second = mixed.kinds
     log(
-        f"mixed: {mixed.name} varies per texel ({first} on {100 * mixed.share(first):.0f}%, {second} on "
-        f"{100 * mixed.share(second):.0f}% of the texels): converting each kind through its own transform "
-        "and blending them by the map"
+        f"mixed: {mixed.name} varies per texel ({mixed.describe()}): converting each kind through its own "
+        "transform and blending them by the map"
     )
     converted = {}
     for kind, ms in sets.items():
         log(f"mixed: the {kind} ({mixed.name} {mixed.value(kind):g})")
         converted[kind] = convert_kind(ms, kinds / f"{kind}-out")
     texels = int(np.prod(map_set.size))
-    outside = blend(converted[first], converted[second], mixed, folder / "maps", map_set)
+    outside = blend(list(converted.values()), mixed, folder / "maps", map_set)
     for kind, ms in converted.items():  # what was applied, with its provenance
         t = ms.root.parent / "transform.json"
         if t.is_file():
@@ -298,66 +368,70 @@ class _Blended:
 
     name: str
     channels: int
-    metal: _Source
-    dielectric: _Source
+    sources: list[_Source]
     file: str
     info: ImageInfo
 
 
 def _plan(
-    metal: MapSet, dielectric: MapSet, weights: Path, info: ImageInfo, layer: str | None = None
+    sides: list[MapSet], weights: Path, info: ImageInfo, first_only: frozenset[str] = frozenset()
 ) -> tuple[list[_Blended], dict[str, Any]]:
     """The maps to blend and the parameters that stay constants (options included); ``weights``, ``info``: the
-    source's map of the mixed parameter and its format. ``layer``: the layer the first side has and the second
-    has not; the target's colour and roughness of that layer are the first side's everywhere (where the layer's
-    weight is 0 they draw nothing; blended, a held coat roughness became a map running to 0)."""
-    from matremap.dialects.mtlx import LAYER_PARAMS
-
-    spec = metal.spec
-    sides = [metal, dielectric]
-    a, b = _sources(metal), _sources(dielectric)
+    source's map of the mixed parameter and its format. ``first_only``: parameters that take the first side's
+    value everywhere (a layer's colour and roughness, when the other side is bare: where the layer's weight is 0
+    they draw nothing; blended, a held coat roughness became a map running to 0)."""
+    spec = sides[0].spec
+    found = [_sources(ms) for ms in sides]
     for option in spec.option_names:
-        if str(metal.constants.get(option)) != str(dielectric.constants.get(option)):
+        given = {str(ms.constants.get(option)) for ms in sides}
+        if len(given) > 1:
             raise MatremapError(
-                f"the metal and the dielectric texels were converted with different {option} ("
-                f"{metal.constants.get(option)} and {dielectric.constants.get(option)}); fix it: --fix {option}=..."
+                f"the kinds of texels were converted with different {option} ({' and '.join(sorted(given))}); fix "
+                f"it: --fix {option}=..."
             )
-    constants: dict[str, Any] = {k: v for k, v in metal.constants.items() if k in spec.option_names}
+    constants: dict[str, Any] = {k: v for k, v in sides[0].constants.items() if k in spec.option_names}
     roles = [spec.specialise(ms.constants) for ms in sides]  # a parameter one kind does not use takes the other's
-    own = LAYER_PARAMS.get(spec.id, {}).get(layer or "")
-    first_only = {own.colour, own.roughness} if own is not None else set()
     plan = []
     for p in spec.params:
-        if p.name not in a and p.name not in b:
+        have = [i for i, f in enumerate(found) if p.name in f]
+        if not have:
             continue
-        va = a[p.name] if p.name in a else b[p.name]
-        vb = b[p.name] if p.name in b and p.name not in first_only else va
-        used = [r.param(p.name).role != "other" for r in roles]
-        va, vb = (vb, vb) if used == [False, True] else (va, va) if used == [True, False] else (va, vb)
-        if not _is_map(va) and not _is_map(vb) and np.allclose(va, vb):
-            constants[p.name] = va
+        values = [found[i][p.name] if i in have else found[have[0]][p.name] for i in range(len(sides))]
+        if p.name in first_only:
+            values = [values[0]] * len(sides)
+        used = [i for i, r in enumerate(roles) if r.param(p.name).role != "other"]
+        if used and len(used) < len(sides):
+            values = [values[i] if i in used else values[used[0]] for i in range(len(sides))]
+        if not any(_is_map(v) for v in values) and all(np.allclose(values[0], v) for v in values[1:]):
+            constants[p.name] = values[0]
             continue
-        out = _info(spec, p.name, sides, [v for v in (va, vb) if not _is_map(v)], info)
-        plan.append(_Blended(p.name, p.channels, va, vb, _file_name(p.name, sides, out, weights), out))
+        out = _info(spec, p.name, sides, [v for v in values if not _is_map(v)], info)
+        plan.append(_Blended(p.name, p.channels, values, _file_name(p.name, sides, out, weights), out))
     return plan, constants
 
 
-def blend(metal: MapSet, dielectric: MapSet, mixed: Mixed, dest: Path, source: MapSet) -> int:
-    """Write the per-texel blend of the two converted map sets into ``dest`` (maps, the union of their
-    outside-domain masks where they contribute, the normal map, ``material.json``), band by band; returns
-    the number of texels outside the training domain. A failure leaves no ``dest``."""
-    spec = metal.spec
-    plan, constants = _plan(metal, dielectric, source.maps[mixed.name], source.info[mixed.name], mixed.layer)
+def blend(sides: list[MapSet], mixed: Blend, dest: Path, source: MapSet) -> int:
+    """Write the per-texel blend of the converted map sets (one per kind of ``mixed``, in its order) into
+    ``dest`` (maps, the union of their outside-domain masks where they contribute, the normal map,
+    ``material.json``), band by band; returns the number of texels outside the training domain. A failure leaves
+    no ``dest``."""
+    from matremap.dialects.mtlx import LAYER_PARAMS
+
+    spec = sides[0].spec
+    own = LAYER_PARAMS.get(spec.id, {}).get(mixed.layer or "") if isinstance(mixed, Mixed) else None
+    first_only = frozenset(n for n in (own.colour, own.roughness) if n) if own is not None else frozenset()
+    plan, constants = _plan(sides, source.maps[mixed.name], source.info[mixed.name], first_only)
     dest.mkdir(parents=True, exist_ok=False)
     try:
-        outside = _blend_bands(plan, mixed, dest, source, [metal, dielectric])
+        outside = _blend_bands(plan, mixed, dest, source, sides)
         doc: dict[str, Any] = {"model": spec.id, "maps": {b.name: b.file for b in plan}}
-        if metal.normal is not None:
-            shutil.copyfile(metal.normal, dest / metal.normal.name)
-            doc["normal"] = metal.normal.name
+        normal = sides[0].normal
+        if normal is not None:
+            shutil.copyfile(normal, dest / normal.name)
+            doc["normal"] = normal.name
         doc["params"] = constants
         doc["colorspace"] = {b.file: b.info.colorspace for b in plan}
-        doc["provenance"] = _provenance(metal, dielectric, mixed, source, outside, dest)
+        doc["provenance"] = _provenance(sides, mixed, source, outside, dest)
         write_text(dest / MANIFEST_NAME, json.dumps(doc, indent=1) + "\n")
     except BaseException:
         shutil.rmtree(dest, ignore_errors=True)
@@ -374,7 +448,7 @@ def _band(v: _Source, read: dict[tuple[int, str], np.ndarray], channels: int, sh
     return _full(read[_key(v)] if _is_map(v) else v, channels, shape)
 
 
-def _blend_bands(plan: list[_Blended], mixed: Mixed, dest: Path, source: MapSet, sides: list[MapSet]) -> int:
+def _blend_bands(plan: list[_Blended], mixed: Blend, dest: Path, source: MapSet, sides: list[MapSet]) -> int:
     """Stream the blend of every planned map and the outside-domain mask into ``dest``; the mask's count."""
     height, width = source.size
     spec = sides[0].spec
@@ -384,7 +458,7 @@ def _blend_bands(plan: list[_Blended], mixed: Mixed, dest: Path, source: MapSet,
     writers: list[MapWriter] = []
     outside = 0
     try:
-        for v in (v for b in plan for v in (b.metal, b.dielectric) if _is_map(v)):
+        for v in (v for b in plan for v in b.sources if _is_map(v)):
             if _key(v) not in readers:
                 readers[_key(v)] = MapReader(v[0].maps[v[1]], v[0].colorspace.get(v[1]))
         weights = MapReader(source.maps[mixed.name], source.colorspace.get(mixed.name))
@@ -395,14 +469,16 @@ def _blend_bands(plan: list[_Blended], mixed: Mixed, dest: Path, source: MapSet,
         writers = [MapWriter(dest / b.file, b.info.like(width=width, height=height)) for b in plan]
         writers.append(MapWriter(dest / MASK_NAME, ImageInfo("png", "uint8", 1, width, height, "linear")))
         for y0, y1 in bands(height, band_rows(width)):
-            w = mixed.weight(map_values(source.spec, mixed.name, weights.read_rows(y0, y1), weights.path, y0))
+            ws = mixed.weights(map_values(source.spec, mixed.name, weights.read_rows(y0, y1), weights.path, y0))
             read = {k: map_values(spec, k[1], r.read_rows(y0, y1), r.path, y0) for k, r in readers.items()}
             for b, writer in zip(plan, writers, strict=False):
-                ww = w if b.channels == 1 else w[..., None]
-                fa, fb = (_band(v, read, b.channels, w.shape) for v in (b.metal, b.dielectric))
-                writer.write_rows(y0, ww * fa + (1.0 - ww) * fb)
-            off = np.zeros(w.shape, dtype=bool)
-            for mask, share in zip(masks, (w, 1.0 - w), strict=True):
+                parts = (
+                    (w if b.channels == 1 else w[..., None]) * _band(v, read, b.channels, w.shape)
+                    for w, v in zip(ws, b.sources, strict=True)
+                )
+                writer.write_rows(y0, sum(parts))
+            off = np.zeros(ws[0].shape, dtype=bool)
+            for mask, share in zip(masks, ws, strict=True):
                 if mask is not None:
                     off |= (mask.read_rows(y0, y1)[..., 0] > 0.5) & (share > TOLERANCE)
             writers[-1].write_rows(y0, off.astype(np.float32))
@@ -421,24 +497,20 @@ def _blend_bands(plan: list[_Blended], mixed: Mixed, dest: Path, source: MapSet,
     return outside
 
 
-def _provenance(
-    metal: MapSet, dielectric: MapSet, mixed: Mixed, source: MapSet, outside: int, dest: Path
-) -> dict[str, Any]:
-    """The blended result's provenance (in ``dest``): the source and both transforms."""
+def _provenance(sides: list[MapSet], mixed: Blend, source: MapSet, outside: int, dest: Path) -> dict[str, Any]:
+    """The blended result's provenance (in ``dest``): the source and each kind's transform."""
 
     def described(ms: MapSet) -> str:
         doc = json.loads((ms.root / MANIFEST_NAME).read_text())
         return str(doc.get("provenance", {}).get("transform", "?"))
 
-    m, d = described(metal), described(dielectric)
+    done = {kind: described(ms) for kind, ms in zip(mixed.kinds, sides, strict=True)}
+    where = ", ".join(f"{t} where {mixed.name} is {mixed.value(k):g}" for k, t in done.items())
     return {
         "source": source_reference(source.root, dest),
         "source_model": source.model,
-        "transform": (
-            f"per texel by {mixed.name}: {m} where {mixed.name} is {mixed.metal:g}, {d} where it is "
-            f"{mixed.dielectric:g}, blended linearly in between"
-        ),
-        "transforms": {mixed.kinds[0]: m, mixed.kinds[1]: d},
-        "blend": {"parameter": mixed.name, mixed.kinds[0]: mixed.metal, mixed.kinds[1]: mixed.dielectric},
+        "transform": f"per texel by {mixed.name}: {where}, blended linearly in between",
+        "transforms": done,
+        "blend": {"parameter": mixed.name, **{k: mixed.value(k) for k in mixed.kinds}},
         "outside_domain": {"file": MASK_NAME, "texels": outside},
     }
