@@ -167,6 +167,14 @@ ASSETS: list[Asset] = [
         note="a uniform blue base under a coat masked by clearcoatTexture (blended per texel)",
     ),
     Asset(
+        "ClearCoatTest-rough",
+        "gltf-ClearCoatTest/ClearCoatTest.glb",
+        "gltf:pbr",
+        [OPENPBR, CYCLES],
+        material="RoughVariations_Coated",
+        note="a coat whose roughness is clearcoatRoughnessTexture (converted at five levels, interpolated)",
+    ),
+    Asset(
         "MRSNoTex-gold-r0",
         "gltf-MetalRoughSpheresNoTextures/MetalRoughSpheresNoTextures.glb",
         "gltf:metal-rough",
