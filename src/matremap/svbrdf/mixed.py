@@ -230,7 +230,7 @@ def _check_layer_target(mixed: Blend, spec: ModelSpec, fix: Mapping[str, Any]) -
 
     own = LAYER_PARAMS.get(spec.id, {}).get(mixed.layer or "")
     varied = [LAYERS.get(spec.id, {}).get(mixed.layer or "")] if isinstance(mixed, Mixed) else []
-    varied += [own.roughness if own is not None and not own.gloss else None] if isinstance(mixed, Levels) else []
+    varied += [own.roughness if own is not None else None] if isinstance(mixed, Levels) else []
     varied += [getattr(qty.roughness_param(spec), "name", None), getattr(qty.diffuse_param(spec), "name", None)]
     if spec.reflectance is not None:  # the kinds' F0 differs too (an IOR fitted under a coat and without it)
         varied.append(spec.reflectance.driven_param(spec.specialise(fix).diffuse_only is None))
