@@ -1114,14 +1114,17 @@ def refuse_textured_layers(path: Path, asset: Any, target: str) -> None:
     on = layers_on(asset.model, {**asset.constants, **dict.fromkeys(asset.textures, 1.0)})
     why = None
     if textured:
-        why = f"its layer varies over the maps ({', '.join(textured)} textured)"
-    elif asset.textured and "transmission" in on:
-        why = "it lets light through over textured maps (the evaluation of maps draws reflection only)"
-    if why is not None:
-        raise MatremapError(
-            f"{path}: material {asset.name!r}: {why}; textured layers are not converted yet (a sweep's quantities, "
-            f"roughness, F0 and diffuse, have no layer), so it is not converted to {target}; a uniform layer is"
+        why = (
+            f"its layer varies over the maps ({', '.join(textured)} textured), and a layer's colour given as a map is "
+            "not converted (a layer's weight or roughness map is, and a uniform colour)"
         )
+    elif asset.textured and "transmission" in on:
+        why = (
+            "it lets light through over textured maps, which is not converted (the evaluation of maps draws "
+            "reflection only; a uniform transmissive material is)"
+        )
+    if why is not None:
+        raise MatremapError(f"{path}: material {asset.name!r}: {why}, so it is not converted to {target}")
 
 
 def hold_layers(
