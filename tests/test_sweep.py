@@ -254,9 +254,6 @@ def _wait_for_rows(db, n, proc, timeout=60):
 
 
 BIG = "alpha=0.05:0.9:40,specularReflectance=0.02:0.2:5"
-#: a sweep long enough to be interrupted mid-way: 2,000 points (200 were done in 0.4 s on 2 workers, before the
-#: Ctrl-C that followed the tenth row)
-HUGE = "alpha=0.05:0.9:400,specularReflectance=0.02:0.2:5"
 
 
 def test_sigkill_mid_sweep_leaves_a_valid_database_that_resumes(tmp_path):
@@ -278,7 +275,7 @@ def test_sigkill_mid_sweep_leaves_a_valid_database_that_resumes(tmp_path):
 
 def test_ctrl_c_stops_cleanly_and_keeps_finished_points(tmp_path):
     db = tmp_path / "i.sqlite"
-    proc = _start_cli_sweep(db, HUGE, workers=2)
+    proc = _start_cli_sweep(db, BIG, workers=2)
     _wait_for_rows(db, 10, proc)
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=60)
