@@ -95,11 +95,7 @@ def test_clearcoattest_rough_variations_writes_a_coat_roughness_map_that_follows
     assert code == 0 and "PASSED" in log, log[-800:]
     assert "mixed: clearcoatRoughness varies per texel (coat roughness from" in log
     doc = json.loads((out / "maps" / "material.json").read_text())
-    rough = _mask(out / "maps" / doc["maps"]["coat_roughness"], "coat_roughness")
-    src = read_asset(COAT_TEST, "RoughVariations_Coated").to_map_set(tmp_path / "src")
-    from matremap.svbrdf.textures import load_map_set
-
-    source = _mask(load_map_set(src).maps["clearcoatRoughness"], "clearcoatRoughness")
+    rough, source = written_and_source(out, "coat_roughness", tmp_path, "RoughVariations_Coated", "clearcoatRoughness")
     assert rough.shape == source.shape and np.corrcoef(rough.ravel(), source.ravel())[0, 1] > 0.99
     assert np.allclose(doc["params"]["coat_color"], 1.0)  # no colour the glTF coat has not
 
@@ -236,10 +232,21 @@ def test_a_reflectance_tint_is_learned_only_where_the_hue_changes():
 # a coat mask: the material converted with the coat and without it, blended per texel by the mask
 
 
-def _mask(path: Path, name: str) -> np.ndarray:
+def grey(path: Path) -> np.ndarray:
+    """A scalar map's values (its first channel, linear)."""
     from matremap.svbrdf.textures import read_image
 
     return np.asarray(read_image(path, "linear", colour=False)[0], dtype=float)[..., 0]
+
+
+def written_and_source(out: Path, written_param: str, tmp_path: Path, material: str, source_param: str) -> tuple:
+    """A remap's written scalar map of ``written_param`` and the ClearCoatTest material's own map of
+    ``source_param``, as arrays."""
+    from matremap.svbrdf.textures import load_map_set
+
+    doc = json.loads((out / "maps" / "material.json").read_text())
+    source = load_map_set(read_asset(COAT_TEST, material).to_map_set(tmp_path / "src"))
+    return grey(out / "maps" / doc["maps"][written_param]), grey(source.maps[source_param])
 
 
 @needs_materialx
@@ -250,13 +257,7 @@ def test_clearcoattest_partial_coated_onto_openpbr_writes_a_coat_weight_map_that
     code, log = remap(capsys, COAT_TEST, "mtlx:open_pbr_surface", out, "--material", "Partial_Coated")
     assert code == 0 and "PASSED" in log, log[-800:]
     assert "mixed: clearcoat varies per texel" in log
-    doc = json.loads((out / "maps" / "material.json").read_text())
-    coat = _mask(out / "maps" / doc["maps"]["coat_weight"], "coat_weight")
-    src = read_asset(COAT_TEST, "Partial_Coated").to_map_set(tmp_path / "src")
-    from matremap.svbrdf.textures import load_map_set
-
-    source = load_map_set(src)
-    mask = _mask(source.maps["clearcoat"], "clearcoat")
+    coat, mask = written_and_source(out, "coat_weight", tmp_path, "Partial_Coated", "clearcoat")
     assert coat.shape == mask.shape and np.corrcoef(coat.ravel(), mask.ravel())[0, 1] > 0.999
     assert coat[mask < 1e-3].max() < 1e-3 and coat.max() > 0.2  # no coat where the mask has none
     import MaterialX as mx
@@ -288,7 +289,7 @@ def test_clearcoattest_partial_coated_onto_gltf_writes_the_mask_as_a_clearcoat_t
     src = read_asset(COAT_TEST, "Partial_Coated").to_map_set(tmp_path / "src")
     from matremap.svbrdf.textures import load_map_set
 
-    mask = _mask(load_map_set(src).maps["clearcoat"], "clearcoat")
+    mask = grey(load_map_set(src).maps["clearcoat"])
     assert red.shape == mask.shape and np.abs(red - mask).max() < 1.5 / 255
 
 
@@ -310,6 +311,5 @@ def test_a_textured_base_under_a_coat_mask_blends_a_coated_and_a_bare_conversion
     code, log = remap(capsys, src, "mtlx:open_pbr_surface", out)
     assert code == 0 and "PASSED" in log, log[-800:]
     doc = json.loads((out / "maps" / "material.json").read_text())
-    coat = _mask(out / "maps" / doc["maps"]["coat_weight"], "coat_weight")
-    ramp = _mask(tmp_path / "in" / "coat.png", "coat")
+    coat, ramp = grey(out / "maps" / doc["maps"]["coat_weight"]), grey(tmp_path / "in" / "coat.png")
     assert np.corrcoef(coat.ravel(), ramp.ravel())[0, 1] > 0.999 and coat[:, 0].max() < 1e-3
