@@ -202,13 +202,27 @@ def lost_look(found: dict[str, dict[str, Any]]) -> list[str]:
     return lost
 
 
-#: a coat's textures read as maps (its weight's and its roughness's, each blended per texel; its normal map is noted)
-COAT_MAPS = {"clearcoatTexture": "clearcoat", "clearcoatRoughnessTexture": "clearcoatRoughness"}
+@dataclass(frozen=True)
+class CoatMap:
+    """A KHR_materials_clearcoat texture read as a ``gltf:pbr`` map: its slot, the channel the value is in and
+    the factor it multiplies (its weight's R, its roughness's G; a coat's normal map is noted, not read)."""
+
+    slot: str
+    channel: int
+    factor: str
+
+
+#: gltf:pbr's coat maps (each blended per texel: svbrdf/mixed.py) -> their KHR_materials_clearcoat texture
+COAT_MAPS = {
+    "clearcoat": CoatMap("clearcoatTexture", 0, "clearcoatFactor"),
+    "clearcoatRoughness": CoatMap("clearcoatRoughnessTexture", 1, "clearcoatRoughnessFactor"),
+}
+_COAT_SLOTS = {m.slot for m in COAT_MAPS.values()}
 
 
 def _coat_textures(cc: dict[str, Any]) -> list[str]:
     """A coat's textures that matremap does not convert (none of the ratified extension's: see :data:`COAT_MAPS`)."""
-    return [k for k in _value_textures(cc) if k not in COAT_MAPS]
+    return [k for k in _value_textures(cc) if k not in _COAT_SLOTS]
 
 
 #: the model a glTF material is read into when a layer carries its look (:func:`layer_values`)
@@ -259,7 +273,7 @@ def extension_notes(found: dict[str, dict[str, Any]], textured: bool = False) ->
     layers = layer_values(found, textured)
     if layers:
         what = ", ".join(f"{k} {_g(v) if isinstance(v, float) else _rgb(v)}" for k, v in layers.items())
-        uniform = textured and not (CLEARCOAT in found and set(COAT_MAPS) & set(found[CLEARCOAT]))
+        uniform = textured and not (CLEARCOAT in found and _COAT_SLOTS & set(found[CLEARCOAT]))
         held = " (uniform over the maps: fitted once, held while the sweep fits the maps)" if uniform else ""
         exts = [
             e
@@ -316,6 +330,7 @@ def extension_notes(found: dict[str, dict[str, Any]], textured: bool = False) ->
 
 __all__ = [
     "CLEARCOAT",
+    "COAT_MAPS",
     "EMISSIVE_STRENGTH",
     "IOR",
     "LAYERED_MODEL",

@@ -46,6 +46,7 @@ from matremap.formats.gltf_container import (
 )
 from matremap.formats.gltf_extensions import (
     CLEARCOAT,
+    COAT_MAPS,
     EMISSIVE_STRENGTH,
     IOR,
     LAYERED_MODEL,
@@ -201,12 +202,9 @@ def read(
     layers = layer_values(found)
     maps = textures.read_maps(pbr, found.get(SPECULAR, {}), constants)
     if "clearcoat" in layers:  # a coat mask (R of clearcoatTexture), a coat roughness map (G of its texture)
-        for slot, (name, c) in {
-            "clearcoatTexture": ("clearcoat", 0),
-            "clearcoatRoughnessTexture": ("clearcoatRoughness", 1),
-        }.items():
-            if slot in found[CLEARCOAT]:
-                maps[name] = textures.read_layer_map(found[CLEARCOAT][slot], slot, c, layers[name])
+        for name, coat in COAT_MAPS.items():
+            if coat.slot in found[CLEARCOAT]:
+                maps[name] = textures.read_layer_map(found[CLEARCOAT][coat.slot], coat.slot, coat.channel, layers[name])
     normal = textures.read_normal(m)
     doc.uv_set = textures.uv_set
     if normal is not None and not maps:

@@ -51,6 +51,7 @@ from matremap.formats.gltf_edit import (
 )
 from matremap.formats.gltf_extensions import (
     CLEARCOAT,
+    COAT_MAPS,
     EMISSIVE_STRENGTH,
     IOR,
     LAYERED_MODEL,
@@ -217,19 +218,15 @@ def specular_image(
     return {}, image
 
 
-#: gltf:pbr's coat maps -> KHR_materials_clearcoat's texture and the channel it is read from
-COAT_SLOTS = {"clearcoat": ("clearcoatTexture", 0), "clearcoatRoughness": ("clearcoatRoughnessTexture", 1)}
-
-
 def coat_image(maps: dict[str, np.ndarray], exts: dict[str, Any], name: str) -> NewImage | None:
     """A ``clearcoat`` or ``clearcoatRoughness`` map as KHR_materials_clearcoat's texture (its R or G channel of
     a linear PNG; the factor is then 1), replacing the copied extension's own (``exts``)."""
     if name not in maps:
         return None
-    slot, c = COAT_SLOTS[name]
-    old = (exts.get(CLEARCOAT) or {}).get(slot)
+    coat = COAT_MAPS[name]
+    old = (exts.get(CLEARCOAT) or {}).get(coat.slot)
     pixels = np.zeros((*maps[name].shape[:2], 3))
-    pixels[..., c] = maps[name]
+    pixels[..., coat.channel] = maps[name]
     return NewImage(name, png(code(pixels, False)), "image/png", old)
 
 
@@ -380,7 +377,7 @@ def plan_material(doc: dict[str, Any], rep: Replacement) -> list[NewImage]:
     ]
     rep.spec_ext, spec_image = specular_image(rep.consts, rep.maps, rep.old_spec)
     images += [spec_image, normal_image(mat, rep.normal, rep.source_normal if rep.copied else None)]
-    images += [coat_image(rep.maps, mat.get("extensions") or {}, slot) for slot in COAT_SLOTS]
+    images += [coat_image(rep.maps, mat.get("extensions") or {}, slot) for slot in COAT_MAPS]
     if opacity is not None and not rep.copied:
         mat["alphaMode"] = "MASK" if opacity.settings.get("mode") == "mask" else "BLEND"
         if "cutoff" in opacity.settings:
@@ -420,7 +417,7 @@ def finish_material(doc: dict[str, Any], rep: Replacement, infos: dict[str, dict
     else:
         exts.pop(SPECULAR, None)
     if "clearcoat" in rep.consts:
-        coat = {COAT_SLOTS[n][0]: infos[n] for n in COAT_SLOTS if n in infos}
+        coat = {COAT_MAPS[n].slot: infos[n] for n in COAT_MAPS if n in infos}
         layer_extensions(exts, rep.consts, keep_unread=rep.copied, coat_textures=coat)
     elif rep.source_layered:
         for name in (CLEARCOAT, SHEEN):
@@ -469,7 +466,7 @@ def layer_extensions(
     def rgb(name: str) -> list[float]:
         return [float(x) for x in np.broadcast_to(np.asarray(consts[name], dtype=float), (3,))]
 
-    factors = {"clearcoatTexture": "clearcoatFactor", "clearcoatRoughnessTexture": "clearcoatRoughnessFactor"}
+    factors = {m.slot: m.factor for m in COAT_MAPS.values()}
     coat = {**{factors[k]: 1.0 for k in coat_textures or {}}, **(coat_textures or {})} or None
     values: dict[str, dict[str, Any] | None] = {
         CLEARCOAT: {
