@@ -137,8 +137,12 @@ def fit_reflectance(
     s1f, s2f = s1.ravel(), s2.ravel()
     if alpha is None:
         train, test = holdout_split(len(s1), holdout, seed)
-        k = float(np.sum(s1f * s2f) / max(np.sum(s1f * s1f), 1e-300))
-        grey = _rmse(s1[test] * _scale(s1[train], s2[train]).mean(), s2[test])
+
+        def pooled(rows: np.ndarray) -> float:  # one k for every channel, least squares through the origin
+            return float(np.sum(s1[rows] * s2[rows]) / max(np.sum(s1[rows] * s1[rows]), 1e-300))
+
+        k = pooled(np.arange(len(s1)))
+        grey = _rmse(s1[test] * pooled(train), s2[test])  # held out with the estimator that gives the stored k
         out = {"kind": "k_alpha", "input": "reflectance", "roughness": False, "coef": [k], "heldout_rmse": grey}
         return _with_tint(out, s1, s2, np.full(len(s1), k), train, test, {"k": grey})
     a = np.repeat(alpha, s1.shape[-1])
