@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from matremap.core.material import Material
+from matremap.dialects import get_model
 from matremap.errors import MatremapError
 from matremap.sweep.executors import InlineExecutor
 from matremap.sweep.grid import Grid, parse_grid
@@ -158,6 +159,23 @@ def test_failed_bound_loss_and_off_grid_rows(ward_db):
     assert a.flags[lossy] == ["loss"]
     assert a.off_grid == [off["key"]] and a.flags[off["key"]] == []
     assert len(a.failed_rows) == 1 and len(a.ok_rows) == 30
+
+
+def test_a_roughness_at_its_bound_is_learned_from_where_the_source_is_at_its_own(ward_db):
+    """Source alpha 1 (Ward's upper bound) fitted at pbr alpha 1 is the ends of the ranges meeting, not a
+    stuck fit; the same target value from an interior source alpha stays flagged."""
+    rows, grid, config = load(ward_db)
+    rows = copy.deepcopy(rows)
+    end, inner = key_at(grid, (5, 2)), key_at(grid, (4, 2))
+    hi = get_model("mitsuba06:ward").param("alpha").bounds[1]
+    for r in rows:
+        if r["key"] in (end, inner):
+            r["target"]["alpha"] = 1.0
+        if r["key"] == end:
+            r["source"]["alpha"] = hi
+    a = analyse(rows, grid, config)
+    assert not any(f.startswith("bound") for f in a.flags[end])
+    assert "bound:alpha" in a.flags[inner]
 
 
 # ---------------------------------------------------------------------------------------------

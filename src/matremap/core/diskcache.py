@@ -37,8 +37,9 @@ CACHE_ENV = ("MATREMAP_CACHE", "MATREMAP_CACHE_DIR")
 #: matremap are recomputed rather than reused (3: a scale mapping's domain reaches 0; 4: Principled metals read
 #: F0 from their base colour; 5: a source's specular part no override isolates is full - diffuse, and Mitsuba 3's
 #: principled metal is its specular part; 6: OpenPBR and Standard Surface metals read F0 from their base colour,
-#: a reflectance mapping may carry a per-channel tint)
-RESULTS_REVISION = 6
+#: a reflectance mapping may carry a per-channel tint; 7: a roughness at its bound where the source's is at
+#: its own is learned from, not excluded)
+RESULTS_REVISION = 7
 
 
 def cache_dir() -> Path:

@@ -62,8 +62,12 @@ finished points on the grid and gives every point a list of flag reasons. It is 
     A fitted parameter sits within ``BOUND_TOL`` (1e-6) of the width of its range from one of its
     bounds: the optimiser wanted to go further, so the target model cannot match the source there.
     Not flagged: a value the fitter set without optimising (a stage with no evaluations, e.g. "source
-    part is black; target part set to its minimum"), and a lower bound of 0 of a parameter the image
-    scales with (albedo, colour, F0), where 0 is simply a black part rather than a stuck fit.
+    part is black; target part set to its minimum"), a lower bound of 0 of a parameter the image
+    scales with (albedo, colour, F0), where 0 is simply a black part rather than a stuck fit, and a
+    roughness at its bound where the source's roughness is at one of its own: the end of one range is
+    the end of the other (a mirror stays a mirror, glTF roughness 1 is Cycles roughness 1), so
+    excluding those points would shrink the learned domain to the grid's interior and leave a map's
+    smoothest and roughest texels outside it (a glTF BoomBox onto Cycles: half its texels).
 
 ``loss``
     The loss is an outlier of the sweep: its robust z-score on log(loss), (log L - median) /
@@ -237,7 +241,7 @@ def analyse(rows: Sequence[Mapping[str, Any]], grid: Grid | Mapping[str, Any] | 
         notes.append("no grid stored in the database: neighbour (jump) tests skipped")
 
     for r in ok:
-        _value_tests(r, target, tested, flags[r["key"]], details[r["key"]])
+        _value_tests(r, source, target, tested, flags[r["key"]], details[r["key"]])
     _loss_test(ok, flags, details, LOSS_MAX_BY_OBJECTIVE.get(_objective(config), LOSS_MAX))
 
     # one entry per reason, in a stable order
@@ -312,10 +316,16 @@ def _channels(value: Any) -> list[float]:
 
 
 def _value_tests(
-    row: Mapping[str, Any], target: ModelSpec, tested: Iterable[str], reasons: list[str], details: list[str]
+    row: Mapping[str, Any],
+    source: ModelSpec,
+    target: ModelSpec,
+    tested: Iterable[str],
+    reasons: list[str],
+    details: list[str],
 ) -> None:
     values = row["target"]
     optimised = _optimised(row)
+    source_at_end = _roughness_at_bound(row.get("source"), source)
     for name in tested:
         if name not in values:
             continue
@@ -332,11 +342,30 @@ def _value_tests(
         at_hi = [c for c in chans if c >= hi - tol]
         if at_lo and p.scales_image and lo == 0.0:
             at_lo = []  # a black part is an answer, not a stuck fit
+        if p.role == "roughness" and source_at_end:
+            at_lo, at_hi = [], []  # the end of the source's range maps to the end of the target's
         if at_lo or at_hi:
             reasons.append(f"bound:{name}")
             details.append(
                 f"{name} = {_fmt(chans)} at its {'lower' if at_lo else 'upper'} bound {lo if at_lo else hi:g}"
             )
+
+
+def _roughness_at_bound(values: Any, source: ModelSpec) -> bool:
+    """Whether every roughness parameter of the source that ``values`` holds sits at one of its bounds."""
+    if not isinstance(values, Mapping):
+        return False
+    found = False
+    for p in source.params_with_roles(("roughness",)):
+        if p.name not in values:
+            continue
+        lo, hi = p.bounds
+        tol = BOUND_TOL * (hi - lo)
+        for c in _channels(values[p.name]):
+            if lo + tol < c < hi - tol:
+                return False
+        found = True
+    return found
 
 
 def _optimised(row: Mapping[str, Any]) -> set[str] | None:
