@@ -186,6 +186,28 @@ def test_a_textured_gltf_metal_is_swept_when_asked(tmp_path):
     assert (tmp_path / "out" / "maps" / "material.json").is_file()
 
 
+def test_a_roughness_map_from_mirror_to_roughest_lies_inside_the_learned_domain(tmp_path):
+    """glTF roughness 0 and 1 fit the target's alpha at its own bounds (the mirror limit, alpha 1): those sweep
+    points were excluded as stuck fits, the learned domain shrank to the grid's interior and the smoothest and
+    roughest texels fell outside it (half of the MaterialX BoomBox onto Cycles Principled: exit 3)."""
+    src = gltf(tmp_path / "in", textured=True)
+    y, x = np.mgrid[0:16, 0:16] / 15.0
+    png(tmp_path / "in" / "mr.png", np.stack([0 * x, x, np.ones_like(x)], -1).astype(np.float32), "linear")
+    logs: list[str] = []
+    res = remap_file(
+        src,
+        "mitsuba06:pbr",
+        tmp_path / "out",
+        fix={"distribution": "ggx"},
+        library=False,
+        evaluate=False,
+        cache=tmp_path / "cache",
+        log=logs.append,
+    )
+    assert "roughness=0.0:1.0:" in next(m for m in logs if m.startswith("sweep:") and "fits over" in m)
+    assert res.remap.outside == 0 and res.verdict.passed
+
+
 def _bpy_available() -> bool:
     from matremap.renderers.cycles.probe import bpy_available
 

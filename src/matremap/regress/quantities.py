@@ -70,6 +70,9 @@ def _channels(spec: ModelSpec) -> dict[str, int]:
 #: a value moved by more than this share of its parameter's range when clipped counts as clipped (the
 #: nudges that keep F0 below 1 or a roughness above its mirror limit do not)
 CLIP_TOLERANCE = 1e-3
+#: the most of a parameter's range a regression's own error may excuse (a mapping whose held-out error is
+#: larger than this is a poor one, and its overshoots count)
+SLACK_MAX = 0.02
 
 
 def write(
@@ -77,16 +80,21 @@ def write(
     quantities: Mapping[str, np.ndarray],
     template: Mapping[str, Any],
     clipped: dict[str, int] | None = None,
+    slack: Mapping[str, float] | None = None,
 ) -> dict[str, np.ndarray]:
     """Parameter arrays for ``quantities``; parameters no quantity drives keep ``template``'s value
     (returned as read-only broadcast views: no memory per texel). Driven values are clipped to what the
     renderer accepts; ``clipped`` (parameter -> count) adds up the values that moved by more than
-    :data:`CLIP_TOLERANCE` of the range (a regression asking for more than the target can give)."""
+    :data:`CLIP_TOLERANCE` of the range (a regression asking for more than the target can give), or by
+    more than ``slack`` (quantity -> the regression's own held-out error) where that is larger: a mapping
+    that overshoots a bound it was trained at by less than its error asks for nothing the target lacks."""
+    slack = slack or {}
     if "roughness" in quantities:
         shape = np.shape(quantities["roughness"])
     else:
         shape = np.shape(next(iter(quantities.values())))[:-1]
     out: dict[str, np.ndarray] = {}
+    own_slack: dict[str, float] = {}  # the parameters whose value is the quantity itself
     for p in spec.params:
         v = np.asarray(template[p.name], dtype=float)
         out[p.name] = np.broadcast_to(
@@ -97,10 +105,11 @@ def write(
     if rp is not None and "roughness" in quantities:
         out[rp.name] = as_floats(quantities["roughness"])
         driven.append(rp.name)
+        own_slack[rp.name] = slack.get("roughness", 0.0)
     if spec.reflectance is not None and "reflectance" in quantities:
         f0 = as_floats(quantities["reflectance"])
         if clipped is not None:
-            count_clipped(f0, 0.0, 1.0, "reflectance", clipped)
+            count_clipped(f0, 0.0, 1.0, "reflectance", clipped, slack.get("reflectance", 0.0))
         f0 = clip(f0, 0.0, 1.0 - 1e-7)
         driven += spec.reflectance.write_f0(f0, out, _channels(spec), quantities.get("diffuse"))
     dp = diffuse_param(spec)
@@ -108,11 +117,12 @@ def write(
     if dp is not None and "diffuse" in quantities and not writes_albedo:
         out[dp.name] = as_floats(quantities["diffuse"])
         driven.append(dp.name)
+        own_slack[dp.name] = slack.get("diffuse", 0.0)
     bounds = {p.name: p.bounds for p in spec.params}
     for name in driven:  # stay inside what the renderer accepts (in place: these arrays are ours)
         a = out[name]
         if clipped is not None:
-            count_clipped(a, *bounds[name], name, clipped)
+            count_clipped(a, *bounds[name], name, clipped, own_slack.get(name, 0.0))
         if uniform(a):
             out[name] = clip(a, *bounds[name])
             continue
@@ -122,10 +132,11 @@ def write(
     return out
 
 
-def count_clipped(a: np.ndarray, lo: float, hi: float, name: str, counts: dict[str, int]) -> None:
+def count_clipped(a: np.ndarray, lo: float, hi: float, name: str, counts: dict[str, int], slack: float = 0.0) -> None:
     """Add to ``counts[name]`` the values of ``a`` that clipping to [lo, hi] moves by more than
-    :data:`CLIP_TOLERANCE` of the range (a broadcast of one value counts for every element)."""
-    tol = CLIP_TOLERANCE * (hi - lo)
+    :data:`CLIP_TOLERANCE` of the range or ``slack`` (at most :data:`SLACK_MAX` of it), whichever is larger
+    (a broadcast of one value counts for every element)."""
+    tol = max(CLIP_TOLERANCE, min(slack / (hi - lo), SLACK_MAX)) * (hi - lo)
     probe = a[:1] if uniform(a) else a
     n = int(np.count_nonzero((probe < lo - tol) | (probe > hi + tol)))
     if n:

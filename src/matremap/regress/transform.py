@@ -240,7 +240,18 @@ class Transform:
             else:
                 y[name] = evaluate_mapping(m, x)
             self._check_finite(name, y[name])
-        return qty.write(get_model(self.target), y, self.template, clipped), outside
+        return qty.write(get_model(self.target), y, self.template, clipped, self._slack()), outside
+
+    def _slack(self) -> dict[str, float]:
+        """Each quantity's held-out RMSE (its training RMSE where nothing was held out): how far past a
+        bound the mapping may land by its own error (:func:`quantities.write`)."""
+        out = {}
+        for name, e in self.errors.items():
+            value = e.get("heldout_rmse")
+            value = e.get("train_rmse") if value is None else value
+            if value is not None and np.isfinite(value):
+                out[name] = float(value)
+        return out
 
     def _check_finite(self, name: str, a: np.ndarray) -> None:
         """Refuse a mapping's output holding NaN or infinity (a second line of defence behind the
