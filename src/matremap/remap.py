@@ -52,11 +52,13 @@ from matremap.dialects.mtlx import (
     layer_textures,
     layer_weights,
     layers_on,
+    opaque_share,
 )
 from matremap.errors import MatremapError, TransformChecksumError
 from matremap.regress import quantities as qty
 from matremap.regress.transform import Transform
 from matremap.renderers import renderer_for
+from matremap.svbrdf import levels
 from matremap.svbrdf.convert import MASK_NAME, convert, source_reference
 from matremap.svbrdf.evaluate import evaluate as evaluate_pair
 from matremap.svbrdf.evaluate import parse_rotations
@@ -69,7 +71,7 @@ from matremap.svbrdf.mapstats import (
     summarise,
     with_medians,
 )
-from matremap.svbrdf.mixed import layer_levels, layer_parameter, mixed_parameter, remap_mixed
+from matremap.svbrdf.mixed import Levels, layer_levels, layer_parameter, mixed_parameter, remap_mixed, through_levels
 from matremap.svbrdf.quality import Check, Thresholds, Verdict, image_checks, map_checks, sample
 from matremap.svbrdf.textures import MapSet, load_map_set, map_values, read_image, texel_limit
 
@@ -620,7 +622,8 @@ def remap_into(
     seconds["load"] = time.perf_counter() - t0
     t = time.perf_counter()
     identity = identity_route(map_set, target, job.fix)
-    conversion = _convert_maps(folder, map_set, summary, job, target_renderer, identity, log, seconds)
+    fitted: list[Check] = []  # the fits of materials converted as a few uniform ones (levels under transmission)
+    conversion = _convert_maps(folder, map_set, summary, job, target_renderer, identity, log, seconds, fitted)
     texels, outside, clipped, constant, tpath, cached = conversion
     seconds["convert"] = time.perf_counter() - t
     result_set = load_map_set(folder / "maps")
@@ -639,6 +642,7 @@ def remap_into(
             _clamped_where(clipped, constant),
         ),
     ]
+    checks += fitted
     checks += map_quality(map_set, summary.sample(), result_set, result_summary.sample(), job.thresholds)
     verdict, mean, html = Verdict(checks), None, None
     if job.evaluate:
@@ -721,19 +725,29 @@ def _convert_maps(
     identity: Equivalence | None,
     log: Callable[[str], None],
     seconds: dict[str, float],
+    fitted: list[Check],
 ) -> tuple[int, int, int, int, Path | None, bool]:
     """``folder/maps``: the maps copied (identity), blended per texel from each kind's conversion (maps
-    that mix metal and dielectric), or converted through one transform. Returns (texels, texels outside
-    the training domain, values clipped, texels whose F0 a parameter written as one constant approximates
-    (:func:`matremap.svbrdf.convert.one_constant`), the transform file or None, whether it came from a cache);
-    the time spent finding the transform goes to ``seconds["transform"]``."""
+    that mix metal and dielectric, a material that lets light through at levels of its roughness), or converted
+    through one transform. Returns (texels, texels outside the training domain, values clipped, texels whose F0 a
+    parameter written as one constant approximates (:func:`matremap.svbrdf.convert.one_constant`), the transform
+    file or None, whether it came from a cache); the time spent finding the transform goes to
+    ``seconds["transform"]``; ``fitted`` receives the gate's checks of the levels' fits
+    (:func:`~matremap.svbrdf.levels.checks`)."""
     target = job.target
     if identity is not None:
         log(f"identity: {_identity_words(identity)}: the maps are copied, nothing is fitted")
         copy_map_set(map_set, folder / "maps", identity)
         return int(np.prod(map_set.size)), 0, 0, 0, None, True
-    mixed = mixed_parameter(map_set, summary) or layer_parameter(map_set, summary) or layer_levels(map_set, summary)
+    through = through_levels(map_set, summary)
+    mixed = through or mixed_parameter(map_set, summary) or layer_parameter(map_set, summary)
+    mixed = mixed or layer_levels(map_set, summary)
     params = summary.sample()
+    fits: dict[str, tuple[Material, Any]] = {}
+    if through is not None:  # lets light through: fitted at levels of its roughness, refined where they part
+        job = hold_constants(map_set, summary, through, job, log)
+        fit_at = level_fits(map_set, through, job, fits, log)
+        mixed, midpoints = levels.refine(through, fit_at, log)
     if mixed is not None:  # metal and dielectric texels: blended per texel
         texels, outside = remap_mixed(
             folder,
@@ -750,9 +764,12 @@ def _convert_maps(
                 target_renderer,
                 complete_fix(kind.model, {**kind.constants, **kind_params}, target, job.fix),
             ),
-            lambda kind, out: convert_kind(kind, out, job, log),
+            lambda kind, out: convert_kind(kind, out, job, log, fits),
             log,
         )
+        if through is not None:
+            assert isinstance(mixed, Levels)
+            fitted += levels.checks(mixed, fit_at, midpoints, job.thresholds, log)
         return texels, outside, 0, 0, None, False
     held = held_values(map_set, summary, target)
     # the maps' ranges stand for them where only their extremes matter (is any texel diffuse?)
@@ -777,24 +794,91 @@ def _convert_maps(
     return int(report.texels), int(report.outside), clipped, int(report.approximated), tpath, cached
 
 
-def convert_kind(kind: MapSet, out: Path, job: RemapJob, log: Callable[[str], None]) -> MapSet:
+def convert_kind(
+    kind: MapSet,
+    out: Path,
+    job: RemapJob,
+    log: Callable[[str], None],
+    fits: dict[str, tuple[Material, Any]] | None = None,
+) -> MapSet:
     """One kind of a map set blended per texel (:func:`~matremap.svbrdf.mixed.remap_mixed`), converted into
-    ``out``: remapped as a map set, or, where no map is left (a uniform base under a coat mask), fitted as one
-    material (:func:`_fit_uniform`, its layers freed) whose values are the kind's constants."""
+    ``out``: remapped as a map set, or, where no map is left (a uniform base under a coat mask, a level of a glass's
+    roughness), fitted as one material (:func:`_fit_uniform`, its layers freed) whose values are the kind's
+    constants; ``fits`` (kind -> source and fit) receives such a fit."""
     if kind.maps:
         return load_map_set(remap_into(out, kind, replace(job, evaluate=False), log).maps)
-    source = Material.create(kind.model, dict(kind.constants))
-    white = {c: [1.0, 1.0, 1.0] for c in invented_colours(source, job.target) if c not in job.fix}
-    job = replace(job, fix={**job.fix, **white})  # the kinds are blended: no colour one of them invents
-    fix = complete_fix(source.model, qty.material_values(source), job.target, job.fix)
-    job, fix, metal = free_partial_metal(source, job, fix, log)
-    r, _ = _fit_uniform(source, job, fix, log, metal)
-    log(f"fit: {kind.root.name} as one material onto {job.target}, relative error {r.loss:.4f}")
+    if fits is not None and kind.root.name in fits:  # fitted already (a level: svbrdf/levels.py)
+        source, r = fits[kind.root.name]
+    else:
+        source = Material.create(kind.model, dict(kind.constants))
+        r = _fit_kind(source, job, log)
+        log(f"fit: {kind.root.name} as one material onto {job.target}, relative error {r.loss:.4f}")
+        if fits is not None:
+            fits[kind.root.name] = (source, r)
     out.mkdir(parents=True, exist_ok=False)
     params = r.target.to_dict()["params"]
     doc = {"model": r.target.model, "maps": {}, "params": params, "provenance": {"transform": f"fit ({r.loss:.4f})"}}
     write_text(out / "material.json", json.dumps(doc, indent=1) + "\n")
     return MapSet(r.target.model, {}, out, kind.size, kind.normal, params)
+
+
+def _fit_kind(source: Material, job: RemapJob, log: Callable[[str], None]) -> Any:
+    """The fit of one uniform kind of a blended map set (:func:`convert_kind`): a layer colour the source has not
+    held white (the kinds are blended: no colour one of them invents), a glass a dielectric, a partial metal's
+    metalness freed."""
+    white = {c: [1.0, 1.0, 1.0] for c in invented_colours(source, job.target) if c not in job.fix}
+    job = replace(job, fix={**job.fix, **white})
+    fix = complete_fix(source.model, qty.material_values(source), job.target, job.fix)
+    fix = glass_is_dielectric(source, job.target, fix, job.fix)
+    job, fix, metal = free_partial_metal(source, job, fix, log)
+    return _fit_uniform(source, job, fix, log, metal)[0]
+
+
+def level_fits(
+    map_set: MapSet,
+    through: Levels,
+    job: RemapJob,
+    fits: dict[str, tuple[Material, Any]],
+    log: Callable[[str], None],
+) -> levels.FitAt:
+    """The fit of ``map_set`` at one level of ``through``'s roughness (the source at that level, its other maps
+    held), each made once and kept in ``fits`` under the kind's name (:func:`convert_kind` reuses it)."""
+
+    def fit_at(value: float) -> tuple[Material, Any]:
+        key = replace(through, levels=(value,)).kinds[0]
+        if key not in fits:
+            source = Material.create(map_set.model, {**map_set.constants, **through.held, through.name: value})
+            r = _fit_kind(source, job, log)
+            log(f"fit: {key} as one material onto {job.target}, relative error {r.loss:.4f}")
+            fits[key] = (source, r)
+        return fits[key]
+
+    return fit_at
+
+
+def hold_constants(
+    map_set: MapSet, summary: MapSummary, through: Levels, job: RemapJob, log: Callable[[str], None]
+) -> RemapJob:
+    """``job`` with the target's parameters that its renderers take only as constants (Mitsuba 3 principled's
+    ``specular`` and ``eta``, roughdielectric's ``int_ior``) held at the values one fit at the map's median gives,
+    before a material is converted at the levels of ``through``: each level's fit would set them apart, and the
+    blend would ask for a map of them."""
+    from matremap.renderers.registry import texture_refusal
+
+    spec = get_model(job.target)
+    names = [p.name for p in spec.params if p.name not in job.fix and texture_refusal(spec.id, [p.name])]
+    if not names:
+        return job
+    median = float(np.median(np.asarray(summary.sample()[through.name], dtype=float)))
+    values = {**map_set.constants, **through.held, through.name: median}
+    r = _fit_kind(Material.create(map_set.model, values), job, log)
+    held = {n: r.target.to_dict()["params"][n] for n in names}
+    shown = ", ".join(f"{k} {np.round(v, 4).tolist()}" for k, v in held.items())
+    log(
+        f"levels: {shown} held at the fit at the median {through.name} {median:.3g} (relative error {r.loss:.4f}): "
+        f"{job.target} takes {'them' if len(held) > 1 else 'it'} as a constant only"
+    )
+    return replace(job, fix={**job.fix, **held})
 
 
 def _transform_for(
@@ -965,7 +1049,8 @@ def map_quality(
     """The map checks of the gate: hue and flatness of the diffuse albedo and F0, source against result, each
     as seen through a coloured coat (:func:`~matremap.dialects.mtlx.coat_tint`: a copper-tinted coat over a
     textured base is absorbed into a glTF base colour, whose hue then differs from the source's base map by
-    25 degrees and is right)."""
+    25 degrees and is right), the diffuse as much of it as does not let light through
+    (:func:`~matremap.dialects.mtlx.opaque_share`)."""
     probe = next((np.asarray(v) for v in source_params.values() if np.ndim(v) >= 2), None)
     shape = sample(probe).shape[:2] if probe is not None else (1, 1)
     sides = []
@@ -975,10 +1060,14 @@ def map_quality(
             q = _quantity_sample(side.spec, values, shape)
         except (MatremapError, ValueError) as e:  # a quantity a model cannot read: no map checks, said so
             return [Check("map_checks", 0.0, 0.0, f"skipped: {e}")]
-        tint = coat_tint(side.model, {k: sample(v) for k, v in values.items()})
+        sampled = {k: sample(v) for k, v in values.items()}
+        tint = coat_tint(side.model, sampled)
         if tint is not None:  # a dielectric's F0 keeps its own (grey) hue: a target's cannot take the coat's
             metal = side.spec.specialise(values).diffuse_only is None
             q = {k: v * tint if k == "diffuse" or (k == "reflectance" and metal) else v for k, v in q.items()}
+        opaque = opaque_share(side.model, sampled)
+        if opaque is not None and "diffuse" in q:  # a glass's base colour is its tint, no diffuse one sees
+            q["diffuse"] = q["diffuse"] * (opaque[..., None] if opaque.ndim else opaque)
         sides.append(q)
     return map_checks(sides[0], sides[1], limits)
 
@@ -1103,28 +1192,20 @@ def _remap_file(
 
 def refuse_textured_layers(path: Path, asset: Any, target: str) -> None:
     """Refuse, before any work, a material whose layer's colour varies over its maps (a sheen colour map: a sweep's
-    quantities, roughness, F0 and diffuse, have no layer), or that lets light through over textured maps (the
-    evaluation of maps draws reflection only). A uniform layer over textured maps is converted
+    quantities, roughness, F0 and diffuse, have no layer). A uniform layer over textured maps is converted
     (:func:`hold_layers`), and so is a coat or sheen whose weight or roughness is a map (blended per texel between
     the material with the layer and without it, or between a few levels of its roughness,
-    :mod:`matremap.svbrdf.mixed`)."""
+    :mod:`matremap.svbrdf.mixed`), and a material that lets light through over a roughness map (levels of it, each
+    fitted on the transmission probe: :func:`~matremap.svbrdf.mixed.through_levels`, which refuses other maps)."""
     # a coat or sheen mask, a layer's roughness map: blended per texel (svbrdf/mixed.py)
     blended = [*layer_weights(get_model(asset.model)), *layer_roughnesses(asset.model)]
     textured = [n for n in layer_textures(asset.model, asset.textures) if n not in blended]
-    on = layers_on(asset.model, {**asset.constants, **dict.fromkeys(asset.textures, 1.0)})
-    why = None
     if textured:
-        why = (
-            f"its layer varies over the maps ({', '.join(textured)} textured), and a layer's colour given as a map is "
-            "not converted (a layer's weight or roughness map is, and a uniform colour)"
+        raise MatremapError(
+            f"{path}: material {asset.name!r}: its layer varies over the maps ({', '.join(textured)} textured), and a "
+            "layer's colour given as a map is not converted (a layer's weight or roughness map is, and a uniform "
+            f"colour), so it is not converted to {target}"
         )
-    elif asset.textured and "transmission" in on:
-        why = (
-            "it lets light through over textured maps, which is not converted (the evaluation of maps draws "
-            "reflection only; a uniform transmissive material is)"
-        )
-    if why is not None:
-        raise MatremapError(f"{path}: material {asset.name!r}: {why}, so it is not converted to {target}")
 
 
 def hold_layers(

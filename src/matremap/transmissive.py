@@ -146,4 +146,36 @@ def inside(spec: ModelSpec, name: str, value: Any) -> Any:
     return float(moved) if moved.ndim == 0 else moved.tolist()
 
 
-__all__ = ["JOINT_STRATEGY", "NUDGE", "TransmissiveFit", "inside", "setup", "smoothest", "widened"]
+def interpolation_error(source: Material, fitted: Any, target: Material) -> float:
+    """The relative RMSE between ``source`` and ``target`` on the probe ``fitted`` (a
+    :class:`~matremap.core.fit.FitResult` of a neighbouring material) was made on, with its renderers and
+    irradiance scale: how far a target nothing was fitted to (the blend of a few fits) is from the source. The
+    source is drawn as a fit draws its own (a glass the target cannot be as smooth as, widened to the target's
+    narrowest lobe)."""
+    from matremap.core.fit import FULL, part
+    from matremap.renderers import get_renderer
+    from matremap.renderers.base import render_pixels
+    from matremap.renderers.embedded.transmission import EQUIVALENTS, interface_of
+
+    drawn = source
+    through = target.model in EQUIVALENTS  # a target that lets light through: smoothest() reads it
+    alpha = smoothest(target.spec, target.values) if through else None
+    if alpha is not None and interface_of(source).alpha < alpha:  # as setup() widens it
+        drawn = widened(source, alpha) or source
+    scene = fitted.scene
+    src = render_pixels(get_renderer(fitted.source_renderer), [part(drawn, FULL) or drawn], scene)[0]
+    tgt = render_pixels(get_renderer(fitted.target_renderer), [target], scene)[0]
+    goal = np.asarray(src, dtype=np.float64) * fitted.irradiance_scale
+    return float(np.linalg.norm(np.asarray(tgt, dtype=np.float64) - goal) / max(float(np.linalg.norm(goal)), 1e-12))
+
+
+__all__ = [
+    "JOINT_STRATEGY",
+    "NUDGE",
+    "TransmissiveFit",
+    "inside",
+    "interpolation_error",
+    "setup",
+    "smoothest",
+    "widened",
+]

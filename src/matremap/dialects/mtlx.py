@@ -317,6 +317,18 @@ def coat_tint(model: str, values: Mapping[str, Any]) -> np.ndarray | None:
     return 1.0 + np.clip(weight, 0.0, 1.0) * (colour - 1.0)
 
 
+def opaque_share(model: str, values: Mapping[str, Any]) -> np.ndarray | None:
+    """The share of a base that does not let light through, 1 - transmission weight ([...], values may be maps),
+    or None for a model without a scalar transmission weight: the diffuse a transmissive material shows is its
+    albedo times this share (OpenPBR 1.1 mixes its base as (1 - transmission_weight) diffuse + transmission_weight
+    transmission; Standard Surface 1.0.1, glTF KHR_materials_transmission and Blender's Principled BSDF alike).
+    For the gate's map checks: the base colour of a clear glass is its tint, not a diffuse anyone sees."""
+    name = LAYERS.get(model, {}).get("transmission")
+    if name is None or model not in LAYER_PARAMS:  # a glass's transmittance is a colour, and it has no diffuse
+        return None
+    return 1.0 - np.clip(np.asarray(values.get(name, 0.0), dtype=float), 0.0, 1.0)
+
+
 def absorbed_layers(
     source_model: str, source_values: Mapping[str, Any], target_model: str, target_values: Mapping[str, Any]
 ) -> list[str]:

@@ -20,11 +20,12 @@ extension registry, ratified versions):
 copy leaves them alone). A material without textures whose look a layer carries (a clear coat above 0.5, a
 coloured sheen, any transmission) is read into ``gltf:pbr`` and its layers fitted (:func:`layer_values`; a
 transmission on the transmission probe); so is a textured material whose coat or sheen is uniform (no texture of
-its own values: the layer is fitted once and held while the sweep fits the base maps under it); a faint layer is
-noted; a layer with textures of its own, or a transmission over textured base maps, is listed in ``asset.lost`` and
-refused for other targets, except a coat's weight texture (``clearcoatTexture``: read as the ``clearcoat`` map,
-the material blended per texel with the coat and without it). A coat's own normal map (``clearcoatNormalTexture``)
-is noted: the target's coat follows the base's normal map.
+its own values: the layer is fitted once and held while the sweep fits the base maps under it) or whose transmission
+is (converted at levels of its roughness map, :func:`~matremap.svbrdf.mixed.through_levels`); a faint layer is
+noted; a layer with textures of its own is listed in ``asset.lost`` and refused for other targets, except a coat's
+weight texture (``clearcoatTexture``: read as the ``clearcoat`` map, the material blended per texel with the coat
+and without it). A coat's own normal map (``clearcoatNormalTexture``) is noted: the target's coat follows the
+base's normal map.
 """
 
 from __future__ import annotations
@@ -236,12 +237,14 @@ def layer_values(found: dict[str, dict[str, Any]], textured: bool = False) -> di
     :data:`COAT_LOOK`), coloured sheen or transmission (as :func:`lost_look` says) carries its look, when those
     layers' values have no texture: the material is then read into ``gltf:pbr`` and its layers are fitted (a
     transmission on the transmission probe), not left out. ``textured``: the base has maps; a uniform coat or
-    sheen is read (held over the maps' sweep), a transmission is not (the evaluation of maps draws reflection
-    only). Empty otherwise (the material is read as ``gltf:metal-rough``)."""
+    sheen is read (held over the maps' sweep), and a uniform transmission (converted at levels of a roughness map,
+    each fitted on the transmission probe; other maps that vary are refused then:
+    :func:`~matremap.svbrdf.mixed.through_levels`). Empty otherwise (the material is read as
+    ``gltf:metal-rough``)."""
     cc, sh, tr = found.get(CLEARCOAT), found.get(SHEEN), found.get(TRANSMISSION)
     coat = cc is not None and cc["clearcoatFactor"] > COAT_LOOK and not _coat_textures(cc)
     sheen = sh is not None and SHEEN in " ".join(lost_look(found)) and not _value_textures(sh)
-    through = tr is not None and TRANSMISSION in " ".join(lost_look(found)) and not _textures(tr) and not textured
+    through = tr is not None and TRANSMISSION in " ".join(lost_look(found)) and not _textures(tr)
     vol = found.get(VOLUME)
     if through and vol is not None and _textures(vol):
         through = False  # a textured thickness or attenuation: not a uniform material
@@ -275,6 +278,8 @@ def extension_notes(found: dict[str, dict[str, Any]], textured: bool = False) ->
         what = ", ".join(f"{k} {_g(v) if isinstance(v, float) else _rgb(v)}" for k, v in layers.items())
         uniform = textured and not (CLEARCOAT in found and _COAT_SLOTS & set(found[CLEARCOAT]))
         held = " (uniform over the maps: fitted once, held while the sweep fits the maps)" if uniform else ""
+        if textured and "transmission" in layers:
+            held = " (over maps: converted at levels of its roughness map, each fitted on the transmission probe)"
         exts = [
             e
             for e, k in ((CLEARCOAT, "clearcoat"), (SHEEN, "sheenColor"), (TRANSMISSION, "transmission"))

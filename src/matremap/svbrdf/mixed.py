@@ -34,7 +34,7 @@ import json
 import os
 import shutil
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -104,14 +104,18 @@ class Mixed:
 
 @dataclass(frozen=True)
 class Levels:
-    """A layer's roughness given as a map (a coat roughness texture): the material is converted at a few
-    ``levels`` of it, evenly over the map's range, and each texel interpolated linearly between the two levels
-    around its value (hat weights: a piecewise-linear map of the layer's roughness, as a sweep along it would
-    learn, that the per-texel blend applies)."""
+    """A roughness given as a map (a coat roughness texture; the base roughness of a material that lets light
+    through): the material is converted at a few ``levels`` of it, evenly over the map's range, and each texel
+    takes the interpolation of the levels' values at its own (:meth:`weights`: a not-a-knot cubic spline through
+    four levels or more, exact where a target's parameter is a quadratic or cubic of the source's, as Mitsuba's
+    alpha is of glTF roughness; linear between two or three)."""
 
     name: str
     levels: tuple[float, ...]
-    layer: str
+    #: the layer whose roughness it is (None: the base's)
+    layer: str | None
+    #: maps that do not vary, held at their value in every level (parameter -> value)
+    held: Mapping[str, Any] = field(default_factory=dict)
 
     @property
     def kinds(self) -> tuple[str, ...]:
@@ -121,8 +125,18 @@ class Levels:
         return self.levels[self.kinds.index(kind)]
 
     def weights(self, values: np.ndarray) -> list[np.ndarray]:
-        """The hat weight of each level per texel (values outside the levels take the nearest one)."""
+        """The weight of each level per texel (they sum to 1; a spline's may be negative: the blend clips its result
+        to the parameters' bounds); values outside the levels take the nearest one."""
         v = np.clip(np.asarray(values, dtype=np.float32), self.levels[0], self.levels[-1])
+        if len(self.levels) == 1:
+            return [np.ones_like(v)]
+        if len(self.levels) >= SPLINE_LEVELS:
+            from scipy.interpolate import CubicSpline
+
+            n = len(self.levels)
+            basis = CubicSpline(np.asarray(self.levels, dtype=float), np.eye(n), axis=0)  # not-a-knot
+            w = basis(v.reshape(-1).astype(float)).astype(np.float32)
+            return [w[:, i].reshape(v.shape) for i in range(n)]
         out = []
         for i, level in enumerate(self.levels):
             w = np.zeros_like(v)
@@ -136,11 +150,16 @@ class Levels:
         return out
 
     def describe(self) -> str:
-        return f"{self.layer} roughness from {self.levels[0]:g} to {self.levels[-1]:g}, {len(self.levels)} levels"
+        whose = f"{self.layer} roughness" if self.layer else self.name
+        if len(self.levels) == 1:
+            return f"{whose} {self.levels[0]:g} everywhere"
+        return f"{whose} from {self.levels[0]:g} to {self.levels[-1]:g}, {len(self.levels)} levels"
 
 
 #: levels a layer roughness map is converted at (:class:`Levels`)
 LEVELS = 5
+#: from this many levels on, a texel's value is the cubic spline through the levels' (linear below)
+SPLINE_LEVELS = 4
 
 
 def layer_levels(map_set: MapSet, summary: MapSummary) -> Levels | None:
@@ -157,6 +176,45 @@ def layer_levels(map_set: MapSet, summary: MapSummary) -> Levels | None:
         levels = tuple(round(float(v), 6) for v in np.linspace(stats.lo, stats.hi, LEVELS))
         return Levels(own.roughness or "", levels, layer)
     return None
+
+
+def through_levels(map_set: MapSet, summary: MapSummary) -> Levels | None:
+    """The levels a map set that lets light through (its transmission weight above 0) is converted at, or None
+    when it does not: each level is one uniform material fitted on the transmission probe (the sweep of maps draws
+    reflection only), at :data:`LEVELS` values over the base roughness map's range (one where it does not vary);
+    every other map must be uniform and is held at its value. A map that varies otherwise (a colour under the
+    glass: three axes, not one the levels interpolate) is refused in one line, before any fit."""
+    from matremap.dialects.mtlx import layers_on
+
+    spec = map_set.spec
+    if "transmission" not in layers_on(map_set.model, {**map_set.constants, **dict.fromkeys(map_set.maps, 1.0)}):
+        return None
+    rp = qty.roughness_param(spec)
+    sample = summary.sample()
+    held: dict[str, Any] = {}
+    varying = []
+    for name in map_set.maps:
+        a = np.asarray(sample[name], dtype=float)
+        flat = a.reshape(-1, a.shape[-1]) if spec.param(name).channels == 3 and a.ndim == 3 else a.reshape(-1, 1)
+        if float(np.max(np.ptp(flat, axis=0))) > 2 * TOLERANCE:
+            varying.append(name)
+        elif rp is None or name != rp.name:
+            med = np.median(flat, axis=0)
+            held[name] = med.tolist() if spec.param(name).channels == 3 else float(med[0])
+    other = [n for n in varying if rp is None or n != rp.name]
+    if other:
+        maps = f"{', '.join(other)} map{'s vary' if len(other) > 1 else ' varies'}"
+        raise MatremapError(
+            f"{map_set.model} lets light through, and its {maps} over the texels: only a roughness map is "
+            "converted under transmission (each level of it fitted on the transmission probe); bake that map to "
+            "one value or remap the material without its transmission"
+        )
+    if rp is None or rp.name not in map_set.maps:
+        return None  # a uniform material under uniform maps: nothing to blend
+    stats = summary.stats[rp.name]
+    count = LEVELS if rp.name in varying else 1
+    levels = tuple(dict.fromkeys(round(float(v), 6) for v in np.linspace(stats.lo, stats.hi, count)))
+    return Levels(rp.name, levels, None, held)
 
 
 Blend = Mixed | Levels
@@ -236,7 +294,8 @@ def _check_layer_target(mixed: Blend, spec: ModelSpec, fix: Mapping[str, Any]) -
         varied.append(spec.reflectance.driven_param(spec.specialise(fix).diffuse_only is None))
     why = texture_refusal(spec.id, [n for n in varied if n is not None and n not in fix])
     if why is not None:
-        what = f"with and without the {mixed.layer}" if isinstance(mixed, Mixed) else f"of each {mixed.layer} roughness"
+        whose = mixed.layer or "base"
+        what = f"with and without the {whose}" if isinstance(mixed, Mixed) else f"of each {whose} roughness"
         raise MatremapError(
             f"{why}, and the texels {what} ({mixed.name} map) need it as a map; choose a target that takes it as a map"
         )
@@ -250,12 +309,13 @@ def kind_map_set(map_set: MapSet, mixed: Blend, kind: str, dest: Path) -> MapSet
     def rel(f: Path) -> str:
         return os.path.relpath(Path(f).resolve(), dest.resolve())
 
-    maps = {k: f for k, f in map_set.maps.items() if k != mixed.name}
+    held = mixed.held if isinstance(mixed, Levels) else {}
+    maps = {k: f for k, f in map_set.maps.items() if k != mixed.name and k not in held}
     value = mixed.value(kind)
     doc: dict[str, Any] = {
         "model": map_set.model,
         "maps": {k: rel(f) for k, f in maps.items()},
-        "params": {**map_set.constants, mixed.name: value},
+        "params": {**map_set.constants, **held, mixed.name: value},
         "colorspace": {k: map_set.colorspace[k] for k in maps if k in map_set.colorspace},
     }
     if map_set.normal is not None:
@@ -476,11 +536,12 @@ def _blend_bands(plan: list[_Blended], mixed: Blend, dest: Path, source: MapSet,
                     (w if b.channels == 1 else w[..., None]) * _band(v, read, b.channels, w.shape)
                     for w, v in zip(ws, b.sources, strict=True)
                 )
-                writer.write_rows(y0, sum(parts))
+                lo, hi = spec.param(b.name).bounds  # a spline between levels may overshoot them
+                writer.write_rows(y0, np.clip(sum(parts), lo, hi))
             off = np.zeros(ws[0].shape, dtype=bool)
             for mask, share in zip(masks, ws, strict=True):
                 if mask is not None:
-                    off |= (mask.read_rows(y0, y1)[..., 0] > 0.5) & (share > TOLERANCE)
+                    off |= (mask.read_rows(y0, y1)[..., 0] > 0.5) & (np.abs(share) > TOLERANCE)
             writers[-1].write_rows(y0, off.astype(np.float32))
             outside += int(np.count_nonzero(off))
         for writer in writers:
