@@ -165,8 +165,8 @@ def test_corpus_attenuation_and_clearcoat_are_read_into_gltf_pbr():
         for n in a.notes
     )
     textured = read(CORPUS / "gltf-AttenuationTest" / "AttenuationTest.glb", "R3_ThicknessTex_Mat")
-    assert textured.lost == ["KHR_materials_transmission (transmissionFactor 1)"]  # a thickness texture
-    assert any(n.startswith("KHR_materials_volume thickness 2") for n in textured.notes)
+    assert textured.lost == [] and textured.model == "gltf:pbr"  # a thickness texture is a rasteriser's hint
+    assert any(n.startswith("KHR_materials_volume.thicknessTexture") for n in textured.notes)
     c = read(CORPUS / "gltf-ClearCoatTest" / "ClearCoatTest.glb", "Simple_Coated")  # a coat of factor 1: fitted
     assert c.lost == [] and c.model == "gltf:pbr" and c.constants["clearcoat"] == 1.0
     assert any(n.startswith("read into gltf:pbr (clearcoat 1") for n in c.notes)

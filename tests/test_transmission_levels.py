@@ -131,3 +131,19 @@ def test_transmission_roughness_test_onto_roughdielectric_writes_alpha_as_the_sq
         return  # the file's values are checked above; Mitsuba itself is optional
     ok, why = cc.mitsuba_loads(out / "TransmissionRoughnessTest.xml")
     assert ok, why
+
+
+def test_a_volume_with_a_thickness_texture_is_converted_and_a_gltf_copy_keeps_the_texture(tmp_path, capsys):
+    """AttenuationTest's R3_ThicknessTex_Mat (a blue volume whose thickness is a texture, which path tracers ignore:
+    KHR_materials_volume, "Thickness Texture") was refused. Onto gltf:pbr (the identity: copied) the written volume
+    keeps its thicknessTexture, read back by pygltflib."""
+    pygltflib = pytest.importorskip("pygltflib")
+    att = CORPUS / "gltf-AttenuationTest" / "AttenuationTest.glb"
+    out = tmp_path / "out"
+    code = main(["remap", str(att), "--material", "R3_ThicknessTex_Mat", "--to", "gltf:pbr", "-o", str(out)])
+    assert code == 0, capsys.readouterr().err[-400:]
+    g = pygltflib.GLTF2().load(str(out / "AttenuationTest.glb"))
+    m = next(m for m in g.materials if m.name == "R3_ThicknessTex_Mat")
+    volume = m.extensions["KHR_materials_volume"]
+    assert volume["thicknessFactor"] == 2.0 and volume["thicknessTexture"] == {"index": 1}
+    assert volume["attenuationColor"] == pytest.approx([0.1, 0.5, 0.9])

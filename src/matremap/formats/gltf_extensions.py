@@ -246,8 +246,6 @@ def layer_values(found: dict[str, dict[str, Any]], textured: bool = False) -> di
     sheen = sh is not None and SHEEN in " ".join(lost_look(found)) and not _value_textures(sh)
     through = tr is not None and TRANSMISSION in " ".join(lost_look(found)) and not _textures(tr)
     vol = found.get(VOLUME)
-    if through and vol is not None and _textures(vol):
-        through = False  # a textured thickness or attenuation: not a uniform material
     if not (coat or sheen or through):
         return {}
     out: dict[str, Any] = {}
@@ -319,11 +317,18 @@ def extension_notes(found: dict[str, dict[str, Any]], textured: bool = False) ->
             f"{_textures(sh)}: a faint sheen the fit does not see; {LEFT_BEHIND}"
         )
     tr = found.get(TRANSMISSION)
+    vol = found.get(VOLUME)
+    if "transmission" in layers and vol is not None and "thicknessTexture" in vol:
+        notes.append(
+            f"{VOLUME}.thicknessTexture is a rasteriser's stand-in for the length of the path through the object (the "
+            'extension\'s "Thickness Texture": path tracers derive it from the geometry and ignore the texture): not '
+            "converted; the volume's length comes from the geometry (thicknessFactor "
+            f"{_g(vol['thicknessFactor'])} > 0: a volume, not a thin wall); a glTF copy keeps it"
+        )
     if "transmission" in layers:
         pass  # read into gltf:pbr above
     elif tr is not None and TRANSMISSION not in " ".join(lost):
         notes.append(f"{TRANSMISSION} factor 0: nothing goes through")
-    vol = found.get(VOLUME)
     if vol is not None and "transmission" not in layers:
         notes.append(
             f"{VOLUME} thickness {_g(vol['thicknessFactor'])}, attenuation colour {_rgb(vol['attenuationColor'])} "

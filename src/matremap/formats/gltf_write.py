@@ -443,6 +443,8 @@ LAYER_EXTENSIONS = {
 
 #: gltf:pbr's layer parameters the writer takes as maps (each into its extension's texture)
 LAYER_MAPS = ("clearcoat", "clearcoatRoughness")
+#: the textures of a layer extension that hold none of its values: a copy of the source keeps them
+KEPT_TEXTURES = {CLEARCOAT: "clearcoatNormalTexture", VOLUME: "thicknessTexture"}
 
 
 def layer_extensions(
@@ -455,7 +457,7 @@ def layer_extensions(
     KHR_materials_clearcoat (clearcoatFactor > 0), _sheen (a sheen colour not black), _transmission
     (transmissionFactor > 0) and _volume (thicknessFactor > 0; attenuationDistance 0 is glTF's default,
     infinity, so it is left out). The ratified READMEs' property names; a replaced extension loses the textures
-    of its values (the result's values are uniform), not a coat's own normal map. ``keep_unread``: in a copy of a
+    of its values (the result's values are uniform), not those of :data:`KEPT_TEXTURES`. ``keep_unread``: in a copy of a
     glTF source, a transmission or volume the result has off is the source's, which the reader does not read into
     gltf:pbr (only its coat and sheen): kept. ``coat_textures``: the textureInfos of ``clearcoat`` and
     ``clearcoatRoughness`` maps by slot (their factors are then 1)."""
@@ -490,9 +492,11 @@ def layer_extensions(
     }
     for name, ext in values.items():
         if ext is not None:
-            # the coat's own normal map is no value of the layer: a copy keeps it (matremap's coats use the base's)
-            own = (exts.get(name) or {}).get("clearcoatNormalTexture") if name == CLEARCOAT else None
-            exts[name] = ext if own is None else {**ext, "clearcoatNormalTexture": own}
+            # no values of the layer, so a copy keeps them: the coat's own normal map (matremap's coats use the
+            # base's), a volume's thickness texture (a rasteriser's stand-in for the path length the geometry gives)
+            slot = KEPT_TEXTURES.get(name)
+            own = (exts.get(name) or {}).get(slot) if slot is not None else None
+            exts[name] = ext if own is None else {**ext, str(slot): own}
         elif not (keep_unread and name in (TRANSMISSION, VOLUME)):
             exts.pop(name, None)
 
