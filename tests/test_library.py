@@ -232,3 +232,23 @@ def test_a_textured_gltf_metal_goes_onto_openpbr_through_the_library(tmp_path, c
 def linear(srgb: np.ndarray) -> np.ndarray:
     """sRGB-encoded values to linear (IEC 61966-2-1)."""
     return np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+
+
+def test_a_kind_of_a_blended_map_set_needs_a_route_only_where_it_is_used(tmp_path):
+    """One kind of a map set blended per texel (a glTF metallic map's metal texels) is converted over every texel,
+    but only those where it has weight reach the result: the library's coverage is judged there. Judged over all
+    texels, the shipped glTF metal -> Cycles Principled route was refused for BoomBox (45 % covered)."""
+    from matremap.remap import library_transform
+    from matremap.svbrdf.textures import MapSet
+
+    rough = np.full((8, 8), 0.5)
+    rough[:, :4] = 0.0  # below the library's grid (roughness from 0.05): where the dielectric texels are
+    params = {"roughness": rough, "baseColor": np.full((8, 8, 3), 0.6), "metallic": 1.0}
+    fix = {"Metallic": 1.0, "distribution": "multi_ggx"}
+    ms = MapSet("gltf:metal-rough", {}, tmp_path)
+    logs: list[str] = []
+    assert library_transform(ms, params, "cycles:principled", fix, logs.append) is None
+    used = np.zeros((8, 8), dtype=bool)
+    used[:, 4:] = True
+    found = library_transform(ms, params, "cycles:principled", fix, logs.append, within=used)
+    assert found is not None and "gltf-metal-cyclesprincipled" in logs[-1]

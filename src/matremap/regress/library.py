@@ -275,6 +275,72 @@ PAIRS: tuple[Pair, ...] = (
         )
         for kind, metal, grid in (("dielectric", 0.0, "{roughness}=0.05:1:8,base_color=0:1:5,{ior}=1.3:1.8:3"),)
     ),
+    # what users bring (issue 16): glTF metals into Blender's Principled BSDF, Blender's Principled BSDF out to glTF,
+    # and Standard Surface into OpenPBR (the ASWF's successor to it) and back
+    Pair(
+        "gltf-metal-cyclesprincipled",
+        "gltf:metal-rough",
+        "cycles:principled",
+        "roughness=0.05:1:8,baseColor=0.05:1:8",
+        source_params={"metallic": 1.0},
+        fix={"distribution": "multi_ggx", "Metallic": 1.0},
+        reverse=False,
+        keep_flagged=True,
+    ),
+    *(
+        Pair(
+            f"cyclesprincipled-{kind}-gltf",
+            "cycles:principled",
+            "gltf:metal-rough",
+            grid,
+            source_params={"distribution": "multi_ggx", "Metallic": metal},
+            fix={"metallic": metal},
+            reverse=False,
+            keep_flagged=True,
+        )
+        for kind, metal, grid in (
+            ("dielectric", 0.0, "Roughness=0.05:1:8,Base Color=0:1:5,IOR=1.3:1.8:3"),
+            ("metal", 1.0, "Roughness=0.05:1:8,Base Color=0.05:1:8"),
+        )
+    ),
+    *(
+        Pair(
+            f"{short}-{kind}-{other}",
+            model,
+            target,
+            grid.format(roughness=roughness, ior=ior),
+            source_params={metalness: metal},
+            fix={target_metalness: metal},
+            reverse=False,
+            keep_flagged=True,
+        )
+        for short, model, metalness, roughness, ior, other, target, target_metalness in (
+            (
+                "standardsurface",
+                "mtlx:standard_surface",
+                "metalness",
+                "specular_roughness",
+                "specular_IOR",
+                "openpbr",
+                "mtlx:open_pbr_surface",
+                "base_metalness",
+            ),
+            (
+                "openpbr",
+                "mtlx:open_pbr_surface",
+                "base_metalness",
+                "specular_roughness",
+                "specular_ior",
+                "standardsurface",
+                "mtlx:standard_surface",
+                "metalness",
+            ),
+        )
+        for kind, metal, grid in (
+            ("dielectric", 0.0, "{roughness}=0.05:1:8,base_color=0:1:5,{ior}=1.3:1.8:3"),
+            ("metal", 1.0, "{roughness}=0.05:1:8,base_color=0.05:1:8"),
+        )
+    ),
 )
 
 
