@@ -147,3 +147,19 @@ def test_a_volume_with_a_thickness_texture_is_converted_and_a_gltf_copy_keeps_th
     volume = m.extensions["KHR_materials_volume"]
     assert volume["thicknessFactor"] == 2.0 and volume["thicknessTexture"] == {"index": 1}
     assert volume["attenuationColor"] == pytest.approx([0.1, 0.5, 0.9])
+
+
+@pytest.mark.slow
+def test_onto_a_model_without_transmission_the_glass_fails_the_gate_and_its_ior_stays_one_number(tmp_path, capsys):
+    """glTF's ior has no texture: each level's fit set it apart, and the written glTF was refused after every fit
+    (exit 2, "a map of ior cannot be written"). Held at the median's fit, the file is written and the gate fails
+    what an opaque model cannot draw (exit 3)."""
+    out = tmp_path / "out"
+    code = main(
+        ["remap", str(TRT), "--material", "Mat_IOR_1.50", "--to", "gltf:metal-rough", "-o", str(out), "--no-evaluate"]
+    )
+    err = capsys.readouterr().err
+    assert code == 3, err[-600:]
+    assert "levels: ior" in err and "Traceback" not in err
+    assert (out / "TransmissionRoughnessTest.glb").is_file()
+    assert not (out / "maps" / "material_ior.exr").exists()

@@ -886,14 +886,21 @@ def level_fits(
 def hold_constants(
     map_set: MapSet, summary: MapSummary, through: Levels, job: RemapJob, log: Callable[[str], None]
 ) -> RemapJob:
-    """``job`` with the target's parameters that its renderers take only as constants (Mitsuba 3 principled's
-    ``specular`` and ``eta``, roughdielectric's ``int_ior``) held at the values one fit at the map's median gives,
-    before a material is converted at the levels of ``through``: each level's fit would set them apart, and the
-    blend would ask for a map of them."""
+    """``job`` with the target's parameters that its renderers or its file format take only as constants (Mitsuba 3
+    principled's ``specular`` and ``eta``, roughdielectric's ``int_ior``, glTF's ``ior``) held at the values one fit
+    at the map's median gives, before a material is converted at the levels of ``through``: each level's fit would
+    set them apart, and the blend would ask for a map of them (written to glTF, an ior map was refused after every
+    fit)."""
+    from matremap.formats import written_constants
     from matremap.renderers.registry import texture_refusal
 
     spec = get_model(job.target)
-    names = [p.name for p in spec.params if p.name not in job.fix and texture_refusal(spec.id, [p.name])]
+    constant = set(written_constants(spec.id))
+    names = [
+        p.name
+        for p in spec.params
+        if p.name not in job.fix and (p.name in constant or texture_refusal(spec.id, [p.name]))
+    ]
     if not names:
         return job
     median = float(np.median(np.asarray(summary.sample()[through.name], dtype=float)))

@@ -48,6 +48,18 @@ WRITERS = {
 }
 
 
+def written_constants(model: str) -> tuple[str, ...]:
+    """The parameters of ``model`` its own file format's writer takes as numbers only (a map of one is refused
+    when written): glTF's ``ior`` and layer values (:data:`matremap.formats.gltf_write.CONSTANT_ONLY`)."""
+    from matremap.formats.gltf_read import LAYERED_MODEL, MODEL
+
+    if model in (MODEL, LAYERED_MODEL):
+        from matremap.formats.gltf_write import CONSTANT_ONLY
+
+        return CONSTANT_ONLY
+    return ()
+
+
 def written_models(fmt: str) -> tuple[str, ...]:
     """The models the writer of format ``fmt`` (a key of :data:`WRITERS`) takes."""
     if fmt == "gltf":

@@ -88,7 +88,7 @@ def result_values(result: Any) -> tuple[dict[str, Any], dict[str, np.ndarray], P
             raise MatremapError(
                 f"{f}: {IOR} has no texture, so a map of ior cannot be written to glTF; use a uniform ior"
             )
-        if name in LAYER_EXTENSIONS and name not in LAYER_MAPS:
+        if name in CONSTANT_ONLY:
             raise MatremapError(
                 f"{f}: a map of {name} (a layer extension's texture) is not written to glTF yet; use a uniform {name}"
             )
@@ -445,6 +445,9 @@ LAYER_EXTENSIONS = {
 LAYER_MAPS = ("clearcoat", "clearcoatRoughness")
 #: the textures of a layer extension that hold none of its values: a copy of the source keeps them
 KEPT_TEXTURES = {CLEARCOAT: "clearcoatNormalTexture", VOLUME: "thicknessTexture"}
+#: the parameters this writer takes as numbers only: KHR_materials_ior has no texture, and the layer extensions'
+#: textures are not written yet (but the coat's, :data:`LAYER_MAPS`)
+CONSTANT_ONLY = ("ior", *(n for n in LAYER_EXTENSIONS if n not in LAYER_MAPS))
 
 
 def layer_extensions(
@@ -501,4 +504,13 @@ def layer_extensions(
             exts.pop(name, None)
 
 
-__all__ = ["commit", "finish_material", "layer_extensions", "plan_material", "result_values", "texture_values", "write"]
+__all__ = [
+    "CONSTANT_ONLY",
+    "commit",
+    "finish_material",
+    "layer_extensions",
+    "plan_material",
+    "result_values",
+    "texture_values",
+    "write",
+]
