@@ -80,7 +80,7 @@ def test_a_glass_over_a_roughness_map_is_levels_of_its_roughness_its_uniform_map
     assert through.held == {"metallic": 0.0}  # the packed texture's metallic channel: uniform, held
 
 
-def test_a_glass_whose_colour_varies_over_the_maps_is_refused_in_one_line(tmp_path):
+def test_a_glass_whose_colour_and_roughness_both_vary_is_refused_in_one_line(tmp_path):
     ms = _trt_map_set(tmp_path)
     y, x = np.mgrid[0:64, 0:64] / 63.0  # the grid texture's size
     tint = tmp_path / "tint.exr"
@@ -90,7 +90,7 @@ def test_a_glass_whose_colour_varies_over_the_maps_is_refused_in_one_line(tmp_pa
     doc["params"].pop("baseColor", None)
     (ms.root / "material.json").write_text(json.dumps(doc))
     tinted = load_map_set(ms.root)
-    with pytest.raises(MatremapError, match=r"lets light through, and its baseColor map varies"):
+    with pytest.raises(MatremapError, match=r"lets light through, and its roughness, baseColor maps vary"):
         through_levels(tinted, summarise(tinted))
 
 
@@ -163,3 +163,54 @@ def test_onto_a_model_without_transmission_the_glass_fails_the_gate_and_its_ior_
     assert "levels: ior" in err and "Traceback" not in err
     assert (out / "TransmissionRoughnessTest.glb").is_file()
     assert not (out / "maps" / "material_ior.exr").exists()
+
+
+def test_a_colours_levels_interpolate_each_channel_at_its_own_value():
+    """A glass's tint: grey levels, the target's colours weighted channel by channel (RGB renderers draw each
+    channel on its own), its numbers at the channel mean."""
+    lv = Levels("baseColor", (0.2, 0.4, 0.6, 0.8, 1.0), None, per_channel=True, typical=(0.5, 0.5, 0.5))
+    rgb = np.array([[0.25, 0.5, 0.9], [1.0, 0.2, 0.6]], dtype=np.float32)
+    ws = lv.weights(rgb)
+    assert ws[0].shape == rgb.shape
+    np.testing.assert_allclose(sum(w * v**0.5 for w, v in zip(ws, lv.levels, strict=True)), rgb**0.5, atol=2e-3)
+    mean = lv.scalar_weights(rgb)
+    assert mean[0].shape == rgb.shape[:1]
+    np.testing.assert_allclose(sum(w * v for w, v in zip(mean, lv.levels, strict=True)), rgb.mean(axis=-1), atol=1e-5)
+
+
+def _tinted_glass(tmp_path: Path) -> Path:
+    """TransmissionRoughnessTest's Mat_IOR_1.33 with its roughness one number and a tint map (three ramps)."""
+    ms = _trt_map_set(tmp_path)
+    y, x = np.mgrid[0:64, 0:64] / 63.0
+    tint = np.stack([0.2 + 0.8 * x, 0.9 - 0.6 * y, 0.3 + 0.5 * x * y], -1).astype(np.float32)
+    write_image(ms.root / "tint.exr", tint)
+    doc = json.loads((ms.root / "material.json").read_text())
+    doc["maps"]["baseColor"] = "tint.exr"
+    doc["colorspace"]["baseColor"] = "linear"
+    doc["params"].pop("baseColor", None)
+    doc["maps"].pop("roughness")
+    doc["params"]["roughness"] = 0.3
+    (ms.root / "material.json").write_text(json.dumps(doc))
+    return ms.root
+
+
+@pytest.mark.slow
+def test_a_tinted_glass_onto_roughdielectric_writes_the_square_root_of_its_tint(tmp_path):
+    """Mitsuba's roughdielectric applies specular_transmittance at every refraction, glTF's base colour tints once
+    where light enters: through a solid (two refractions) the transmittance is the tint's square root, channel by
+    channel. Five grey levels, the texels interpolated per channel: the written map follows tint^0.5 (a power fitted
+    on the files), and the target's numbers are one value each (held at the median's fit)."""
+    from matremap.remap import remap
+
+    root = _tinted_glass(tmp_path)
+    res = remap(root, None, "mitsuba3:roughdielectric", tmp_path / "out", log=lambda m: None, evaluate=False)
+    assert res.verdict.passed, res.verdict
+    out = load_map_set(tmp_path / "out" / "maps")
+    assert set(out.maps) == {"specular_transmittance"}  # alpha, int_ior: one number each
+    assert out.constants["alpha"] == pytest.approx(0.09, abs=0.01)  # glTF roughness 0.3, squared
+    t = np.atleast_3d(read_image(out.maps["specular_transmittance"], "linear")[0])[..., :3]
+    s = np.atleast_3d(read_image(root / "tint.exr", "linear")[0])[..., :3]
+    for c in range(3):
+        power, _ = np.polyfit(np.log(s[..., c].ravel()), np.log(t[..., c].ravel()), 1)
+        assert power == pytest.approx(0.5, abs=0.02)
+        assert np.corrcoef(s[..., c].ravel() ** 0.5, t[..., c].ravel())[0, 1] > 0.995

@@ -874,7 +874,7 @@ def level_fits(
     def fit_at(value: float) -> tuple[Material, Any]:
         key = replace(through, levels=(value,)).kinds[0]
         if key not in fits:
-            source = Material.create(map_set.model, {**map_set.constants, **through.held, through.name: value})
+            source = levels.at(through, Material.create(map_set.model, {**map_set.constants, **through.held}), value)
             r = _fit_kind(source, job, log)
             log(f"fit: {key} as one material onto {job.target}, relative error {r.loss:.4f}")
             fits[key] = (source, r)
@@ -890,24 +890,28 @@ def hold_constants(
     principled's ``specular`` and ``eta``, roughdielectric's ``int_ior``, glTF's ``ior``) held at the values one fit
     at the map's median gives, before a material is converted at the levels of ``through``: each level's fit would
     set them apart, and the blend would ask for a map of them (written to glTF, an ior map was refused after every
-    fit)."""
+    fit). Under a colour's levels every number of the target is held so: a glass's tint moves none of them (fitted
+    per level, OpenPBR's roughness, IOR and transmission weight became maps of fit noise)."""
     from matremap.formats import written_constants
     from matremap.renderers.registry import texture_refusal
 
     spec = get_model(job.target)
     constant = set(written_constants(spec.id))
+    tint = through.per_channel  # a glass whose colour alone varies: the target's numbers do not follow it
     names = [
         p.name
         for p in spec.params
-        if p.name not in job.fix and (p.name in constant or texture_refusal(spec.id, [p.name]))
+        if p.name not in job.fix
+        and (p.name in constant or texture_refusal(spec.id, [p.name]) or (tint and p.channels == 1))
     ]
     if not names:
         return job
     median = float(np.median(np.asarray(summary.sample()[through.name], dtype=float)))
-    values = {**map_set.constants, **through.held, through.name: median}
-    r = _fit_kind(Material.create(map_set.model, values), job, log)
+    source = levels.at(through, Material.create(map_set.model, {**map_set.constants, **through.held}), median)
+    r = _fit_kind(source, job, log)
     held = {n: r.target.to_dict()["params"][n] for n in names}
-    shown = ", ".join(f"{k} {np.round(v, 4).tolist()}" for k, v in held.items())
+    shown = ", ".join(f"{k} {np.round(v, 4).tolist()}" for k, v in list(held.items())[:4])
+    shown += f" and {len(held) - 4} more" if len(held) > 4 else ""
     log(
         f"levels: {shown} held at the fit at the median {through.name} {median:.3g} (relative error {r.loss:.4f}): "
         f"{job.target} takes {'them' if len(held) > 1 else 'it'} as a constant only"

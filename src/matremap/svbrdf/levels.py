@@ -41,19 +41,31 @@ MAX_LEVELS = 17
 FitAt = Callable[[float], tuple[Material, Any]]
 
 
-def interpolated(levels: Levels, x: float, fit_at: FitAt) -> Material:
-    """The target the blend writes at a texel whose value is ``x``: the levels' fitted targets weighted as
-    :meth:`~matremap.svbrdf.mixed.Levels.weights` weighs them (options as the first level's), clipped to the bounds
-    as the blend clips."""
-    weights = [float(w.reshape(-1)[0]) for w in levels.weights(np.array([x], dtype=np.float32))]
+def interpolated(levels: Levels, x: Any, fit_at: FitAt) -> Material:
+    """The target the blend writes at a texel whose value is ``x`` (a number, or a colour for a colour's levels):
+    the levels' fitted targets weighted as :meth:`~matremap.svbrdf.mixed.Levels.weights` weighs them (a colour's
+    levels: the target's colours channel by channel, its numbers at the channel mean), options as the first
+    level's, clipped to the bounds as the blend clips."""
+    x = np.asarray(x, dtype=np.float32).reshape(-1)
+    scalar = [float(w.reshape(-1)[0]) for w in levels.scalar_weights(x)]
+    per_channel = [w.reshape(-1) for w in levels.weights(x)] if levels.per_channel else None
     targets = [fit_at(v)[1].target for v in levels.levels]
     spec = targets[0].spec
     values: dict[str, Any] = {}
     for p in spec.params:
-        v = sum(w * np.asarray(t.values[p.name], dtype=float) for w, t in zip(weights, targets, strict=True))
+        ws: list[Any] = per_channel if p.channels == 3 and per_channel is not None else scalar
+        v = sum(w * np.asarray(t.values[p.name], dtype=float) for w, t in zip(ws, targets, strict=True))
         v = np.clip(v, *p.bounds)
-        values[p.name] = v.tolist() if p.channels == 3 else float(np.reshape(v, -1)[0])
+        values[p.name] = np.broadcast_to(v, (3,)).tolist() if p.channels == 3 else float(np.reshape(v, -1)[0])
     return Material.create(spec.id, {**targets[0].options, **values})
+
+
+def at(levels: Levels, source: Material, x: Any) -> Material:
+    """``source`` with the levels' parameter at ``x`` (a grey or a colour for a colour's levels)."""
+    value = np.asarray(x, dtype=float).reshape(-1)
+    if source.spec.param(levels.name).channels == 3:
+        return source.with_params({levels.name: np.broadcast_to(value, (3,)).tolist()})
+    return source.with_params({levels.name: float(value[0])})
 
 
 def midpoint(levels: Levels, a: float, b: float, fit_at: FitAt) -> float:
@@ -64,7 +76,20 @@ def midpoint(levels: Levels, a: float, b: float, fit_at: FitAt) -> float:
 
     source, fitted = fit_at(a)
     x = 0.5 * (a + b)
-    return interpolation_error(source.with_params({levels.name: x}), fitted, interpolated(levels, x, fit_at))
+    return interpolation_error(at(levels, source, x), fitted, interpolated(levels, x, fit_at))
+
+
+def typical_error(levels: Levels, fit_at: FitAt) -> float | None:
+    """For a colour's levels, the relative RMSE at the map's median colour (:attr:`Levels.typical`), where the
+    channels are interpolated each at its own value: whether the target draws them apart as the levels assume."""
+    from matremap.transmissive import interpolation_error
+
+    if not levels.per_channel or levels.typical is None:
+        return None
+    x = np.asarray(levels.typical, dtype=float)
+    nearest = min(levels.levels, key=lambda v: abs(v - float(x.mean())))
+    source, fitted = fit_at(nearest)
+    return interpolation_error(at(levels, source, x), fitted, interpolated(levels, x, fit_at))
 
 
 def refine(
@@ -113,6 +138,9 @@ def checks(
     fits = [fit_at(v)[1] for v in levels.levels]
     errors = [(float(r.loss), f"level {v:g}") for v, r in zip(levels.levels, fits, strict=True)]
     errors += [(e, f"midpoint {0.5 * (a + b):g}") for (a, b), e in midpoints.items()]
+    typical = typical_error(levels, fit_at)
+    if typical is not None:
+        errors.append((typical, f"the median colour {np.round(levels.typical or (), 3).tolist()}"))
     worst, where = max(errors)
     log(
         f"levels: relative error on the transmission probe {min(errors)[0]:.4f}-{worst:.4f} over {len(fits)} "
@@ -130,4 +158,15 @@ def checks(
     ]
 
 
-__all__ = ["MAX_LEVELS", "OVER_FITS", "REFINE", "FitAt", "checks", "interpolated", "midpoint", "refine"]
+__all__ = [
+    "MAX_LEVELS",
+    "OVER_FITS",
+    "REFINE",
+    "FitAt",
+    "at",
+    "checks",
+    "interpolated",
+    "midpoint",
+    "refine",
+    "typical_error",
+]

@@ -105,10 +105,16 @@ class Mixed:
 @dataclass(frozen=True)
 class Levels:
     """A roughness given as a map (a coat roughness texture; the base roughness of a material that lets light
-    through): the material is converted at a few ``levels`` of it, evenly over the map's range, and each texel
-    takes the interpolation of the levels' values at its own (:meth:`weights`: a not-a-knot cubic spline through
-    four levels or more, exact where a target's parameter is a quadratic or cubic of the source's, as Mitsuba's
-    alpha is of glTF roughness; linear between two or three)."""
+    through), or the colour of a glass (its tint): the material is converted at a few ``levels`` of it, evenly over
+    the map's range, and each texel takes the interpolation of the levels' values at its own (:meth:`weights`: a
+    not-a-knot cubic spline through four levels or more, exact where a target's parameter is a quadratic or cubic of
+    the source's, as Mitsuba's alpha is of glTF roughness; linear between two or three).
+
+    A colour's levels are greys, and a texel is interpolated channel by channel (``per_channel``): the target's
+    colours take each channel's weights at the source's same channel, its numbers the weights at the channel mean.
+    That is exact where the models draw each channel on its own, as RGB renderers draw a glass's tint (glTF's base
+    colour where light enters, OpenPBR's transmission_color, Mitsuba's specular_transmittance); ``typical`` (the
+    map's median colour) is where the gate checks it."""
 
     name: str
     levels: tuple[float, ...]
@@ -116,6 +122,10 @@ class Levels:
     layer: str | None
     #: maps that do not vary, held at their value in every level (parameter -> value)
     held: Mapping[str, Any] = field(default_factory=dict)
+    #: a colour's levels: greys, each texel interpolated channel by channel
+    per_channel: bool = False
+    #: the map's median colour (a colour's levels): a texel the gate checks the channels' interpolation at
+    typical: tuple[float, ...] | None = None
 
     @property
     def kinds(self) -> tuple[str, ...]:
@@ -123,6 +133,12 @@ class Levels:
 
     def value(self, kind: str) -> float:
         return self.levels[self.kinds.index(kind)]
+
+    def scalar_weights(self, values: np.ndarray) -> list[np.ndarray]:
+        """The weights a target's numbers take per texel: :meth:`weights` of ``values``, or of their channel mean
+        for a colour's levels (``values`` [..., 3])."""
+        a = np.asarray(values, dtype=np.float32)
+        return self.weights(a.mean(axis=-1) if self.per_channel and a.ndim and a.shape[-1] == 3 else a)
 
     def weights(self, values: np.ndarray) -> list[np.ndarray]:
         """The weight of each level per texel (they sum to 1; a spline's may be negative: the blend clips its result
@@ -151,6 +167,8 @@ class Levels:
 
     def describe(self) -> str:
         whose = f"{self.layer} roughness" if self.layer else self.name
+        if self.per_channel:
+            whose = f"{self.name} (channel by channel)"
         if len(self.levels) == 1:
             return f"{whose} {self.levels[0]:g} everywhere"
         return f"{whose} from {self.levels[0]:g} to {self.levels[-1]:g}, {len(self.levels)} levels"
@@ -181,13 +199,16 @@ def layer_levels(map_set: MapSet, summary: MapSummary) -> Levels | None:
 def through_levels(map_set: MapSet, summary: MapSummary) -> Levels | None:
     """The levels a map set that lets light through (its transmission weight above 0) is converted at, or None
     when it does not: each level is one uniform material fitted on the transmission probe (the sweep of maps draws
-    reflection only), at :data:`LEVELS` values over the base roughness map's range (one where it does not vary);
-    every other map must be uniform and is held at its value. A map that varies otherwise (a colour under the
-    glass: three axes, not one the levels interpolate) is refused in one line, before any fit."""
+    reflection only), at :data:`LEVELS` values over the range of the one map that varies: the base roughness, or a
+    colour (a tinted glass's base colour; grey levels, each texel interpolated channel by channel: see
+    :class:`Levels`). Every other map must be uniform and is held at its value; two maps that vary (a roughness and
+    a colour, two colours) are refused in one line, before any fit."""
     from matremap.dialects.mtlx import layers_on
 
     spec = map_set.spec
     if "transmission" not in layers_on(map_set.model, {**map_set.constants, **dict.fromkeys(map_set.maps, 1.0)}):
+        return None
+    if not map_set.maps:
         return None
     rp = qty.roughness_param(spec)
     sample = summary.sample()
@@ -198,23 +219,30 @@ def through_levels(map_set: MapSet, summary: MapSummary) -> Levels | None:
         flat = a.reshape(-1, a.shape[-1]) if spec.param(name).channels == 3 and a.ndim == 3 else a.reshape(-1, 1)
         if float(np.max(np.ptp(flat, axis=0))) > 2 * TOLERANCE:
             varying.append(name)
-        elif rp is None or name != rp.name:
+        else:
             med = np.median(flat, axis=0)
             held[name] = med.tolist() if spec.param(name).channels == 3 else float(med[0])
-    other = [n for n in varying if rp is None or n != rp.name]
-    if other:
-        maps = f"{', '.join(other)} map{'s vary' if len(other) > 1 else ' varies'}"
+    allowed = [n for n in varying if (rp is not None and n == rp.name) or spec.param(n).channels == 3]
+    if len(varying) > 1 or varying != allowed:
+        maps = f"{', '.join(varying)} map{'s vary' if len(varying) > 1 else ' varies'}"
         raise MatremapError(
-            f"{map_set.model} lets light through, and its {maps} over the texels: only a roughness map is "
-            "converted under transmission (each level of it fitted on the transmission probe); bake that map to "
-            "one value or remap the material without its transmission"
+            f"{map_set.model} lets light through, and its {maps} over the texels: one map is converted under "
+            "transmission, the roughness or a colour (each level of it fitted on the transmission probe); bake the "
+            "others to one value or remap the material without its transmission"
         )
-    if rp is None or rp.name not in map_set.maps:
-        return None  # a uniform material under uniform maps: nothing to blend
-    stats = summary.stats[rp.name]
-    count = LEVELS if rp.name in varying else 1
-    levels = tuple(dict.fromkeys(round(float(v), 6) for v in np.linspace(stats.lo, stats.hi, count)))
-    return Levels(rp.name, levels, None, held)
+    if not varying:  # every map uniform: one level of the first scalar map, the others held
+        first = next((n for n in map_set.maps if spec.param(n).channels == 1), None)
+        if first is None:
+            return None
+        return Levels(first, (float(held.pop(first)),), None, held)
+    name = varying[0]
+    stats = summary.stats[name]
+    levels = tuple(dict.fromkeys(round(float(v), 6) for v in np.linspace(stats.lo, stats.hi, LEVELS)))
+    if spec.param(name).channels == 1:
+        return Levels(name, levels, None, held)
+    a = np.asarray(sample[name], dtype=float).reshape(-1, 3)
+    typical = tuple(round(float(v), 6) for v in np.median(a, axis=0))
+    return Levels(name, levels, None, held, per_channel=True, typical=typical)
 
 
 Blend = Mixed | Levels
@@ -311,7 +339,9 @@ def kind_map_set(map_set: MapSet, mixed: Blend, kind: str, dest: Path) -> MapSet
 
     held = mixed.held if isinstance(mixed, Levels) else {}
     maps = {k: f for k, f in map_set.maps.items() if k != mixed.name and k not in held}
-    value = mixed.value(kind)
+    value: Any = mixed.value(kind)
+    if map_set.spec.param(mixed.name).channels == 3:
+        value = [value] * 3  # a colour's level: a grey
     doc: dict[str, Any] = {
         "model": map_set.model,
         "maps": {k: rel(f) for k, f in maps.items()},
@@ -529,12 +559,16 @@ def _blend_bands(plan: list[_Blended], mixed: Blend, dest: Path, source: MapSet,
         writers = [MapWriter(dest / b.file, b.info.like(width=width, height=height)) for b in plan]
         writers.append(MapWriter(dest / MASK_NAME, ImageInfo("png", "uint8", 1, width, height, "linear")))
         for y0, y1 in bands(height, band_rows(width)):
-            ws = mixed.weights(map_values(source.spec, mixed.name, weights.read_rows(y0, y1), weights.path, y0))
+            raw = map_values(source.spec, mixed.name, weights.read_rows(y0, y1), weights.path, y0)
+            ws = mixed.scalar_weights(raw) if isinstance(mixed, Levels) else mixed.weights(raw)
+            # a colour's levels: the target's colours take each channel's weights (Levels.per_channel)
+            wc = mixed.weights(raw) if isinstance(mixed, Levels) and mixed.per_channel else None
             read = {k: map_values(spec, k[1], r.read_rows(y0, y1), r.path, y0) for k, r in readers.items()}
             for b, writer in zip(plan, writers, strict=False):
+                shares = ws if b.channels == 1 or wc is None else wc
                 parts = (
-                    (w if b.channels == 1 else w[..., None]) * _band(v, read, b.channels, w.shape)
-                    for w, v in zip(ws, b.sources, strict=True)
+                    (w if b.channels == 1 or w.ndim == 3 else w[..., None]) * _band(v, read, b.channels, w.shape[:2])
+                    for w, v in zip(shares, b.sources, strict=True)
                 )
                 lo, hi = spec.param(b.name).bounds  # a spline between levels may overshoot them
                 writer.write_rows(y0, np.clip(sum(parts), lo, hi))
