@@ -18,7 +18,7 @@ from matremap.core.imageio import write_image
 from matremap.errors import MatremapError
 from matremap.svbrdf import levels
 from matremap.svbrdf.mapstats import summarise
-from matremap.svbrdf.mixed import Levels, through_levels
+from matremap.svbrdf.mixed import Grid, Levels, through_levels
 from matremap.svbrdf.textures import MapSet, load_map_set, read_image
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -80,18 +80,36 @@ def test_a_glass_over_a_roughness_map_is_levels_of_its_roughness_its_uniform_map
     assert through.held == {"metallic": 0.0}  # the packed texture's metallic channel: uniform, held
 
 
-def test_a_glass_whose_colour_and_roughness_both_vary_is_refused_in_one_line(tmp_path):
+def test_a_glass_with_another_number_varying_is_refused_in_one_line(tmp_path):
+    """The roughness and one colour are converted under transmission; a map of another number (a specular
+    strength) is refused before any fit, naming it."""
     ms = _trt_map_set(tmp_path)
     y, x = np.mgrid[0:64, 0:64] / 63.0  # the grid texture's size
-    tint = tmp_path / "tint.exr"
-    write_image(tint, np.stack([x, y, 0 * x + 0.5], -1).astype(np.float32))
+    write_image(ms.root / "strength.exr", (0.2 + 0.8 * x)[..., None].astype(np.float32))
     doc = json.loads((ms.root / "material.json").read_text())
-    doc["maps"]["baseColor"] = str(tint)
-    doc["params"].pop("baseColor", None)
+    doc["maps"]["specular"] = "strength.exr"
+    doc["params"].pop("specular", None)
     (ms.root / "material.json").write_text(json.dumps(doc))
-    tinted = load_map_set(ms.root)
-    with pytest.raises(MatremapError, match=r"lets light through, and its roughness, baseColor maps vary"):
-        through_levels(tinted, summarise(tinted))
+    varied = load_map_set(ms.root)
+    with pytest.raises(MatremapError, match=r"lets light through, and its roughness, specular maps vary"):
+        through_levels(varied, summarise(varied))
+
+
+def test_a_grid_takes_numbers_from_the_roughness_levels_and_colours_from_the_tints():
+    rough = Levels("roughness", (0.0, 0.25, 0.5, 0.75, 1.0), None)
+    tint = Levels("baseColor", (0.2, 0.4, 0.6, 0.8, 1.0), None, per_channel=True, typical=(0.5, 0.5, 0.5))
+    grid = Grid(rough, tint)
+    r = np.array([[0.1, 0.6]], dtype=np.float32)
+    c = np.array([[[0.3, 0.5, 0.9], [1.0, 0.25, 0.7]]], dtype=np.float32)
+    scalar, colour = grid.band_weights({"roughness": r, "baseColor": c})
+    assert len(scalar) == len(colour) == 10 and colour is not None
+    np.testing.assert_allclose(sum(scalar), 1.0, atol=1e-5)
+    np.testing.assert_allclose(sum(colour), 1.0, atol=1e-5)
+    assert all(np.all(w == 0) for w in scalar[5:]) and all(np.all(w == 0) for w in colour[:5])
+    np.testing.assert_allclose(sum(w * v for w, v in zip(scalar[:5], rough.levels, strict=True)), r, atol=1e-5)
+    np.testing.assert_allclose(sum(w * v for w, v in zip(colour[5:], tint.levels, strict=True)), c, atol=1e-5)
+    # a roughness level holds the median colour, a grey level the median roughness
+    assert grid.params("roughness=0.25") == {"roughness": 0.25, "baseColor": [0.5, 0.5, 0.5]}
 
 
 @pytest.mark.slow
@@ -178,8 +196,9 @@ def test_a_colours_levels_interpolate_each_channel_at_its_own_value():
     np.testing.assert_allclose(sum(w * v for w, v in zip(mean, lv.levels, strict=True)), rgb.mean(axis=-1), atol=1e-5)
 
 
-def _tinted_glass(tmp_path: Path) -> Path:
-    """TransmissionRoughnessTest's Mat_IOR_1.33 with its roughness one number and a tint map (three ramps)."""
+def _tinted_glass(tmp_path: Path, keep_roughness: bool = False) -> Path:
+    """TransmissionRoughnessTest's Mat_IOR_1.33 with a tint map (three ramps), its roughness one number (or its
+    grid texture, ``keep_roughness``)."""
     ms = _trt_map_set(tmp_path)
     y, x = np.mgrid[0:64, 0:64] / 63.0
     tint = np.stack([0.2 + 0.8 * x, 0.9 - 0.6 * y, 0.3 + 0.5 * x * y], -1).astype(np.float32)
@@ -188,8 +207,9 @@ def _tinted_glass(tmp_path: Path) -> Path:
     doc["maps"]["baseColor"] = "tint.exr"
     doc["colorspace"]["baseColor"] = "linear"
     doc["params"].pop("baseColor", None)
-    doc["maps"].pop("roughness")
-    doc["params"]["roughness"] = 0.3
+    if not keep_roughness:
+        doc["maps"].pop("roughness")
+        doc["params"]["roughness"] = 0.3
     (ms.root / "material.json").write_text(json.dumps(doc))
     return ms.root
 
@@ -214,3 +234,24 @@ def test_a_tinted_glass_onto_roughdielectric_writes_the_square_root_of_its_tint(
         power, _ = np.polyfit(np.log(s[..., c].ravel()), np.log(t[..., c].ravel()), 1)
         assert power == pytest.approx(0.5, abs=0.02)
         assert np.corrcoef(s[..., c].ravel() ** 0.5, t[..., c].ravel())[0, 1] > 0.995
+
+
+@pytest.mark.slow
+def test_a_glass_whose_roughness_and_tint_both_vary_is_a_grid_of_levels(tmp_path):
+    """TransmissionRoughnessTest's roughness grid under a three-ramp tint onto roughdielectric: five roughness levels
+    at the median tint and five grey levels at the median roughness; the written alpha is the roughness squared and
+    the transmittance the tint's square root, each read from the files; the gate checked the corners."""
+    from matremap.remap import remap
+
+    root = _tinted_glass(tmp_path, keep_roughness=True)
+    logs: list[str] = []
+    res = remap(root, None, "mitsuba3:roughdielectric", tmp_path / "out", log=logs.append, evaluate=False)
+    assert res.verdict.passed, res.verdict
+    assert any("roughness from 0 to 1, 5 levels, and baseColor (channel by channel)" in m for m in logs)
+    out = load_map_set(tmp_path / "out" / "maps")
+    alpha = np.atleast_3d(read_image(out.maps["alpha"], "linear")[0])[..., 0]
+    rough = np.atleast_3d(read_image(root / "roughness.exr", "linear")[0])[..., 0]
+    assert float(np.max(np.abs(alpha - rough**2))) < 0.03
+    t = np.atleast_3d(read_image(out.maps["specular_transmittance"], "linear")[0])[..., :3]
+    s = np.atleast_3d(read_image(root / "tint.exr", "linear")[0])[..., :3]
+    assert float(np.max(np.abs(t - s**0.5))) < 0.03

@@ -73,6 +73,7 @@ from matremap.svbrdf.mapstats import (
 )
 from matremap.svbrdf.mixed import (
     Blend,
+    Grid,
     Levels,
     layer_levels,
     layer_parameter,
@@ -755,14 +756,19 @@ def _convert_maps(
         copy_map_set(map_set, folder / "maps", identity)
         return int(np.prod(map_set.size)), 0, 0, 0, None, True
     through = through_levels(map_set, summary)
-    mixed = through or mixed_parameter(map_set, summary) or layer_parameter(map_set, summary)
+    mixed: Blend | None = through or mixed_parameter(map_set, summary) or layer_parameter(map_set, summary)
     mixed = mixed or layer_levels(map_set, summary)
     params = summary.sample()
     fits: dict[str, tuple[Material, Any]] = {}
-    if through is not None:  # lets light through: fitted at levels of its roughness, refined where they part
+    if through is not None:  # lets light through: fitted at levels of its roughness (or tint), refined where they part
         job = hold_constants(map_set, summary, through, job, log)
-        fit_at = level_fits(map_set, through, job, fits, log)
-        mixed, midpoints = levels.refine(through, fit_at, log)
+        axes = through.axes if isinstance(through, Grid) else (through,)
+        refined = []
+        for axis in axes:  # each axis at its levels, a Grid's other axis held at its typical value
+            others = through.others(axis) if isinstance(through, Grid) else {}
+            fit_at = level_fits(map_set, axis, others, job, fits, log)
+            refined.append((*levels.refine(axis, fit_at, log), fit_at))
+        mixed = Grid(refined[0][0], refined[1][0], through.corners) if isinstance(through, Grid) else refined[0][0]
     if mixed is not None:  # metal and dielectric texels: blended per texel
         texels, outside = remap_mixed(
             folder,
@@ -783,8 +789,8 @@ def _convert_maps(
             log,
         )
         if through is not None:
-            assert isinstance(mixed, Levels)
-            fitted += levels.checks(mixed, fit_at, midpoints, job.thresholds, log)
+            assert isinstance(mixed, Levels | Grid)
+            fitted += levels.checks(mixed, [(lv, f, m) for lv, m, f in refined], job.thresholds, log)
         return texels, outside, 0, 0, None, False
     held = held_values(map_set, summary, target)
     # the maps' ranges stand for them where only their extremes matter (is any texel diffuse?)
@@ -842,10 +848,11 @@ def kind_job(job: RemapJob, mixed: Blend, kind: MapSet, summary: MapSummary) -> 
     the texels of the maps' library sample (:data:`~matremap.svbrdf.mapstats.LIBRARY_LIMIT`) as ``within``: the
     mask :func:`library_transform` judges a route's coverage on (a metal's route need not cover the dielectric
     texels: BoomBox's metal kind onto Cycles Principled read 45 % covered over all texels, 70 % where it is used)."""
-    values = summary.sample(LIBRARY_LIMIT).get(mixed.name)
-    if values is None or kind.root.name not in mixed.kinds or np.ndim(values) < 2:
+    sampled = summary.sample(LIBRARY_LIMIT)
+    values = {n: np.asarray(sampled[n], dtype=np.float32) for n in mixed.inputs if n in sampled}
+    if len(values) < len(mixed.inputs) or kind.root.name not in mixed.kinds or np.ndim(values[mixed.name]) < 2:
         return job
-    share = mixed.weights(np.asarray(values, dtype=np.float32))[mixed.kinds.index(kind.root.name)]
+    share = mixed.band_weights(values)[0][mixed.kinds.index(kind.root.name)]
     return replace(job, within=np.abs(share) > TOLERANCE)
 
 
@@ -864,17 +871,20 @@ def _fit_kind(source: Material, job: RemapJob, log: Callable[[str], None]) -> An
 def level_fits(
     map_set: MapSet,
     through: Levels,
+    others: Mapping[str, Any],
     job: RemapJob,
     fits: dict[str, tuple[Material, Any]],
     log: Callable[[str], None],
 ) -> levels.FitAt:
-    """The fit of ``map_set`` at one level of ``through``'s roughness (the source at that level, its other maps
-    held), each made once and kept in ``fits`` under the kind's name (:func:`convert_kind` reuses it)."""
+    """The fit of ``map_set`` at one level of ``through`` (the source at that level, its other maps held, and
+    ``others``: a :class:`~matremap.svbrdf.mixed.Grid`'s other axis at its typical value), each made once and kept
+    in ``fits`` under the kind's name (:func:`convert_kind` reuses it)."""
+    base = Material.create(map_set.model, {**map_set.constants, **through.held, **others})
 
     def fit_at(value: float) -> tuple[Material, Any]:
         key = replace(through, levels=(value,)).kinds[0]
         if key not in fits:
-            source = levels.at(through, Material.create(map_set.model, {**map_set.constants, **through.held}), value)
+            source = levels.at(through, base, value)
             r = _fit_kind(source, job, log)
             log(f"fit: {key} as one material onto {job.target}, relative error {r.loss:.4f}")
             fits[key] = (source, r)
@@ -884,7 +894,7 @@ def level_fits(
 
 
 def hold_constants(
-    map_set: MapSet, summary: MapSummary, through: Levels, job: RemapJob, log: Callable[[str], None]
+    map_set: MapSet, summary: MapSummary, through: Levels | Grid, job: RemapJob, log: Callable[[str], None]
 ) -> RemapJob:
     """``job`` with the target's parameters that its renderers or its file format take only as constants (Mitsuba 3
     principled's ``specular`` and ``eta``, roughdielectric's ``int_ior``, glTF's ``ior``) held at the values one fit
@@ -897,7 +907,7 @@ def hold_constants(
 
     spec = get_model(job.target)
     constant = set(written_constants(spec.id))
-    tint = through.per_channel  # a glass whose colour alone varies: the target's numbers do not follow it
+    tint = isinstance(through, Levels) and through.per_channel  # a glass's colour alone: no number follows it
     names = [
         p.name
         for p in spec.params
@@ -907,8 +917,10 @@ def hold_constants(
     if not names:
         return job
     median = float(np.median(np.asarray(summary.sample()[through.name], dtype=float)))
-    source = levels.at(through, Material.create(map_set.model, {**map_set.constants, **through.held}), median)
-    r = _fit_kind(source, job, log)
+    axis = through.rough if isinstance(through, Grid) else through
+    others = through.others(axis) if isinstance(through, Grid) else {}
+    base = Material.create(map_set.model, {**map_set.constants, **through.held, **others})
+    r = _fit_kind(levels.at(axis, base, median), job, log)
     held = {n: r.target.to_dict()["params"][n] for n in names}
     shown = ", ".join(f"{k} {np.round(v, 4).tolist()}" for k, v in list(held.items())[:4])
     shown += f" and {len(held) - 4} more" if len(held) > 4 else ""

@@ -21,14 +21,14 @@ the colour and energy of the levels' probe renders, as a uniform material's.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from matremap.core.material import Material
-from matremap.svbrdf.mixed import Levels
+from matremap.svbrdf.mixed import Grid, Levels
 from matremap.svbrdf.quality import Check, Thresholds, image_checks
 
 #: a midpoint whose relative RMSE exceeds this, and OVER_FITS times its two levels' own, is fitted as a level too
@@ -120,38 +120,64 @@ def refine(
         values = sorted([*values, mid])
 
 
+#: one axis of a conversion at levels: its levels, their fits, and its midpoints' errors (:func:`refine`)
+Axis = tuple[Levels, FitAt, Mapping[tuple[float, float], float]]
+
+
+def corner_error(grid: Grid, roughness: float, colour: Sequence[float], rough_at: FitAt, tint_at: FitAt) -> float:
+    """The relative RMSE at one texel of a :class:`~matremap.svbrdf.mixed.Grid`: the source at its roughness and
+    colour against the target the blend writes there (numbers from the roughness levels, colours from the colour's
+    levels channel by channel), on the probe of the roughness level nearest it."""
+    from matremap.transmissive import interpolation_error
+
+    numbers = interpolated(grid.rough, roughness, rough_at)
+    colours = interpolated(grid.tint, colour, tint_at)
+    spec = numbers.spec
+    target = numbers.with_params({p.name: colours.values[p.name].tolist() for p in spec.params if p.channels == 3})
+    nearest = min(grid.rough.levels, key=lambda v: abs(v - roughness))
+    source, fitted = rough_at(nearest)
+    source = at(grid.tint, at(grid.rough, source, roughness), colour)
+    return interpolation_error(source, fitted, target)
+
+
 def checks(
-    levels: Levels,
-    fit_at: FitAt,
-    midpoints: Mapping[tuple[float, float], float],
-    thresholds: Thresholds,
-    log: Callable[[str], None],
+    levels: Levels | Grid, axes: Sequence[Axis], thresholds: Thresholds, log: Callable[[str], None]
 ) -> list[Check]:
-    """The gate's checks of the conversion at ``levels``: ``fit_error``, the worst of the levels' own errors and
-    of ``midpoints``, and the colour and energy of the levels' probe renders
-    (:func:`~matremap.svbrdf.quality.image_checks`). The evaluation under the environment draws the maps'
-    reflection only; this is where what the glass lets through is judged."""
+    """The gate's checks of the conversion at ``levels`` (one :data:`Axis`, two for a Grid): ``fit_error``, the
+    worst of the levels' own errors, of the midpoints', of a colour's median texel and of a Grid's corners; and the
+    colour and energy of the levels' probe renders (:func:`~matremap.svbrdf.quality.image_checks`). The evaluation
+    under the environment draws the maps' reflection only; this is where what the glass lets through is judged."""
     from matremap.core.fit import FULL, part
     from matremap.renderers import get_renderer
     from matremap.renderers.base import render_images
 
-    fits = [fit_at(v)[1] for v in levels.levels]
-    errors = [(float(r.loss), f"level {v:g}") for v, r in zip(levels.levels, fits, strict=True)]
-    errors += [(e, f"midpoint {0.5 * (a + b):g}") for (a, b), e in midpoints.items()]
-    typical = typical_error(levels, fit_at)
-    if typical is not None:
-        errors.append((typical, f"the median colour {np.round(levels.typical or (), 3).tolist()}"))
+    errors: list[tuple[float, str]] = []
+    fits = []
+    for axis, fit_at, midpoints in axes:
+        prefix = f"{axis.name} " if len(axes) > 1 else ""
+        found = [fit_at(v)[1] for v in axis.levels]
+        fits += [(f"{prefix}level {v:g}", r) for v, r in zip(axis.levels, found, strict=True)]
+        errors += [(float(r.loss), f"{prefix}level {v:g}") for v, r in zip(axis.levels, found, strict=True)]
+        errors += [(e, f"{prefix}midpoint {0.5 * (a + b):g}") for (a, b), e in midpoints.items()]
+        typical = typical_error(axis, fit_at)
+        if typical is not None:
+            errors.append((typical, f"the median colour {np.round(axis.typical or (), 3).tolist()}"))
+    if isinstance(levels, Grid):
+        (_, rough_at, _), (_, tint_at, _) = axes
+        for r, c in levels.corners:
+            e = corner_error(levels, r, c, rough_at, tint_at)
+            errors.append((e, f"the texel of roughness {r:.3g} and colour {np.round(c, 3).tolist()}"))
     worst, where = max(errors)
     log(
         f"levels: relative error on the transmission probe {min(errors)[0]:.4f}-{worst:.4f} over {len(fits)} "
-        f"level(s) and {len(midpoints)} midpoint(s) (worst at {where}); the evaluation draws reflection only"
+        f"level(s), their midpoints and typical texels (worst at {where}); the evaluation draws reflection only"
     )
-    scene = fits[0].scene
+    scene = fits[0][1].scene
     pairs = []
-    for v, r in zip(levels.levels, fits, strict=True):
+    for name, r in fits:
         src = render_images(get_renderer(r.source_renderer), [part(r.source, FULL) or r.source], scene)[0]
         tgt = render_images(get_renderer(r.target_renderer), [r.target], scene)[0]
-        pairs.append((f"level {v:g}", src * r.irradiance_scale, tgt))
+        pairs.append((name, src * r.irradiance_scale, tgt))
     return [
         Check("fit_error", worst, thresholds.fit_error, f"relative RMSE on the {scene.describe()}, worst at {where}"),
         *image_checks(pairs, scene.mask(), thresholds),
@@ -162,9 +188,11 @@ __all__ = [
     "MAX_LEVELS",
     "OVER_FITS",
     "REFINE",
+    "Axis",
     "FitAt",
     "at",
     "checks",
+    "corner_error",
     "interpolated",
     "midpoint",
     "refine",

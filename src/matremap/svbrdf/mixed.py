@@ -87,6 +87,20 @@ class Mixed:
         """The mixed parameter's value that holds a texel wholly at ``kind``."""
         return self.metal if kind == self.kinds[0] else self.dielectric
 
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        """The source maps the weights are read from."""
+        return (self.name,)
+
+    def params(self, kind: str) -> dict[str, Any]:
+        """The parameters a ``kind``'s map set holds in place of :attr:`inputs`."""
+        return {self.name: self.value(kind)}
+
+    def band_weights(self, values: Mapping[str, np.ndarray]) -> tuple[list[np.ndarray], list[np.ndarray] | None]:
+        """Each kind's weights per texel from the :attr:`inputs` maps' ``values``: for the target's numbers, and
+        for its colours channel by channel (None: the same)."""
+        return self.weights(values[self.name]), None
+
     def describe(self) -> str:
         """How the texels divide between the kinds, for the log."""
         first, second = self.kinds
@@ -134,6 +148,18 @@ class Levels:
     def value(self, kind: str) -> float:
         return self.levels[self.kinds.index(kind)]
 
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        return (self.name,)
+
+    def params(self, kind: str) -> dict[str, Any]:
+        v = self.value(kind)
+        return {self.name: [v] * 3 if self.per_channel else v}  # a colour's level: a grey
+
+    def band_weights(self, values: Mapping[str, np.ndarray]) -> tuple[list[np.ndarray], list[np.ndarray] | None]:
+        raw = values[self.name]
+        return self.scalar_weights(raw), self.weights(raw) if self.per_channel else None
+
     def scalar_weights(self, values: np.ndarray) -> list[np.ndarray]:
         """The weights a target's numbers take per texel: :meth:`weights` of ``values``, or of their channel mean
         for a colour's levels (``values`` [..., 3])."""
@@ -174,6 +200,80 @@ class Levels:
         return f"{whose} from {self.levels[0]:g} to {self.levels[-1]:g}, {len(self.levels)} levels"
 
 
+@dataclass(frozen=True)
+class Grid:
+    """A glass whose roughness and colour both vary over the maps: converted at the levels of each, the other held
+    at its typical value (the roughness levels at the map's median colour, the colour's grey levels at the median
+    roughness), and each texel takes the target's numbers from the roughness levels and its colours, channel by
+    channel, from the colour's levels. That separates what a tint does from what roughness does, as the models draw
+    them (a tint scales each channel of the light let through, whatever its blur); the gate checks it where it is
+    least sure, at the corners (:func:`matremap.svbrdf.levels.checks`)."""
+
+    rough: Levels
+    tint: Levels
+    #: texels of the maps (roughness, colour) where the gate checks the separation: the smoothest, the roughest,
+    #: the darkest and the brightest
+    corners: tuple[tuple[float, tuple[float, ...]], ...] = ()
+
+    @property
+    def name(self) -> str:
+        return self.rough.name
+
+    @property
+    def layer(self) -> str | None:
+        return None
+
+    @property
+    def held(self) -> Mapping[str, Any]:
+        return self.rough.held
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        return (self.rough.name, self.tint.name)
+
+    @property
+    def kinds(self) -> tuple[str, ...]:
+        return (*self.rough.kinds, *self.tint.kinds)
+
+    def axis(self, kind: str) -> Levels:
+        return self.rough if kind in self.rough.kinds else self.tint
+
+    def value(self, kind: str) -> float:
+        return self.axis(kind).value(kind)
+
+    def params(self, kind: str) -> dict[str, Any]:
+        """A roughness level at the median colour, a grey level at the median roughness."""
+        if kind in self.rough.kinds:
+            return {**self.rough.params(kind), self.tint.name: list(self.tint.typical or (1.0, 1.0, 1.0))}
+        return {**self.tint.params(kind), self.rough.name: self.typical_roughness}
+
+    @property
+    def axes(self) -> tuple[Levels, Levels]:
+        return self.rough, self.tint
+
+    def others(self, axis: Levels) -> dict[str, Any]:
+        """What a level of ``axis`` holds of the other axis: its typical value."""
+        return {k: v for k, v in self.params(axis.kinds[0]).items() if k != axis.name}
+
+    @property
+    def typical_roughness(self) -> float:
+        return float(self.tint.held.get(self.rough.name, self.rough.levels[len(self.rough.levels) // 2]))
+
+    def band_weights(self, values: Mapping[str, np.ndarray]) -> tuple[list[np.ndarray], list[np.ndarray] | None]:
+        """The numbers from the roughness levels (the colour levels weigh 0), the colours from the colour's levels
+        channel by channel (the roughness levels weigh 0)."""
+        rough = self.rough.weights(values[self.rough.name])
+        tint = self.tint.weights(values[self.tint.name])
+        zero_scalar, zero_colour = np.zeros_like(rough[0]), np.zeros_like(tint[0])
+        return (
+            [*rough, *([zero_scalar] * len(tint))],
+            [*([zero_colour] * len(rough)), *tint],
+        )
+
+    def describe(self) -> str:
+        return f"{self.rough.describe()}, and {self.tint.describe()}"
+
+
 #: levels a layer roughness map is converted at (:class:`Levels`)
 LEVELS = 5
 #: from this many levels on, a texel's value is the cubic spline through the levels' (linear below)
@@ -196,7 +296,7 @@ def layer_levels(map_set: MapSet, summary: MapSummary) -> Levels | None:
     return None
 
 
-def through_levels(map_set: MapSet, summary: MapSummary) -> Levels | None:
+def through_levels(map_set: MapSet, summary: MapSummary) -> Levels | Grid | None:
     """The levels a map set that lets light through (its transmission weight above 0) is converted at, or None
     when it does not: each level is one uniform material fitted on the transmission probe (the sweep of maps draws
     reflection only), at :data:`LEVELS` values over the range of the one map that varies: the base roughness, or a
@@ -222,13 +322,27 @@ def through_levels(map_set: MapSet, summary: MapSummary) -> Levels | None:
         else:
             med = np.median(flat, axis=0)
             held[name] = med.tolist() if spec.param(name).channels == 3 else float(med[0])
-    allowed = [n for n in varying if (rp is not None and n == rp.name) or spec.param(n).channels == 3]
-    if len(varying) > 1 or varying != allowed:
+    rough = [n for n in varying if rp is not None and n == rp.name]
+    colours = [n for n in varying if spec.param(n).channels == 3]
+    if len(rough) + len(colours) < len(varying) or len(colours) > 1:
         maps = f"{', '.join(varying)} map{'s vary' if len(varying) > 1 else ' varies'}"
         raise MatremapError(
-            f"{map_set.model} lets light through, and its {maps} over the texels: one map is converted under "
-            "transmission, the roughness or a colour (each level of it fitted on the transmission probe); bake the "
-            "others to one value or remap the material without its transmission"
+            f"{map_set.model} lets light through, and its {maps} over the texels: its roughness and one colour are "
+            "converted under transmission (at levels of each, fitted on the transmission probe); bake the others "
+            "to one value or remap the material without its transmission"
+        )
+    if rough and colours:
+        stats = summary.stats[rough[0]]
+        r_levels = tuple(dict.fromkeys(round(float(v), 6) for v in np.linspace(stats.lo, stats.hi, LEVELS)))
+        r = np.asarray(sample[rough[0]], dtype=float).reshape(-1)
+        c = np.asarray(sample[colours[0]], dtype=float).reshape(-1, 3)
+        lum = c.mean(axis=1)
+        picks = dict.fromkeys(int(i) for i in (r.argmin(), r.argmax(), lum.argmin(), lum.argmax()))
+        corners = tuple((round(float(r[i]), 6), tuple(round(float(v), 6) for v in c[i])) for i in picks)
+        return Grid(
+            Levels(rough[0], r_levels, None, held),
+            _colour_levels(colours[0], summary, {**held, rough[0]: round(float(np.median(r)), 6)}),
+            corners,
         )
     if not varying:  # every map uniform: one level of the first scalar map, the others held
         first = next((n for n in map_set.maps if spec.param(n).channels == 1), None)
@@ -236,16 +350,23 @@ def through_levels(map_set: MapSet, summary: MapSummary) -> Levels | None:
             return None
         return Levels(first, (float(held.pop(first)),), None, held)
     name = varying[0]
+    if spec.param(name).channels == 3:
+        return _colour_levels(name, summary, held)
     stats = summary.stats[name]
     levels = tuple(dict.fromkeys(round(float(v), 6) for v in np.linspace(stats.lo, stats.hi, LEVELS)))
-    if spec.param(name).channels == 1:
-        return Levels(name, levels, None, held)
-    a = np.asarray(sample[name], dtype=float).reshape(-1, 3)
+    return Levels(name, levels, None, held)
+
+
+def _colour_levels(name: str, summary: MapSummary, held: Mapping[str, Any]) -> Levels:
+    """Grey levels over a colour map's range, interpolated channel by channel, with its median colour to check."""
+    stats = summary.stats[name]
+    levels = tuple(dict.fromkeys(round(float(v), 6) for v in np.linspace(stats.lo, stats.hi, LEVELS)))
+    a = np.asarray(summary.sample()[name], dtype=float).reshape(-1, 3)
     typical = tuple(round(float(v), 6) for v in np.median(a, axis=0))
-    return Levels(name, levels, None, held, per_channel=True, typical=typical)
+    return Levels(name, levels, None, dict(held), per_channel=True, typical=typical)
 
 
-Blend = Mixed | Levels
+Blend = Mixed | Levels | Grid
 
 
 def mixed_parameter(map_set: MapSet, summary: MapSummary) -> Mixed | None:
@@ -292,7 +413,7 @@ def check_target(mixed: Blend, target: str, fix: Mapping[str, Any]) -> None:
     from matremap.renderers.registry import texture_refusal
 
     spec = get_model(target)
-    if isinstance(mixed, Levels) or mixed.layer is not None:
+    if isinstance(mixed, Levels | Grid) or mixed.layer is not None:
         _check_layer_target(mixed, spec, fix)
         return
     if qty.diffuse_param(spec) is None:
@@ -337,15 +458,12 @@ def kind_map_set(map_set: MapSet, mixed: Blend, kind: str, dest: Path) -> MapSet
     def rel(f: Path) -> str:
         return os.path.relpath(Path(f).resolve(), dest.resolve())
 
-    held = mixed.held if isinstance(mixed, Levels) else {}
-    maps = {k: f for k, f in map_set.maps.items() if k != mixed.name and k not in held}
-    value: Any = mixed.value(kind)
-    if map_set.spec.param(mixed.name).channels == 3:
-        value = [value] * 3  # a colour's level: a grey
+    held = mixed.held if isinstance(mixed, Levels | Grid) else {}
+    maps = {k: f for k, f in map_set.maps.items() if k not in mixed.inputs and k not in held}
     doc: dict[str, Any] = {
         "model": map_set.model,
         "maps": {k: rel(f) for k, f in maps.items()},
-        "params": {**map_set.constants, **held, mixed.name: value},
+        "params": {**map_set.constants, **held, **mixed.params(kind)},
         "colorspace": {k: map_set.colorspace[k] for k in maps if k in map_set.colorspace},
     }
     if map_set.normal is not None:
@@ -375,14 +493,14 @@ def remap_mixed(
     kinds = folder / KINDS
     sets = {kind: kind_map_set(map_set, mixed, kind, kinds / kind) for kind in mixed.kinds}
     for kind, ms in sets.items():
-        check(ms, {**params, mixed.name: mixed.value(kind)})
+        check(ms, {**params, **mixed.params(kind)})
     log(
         f"mixed: {mixed.name} varies per texel ({mixed.describe()}): converting each kind through its own "
         "transform and blending them by the map"
     )
     converted = {}
     for kind, ms in sets.items():
-        log(f"mixed: the {kind} ({mixed.name} {mixed.value(kind):g})")
+        log(f"mixed: the {kind}")
         converted[kind] = convert_kind(ms, kinds / f"{kind}-out")
     texels = int(np.prod(map_set.size))
     outside = blend(list(converted.values()), mixed, folder / "maps", map_set)
@@ -543,7 +661,7 @@ def _blend_bands(plan: list[_Blended], mixed: Blend, dest: Path, source: MapSet,
     height, width = source.size
     spec = sides[0].spec
     readers: dict[tuple[int, str], MapReader] = {}
-    weights: MapReader | None = None
+    inputs: dict[str, MapReader] = {}
     masks: list[MapReader | None] = []
     writers: list[MapWriter] = []
     outside = 0
@@ -551,7 +669,8 @@ def _blend_bands(plan: list[_Blended], mixed: Blend, dest: Path, source: MapSet,
         for v in (v for b in plan for v in b.sources if _is_map(v)):
             if _key(v) not in readers:
                 readers[_key(v)] = MapReader(v[0].maps[v[1]], v[0].colorspace.get(v[1]))
-        weights = MapReader(source.maps[mixed.name], source.colorspace.get(mixed.name))
+        for name in mixed.inputs:
+            inputs[name] = MapReader(source.maps[name], source.colorspace.get(name))
         masks = [
             MapReader(ms.root / MASK_NAME, "linear", colour=False) if (ms.root / MASK_NAME).is_file() else None
             for ms in sides
@@ -559,10 +678,10 @@ def _blend_bands(plan: list[_Blended], mixed: Blend, dest: Path, source: MapSet,
         writers = [MapWriter(dest / b.file, b.info.like(width=width, height=height)) for b in plan]
         writers.append(MapWriter(dest / MASK_NAME, ImageInfo("png", "uint8", 1, width, height, "linear")))
         for y0, y1 in bands(height, band_rows(width)):
-            raw = map_values(source.spec, mixed.name, weights.read_rows(y0, y1), weights.path, y0)
-            ws = mixed.scalar_weights(raw) if isinstance(mixed, Levels) else mixed.weights(raw)
-            # a colour's levels: the target's colours take each channel's weights (Levels.per_channel)
-            wc = mixed.weights(raw) if isinstance(mixed, Levels) and mixed.per_channel else None
+            raw = {n: map_values(source.spec, n, r.read_rows(y0, y1), r.path, y0) for n, r in inputs.items()}
+            # the target's numbers take ws; its colours wc, channel by channel, where the blend has them (a colour's
+            # levels, Levels.per_channel; a glass's Grid)
+            ws, wc = mixed.band_weights(raw)
             read = {k: map_values(spec, k[1], r.read_rows(y0, y1), r.path, y0) for k, r in readers.items()}
             for b, writer in zip(plan, writers, strict=False):
                 shares = ws if b.channels == 1 or wc is None else wc
@@ -581,7 +700,7 @@ def _blend_bands(plan: list[_Blended], mixed: Blend, dest: Path, source: MapSet,
         for writer in writers:
             writer.close()
     finally:
-        for r in (*readers.values(), weights, *masks):
+        for r in (*readers.values(), *inputs.values(), *masks):
             if r is not None:
                 r.close()
         for writer in writers:
