@@ -760,15 +760,10 @@ def _convert_maps(
     mixed = mixed or layer_levels(map_set, summary)
     params = summary.sample()
     fits: dict[str, tuple[Material, Any]] = {}
+    refined: list[levels.Axis] = []
     if through is not None:  # lets light through: fitted at levels of its roughness (or tint), refined where they part
         job = hold_constants(map_set, summary, through, job, log)
-        axes = through.axes if isinstance(through, Grid) else (through,)
-        refined = []
-        for axis in axes:  # each axis at its levels, a Grid's other axis held at its typical value
-            others = through.others(axis) if isinstance(through, Grid) else {}
-            fit_at = level_fits(map_set, axis, others, job, fits, log)
-            refined.append((*levels.refine(axis, fit_at, log), fit_at))
-        mixed = Grid(refined[0][0], refined[1][0], through.corners) if isinstance(through, Grid) else refined[0][0]
+        mixed, refined = fit_levels(map_set, through, job, fits, log)
     if mixed is not None:  # metal and dielectric texels: blended per texel
         texels, outside = remap_mixed(
             folder,
@@ -790,7 +785,7 @@ def _convert_maps(
         )
         if through is not None:
             assert isinstance(mixed, Levels | Grid)
-            fitted += levels.checks(mixed, [(lv, f, m) for lv, m, f in refined], job.thresholds, log)
+            fitted += levels.checks(mixed, refined, job.thresholds, log)
         return texels, outside, 0, 0, None, False
     held = held_values(map_set, summary, target)
     # the maps' ranges stand for them where only their extremes matter (is any texel diffuse?)
@@ -866,6 +861,28 @@ def _fit_kind(source: Material, job: RemapJob, log: Callable[[str], None]) -> An
     fix = glass_is_dielectric(source, job.target, fix, job.fix)
     job, fix, metal = free_partial_metal(source, job, fix, log)
     return _fit_uniform(source, job, fix, log, metal)[0]
+
+
+def fit_levels(
+    map_set: MapSet,
+    through: Levels | Grid,
+    job: RemapJob,
+    fits: dict[str, tuple[Material, Any]],
+    log: Callable[[str], None],
+) -> tuple[Levels | Grid, list[levels.Axis]]:
+    """``through`` fitted at its levels (each axis of a Grid with the other held at its typical value) and refined
+    where a midpoint parts from them (:func:`~matremap.svbrdf.levels.refine`); the fits go into ``fits``. Returns
+    the refined levels and each axis with its fits and midpoint errors, for the gate."""
+    axes = through.axes if isinstance(through, Grid) else (through,)
+    refined: list[levels.Axis] = []
+    for axis in axes:
+        others = through.others(axis) if isinstance(through, Grid) else {}
+        fit_at = level_fits(map_set, axis, others, job, fits, log)
+        final, midpoints = levels.refine(axis, fit_at, log)
+        refined.append((final, fit_at, midpoints))
+    if isinstance(through, Grid):
+        return Grid(refined[0][0], refined[1][0], through.corners), refined
+    return refined[0][0], refined
 
 
 def level_fits(
