@@ -601,10 +601,11 @@ def _execute(plan: _Plan, outputs: list[_Output], workers: int, progress) -> lis
     groups = _split(outputs, max(1, min(workers, len(outputs))))
     if len(groups) == 1:
         return [_run(plan, groups[0], progress=progress)]
-    import multiprocessing as mp
+    from matremap.sweep.executors import spawn_context
 
-    # spawn, not fork: OpenImageIO keeps a thread pool that a forked child would inherit broken
-    ctx = mp.get_context("spawn")
+    # spawn, not fork: OpenImageIO keeps a thread pool that a forked child would inherit broken; Ctrl-C blocked
+    # while a worker starts (it ignores it from its initializer on)
+    ctx = spawn_context()
     pool = ctx.Pool(len(groups), initializer=_worker_init, initargs=(os.getpid(),))
     try:
         # the group that writes the mask reports first; progress is reported when workers finish

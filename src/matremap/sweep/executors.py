@@ -14,6 +14,7 @@ import sys
 from collections.abc import Callable, Iterator
 from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from contextlib import contextmanager
+from multiprocessing.context import SpawnContext, SpawnProcess
 from typing import Any
 
 from matremap.errors import MatremapError
@@ -105,16 +106,41 @@ def quiet_progress_lock() -> None:
     tqdm.set_lock(threading.RLock())
 
 
+class _QuietSpawnProcess(SpawnProcess):
+    """A spawned process started with SIGINT blocked (see :func:`spawn_context`)."""
+
+    def start(self) -> None:
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            super().start()
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+class _QuietSpawnContext(SpawnContext):
+    Process = _QuietSpawnProcess
+
+
+def spawn_context() -> Any:
+    """The ``spawn`` start method, its workers started with Ctrl-C blocked: a worker ignores SIGINT from its
+    initializer on (:func:`_ignore_sigint`), but a Ctrl-C that reached it while it was still unpickling its start-up
+    data printed a KeyboardInterrupt traceback from multiprocessing's ``spawn_main`` under the sweep's one line
+    (seen twice in full test runs). The signal mask is inherited across fork and exec (POSIX), so the child starts
+    with SIGINT blocked, and the parent's own mask is restored at once."""
+    import multiprocessing as mp
+
+    if not hasattr(signal, "pthread_sigmask"):  # Windows: no signal masks (and no terminal process groups)
+        return mp.get_context("spawn")
+    return _QuietSpawnContext()
+
+
 def process_pool(n: int, initializer: Callable[..., Any], initargs: tuple[Any, ...] = ()) -> ProcessPoolExecutor:
     """A pool of ``n`` worker processes *spawned*, not forked: a process that has used OpenImageIO, BLAS or
     a renderer holds threads and their locks, and a forked child inherits a lock another thread held, for
     ever (a batch run from a long-lived process hung in OpenImageIO's ``write_scanlines``). Python's own
-    documentation warns against forking a multi-threaded process; ``convert`` spawns for the same reason."""
-    import multiprocessing as mp
-
-    return ProcessPoolExecutor(
-        max_workers=n, mp_context=mp.get_context("spawn"), initializer=initializer, initargs=initargs
-    )
+    documentation warns against forking a multi-threaded process; ``convert`` spawns for the same reason.
+    Workers start with Ctrl-C blocked (:func:`spawn_context`)."""
+    return ProcessPoolExecutor(max_workers=n, mp_context=spawn_context(), initializer=initializer, initargs=initargs)
 
 
 def _check_reachable(address: str) -> None:
