@@ -912,7 +912,11 @@ def _strategy_stages(
         total = float(np.sum(goals[FULL] ** 2)) or 1.0
         diffuse_free = [p for p in free_params if p.role == "diffuse"]
         specular_free = [p for p in free_params if p.role in SPECULAR_ROLES]
-        for which_part, params in ((DIFFUSE, diffuse_free), (SPECULAR, specular_free)):
+        order = [(DIFFUSE, diffuse_free), (SPECULAR, specular_free)]
+        # a part the source has not is switched off first: the other is then fitted as the target draws it
+        # without it (a Lambertian onto OpenPBR: its diffuse fitted under a 1.5-IOR specular layer, 0.24)
+        order.sort(key=lambda stage: float(np.sum(goals[stage[0]] ** 2)) > ABSENT * total)
+        for which_part, params in order:
             current = yield from _run_stage(
                 which_part,
                 params,
@@ -1129,8 +1133,9 @@ def _run_stage(
         )
 
     if energy <= ABSENT * total_energy:
-        # the source has no such part: switch the target's part off (lowest allowed values)
-        off = {p.name: p.bounds[0] for p in params if p.role in ("diffuse", "specular")}
+        # the source has no such part: switch the target's part off (lowest allowed values; a dielectric's IOR at
+        # its lowest is 1, no reflection: its specular weight alone left OpenPBR's 1.5-IOR layer on a Lambertian)
+        off = {p.name: p.bounds[0] for p in params if p.role in ("diffuse", "specular", "fresnel")}
         result = current.with_params(off)
         report(result, 0.0, 0, "source part is black; target part set to its minimum")
         return result
