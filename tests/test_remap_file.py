@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib.util
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -166,9 +167,8 @@ def test_bad_files_and_flags_fail_cleanly(tmp_path, capsys):
     assert "nope" in capsys.readouterr().err and not out.exists()
 
 
-def test_a_textured_gltf_metal_is_swept_when_asked(tmp_path):
-    """--sweep: the grid runs over the maps' roughness and base colour (the metal's F0), once each."""
-    src = gltf(tmp_path / "in", textured=True)
+def _swept_onto_ggx(src: Path, tmp_path: Path) -> tuple[Any, str]:
+    """``src`` remapped onto mitsuba06:pbr (GGX) by a sweep of its own; the result and the sweep's log line."""
     logs: list[str] = []
     res = remap_file(
         src,
@@ -180,7 +180,12 @@ def test_a_textured_gltf_metal_is_swept_when_asked(tmp_path):
         cache=tmp_path / "cache",
         log=logs.append,
     )
-    sweep = next(m for m in logs if m.startswith("sweep:") and "fits over" in m)
+    return res, next(m for m in logs if m.startswith("sweep:") and "fits over" in m)
+
+
+def test_a_textured_gltf_metal_is_swept_when_asked(tmp_path):
+    """--sweep: the grid runs over the maps' roughness and base colour (the metal's F0), once each."""
+    res, sweep = _swept_onto_ggx(gltf(tmp_path / "in", textured=True), tmp_path)
     assert "roughness=" in sweep and sweep.count("baseColor=") == 1
     assert res.remap.outside == 0 and res.file is None
     assert (tmp_path / "out" / "maps" / "material.json").is_file()
@@ -193,18 +198,8 @@ def test_a_roughness_map_from_mirror_to_roughest_lies_inside_the_learned_domain(
     src = gltf(tmp_path / "in", textured=True)
     y, x = np.mgrid[0:16, 0:16] / 15.0
     png(tmp_path / "in" / "mr.png", np.stack([0 * x, x, np.ones_like(x)], -1).astype(np.float32), "linear")
-    logs: list[str] = []
-    res = remap_file(
-        src,
-        "mitsuba06:pbr",
-        tmp_path / "out",
-        fix={"distribution": "ggx"},
-        library=False,
-        evaluate=False,
-        cache=tmp_path / "cache",
-        log=logs.append,
-    )
-    assert "roughness=0.0:1.0:" in next(m for m in logs if m.startswith("sweep:") and "fits over" in m)
+    res, sweep = _swept_onto_ggx(src, tmp_path)
+    assert "roughness=0.0:1.0:" in sweep
     assert res.remap.outside == 0 and res.verdict.passed
 
 

@@ -62,6 +62,48 @@ class Pair:
     objective: str = "l2"
 
 
+@dataclass(frozen=True)
+class _Base:
+    """A model with a metal/dielectric base, as the library's base-layer pairs sweep it: its id, options, and the
+    names of its metalness, roughness, base colour and dielectric IOR."""
+
+    model: str
+    options: Mapping[str, Any]
+    metalness: str
+    roughness: str
+    colour: str
+    ior: str
+
+
+_BASES = {
+    "gltf": _Base("gltf:metal-rough", {}, "metallic", "roughness", "baseColor", "ior"),
+    "openpbr": _Base("mtlx:open_pbr_surface", {}, "base_metalness", "specular_roughness", "base_color", "specular_ior"),
+    "standardsurface": _Base(
+        "mtlx:standard_surface", {}, "metalness", "specular_roughness", "base_color", "specular_IOR"
+    ),
+    "cyclesprincipled": _Base(
+        "cycles:principled", {"distribution": "multi_ggx"}, "Metallic", "Roughness", "Base Color", "IOR"
+    ),
+}
+
+
+def _base_pair(source: str, target: str, kind: str) -> Pair:
+    """The library sweep of one kind (``dielectric``, ``metal``) of ``source``'s base onto ``target``'s (keys of
+    :data:`_BASES`): roughness from 0.05 to 1 and the base colour (and a dielectric's IOR) over their ranges."""
+    s, t, metal = _BASES[source], _BASES[target], 1.0 if kind == "metal" else 0.0
+    grid = f"{s.roughness}=0.05:1:8," + (f"{s.colour}=0.05:1:8" if metal else f"{s.colour}=0:1:5,{s.ior}=1.3:1.8:3")
+    return Pair(
+        f"{source}-{kind}-{target}",
+        s.model,
+        t.model,
+        grid,
+        source_params={**s.options, s.metalness: metal},
+        fix={**t.options, t.metalness: metal},
+        reverse=False,
+        keep_flagged=True,
+    )
+
+
 _WARD_GRID = "alpha=0.03:0.7:10,specularReflectance=0.02:0.5:6,diffuseReflectance=0;0.5"
 _ALPHA_F0 = "alpha=0.03:0.9:10,F0=0.02:0.9:6,diffuseReflectance=0;0.5"
 _CYCLES_GRID = "Roughness=0.15:0.95:10,Color=0.02:0.9:6,Diffuse Color=0;0.5"
@@ -201,19 +243,6 @@ PAIRS: tuple[Pair, ...] = (
         source_params={"variant": "ward"},
         fix={"metallic": 0.0},
     ),
-    # swept from glTF (no reverse): the forward domain is the grid, so that roughness 1 (glTF's default, and
-    # the corpus's) is inside. There the target's fit lands on its own roughness bound (the same alpha = 1),
-    # which the stability analysis flags as a bound; here that bound is the answer, so those points are kept
-    Pair(
-        "gltf-dielectric-cyclesprincipled",
-        "gltf:metal-rough",
-        "cycles:principled",
-        "roughness=0.05:1:8,baseColor=0:1:5,ior=1.3:1.8:3",
-        source_params={"metallic": 0.0},
-        fix={"distribution": "multi_ggx", "Metallic": 0.0},
-        reverse=False,
-        keep_flagged=True,
-    ),
     Pair(
         "gltf-dielectric-mitsuba3plastic",
         "gltf:metal-rough",
@@ -233,113 +262,27 @@ PAIRS: tuple[Pair, ...] = (
         source_params={"distribution": "ggx"},
         fix={"metallic": 1.0},
     ),
-    # the layered models' base layers (issue 16): glTF dielectrics into OpenPBR and Standard Surface and back, swept
-    # from each side (no reverse: the forward domain is the grid, roughness 1 inside; the target's roughness bound
-    # there is the answer, so those points are kept), and glTF metals into them (F0 through the base colour,
-    # held-out 0.016). Not their metals back onto glTF: the F82 metal's F0 held out at 0.023, above the library's
-    # 0.02 (swept on demand). No transform has a layer: a textured layered material is swept for its own maps.
+    # the layered models' base layers (issue 16), swept from the source side (no reverse: the forward domain is the
+    # grid, so that roughness 1 -- glTF's default, and the corpus's -- is inside; there the target's fit lands on its
+    # own roughness bound, the same alpha = 1, which the stability analysis flags; that bound is the answer, so those
+    # points are kept): glTF dielectrics and metals (F0 through the base colour, held-out 0.016) into OpenPBR,
+    # Standard Surface and Cycles Principled, their dielectrics back onto glTF, Cycles Principled's metals too (0.017),
+    # and Standard Surface <-> OpenPBR (the ASWF's successor to it). Not OpenPBR's and Standard Surface's metals back
+    # onto glTF: the F82 metal's F0 held out at 0.023, above the library's 0.02 (swept on demand). No transform has a
+    # layer: a textured layered material is swept for its own maps.
     *(
-        Pair(
-            f"gltf-{kind}-{short}",
-            "gltf:metal-rough",
-            model,
-            grid,
-            source_params={"metallic": metal},
-            fix={metalness: metal},
-            reverse=False,
-            keep_flagged=True,
+        _base_pair(source, target, kind)
+        for source, target, kinds in (
+            ("gltf", "cyclesprincipled", ("dielectric", "metal")),
+            ("gltf", "openpbr", ("dielectric", "metal")),
+            ("gltf", "standardsurface", ("dielectric", "metal")),
+            ("openpbr", "gltf", ("dielectric",)),
+            ("standardsurface", "gltf", ("dielectric",)),
+            ("cyclesprincipled", "gltf", ("dielectric", "metal")),
+            ("standardsurface", "openpbr", ("dielectric", "metal")),
+            ("openpbr", "standardsurface", ("dielectric", "metal")),
         )
-        for short, model, metalness in (
-            ("openpbr", "mtlx:open_pbr_surface", "base_metalness"),
-            ("standardsurface", "mtlx:standard_surface", "metalness"),
-        )
-        for kind, metal, grid in (
-            ("dielectric", 0.0, "roughness=0.05:1:8,baseColor=0:1:5,ior=1.3:1.8:3"),
-            ("metal", 1.0, "roughness=0.05:1:8,baseColor=0.05:1:8"),
-        )
-    ),
-    *(
-        Pair(
-            f"{short}-{kind}-gltf",
-            model,
-            "gltf:metal-rough",
-            grid.format(roughness=roughness, ior=ior),
-            source_params={metalness: metal},
-            fix={"metallic": metal},
-            reverse=False,
-            keep_flagged=True,
-        )
-        for short, model, metalness, roughness, ior in (
-            ("openpbr", "mtlx:open_pbr_surface", "base_metalness", "specular_roughness", "specular_ior"),
-            ("standardsurface", "mtlx:standard_surface", "metalness", "specular_roughness", "specular_IOR"),
-        )
-        for kind, metal, grid in (("dielectric", 0.0, "{roughness}=0.05:1:8,base_color=0:1:5,{ior}=1.3:1.8:3"),)
-    ),
-    # what users bring (issue 16): glTF metals into Blender's Principled BSDF, Blender's Principled BSDF out to glTF,
-    # and Standard Surface into OpenPBR (the ASWF's successor to it) and back
-    Pair(
-        "gltf-metal-cyclesprincipled",
-        "gltf:metal-rough",
-        "cycles:principled",
-        "roughness=0.05:1:8,baseColor=0.05:1:8",
-        source_params={"metallic": 1.0},
-        fix={"distribution": "multi_ggx", "Metallic": 1.0},
-        reverse=False,
-        keep_flagged=True,
-    ),
-    *(
-        Pair(
-            f"cyclesprincipled-{kind}-gltf",
-            "cycles:principled",
-            "gltf:metal-rough",
-            grid,
-            source_params={"distribution": "multi_ggx", "Metallic": metal},
-            fix={"metallic": metal},
-            reverse=False,
-            keep_flagged=True,
-        )
-        for kind, metal, grid in (
-            ("dielectric", 0.0, "Roughness=0.05:1:8,Base Color=0:1:5,IOR=1.3:1.8:3"),
-            ("metal", 1.0, "Roughness=0.05:1:8,Base Color=0.05:1:8"),
-        )
-    ),
-    *(
-        Pair(
-            f"{short}-{kind}-{other}",
-            model,
-            target,
-            grid.format(roughness=roughness, ior=ior),
-            source_params={metalness: metal},
-            fix={target_metalness: metal},
-            reverse=False,
-            keep_flagged=True,
-        )
-        for short, model, metalness, roughness, ior, other, target, target_metalness in (
-            (
-                "standardsurface",
-                "mtlx:standard_surface",
-                "metalness",
-                "specular_roughness",
-                "specular_IOR",
-                "openpbr",
-                "mtlx:open_pbr_surface",
-                "base_metalness",
-            ),
-            (
-                "openpbr",
-                "mtlx:open_pbr_surface",
-                "base_metalness",
-                "specular_roughness",
-                "specular_ior",
-                "standardsurface",
-                "mtlx:standard_surface",
-                "metalness",
-            ),
-        )
-        for kind, metal, grid in (
-            ("dielectric", 0.0, "{roughness}=0.05:1:8,base_color=0:1:5,{ior}=1.3:1.8:3"),
-            ("metal", 1.0, "{roughness}=0.05:1:8,base_color=0.05:1:8"),
-        )
+        for kind in kinds
     ),
 )
 
