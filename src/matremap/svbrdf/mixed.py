@@ -291,18 +291,17 @@ def layer_levels(map_set: MapSet, summary: MapSummary) -> Levels | None:
         stats = summary.stats.get(own.roughness or "")
         if not on or stats is None or stats.hi - stats.lo <= 2 * TOLERANCE:
             continue
-        levels = tuple(round(float(v), 6) for v in np.linspace(stats.lo, stats.hi, LEVELS))
-        return Levels(own.roughness or "", levels, layer)
+        return Levels(own.roughness or "", _even_levels(stats), layer)
     return None
 
 
 def through_levels(map_set: MapSet, summary: MapSummary) -> Levels | Grid | None:
     """The levels a map set that lets light through (its transmission weight above 0) is converted at, or None
     when it does not: each level is one uniform material fitted on the transmission probe (the sweep of maps draws
-    reflection only), at :data:`LEVELS` values over the range of the one map that varies: the base roughness, or a
+    reflection only), at :data:`LEVELS` values over the range of the map that varies: the base roughness, or a
     colour (a tinted glass's base colour; grey levels, each texel interpolated channel by channel: see
-    :class:`Levels`). Every other map must be uniform and is held at its value; two maps that vary (a roughness and
-    a colour, two colours) are refused in one line, before any fit."""
+    :class:`Levels`), or both (a :class:`Grid`). Every other map must be uniform and is held at its value; any
+    other that varies (a specular strength, a second colour) is refused in one line, before any fit."""
     from matremap.dialects.mtlx import layers_on
 
     spec = map_set.spec
@@ -332,8 +331,7 @@ def through_levels(map_set: MapSet, summary: MapSummary) -> Levels | Grid | None
             "to one value or remap the material without its transmission"
         )
     if rough and colours:
-        stats = summary.stats[rough[0]]
-        r_levels = tuple(dict.fromkeys(round(float(v), 6) for v in np.linspace(stats.lo, stats.hi, LEVELS)))
+        r_levels = _even_levels(summary.stats[rough[0]])
         r = np.asarray(sample[rough[0]], dtype=float).reshape(-1)
         c = np.asarray(sample[colours[0]], dtype=float).reshape(-1, 3)
         lum = c.mean(axis=1)
@@ -352,18 +350,19 @@ def through_levels(map_set: MapSet, summary: MapSummary) -> Levels | Grid | None
     name = varying[0]
     if spec.param(name).channels == 3:
         return _colour_levels(name, summary, held)
-    stats = summary.stats[name]
-    levels = tuple(dict.fromkeys(round(float(v), 6) for v in np.linspace(stats.lo, stats.hi, LEVELS)))
-    return Levels(name, levels, None, held)
+    return Levels(name, _even_levels(summary.stats[name]), None, held)
 
 
 def _colour_levels(name: str, summary: MapSummary, held: Mapping[str, Any]) -> Levels:
     """Grey levels over a colour map's range, interpolated channel by channel, with its median colour to check."""
-    stats = summary.stats[name]
-    levels = tuple(dict.fromkeys(round(float(v), 6) for v in np.linspace(stats.lo, stats.hi, LEVELS)))
     a = np.asarray(summary.sample()[name], dtype=float).reshape(-1, 3)
     typical = tuple(round(float(v), 6) for v in np.median(a, axis=0))
-    return Levels(name, levels, None, dict(held), per_channel=True, typical=typical)
+    return Levels(name, _even_levels(summary.stats[name]), None, dict(held), per_channel=True, typical=typical)
+
+
+def _even_levels(stats: Any) -> tuple[float, ...]:
+    """:data:`LEVELS` values evenly over a map's range (its :class:`~matremap.svbrdf.mapstats.MapStats`)."""
+    return tuple(dict.fromkeys(round(float(v), 6) for v in np.linspace(stats.lo, stats.hi, LEVELS)))
 
 
 Blend = Mixed | Levels | Grid
