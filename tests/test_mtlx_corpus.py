@@ -173,12 +173,13 @@ CASES = [
     ("mtlx-gltf_pbr_boombox/gltf_pbr_boombox.mtlx", 0, ""),
     ("mtlx-gltf_pbr_gold/gltf_pbr_gold.mtlx", 0, ""),
     ("mtlx-gltf_pbr_plastic/gltf_pbr_plastic.mtlx", 0, ""),
-    ("mtlx-open_pbr_aluminum_brushed/open_pbr_aluminum_brushed.mtlx", 0, ""),
-    ("mtlx-open_pbr_ketchup/open_pbr_ketchup.mtlx", 0, ""),
+    # an anisotropy, a subsurface no model here converts: written, and failed by the gate's dropped check
+    ("mtlx-open_pbr_aluminum_brushed/open_pbr_aluminum_brushed.mtlx", 3, "FAILED: dropped 1 > 0 (left out: specular_"),
+    ("mtlx-open_pbr_ketchup/open_pbr_ketchup.mtlx", 3, "FAILED: dropped 1 > 0 (left out: subsurface_weight=1.0"),
     ("mtlx-open_pbr_lightbulb/open_pbr_lightbulb.mtlx", 0, ""),
     # glasses, fitted on the transmission probe: no glTF base looks like them
     ("mtlx-open_pbr_glass/open_pbr_glass.mtlx", 3, "FAILED: fit_error"),
-    ("mtlx-open_pbr_honey/open_pbr_honey.mtlx", 3, "FAILED: fit_error"),
+    ("mtlx-open_pbr_honey/open_pbr_honey.mtlx", 3, "FAILED:"),
     ("mtlx-standard_surface_glass_tinted/standard_surface_glass_tinted.mtlx", 3, "FAILED:"),
     (f"mtlx-standard_surface_brick_procedural/{EXAMPLES}/standard_surface_brick_procedural.mtlx", 0, ""),
     ("mtlx-standard_surface_chess_set/standard_surface_chess_set.mtlx", 0, ""),
@@ -186,7 +187,7 @@ CASES = [
     ("mtlx-standard_surface_copper/standard_surface_copper.mtlx", 0, ""),  # the coat's colour absorbed, named
     ("mtlx-standard_surface_gold/standard_surface_gold.mtlx", 0, ""),
     (f"mtlx-standard_surface_greysphere_calibration/{EXAMPLES}/standard_surface_greysphere_calibration.mtlx", 0, ""),
-    ("mtlx-standard_surface_jade/standard_surface_jade.mtlx", 0, ""),
+    ("mtlx-standard_surface_jade/standard_surface_jade.mtlx", 3, "FAILED: dropped 2 > 0"),
     ("mtlx-standard_surface_marble_solid/standard_surface_marble_solid.mtlx", 2, "base_color is fed by a 'power' node"),
     ("mtlx-standard_surface_velvet/standard_surface_velvet.mtlx", 3, "FAILED: fit_error"),  # a sheen no glTF base makes
     (
@@ -199,8 +200,9 @@ CASES = [
 
 
 #: a document of several materials is a batch by default (every material, exit 0 only when all pass; the
-#: chess set's glass pawn tops are refused); this table takes one material of it, the batch is tested apart
-ONE_MATERIAL = {"mtlx-standard_surface_chess_set/standard_surface_chess_set.mtlx": "M_Queen_W"}
+#: chess set's glass pawn tops and subsurface kings and queens fail); this table takes one material of it, the
+#: batch is tested apart
+ONE_MATERIAL = {"mtlx-standard_surface_chess_set/standard_surface_chess_set.mtlx": "M_Bishop_W"}
 
 
 def test_the_table_covers_every_corpus_document():
@@ -250,15 +252,16 @@ def test_every_corpus_document_converts_or_is_refused_in_one_line(tmp_path, caps
 
 @pytest.mark.slow
 def test_the_chess_set_as_a_batch_converts_every_opaque_material_into_one_document(tmp_path, capsys):
-    """All 15 materials into one MaterialX document that validates: 13 pass; the two glass pawn tops (a roughness
+    """All 15 materials into one MaterialX document that validates: 9 pass; the two glass pawn tops (a roughness
     texture under transmission: converted at levels of it, where they were refused) fail the gate, glTF's
-    metal-rough model letting no light through (exit 3); the last line counts them."""
+    metal-rough model letting no light through, and so do the kings and queens, whose subsurface texture no model
+    here converts (exit 3); the last line counts them."""
     pytest.importorskip("colour", reason="the quality gate needs colour-science")
     out = tmp_path / "out"
     got = main(["remap", str(CHESS), "--to", "gltf:metal-rough", "-o", str(out), "--allow-path", str(CORPUS), *FAST])
     err = capsys.readouterr()
     assert got == 3 and "Traceback" not in err.err
-    assert "15 material(s): 13 passed, 2 failed the quality gate, 0 refused" in err.out
+    assert "15 material(s): 9 passed, 6 failed the quality gate, 0 refused" in err.out
     whole = next(p for p in out.rglob("standard_surface_chess_set.mtlx") if p.is_file())
     d = mx.createDocument()
     mx.readFromXmlFile(d, str(whole))

@@ -1255,6 +1255,7 @@ def _remap_file(
             for note in asset.notes[before:]:  # what the writer carried over or left behind
                 log(f"note: {note}")
                 result.notes.append(note)
+        result.verdict = dropped_check(asset, result.verdict, kept, job.thresholds)
         write_text(stage / "verdict.json", json.dumps(result.verdict.to_dict(), indent=1) + "\n")
     if result.remap is not None:
         result.remap = result.remap.moved(stage, out)
@@ -1262,6 +1263,19 @@ def _remap_file(
         result.file = out / result.file.relative_to(stage)
         log(f"wrote {result.file}")
     return result
+
+
+def dropped_check(asset: Any, verdict: Verdict, kept: bool, thresholds: Thresholds) -> Verdict:
+    """``verdict`` with the gate's ``dropped`` check: the inputs of ``asset`` that change its look and that no model
+    here converts (``asset.dropped``: an anisotropy, a subsurface, a thin film), which no render of the models can
+    show, so that no other measure sees them lost; none when the file is copied onto its own model (``kept``: a glTF
+    copy keeps its extensions). Before, OpenPBR's brushed aluminium (anisotropy 0.9) went onto glTF as an isotropic
+    metal with a note and exit 0. ``--max-error dropped=N`` accepts N of them."""
+    if kept or not asset.dropped:
+        return verdict
+    n = len(asset.dropped)
+    where = f"left out: {', '.join(asset.dropped)} (no model here converts it; --max-error dropped={n} accepts)"
+    return Verdict([*verdict.checks, Check("dropped", float(len(asset.dropped)), thresholds.dropped, where)])
 
 
 def refuse_textured_layers(path: Path, asset: Any, target: str) -> None:

@@ -96,7 +96,10 @@ class MaterialAsset:
         the inputs it skipped, for the user to see. ``carried``: inputs passed on unchanged to a writer
     (emission, occlusion, opacity: :class:`CarriedInput`). ``lost``: inputs that carry the look and that no
         matremap model has (a coloured coat, transmission, sheen): such a material is copied onto its own
-        model but not converted to another (see :func:`matremap.remap.remap_file`).
+        model but not converted to another (see :func:`matremap.remap.remap_file`). ``dropped``: inputs that
+        change the look and that no model here converts (an anisotropy, a subsurface, a thin film), as
+        ``name=value``: the rest is converted, and the quality gate's ``dropped`` check fails it, naming them,
+        unless the file is copied onto its own format with them (:func:`matremap.remap.dropped_check`).
     """
 
     path: Path
@@ -111,6 +114,7 @@ class MaterialAsset:
     index: int = 0
     lost: list[str] = field(default_factory=list)
     carried: dict[str, CarriedInput] = field(default_factory=dict)
+    dropped: list[str] = field(default_factory=list)
 
     @property
     def textured(self) -> bool:

@@ -195,11 +195,12 @@ def read(path: str | os.PathLike, material: str | int | None = None, *, confinem
         )
     constants: dict[str, Any] = {n: _socket_value(inputs[n], spec.param(n).channels) for n in spec.param_names}
     constants["distribution"] = str(node.get("distribution", "MULTI_GGX")).lower()
-    notes = [
-        f"{k}={_socket_value(inputs[k], 1):g}: cycles:principled has no such parameter; left out"
+    dropped = [
+        f"{k}={_socket_value(inputs[k], 1):g}"
         for k, off in UNMODELLED.items()
         if k in inputs and _socket_value(inputs[k], 1) != off
     ]
+    notes = [f"{d}: cycles:principled has no such parameter; left out" for d in dropped]
     lost: list[str] = []
     carried = {}
     strength = _socket_value(inputs.get("Emission Strength", 0.0), 1)
@@ -214,7 +215,15 @@ def read(path: str | os.PathLike, material: str | int | None = None, *, confinem
     except MatremapError as e:
         raise MatremapError(f"{where}: {e}") from None
     return MaterialAsset(
-        path=p, format="blend", name=name, model=spec.id, constants=constants, notes=notes, lost=lost, carried=carried
+        path=p,
+        format="blend",
+        name=name,
+        model=spec.id,
+        constants=constants,
+        notes=notes,
+        lost=lost,
+        carried=carried,
+        dropped=[d for d in dropped if not d.startswith("Diffuse Roughness")],
     )
 
 

@@ -235,7 +235,32 @@ def read(
         index=idx,
         lost=lost,
         carried=carried,
+        dropped=dropped_extensions(ext),
     )
+
+
+#: material extensions that change the look and that no model here converts -> the property that turns each on
+#: (its default 0, per its ratified README)
+DROPPED = {
+    "KHR_materials_anisotropy": "anisotropyStrength",
+    "KHR_materials_iridescence": "iridescenceFactor",
+    "KHR_materials_diffuse_transmission": "diffuseTransmissionFactor",
+    "KHR_materials_dispersion": "dispersion",
+}
+
+
+def dropped_extensions(ext: dict[str, Any]) -> list[str]:
+    """The extensions of :data:`DROPPED` a material has on (their factor above 0), as ``extension factor``: a glTF copy
+    keeps them (the copy leaves them alone), any other target loses them."""
+    out = []
+    for name, factor in DROPPED.items():
+        e = ext.get(name)
+        if not isinstance(e, dict):
+            continue
+        v = e.get(factor, 0.0)
+        if isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0:
+            out.append(f"{name} {factor} {v:g}")
+    return out
 
 
 def read_factors(path: Path, where: str, pbr: dict[str, Any], found: dict[str, dict[str, Any]]) -> dict[str, Any]:

@@ -502,7 +502,76 @@ def _shader_asset(ctx: _Ctx, shader: Any, name: str, index: int, doc: Any) -> Ma
         index=index,
         lost=lost,
         carried=carried,
+        dropped=dropped_look(shader),
     )
+
+
+#: shader inputs that change the look and that no model here converts -> (the weight of the lobe they belong to and
+#: the least it must be to carry the look -- as a coat above 0.5 does, COAT_LOOK --, the roughness they need to
+#: show; None: none): anisotropies of a lobe that carries the look, subsurface scattering above a tenth, thin films,
+#: volume scattering under a transmission
+_DROPPED: dict[str, dict[str, tuple[str | None, float, str | None]]] = {
+    "standard_surface": {
+        "specular_anisotropy": ("specular", 0.5, "specular_roughness"),
+        "coat_anisotropy": ("coat", 0.5, "coat_roughness"),
+        "subsurface": (None, 0.1, None),
+        "thin_film_thickness": (None, 0.0, None),
+    },
+    "open_pbr_surface": {
+        "specular_roughness_anisotropy": ("specular_weight", 0.5, "specular_roughness"),
+        "coat_roughness_anisotropy": ("coat_weight", 0.5, "coat_roughness"),
+        "subsurface_weight": (None, 0.1, None),
+        "thin_film_weight": (None, 0.0, None),
+        "transmission_scatter": ("transmission_weight", 0.0, None),
+    },
+    "gltf_pbr": {
+        "iridescence": (None, 0.0, None),
+        "anisotropy_strength": (None, 0.0, "roughness"),
+    },
+}
+#: the documented defaults of the weights :data:`_DROPPED` names (Standard Surface 1.0.1, OpenPBR 1.1)
+_WEIGHT_DEFAULTS = {"specular": 1.0, "specular_weight": 1.0, "coat": 0.0, "coat_weight": 0.0}
+
+
+def dropped_look(shader: Any) -> list[str]:
+    """The inputs of ``shader`` (:data:`_DROPPED`) that are on and carry the look (textured, or above their least
+    where the lobe they belong to carries the look and is not a mirror), as ``name=value``: Standard Surface 1.0.1
+    and OpenPBR 1.1 name them so. OpenPBR's brushed aluminium (anisotropy 0.9), its ketchup (subsurface 1), the
+    Standard Surface jade (subsurface 0.4, anisotropy 0.5) and the chess set's kings and queens (a subsurface
+    texture over 73-88 % of their texels) were converted with a note and exit 0."""
+    out = []
+    for name, (weight, least, roughness) in _DROPPED.get(shader.getCategory(), {}).items():
+        inp = shader.getInput(name)
+        if inp is None:
+            continue
+        if inp.getAttribute("nodename") or inp.getAttribute("nodegraph"):
+            out.append(f"{name} (textured)")
+            continue
+        text = inp.getValueString()
+        try:
+            values = [float(x) for x in text.replace(",", " ").split()]
+        except ValueError:
+            continue
+        if not values or max(values) <= (least if weight is None else 0.0):
+            continue
+        if weight is not None and _level(shader, weight) < max(least, 1e-9):
+            continue
+        if roughness is not None and _level(shader, roughness) <= 0.0:
+            continue
+        out.append(f"{name}={text}")
+    return out
+
+
+def _level(shader: Any, name: str) -> float:
+    """Input ``name`` of ``shader`` as a number: its value, its documented default where absent, 1 where it is
+    connected (a texture: taken as on)."""
+    inp = shader.getInput(name)
+    if inp is None:
+        return _WEIGHT_DEFAULTS.get(name, 0.5)
+    if inp.getAttribute("nodename") or inp.getAttribute("nodegraph"):
+        return 1.0
+    v = _float_input(shader, name)
+    return 1.0 if v is None else v
 
 
 def _constant(f: _Field) -> Any:

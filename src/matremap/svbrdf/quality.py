@@ -27,6 +27,9 @@ every remap is also measured on what SSIM ignores:
 * **Uniform materials** -- ``fit_error``: the fit's relative RMSE on the probe, beside the image
   measures of the probe renders.
 
+* **Files** -- ``dropped``: the inputs of the source that change its look and that no model here converts (an
+  anisotropy, a subsurface, a thin film), which no render of the models can show: 0 allowed, each named.
+
 Each measure has a threshold (:class:`Thresholds`, set on the command line with ``--max-error
 NAME=VALUE``); a remap whose worst measure exceeds its threshold exits with status 3 (see
 :mod:`matremap.errors`), its files written and its report marked FAILED with the reason.
@@ -67,6 +70,8 @@ class Thresholds:
     outside: float = 0.05
     clamped: float = 0.01
     fit_error: float = 0.25
+    #: inputs of the source that change its look and that no model here converts (an anisotropy, a subsurface)
+    dropped: float = 0.0
 
     @classmethod
     def parse(cls, items: Sequence[str]) -> Thresholds:

@@ -1,0 +1,70 @@
+"""Inputs that change a material's look and that no model here converts (an anisotropy, a subsurface, a thin film,
+glTF's KHR_materials_anisotropy / _iridescence): the rest is converted and written, and the quality gate's
+``dropped`` check fails it, naming them (exit 3), unless the file is copied onto its own format with them. Before,
+OpenPBR's brushed aluminium went onto glTF as an isotropic metal with a note and exit 0."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from test_formats_gltf import make_file
+
+from matremap.cli import main
+from matremap.formats import read_asset
+from matremap.formats.confine import Confinement
+
+mx = pytest.importorskip("MaterialX", reason="MaterialX not installed: pip install 'matremap[materialx]'")
+
+CORPUS = Path(__file__).resolve().parent / "data" / "corpus"
+ALUMINIUM = CORPUS / "mtlx-open_pbr_aluminum_brushed" / "open_pbr_aluminum_brushed.mtlx"
+WOOD = next((CORPUS / "mtlx-standard_surface_wood_tiled").rglob("standard_surface_wood_tiled.mtlx"))
+JADE = next((CORPUS / "mtlx-standard_surface_jade").rglob("*.mtlx"))
+FAST = ["--rotations", "0:360:2", "--size", "48", "--env-lights", "32"]
+
+
+def test_a_dropped_anisotropy_fails_the_gate_and_is_accepted_when_asked(tmp_path, capsys):
+    pytest.importorskip("colour", reason="the quality gate needs colour-science")
+    out = tmp_path / "out"
+    code = main(["remap", str(ALUMINIUM), "--to", "gltf:metal-rough", "-o", str(out), *FAST])
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert code == 3 and "dropped 1 > 0 (left out: specular_roughness_anisotropy=0.9" in last
+    verdict = json.loads((out / "verdict.json").read_text())
+    assert [c["name"] for c in verdict["checks"] if not c["passed"]] == ["dropped"]  # the rest converts
+    assert (out / "open_pbr_aluminum_brushed.mtlx").is_file()  # written all the same
+    again = tmp_path / "again"
+    code = main(
+        ["remap", str(ALUMINIUM), "--to", "gltf:metal-rough", "-o", str(again), "--max-error", "dropped=1", *FAST]
+    )
+    assert code == 0, capsys.readouterr().err[-400:]
+
+
+def test_only_inputs_that_carry_the_look_are_dropped():
+    """The jade's subsurface 0.4 and anisotropy 0.5 (of its full specular) are; the tiled wood's anisotropies are
+    not: its specular is 0.4 and its coat 0.1, lobes too faint to carry the look (as a coat of 0.5 or less is)."""
+    assert read_asset(JADE).dropped == ["specular_anisotropy=0.5", "subsurface=0.4"]
+    assert read_asset(WOOD, confinement=Confinement.of([CORPUS])).dropped == []
+    assert read_asset(ALUMINIUM).dropped == ["specular_roughness_anisotropy=0.9"]
+
+
+def _anisotropic_gltf(folder: Path) -> Path:
+    material = {
+        "name": "brushed",
+        "pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.9, 0.9, 1], "metallicFactor": 1.0, "roughnessFactor": 0.4},
+        "extensions": {"KHR_materials_anisotropy": {"anisotropyStrength": 0.6, "anisotropyRotation": 0.0}},
+    }
+    return make_file(folder, "brushed.gltf", [material], extra={"extensionsUsed": ["KHR_materials_anisotropy"]})
+
+
+def test_a_gltf_anisotropy_is_dropped_onto_another_model_and_kept_in_a_gltf_copy(tmp_path, capsys):
+    pytest.importorskip("colour", reason="the quality gate needs colour-science")
+    src = _anisotropic_gltf(tmp_path / "in")
+    assert read_asset(src).dropped == ["KHR_materials_anisotropy anisotropyStrength 0.6"]
+    code = main(["remap", str(src), "--to", "mtlx:open_pbr_surface", "-o", str(tmp_path / "mtlx"), *FAST])
+    assert code == 3 and "KHR_materials_anisotropy" in capsys.readouterr().err.strip().splitlines()[-1]
+    copy = tmp_path / "copy"
+    code = main(["remap", str(src), "--to", "gltf:metal-rough", "-o", str(copy), *FAST])
+    assert code == 0, capsys.readouterr().err[-400:]
+    written = json.loads((copy / "brushed.gltf").read_text())
+    assert written["materials"][0]["extensions"]["KHR_materials_anisotropy"]["anisotropyStrength"] == 0.6
