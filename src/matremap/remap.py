@@ -343,7 +343,7 @@ def library_transform(
     """A transform from the shipped library (direct or chained) that covers these maps, or None.
     ``params``: the maps' parameters, whole or a sample (strided here to at most
     :data:`~matremap.svbrdf.mapstats.LIBRARY_LIMIT` texels a side for the domain check); ``within``: the texels
-    of that sample the result is used at (:func:`kind_texels`; None: all). ``probes``: the
+    of that sample the result is used at (:func:`kind_job`; None: all). ``probes``: the
     kinds of probe a route may have been fitted under; when routes of several kinds cover the maps, the one
     whose result looks closest under ``envmap`` is taken (:func:`matremap.svbrdf.choice.best_transform`)."""
     from matremap.regress.library import describe_node, find_route, nearest_routes, node_key
