@@ -68,3 +68,29 @@ def test_a_gltf_anisotropy_is_dropped_onto_another_model_and_kept_in_a_gltf_copy
     assert code == 0, capsys.readouterr().err[-400:]
     written = json.loads((copy / "brushed.gltf").read_text())
     assert written["materials"][0]["extensions"]["KHR_materials_anisotropy"]["anisotropyStrength"] == 0.6
+
+
+def test_a_metals_anisotropy_counts_whatever_its_dielectric_specular_weight(tmp_path):
+    """Standard Surface's specular weight scales the dielectric's lobe alone; a metal's lobe (metalness 1) is drawn
+    with the specular roughness and its anisotropy all the same (the MaterialX brushed-metal example sets specular 0
+    on a metal: its anisotropy was not counted)."""
+    doc = tmp_path / "brushed.mtlx"
+    doc.write_text(
+        '<?xml version="1.0"?>\n<materialx version="1.38">\n'
+        '  <standard_surface name="SR_brushed" type="surfaceshader">\n'
+        '    <input name="base_color" type="color3" value="0.6, 0.6, 0.6" />\n'
+        '    <input name="metalness" type="float" value="1" />\n'
+        '    <input name="specular" type="float" value="0" />\n'
+        '    <input name="specular_roughness" type="float" value="0.3" />\n'
+        '    <input name="specular_anisotropy" type="float" value="0.7" />\n'
+        "  </standard_surface>\n"
+        '  <surfacematerial name="Brushed" type="material">\n'
+        '    <input name="surfaceshader" type="surfaceshader" nodename="SR_brushed" />\n'
+        "  </surfacematerial>\n</materialx>\n"
+    )
+    assert read_asset(doc).dropped == ["specular_anisotropy=0.7"]
+    dielectric = doc.read_text().replace(
+        'name="metalness" type="float" value="1"', 'name="metalness" type="float" value="0"'
+    )
+    doc.write_text(dielectric)
+    assert read_asset(doc).dropped == []  # a dielectric with its specular off: no lobe shows the anisotropy

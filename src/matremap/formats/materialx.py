@@ -506,31 +506,42 @@ def _shader_asset(ctx: _Ctx, shader: Any, name: str, index: int, doc: Any) -> Ma
     )
 
 
-#: shader inputs that change the look and that no model here converts -> (the weight of the lobe they belong to and
-#: the least it must be to carry the look -- as a coat above 0.5 does, COAT_LOOK --, the roughness they need to
-#: show; None: none): anisotropies of a lobe that carries the look, subsurface scattering above a tenth, thin films,
-#: volume scattering under a transmission
-_DROPPED: dict[str, dict[str, tuple[str | None, float, str | None]]] = {
+#: shader inputs that change the look and that no model here converts -> (the weights of the lobes they belong to,
+#: any of which carrying the look is enough, and the least such a weight is -- as a coat above 0.5 does, COAT_LOOK;
+#: with no weight, the least the input itself is --, the roughness they need to show; None: none): anisotropies of a
+#: lobe that carries the look, subsurface scattering above a tenth, thin films, volume scattering under a
+#: transmission
+_DROPPED: dict[str, dict[str, tuple[tuple[str, ...], float, str | None]]] = {
     "standard_surface": {
-        "specular_anisotropy": ("specular", 0.5, "specular_roughness"),
-        "coat_anisotropy": ("coat", 0.5, "coat_roughness"),
-        "subsurface": (None, 0.1, None),
-        "thin_film_thickness": (None, 0.0, None),
+        # the specular roughness is a metal's too: its anisotropy shows whether the specular weight or the
+        # metalness carries that lobe (Standard Surface's specular weight scales the dielectric's alone)
+        "specular_anisotropy": (("specular", "metalness"), 0.5, "specular_roughness"),
+        "coat_anisotropy": (("coat",), 0.5, "coat_roughness"),
+        "subsurface": ((), 0.1, None),
+        "thin_film_thickness": ((), 0.0, None),
     },
     "open_pbr_surface": {
-        "specular_roughness_anisotropy": ("specular_weight", 0.5, "specular_roughness"),
-        "coat_roughness_anisotropy": ("coat_weight", 0.5, "coat_roughness"),
-        "subsurface_weight": (None, 0.1, None),
-        "thin_film_weight": (None, 0.0, None),
-        "transmission_scatter": ("transmission_weight", 0.0, None),
+        "specular_roughness_anisotropy": (("specular_weight", "base_metalness"), 0.5, "specular_roughness"),
+        "coat_roughness_anisotropy": (("coat_weight",), 0.5, "coat_roughness"),
+        "subsurface_weight": ((), 0.1, None),
+        "thin_film_weight": ((), 0.0, None),
+        "transmission_scatter": (("transmission_weight",), 0.0, None),
     },
     "gltf_pbr": {
-        "iridescence": (None, 0.0, None),
-        "anisotropy_strength": (None, 0.0, "roughness"),
+        "iridescence": ((), 0.0, None),
+        "anisotropy_strength": ((), 0.0, "roughness"),
     },
 }
 #: the documented defaults of the weights :data:`_DROPPED` names (Standard Surface 1.0.1, OpenPBR 1.1)
-_WEIGHT_DEFAULTS = {"specular": 1.0, "specular_weight": 1.0, "coat": 0.0, "coat_weight": 0.0}
+_WEIGHT_DEFAULTS = {
+    "specular": 1.0,
+    "specular_weight": 1.0,
+    "coat": 0.0,
+    "coat_weight": 0.0,
+    "metalness": 0.0,
+    "base_metalness": 0.0,
+    "transmission_weight": 0.0,
+}
 
 
 def dropped_look(shader: Any) -> list[str]:
@@ -540,7 +551,7 @@ def dropped_look(shader: Any) -> list[str]:
     Standard Surface jade (subsurface 0.4, anisotropy 0.5) and the chess set's kings and queens (a subsurface
     texture over 73-88 % of their texels) were converted with a note and exit 0."""
     out = []
-    for name, (weight, least, roughness) in _DROPPED.get(shader.getCategory(), {}).items():
+    for name, (weights, least, roughness) in _DROPPED.get(shader.getCategory(), {}).items():
         inp = shader.getInput(name)
         if inp is None:
             continue
@@ -552,10 +563,10 @@ def dropped_look(shader: Any) -> list[str]:
             values = [float(x) for x in text.replace(",", " ").split()]
         except ValueError:
             continue
-        if not values or max(values) <= (least if weight is None else 0.0):
+        if not values or max(values) <= (0.0 if weights else least):
             continue
-        if weight is not None and _level(shader, weight) < max(least, 1e-9):
-            continue
+        if weights and all(_level(shader, w) < max(least, 1e-9) for w in weights):
+            continue  # no lobe it belongs to carries the look
         if roughness is not None and _level(shader, roughness) <= 0.0:
             continue
         out.append(f"{name}={text}")
