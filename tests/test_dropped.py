@@ -94,3 +94,11 @@ def test_a_metals_anisotropy_counts_whatever_its_dielectric_specular_weight(tmp_
     )
     doc.write_text(dielectric)
     assert read_asset(doc).dropped == []  # a dielectric with its specular off: no lobe shows the anisotropy
+
+
+def test_a_blend_principleds_subsurface_and_anisotropy_are_dropped_its_diffuse_roughness_noted():
+    from matremap.formats.blend import dropped_sockets
+
+    inputs = {"Subsurface Weight": 0.3, "Anisotropic": 0.5, "Roughness": 0.4, "Diffuse Roughness": 0.5}
+    assert dropped_sockets(inputs) == ["Subsurface Weight=0.3", "Anisotropic=0.5"]
+    assert dropped_sockets({**inputs, "Roughness": 0.0, "Subsurface Weight": 0.0}) == []  # a mirror shows none

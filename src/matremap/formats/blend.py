@@ -195,12 +195,12 @@ def read(path: str | os.PathLike, material: str | int | None = None, *, confinem
         )
     constants: dict[str, Any] = {n: _socket_value(inputs[n], spec.param(n).channels) for n in spec.param_names}
     constants["distribution"] = str(node.get("distribution", "MULTI_GGX")).lower()
-    dropped = [
+    unmodelled = [
         f"{k}={_socket_value(inputs[k], 1):g}"
         for k, off in UNMODELLED.items()
         if k in inputs and _socket_value(inputs[k], 1) != off
     ]
-    notes = [f"{d}: cycles:principled has no such parameter; left out" for d in dropped]
+    notes = [f"{d}: cycles:principled has no such parameter; left out" for d in unmodelled]
     lost: list[str] = []
     carried = {}
     strength = _socket_value(inputs.get("Emission Strength", 0.0), 1)
@@ -223,8 +223,24 @@ def read(path: str | os.PathLike, material: str | int | None = None, *, confinem
         notes=notes,
         lost=lost,
         carried=carried,
-        dropped=[d for d in dropped if not d.startswith("Diffuse Roughness")],
+        dropped=dropped_sockets(inputs),
     )
+
+
+#: the sockets of :data:`UNMODELLED` that change the look (the gate's ``dropped`` check) -> the socket they need
+#: above 0 to show (None: none); a Diffuse Roughness (Oren-Nayar) is left out with a note only
+DROPPED = {"Subsurface Weight": None, "Anisotropic": "Roughness", "Thin Film Thickness": None}
+
+
+def dropped_sockets(inputs: dict[str, Any]) -> list[str]:
+    """The Principled BSDF's sockets of :data:`DROPPED` that are on (above 0, and their roughness too), as
+    ``name=value``."""
+    out = []
+    for k, needs in DROPPED.items():
+        if k in inputs and _socket_value(inputs[k], 1) > UNMODELLED[k]:
+            if needs is None or _socket_value(inputs.get(needs, 0.5), 1) > 0.0:
+                out.append(f"{k}={_socket_value(inputs[k], 1):g}")
+    return out
 
 
 def _surface_principled(mat: dict[str, Any], where: str) -> dict[str, Any]:
