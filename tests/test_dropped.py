@@ -102,3 +102,38 @@ def test_a_blend_principleds_subsurface_and_anisotropy_are_dropped_its_diffuse_r
     inputs = {"Subsurface Weight": 0.3, "Anisotropic": 0.5, "Roughness": 0.4, "Diffuse Roughness": 0.5}
     assert dropped_sockets(inputs) == ["Subsurface Weight=0.3", "Anisotropic=0.5"]
     assert dropped_sockets({**inputs, "Roughness": 0.0, "Subsurface Weight": 0.0}) == []  # a mirror shows none
+
+
+@pytest.mark.parametrize(
+    "ext, fallback, refused",
+    [
+        (
+            {"KHR_materials_pbrSpecularGlossiness": {"diffuseFactor": [0.8, 0.1, 0.1, 1], "glossinessFactor": 0.6}},
+            False,
+            True,
+        ),
+        (
+            {"KHR_materials_pbrSpecularGlossiness": {"diffuseFactor": [0.8, 0.1, 0.1, 1], "glossinessFactor": 0.6}},
+            True,
+            False,
+        ),
+        ({"KHR_materials_unlit": {}}, True, True),
+    ],
+    ids=["specgloss", "specgloss-with-fallback", "unlit"],
+)
+def test_another_workflows_material_is_refused_not_read_as_the_defaults(tmp_path, capsys, ext, fallback, refused):
+    """A red specular-glossiness material (no metallic-roughness beside it) was read as glTF's defaults, a white
+    rough metal, and went onto OpenPBR as a grey metal, PASSED, exit 0. Now refused in one line naming the extension
+    and the way out, nothing written; with a metallic-roughness fallback beside it (as the extension asked writers
+    to give) the fallback is read. An unlit material is refused: no lit model draws it."""
+    material: dict = {"name": "red", "extensions": ext}
+    if fallback:
+        material["pbrMetallicRoughness"] = {"baseColorFactor": [0.8, 0.1, 0.1, 1], "metallicFactor": 0.0}
+    src = make_file(tmp_path / "in", "m.gltf", [material], extra={"extensionsUsed": list(ext)})
+    out = tmp_path / "out"
+    code = main(["remap", str(src), "--to", "mtlx:open_pbr_surface", "-o", str(out), *FAST])
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    if refused:
+        assert code == 2 and next(iter(ext)) in last and last.startswith("matremap: error:") and not out.exists()
+    else:
+        assert code == 0, last

@@ -222,6 +222,13 @@ def read(
         constants |= layers
         lost = [w for w in lost if not w.startswith(SHEEN)]
         lost = [w for w in lost if "transmission" not in layers or not w.startswith(TRANSMISSION)]
+    # another workflow carries the look, unless the file gives a metallic-roughness fallback beside it (as the
+    # specular-glossiness extension asked writers to)
+    lost += [
+        f"{workflow} ({why})"
+        for workflow, why in WORKFLOWS.items()
+        if workflow in ext and (workflow == UNLIT or "pbrMetallicRoughness" not in m)
+    ]
     return MaterialAsset(
         path=p,
         format="gltf",
@@ -238,6 +245,18 @@ def read(
         dropped=dropped_extensions(ext),
     )
 
+
+#: material extensions that replace the metallic-roughness workflow -> what that means for a conversion: the
+#: material's look is in them, and reading the metallic-roughness defaults beside them gave a grey metal (a red
+#: specular-glossiness material onto OpenPBR: base_color 0.52 grey, metalness 1, PASSED, exit 0)
+WORKFLOWS = {
+    "KHR_materials_pbrSpecularGlossiness": (
+        "the archived specular-glossiness workflow carries its colours; convert the file to metallic-roughness "
+        "first, e.g. gltf-transform metalrough IN OUT"
+    ),
+    "KHR_materials_unlit": "an unlit material: no lit model draws it; use its base colour as an emission instead",
+}
+UNLIT = "KHR_materials_unlit"
 
 #: material extensions that change the look and that no model here converts -> the property that turns each on
 #: (its default 0, per its ratified README)
