@@ -137,3 +137,29 @@ def test_another_workflows_material_is_refused_not_read_as_the_defaults(tmp_path
         assert code == 2 and next(iter(ext)) in last and last.startswith("matremap: error:") and not out.exists()
     else:
         assert code == 0, last
+
+
+def test_what_a_coat_does_to_the_base_and_a_glass_scatter_are_dropped_where_they_show(tmp_path):
+    """Standard Surface 1.0.1's coat_affect_color / _roughness (the base saturated and roughened under a coat) and
+    transmission_scatter / _extra_roughness (a glass's volume scattering and extra blur): none is modelled."""
+
+    def dropped(inputs: str) -> list[str]:
+        doc = tmp_path / "m.mtlx"
+        doc.write_text(
+            '<?xml version="1.0"?>\n<materialx version="1.38">\n'
+            f'  <standard_surface name="SR" type="surfaceshader">\n{inputs}  </standard_surface>\n'
+            '  <surfacematerial name="M" type="material">\n'
+            '    <input name="surfaceshader" type="surfaceshader" nodename="SR" />\n'
+            "  </surfacematerial>\n</materialx>\n"
+        )
+        return read_asset(doc).dropped
+
+    def inp(name: str, value: str, typ: str = "float") -> str:
+        return f'    <input name="{name}" type="{typ}" value="{value}" />\n'
+
+    coat = inp("coat", "1") + inp("coat_affect_color", "0.6") + inp("coat_affect_roughness", "0.3")
+    assert dropped(coat) == ["coat_affect_color=0.6", "coat_affect_roughness=0.3"]
+    assert dropped(coat.replace('"coat" type="float" value="1"', '"coat" type="float" value="0.2"')) == []
+    glass = inp("transmission", "1") + inp("transmission_scatter", "0.2, 0.1, 0.1", "color3")
+    assert dropped(glass) == ["transmission_scatter=0.2, 0.1, 0.1"]
+    assert dropped(inp("transmission_scatter", "0.2, 0.1, 0.1", "color3")) == []  # no transmission: nothing scatters

@@ -517,8 +517,13 @@ _DROPPED: dict[str, dict[str, tuple[tuple[str, ...], float, str | None]]] = {
         # metalness carries that lobe (Standard Surface's specular weight scales the dielectric's alone)
         "specular_anisotropy": (("specular", "metalness"), 0.5, "specular_roughness"),
         "coat_anisotropy": (("coat",), 0.5, "coat_roughness"),
+        # what a coat that carries the look does to the base under it: saturates its colour, roughens it
+        "coat_affect_color": (("coat",), 0.5, None),
+        "coat_affect_roughness": (("coat",), 0.5, None),
         "subsurface": ((), 0.1, None),
         "thin_film_thickness": ((), 0.0, None),
+        "transmission_scatter": (("transmission",), 0.0, None),
+        "transmission_extra_roughness": (("transmission",), 0.0, None),
     },
     "open_pbr_surface": {
         "specular_roughness_anisotropy": (("specular_weight", "base_metalness"), 0.5, "specular_roughness"),
@@ -541,6 +546,7 @@ _WEIGHT_DEFAULTS = {
     "metalness": 0.0,
     "base_metalness": 0.0,
     "transmission_weight": 0.0,
+    "transmission": 0.0,
 }
 
 
