@@ -259,12 +259,12 @@ WORKFLOWS = {
 UNLIT = "KHR_materials_unlit"
 
 #: material extensions that change the look and that no model here converts -> the property that turns each on
-#: (its default 0, per its ratified README)
+#: (its default 0, per its ratified README). Not a dispersion (KHR_materials_dispersion, OpenPBR's
+#: transmission_dispersion_*): colour fringes at a glass's edges, noted, as OpenPBR's glass example's Abbe 64 is
 DROPPED = {
     "KHR_materials_anisotropy": "anisotropyStrength",
     "KHR_materials_iridescence": "iridescenceFactor",
     "KHR_materials_diffuse_transmission": "diffuseTransmissionFactor",
-    "KHR_materials_dispersion": "dispersion",
 }
 
 
