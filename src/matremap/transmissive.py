@@ -75,16 +75,15 @@ def setup(
         )
         return out
     values, freed = reader(iface)
-    narrowest = smoothest(spec, values)
-    if narrowest is not None and iface.alpha < narrowest:
-        wider = widened(source, narrowest)
-        if wider is not None:
-            out.source = wider
-            out.notes.append(
-                f"the source's lobe (GGX alpha {iface.alpha:.3g}) is narrower than {spec.id}'s narrowest (alpha "
-                f"{narrowest:.3g}, alike at any resolution the probe has): fitted, and judged, at that width"
-            )
-            values, freed = reader(interface_of(wider))
+    wider = widened_for(source, spec, values)
+    if wider is not None:
+        out.source = wider
+        values, freed = reader(interface_of(wider))
+        out.notes.append(
+            f"the source's lobe (GGX alpha {iface.alpha:.3g}) is narrower than {spec.id}'s narrowest (alpha "
+            f"{interface_of(wider).alpha:.3g}, alike at any resolution the probe has): fitted, and judged, at that "
+            "width"
+        )
     held = set(fix or {})
     moved = set(freed) | {p.name for p in spec.params if p.fit}
     start = {k: inside(spec, k, v) if k in moved else v for k, v in values.items() if k not in held}
@@ -106,6 +105,18 @@ def smoothest(spec: ModelSpec, values: Mapping[str, Any]) -> float | None:
     if rp is None or rp.log:
         return None
     return interface_of(Material.create(spec.id, {**values, rp.name: rp.bounds[0]})).alpha
+
+
+def widened_for(source: Material, spec: ModelSpec, values: Mapping[str, Any]) -> Material | None:
+    """``source`` widened to the narrowest lobe ``spec`` lets through with (:func:`smoothest` of ``values``), or
+    None where it is no narrower or cannot be widened: how a fit draws, and judges, a source smoother than its
+    target can be."""
+    from matremap.renderers.embedded.transmission import interface_of
+
+    narrowest = smoothest(spec, values)
+    if narrowest is None or interface_of(source).alpha >= narrowest:
+        return None
+    return widened(source, narrowest)
 
 
 def widened(source: Material, alpha: float) -> Material | None:
@@ -155,13 +166,10 @@ def interpolation_error(source: Material, fitted: Any, target: Material) -> floa
     from matremap.core.fit import FULL, part
     from matremap.renderers import get_renderer
     from matremap.renderers.base import render_pixels
-    from matremap.renderers.embedded.transmission import EQUIVALENTS, interface_of
+    from matremap.renderers.embedded.transmission import EQUIVALENTS
 
-    drawn = source
     through = target.model in EQUIVALENTS  # a target that lets light through: smoothest() reads it
-    alpha = smoothest(target.spec, target.values) if through else None
-    if alpha is not None and interface_of(source).alpha < alpha:  # as setup() widens it
-        drawn = widened(source, alpha) or source
+    drawn = (widened_for(source, target.spec, target.values) if through else None) or source
     scene = fitted.scene
     src = render_pixels(get_renderer(fitted.source_renderer), [part(drawn, FULL) or drawn], scene)[0]
     tgt = render_pixels(get_renderer(fitted.target_renderer), [target], scene)[0]
@@ -178,4 +186,5 @@ __all__ = [
     "setup",
     "smoothest",
     "widened",
+    "widened_for",
 ]

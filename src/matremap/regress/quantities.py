@@ -136,7 +136,8 @@ def count_clipped(a: np.ndarray, lo: float, hi: float, name: str, counts: dict[s
     """Add to ``counts[name]`` the values of ``a`` that clipping to [lo, hi] moves by more than
     :data:`CLIP_TOLERANCE` of the range or ``slack`` (at most :data:`SLACK_MAX` of it), whichever is larger
     (a broadcast of one value counts for every element)."""
-    tol = max(CLIP_TOLERANCE, min(slack / (hi - lo), SLACK_MAX)) * (hi - lo)
+    width = hi - lo
+    tol = max(CLIP_TOLERANCE * width, min(slack, SLACK_MAX * width))
     probe = a[:1] if uniform(a) else a
     n = int(np.count_nonzero((probe < lo - tol) | (probe > hi + tol)))
     if n:
