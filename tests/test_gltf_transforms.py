@@ -320,3 +320,43 @@ def test_a_transformed_material_written_back_reads_the_same_maps(tmp_path, suffi
         got = back.textures[name]
         got_v = image_codes(got.path)[..., got.channels[0]]
         np.testing.assert_allclose(got_v, want[..., 0], atol=0.5 / 255 + 1e-6)
+
+
+def test_textures_of_other_sizes_and_tilings_become_maps_of_one_size(tmp_path):
+    """glTF gives each texture its own size and transform (Khronos SheenChair: a 512² albedo tiled 7 times beside
+    a 1024² normal map tiled twice); a map set needs one size: the largest any texture needs to keep its texels
+    (an 8-texel ramp tiled 3 times needs 24), the others resampled there, each through its own lookup."""
+    from test_formats_gltf import png_bytes
+
+    (tmp_path / "r.png").write_bytes(png_bytes(tmp_path, grey_ramp()))  # 8 x 4, blue = x
+    normal = np.zeros((16, 16, 3), np.uint8) + np.array([128, 128, 255], np.uint8)
+    (tmp_path / "n.png").write_bytes(png_bytes(tmp_path, normal))
+    tiled = {"index": 0, "extensions": {"KHR_texture_transform": {"scale": [3, 1]}}}
+    mats = [{"name": "m", "pbrMetallicRoughness": {"metallicRoughnessTexture": tiled}, "normalTexture": {"index": 1}}]
+    doc = {
+        "asset": {"version": "2.0"},
+        "images": [{"uri": "r.png"}, {"uri": "n.png"}],
+        "textures": [{"source": 0}, {"source": 1}],
+        "materials": mats,
+    }
+    (tmp_path / "a.gltf").write_text(json.dumps(doc))
+    asset = read(tmp_path / "a.gltf")
+    metal, nmap = baked(asset.textures["metallic"]), baked(asset.normal)
+    assert metal.shape[:2] == nmap.shape[:2] == (16, 24)  # height from the normal map, width from the tiling
+    # three whole periods of the ramp across, each of its 8 columns kept (texel centres land on the image's)
+    np.testing.assert_allclose(metal[0, :, 2], np.tile(np.arange(8) * 32 / 255, 3), atol=1e-6)
+    # the flat normal stays flat when resampled
+    np.testing.assert_allclose(nmap, np.broadcast_to(nmap[0, 0], nmap.shape), atol=1e-6)
+    assert nmap[0, 0, 2] > 0.9999
+    assert any("resampled to 24x16" in n for n in asset.notes)
+    ms = load_map_set(asset.to_map_set(tmp_path / "ms"))  # refused before: "textures of different sizes"
+    assert ms.size == (16, 24)
+
+
+def test_a_tiling_beyond_the_bake_limit_is_capped_and_said(tmp_path):
+    from matremap.formats.bake import MAX_SIDE
+
+    f = one_texture_file(tmp_path, {"index": 0, "extensions": {"KHR_texture_transform": {"scale": [400, 1]}}})
+    asset = read(f)
+    assert baked(asset.textures["metallic"]).shape[:2] == (4, MAX_SIDE)
+    assert any(f"capped at {MAX_SIDE} per side from 3200x4" in n for n in asset.notes)

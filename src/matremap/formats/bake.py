@@ -24,6 +24,7 @@ Values are decoded to linear before filtering, as GPUs and offline renderers fil
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,6 +32,8 @@ import numpy as np
 from matremap.errors import MatremapError
 
 WRAP_MODES = ("repeat", "mirror", "clamp", "border")
+#: the largest side of a baked map; a lookup asking for more (a 2048-texel image tiled 4 times) is capped there
+MAX_SIDE = 2048
 
 
 def translate(du: float, dv: float) -> np.ndarray:
@@ -153,7 +156,19 @@ def bake_image(image: np.ndarray, transform: UVTransform, size: tuple[int, int] 
     return sample(image, ls, lt, transform.wrap, transform.border)
 
 
+def texels_needed(image_size: tuple[int, int], matrix: np.ndarray) -> tuple[int, int]:
+    """The map size (height, width) that keeps every texel of an image of ``image_size`` seen through the
+    3x3 lookup ``matrix``: the image's size times the lookup's derivatives (a texture tiled 7 times across
+    needs 7 times its width), uncapped."""
+    h, w = image_size
+    m = np.asarray(matrix, dtype=float)
+    need_w = float(np.hypot(w * m[0, 0], h * m[1, 0]))  # image texels crossed per unit of the map's s
+    need_h = float(np.hypot(w * m[0, 1], h * m[1, 1]))
+    return max(1, math.ceil(need_h - 1e-6)), max(1, math.ceil(need_w - 1e-6))
+
+
 __all__ = [
+    "MAX_SIDE",
     "WRAP_MODES",
     "UVTransform",
     "bake_image",
@@ -161,5 +176,6 @@ __all__ = [
     "sample",
     "scale",
     "texel_grid",
+    "texels_needed",
     "translate",
 ]

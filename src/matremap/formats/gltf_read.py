@@ -35,6 +35,7 @@ from matremap.core.atomic import temp_prefix
 from matremap.core.material import Material
 from matremap.errors import MatremapError
 from matremap.formats.asset import CarriedInput, MaterialAsset, TextureRef
+from matremap.formats.bake import MAX_SIDE
 from matremap.formats.confine import Confinement
 from matremap.formats.gltf_container import (
     FileReader,
@@ -206,6 +207,7 @@ def read(
             if coat.slot in found[CLEARCOAT]:
                 maps[name] = textures.read_layer_map(found[CLEARCOAT][coat.slot], coat.slot, coat.channel, layers[name])
     normal = textures.read_normal(m)
+    maps, normal = textures.at_one_size(maps, normal)
     doc.uv_set = textures.uv_set
     if normal is not None and not maps:
         notes.append(
@@ -324,6 +326,8 @@ class MaterialTextures:
     def __init__(self, reader: FileReader, where: str, notes: list[str]) -> None:
         self.reader, self.where, self.notes = reader, where, notes
         self.uv_sets: dict[str, int] = {}
+        #: the textures each TextureRef made here was read from, with whether it was decoded from sRGB
+        self.sources: list[tuple[TextureRef, SlotTexture, bool]] = []
 
     @property
     def uv_set(self) -> int:
@@ -351,8 +355,8 @@ class MaterialTextures:
         uv = uv_override if uv_override is not None else info.get("texCoord", 0)
         from matremap.svbrdf.textures import image_info
 
-        n = image_info(f, "linear", colour=False).channels
-        return SlotTexture(slot, f, n, uv, wrap, matrix, f in r.extracted)
+        info = image_info(f, "linear", colour=False)
+        return SlotTexture(slot, f, info.channels, uv, wrap, matrix, f in r.extracted, (info.height, info.width))
 
     def remapped(self, info: Any, slot: str) -> SlotTexture:
         """:meth:`file` of a texture the model is remapped from: its UV set must be the others'."""
@@ -373,11 +377,14 @@ class MaterialTextures:
         colorspace = "srgb" if srgb else "linear"
         if tex.transform is not None:
             self.note_baked(tex)
-            return TextureRef(tex.path, channels, colorspace, scale, tex.extracted, bake=baked(tex, srgb))
-        f, extracted = tex.path, tex.extracted
-        if tex.channels in (2, 4) and max(channels) < tex.channels - 1:
-            f, extracted = without_alpha(tex.path), True
-        return TextureRef(f, channels, colorspace, scale, extracted)
+            ref = TextureRef(tex.path, channels, colorspace, scale, tex.extracted, bake=baked(tex, srgb))
+        else:
+            f, extracted = tex.path, tex.extracted
+            if tex.channels in (2, 4) and max(channels) < tex.channels - 1:
+                f, extracted = without_alpha(tex.path), True
+            ref = TextureRef(f, channels, colorspace, scale, extracted)
+        self.sources.append((ref, tex, srgb))
+        return ref
 
     def read_maps(
         self, pbr: dict[str, Any], spec_ext: dict[str, Any], constants: dict[str, Any]
@@ -428,8 +435,46 @@ class MaterialTextures:
             self.notes.append(f"normalTexture scale {scale:g} ignored; the normal map is used as stored (scale 1)")
         if tex.transform is not None:
             self.note_baked(tex)
-            return TextureRef(tex.path, None, "linear", 1.0, tex.extracted, bake=baked_normal(tex))
-        return TextureRef(tex.path, None, "linear", 1.0, tex.extracted)
+            ref = TextureRef(tex.path, None, "linear", 1.0, tex.extracted, bake=baked_normal(tex))
+        else:
+            ref = TextureRef(tex.path, None, "linear", 1.0, tex.extracted)
+        self.sources.append((ref, tex, False))
+        return ref
+
+    def at_one_size(
+        self, maps: dict[str, TextureRef], normal: TextureRef | None
+    ) -> tuple[dict[str, TextureRef], TextureRef | None]:
+        """The remapped textures and the normal map at one size, as a map set needs them: the largest any of
+        them needs to keep its texels (a texture tiled 7 times asks for 7 times its size; :attr:`SlotTexture.need`),
+        capped at :data:`~matremap.formats.bake.MAX_SIDE` per side; one of another size is resampled there
+        (bilinearly, glTF's linear filter, its transform and wrap applied), with a note. glTF gives each
+        texture its own size and transform (§3.8.4; KHR_texture_transform), so a material's textures often
+        differ (Khronos SheenChair: a 512² fabric albedo tiled 7 times beside a 1024² normal map tiled twice)."""
+        used = [r for r in (*maps.values(), normal) if r is not None]
+        slots = {id(ref): (tex, srgb) for ref, tex, srgb in self.sources if any(ref is u for u in used)}
+        if not slots:
+            return maps, normal
+        need = [tex.need for tex, _ in slots.values()]
+        h, w = max(n[0] for n in need), max(n[1] for n in need)
+        size = (min(h, MAX_SIDE), min(w, MAX_SIDE))
+        if all(tex.size == size for tex, _ in slots.values()):
+            return maps, normal
+
+        def sized(ref: TextureRef) -> TextureRef:
+            tex, srgb = slots[id(ref)]
+            if tex.size == size:
+                return ref
+            bake = baked_normal(tex, size) if ref is normal else baked(tex, srgb, size)
+            return TextureRef(tex.path, ref.channels, ref.colorspace, ref.scale, tex.extracted, bake=bake)
+
+        resampled = sorted({tex.slot for tex, _ in slots.values() if tex.size != size})
+        if resampled:
+            capped = f", capped at {MAX_SIDE} per side from {w}x{h}" if (h, w) != size else ""
+            self.notes.append(
+                f"{', '.join(resampled)} resampled to {size[1]}x{size[0]} texels (bilinear, with the transform and "
+                f"wrap each is read through{capped}): a map set's maps share one size"
+            )
+        return {k: sized(r) for k, r in maps.items()}, sized(normal) if normal is not None else None
 
     def note_baked(self, tex: SlotTexture) -> None:
         """Note (once per slot) that a transformed texture is baked onto the maps' UVs."""

@@ -39,7 +39,7 @@ import numpy as np
 
 from matremap.core.imageio import srgb_to_linear
 from matremap.errors import MatremapError
-from matremap.formats.bake import UVTransform, bake_image, rotate, scale, translate
+from matremap.formats.bake import UVTransform, bake_image, rotate, scale, texels_needed, translate
 from matremap.formats.gltf_container import is_index
 
 TRANSFORM = "KHR_texture_transform"
@@ -110,7 +110,8 @@ class SlotTexture:
     ``KHR_materials_clearcoat.clearcoatTexture``), ``path`` its image file with ``channels`` channels,
     ``uv_set`` the UV set it is looked up with (after a transform's override), ``wrap`` its sampler's
     modes, ``transform`` the KHR_texture_transform lookup (None when absent or the identity),
-    ``extracted`` whether the file is matremap's copy of an image stored inside the glTF."""
+    ``extracted`` whether the file is matremap's copy of an image stored inside the glTF, ``size`` the image's
+    (height, width)."""
 
     slot: str
     path: Path
@@ -119,6 +120,13 @@ class SlotTexture:
     wrap: tuple[str, str]
     transform: np.ndarray | None
     extracted: bool = False
+    size: tuple[int, int] = (0, 0)
+
+    @property
+    def need(self) -> tuple[int, int]:
+        """The map size that keeps each of its texels as its transform lays them on the UVs (a texture tiled
+        7 times needs 7 times its size; :func:`~matremap.formats.bake.texels_needed`), not capped."""
+        return self.size if self.transform is None else texels_needed(self.size, self.transform)
 
     @property
     def uv_transform(self) -> UVTransform:
@@ -160,12 +168,12 @@ def linear_values(path: Path, srgb: bool) -> np.ndarray:
     return image
 
 
-def baked(tex: SlotTexture, srgb: bool) -> Callable[[], np.ndarray]:
+def baked(tex: SlotTexture, srgb: bool, size: tuple[int, int] | None = None) -> Callable[[], np.ndarray]:
     """A bake callable: the image of ``tex`` (linear) as its transform and sampler show it on [0, 1]^2
-    of its UV set, at the image's own size."""
+    of its UV set, at ``size`` (the image's own by default), sampled bilinearly as glTF's linear filter does."""
 
     def bake() -> np.ndarray:
-        return bake_image(linear_values(tex.path, srgb), tex.uv_transform)
+        return bake_image(linear_values(tex.path, srgb), tex.uv_transform, size)
 
     return bake
 
@@ -179,12 +187,13 @@ def normal_frame(matrix: np.ndarray) -> np.ndarray:
     return flip @ inv @ flip
 
 
-def baked_normal(tex: SlotTexture) -> Callable[[], np.ndarray]:
-    """A bake callable for a transformed normal map: its code values (x, y, z in [0, 1]) as the transform
-    shows them, x and y turned into the untransformed frame (see :func:`normal_frame`), renormalised."""
+def baked_normal(tex: SlotTexture, size: tuple[int, int] | None = None) -> Callable[[], np.ndarray]:
+    """A bake callable for a transformed (or resampled) normal map: its code values (x, y, z in [0, 1]) as the
+    transform shows them at ``size`` (the image's own by default), x and y turned into the untransformed frame
+    (see :func:`normal_frame`), renormalised."""
 
     def bake() -> np.ndarray:
-        codes = bake_image(read_code_values(tex.path)[..., :3], tex.uv_transform)
+        codes = bake_image(read_code_values(tex.path)[..., :3], tex.uv_transform, size)
         if codes.shape[-1] < 3:
             raise MatremapError(f"{tex.path}: a normal map needs 3 channels, it has {codes.shape[-1]}")
         n = codes.astype(np.float64) * 2.0 - 1.0

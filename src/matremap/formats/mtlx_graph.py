@@ -46,14 +46,12 @@ from typing import Any, NoReturn
 import numpy as np
 
 from matremap.errors import MatremapError
-from matremap.formats.bake import sample, texel_grid
+from matremap.formats.bake import MAX_SIDE, sample, texel_grid
 
 #: channels of the MaterialX data types the evaluator handles
 CHANNELS = {"float": 1, "integer": 1, "boolean": 1, "vector2": 2, "vector3": 3, "color3": 3, "vector4": 4, "color4": 4}
 #: the probe grid's side
 PROBE = 16
-#: the largest side of a baked map; a graph asking for more (a 2048-texel image tiled 4 times) is capped
-MAX_SIDE = 2048
 #: the side of a map baked from a graph that varies over UV without reading any image
 PROCEDURAL_SIDE = 1024
 #: how deep node connections may nest before the graph is refused (a cycle, or a hostile document)
