@@ -424,7 +424,9 @@ def cell(err: dict[str, float] | None) -> str:
 
 
 def print_report(entries: list[Entry], src: Source, seconds: float) -> dict[str, Any]:
-    """Long: the table, the summary lines, the losers and the notes, and the figures as a dict."""
+    """Print the table, the summary lines, the losers and the notes; return the figures.
+
+    Long: one block per part of the report, in the order printed."""
     kinds = {k: [e for e in entries if e.kind == k] for k in ("opaque", "layered", "transmissive")}
     done = [e for e in entries if "a" in e.err and "b" in e.err]
     print(
