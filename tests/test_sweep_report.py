@@ -178,6 +178,25 @@ def test_a_roughness_at_its_bound_is_learned_from_where_the_source_is_at_its_own
     assert "bound:alpha" in a.flags[inner]
 
 
+def test_a_roughness_at_its_bound_fitted_closely_is_a_saturation_not_a_stuck_fit(ward_db):
+    """An interior source alpha fitted at pbr's alpha 1 within LOSS_MIN (or the sweep's median loss) is the closest
+    the target gets, and as close as anywhere (the mapping saturates there: a rough base under a sheen): learned
+    from; the same fit further off than both stays flagged."""
+    from matremap.sweep.stability import LOSS_MIN
+
+    rows, grid, config = load(ward_db)
+    rows = copy.deepcopy(rows)
+    typical = max(LOSS_MIN, float(np.median([r["loss"] for r in rows])))
+    close, far = key_at(grid, (4, 2)), key_at(grid, (4, 3))
+    for r in rows:
+        if r["key"] in (close, far):
+            r["target"]["alpha"] = 1.0
+            r["loss"] = 0.5 * LOSS_MIN if r["key"] == close else 3.0 * typical
+    a = analyse(rows, grid, config)
+    assert not any(f.startswith("bound") for f in a.flags[close])
+    assert "bound:alpha" in a.flags[far]
+
+
 # ---------------------------------------------------------------------------------------------
 # Round trip
 

@@ -38,8 +38,8 @@ CACHE_ENV = ("MATREMAP_CACHE", "MATREMAP_CACHE_DIR")
 #: F0 from their base colour; 5: a source's specular part no override isolates is full - diffuse, and Mitsuba 3's
 #: principled metal is its specular part; 6: OpenPBR and Standard Surface metals read F0 from their base colour,
 #: a reflectance mapping may carry a per-channel tint; 7: a roughness at its bound where the source's is at
-#: its own is learned from, not excluded)
-RESULTS_REVISION = 7
+#: its own is learned from, not excluded; 8: so is a roughness at its bound fitted within LOSS_MIN)
+RESULTS_REVISION = 8
 
 
 def cache_dir() -> Path:

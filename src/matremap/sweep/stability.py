@@ -67,7 +67,12 @@ finished points on the grid and gives every point a list of flag reasons. It is 
     roughness at its bound where the source's roughness is at one of its own: the end of one range is
     the end of the other (a mirror stays a mirror, glTF roughness 1 is Cycles roughness 1), so
     excluding those points would shrink the learned domain to the grid's interior and leave a map's
-    smoothest and roughest texels outside it (a glTF BoomBox onto Cycles: half its texels).
+    smoothest and roughest texels outside it (a glTF BoomBox onto Cycles: half its texels). Nor a roughness at its
+    bound fitted as closely as the sweep's typical fit (a loss within ``LOSS_MIN`` or the median of the sweep's):
+    the target's roughest (or smoothest) is then the closest it gets, and as close as anywhere, the mapping
+    saturating there (a rough glTF base under a sheen onto OpenPBR: glTF roughness 0.85 to 0.99 all fitted at
+    OpenPBR's 1 within 0.6 to 0.7 %, excluded before, and 30 % of Khronos SheenCloth's texels then counted outside
+    the learned domain).
 
 ``loss``
     The loss is an outlier of the sweep: its robust z-score on log(loss), (log L - median) /
@@ -240,8 +245,10 @@ def analyse(rows: Sequence[Mapping[str, Any]], grid: Grid | Mapping[str, Any] | 
     elif grid is None:
         notes.append("no grid stored in the database: neighbour (jump) tests skipped")
 
+    losses = [float(r["loss"]) for r in ok if r.get("loss") is not None]
+    close = max(LOSS_MIN, float(np.median(losses))) if losses else LOSS_MIN
     for r in ok:
-        _value_tests(r, source, target, tested, flags[r["key"]], details[r["key"]])
+        _value_tests(r, source, target, tested, flags[r["key"]], details[r["key"]], close)
     _loss_test(ok, flags, details, LOSS_MAX_BY_OBJECTIVE.get(_objective(config), LOSS_MAX))
 
     # one entry per reason, in a stable order
@@ -322,10 +329,14 @@ def _value_tests(
     tested: Iterable[str],
     reasons: list[str],
     details: list[str],
+    close: float = LOSS_MIN,
 ) -> None:
     values = row["target"]
     optimised = _optimised(row)
-    source_at_end = _roughness_at_bound(row.get("source"), source)
+    # the ends of the ranges meeting, or the closest the target gets and as close as the sweep's fits: a
+    # saturation, not a stuck fit
+    loss = row.get("loss")
+    saturated = _roughness_at_bound(row.get("source"), source) or (loss is not None and float(loss) <= close)
     for name in tested:
         if name not in values:
             continue
@@ -342,7 +353,7 @@ def _value_tests(
         at_hi = [c for c in chans if c >= hi - tol]
         if at_lo and p.scales_image and lo == 0.0:
             at_lo = []  # a black part is an answer, not a stuck fit
-        if p.role == "roughness" and source_at_end:
+        if p.role == "roughness" and saturated:
             at_lo, at_hi = [], []  # the end of the source's range maps to the end of the target's
         if at_lo or at_hi:
             reasons.append(f"bound:{name}")
