@@ -112,7 +112,11 @@ def test_a_coat_roughness_map_onto_gltf_is_written_as_a_clearcoat_roughness_text
 
 
 @needs_materialx
-def test_a_textured_coat_colour_in_materialx_is_refused_before_any_work(tmp_path, capsys):
+def test_a_textured_coat_colour_in_materialx_is_converted_at_grey_levels_channel_by_channel(tmp_path, capsys):
+    """The copper's coat colour fed by the base colour's image (refused before: "a layer's colour given as a map is
+    not converted"): converted at grey levels of it, each texel interpolated channel by channel, the target's
+    numbers held at the fit at the typical texel (fitted per level, the coat weight and the base IOR became maps of
+    the levels' trade against the colour)."""
     src = textured_copper(tmp_path / "in")
     text = src.read_text().replace(
         '<input name="coat_color" type="color3" value="0.96467984, 0.37626296, 0.25818297" />',
@@ -121,10 +125,20 @@ def test_a_textured_coat_colour_in_materialx_is_refused_before_any_work(tmp_path
     src.write_text(text)
     asset = read_asset(src)
     assert "coat_color" in layer_textures(asset.model, asset.textures)
-    code, log = remap(capsys, src, "gltf:pbr", tmp_path / "out")
-    last = log.strip().splitlines()[-1]
-    assert code == 2 and "its layer varies over the maps (coat_color textured)" in last
-    assert "sweep:" not in log and not (tmp_path / "out").exists()
+    out = tmp_path / "out"
+    code, log = remap(capsys, src, "mtlx:open_pbr_surface", out)
+    assert code == 0 and "PASSED" in log, log[-800:]
+    assert "coat_color varies per texel (coat_color (channel by channel) from" in log
+    doc = json.loads((out / "maps" / "material.json").read_text())
+    assert set(doc["maps"]) == {"base_color", "coat_color"}, doc["maps"]  # every number held: no map of one
+    from matremap.svbrdf.textures import load_map_set, read_image
+
+    written_set = load_map_set(out / "maps")
+    colour, _ = read_image(written_set.maps["coat_color"], written_set.colorspace.get("coat_color"), colour=True)
+    source_set = load_map_set(asset.to_map_set(tmp_path / "src"))
+    source, _ = read_image(source_set.maps["coat_color"], source_set.colorspace.get("coat_color"), colour=True)
+    for c in (0, 1):  # the ramps of the source's red and green channels carried into the written coat colour
+        assert np.corrcoef(colour[..., c].ravel(), source[..., c].ravel())[0, 1] > 0.9
 
 
 def test_a_coat_roughness_is_not_a_second_roughness_of_an_anisotropic_model():
@@ -293,13 +307,23 @@ def test_clearcoattest_partial_coated_onto_gltf_writes_the_mask_as_a_clearcoat_t
     assert red.shape == mask.shape and np.abs(red - mask).max() < 1.5 / 255
 
 
-def test_a_coat_mask_onto_a_target_that_takes_its_specular_as_a_constant_is_refused_before_any_work(tmp_path, capsys):
-    """Mitsuba 3's principled takes ``specular`` as one number; the kinds' fits differ in it."""
+def test_a_coat_mask_onto_a_target_that_takes_its_specular_as_a_constant_holds_it_at_one_fit(tmp_path, capsys):
+    """Mitsuba 3's principled takes ``specular`` as one number: it is held at the fit at the maps' typical texel
+    before the coated and bare kinds are fitted (refused before: the two fits differed in it); the coat weight is
+    written as a bitmap that follows the mask, and the scene loads in Mitsuba 3."""
     out = tmp_path / "out"
     code, log = remap(capsys, COAT_TEST, "mitsuba3:principled", out, "--material", "Partial_Coated")
-    last = log.strip().splitlines()[-1]
-    assert code == 2 and "specular of mitsuba3:principled as a constant" in last and "clearcoat map" in last
-    assert "fit:" not in log and not out.exists()
+    assert code == 0 and "PASSED" in log, log[-800:]
+    assert "levels: specular" in log and "takes them as numbers only" in log
+    doc = json.loads((out / "maps" / "material.json").read_text())
+    assert "specular" not in doc["maps"] and "clearcoat" in doc["maps"]
+    coat, mask = written_and_source(out, "clearcoat", tmp_path, "Partial_Coated", "clearcoat")
+    assert np.corrcoef(coat.ravel(), mask.ravel())[0, 1] > 0.99
+    pytest.importorskip("mitsuba")
+    from corpus_checks import mitsuba_loads
+
+    ok, why = mitsuba_loads(written(out))
+    assert ok, why
 
 
 @needs_materialx

@@ -45,12 +45,10 @@ from matremap.core.scene import Scene, parse_probe
 from matremap.dialects import get_model, list_models
 from matremap.dialects.equivalence import Equivalence, equivalence
 from matremap.dialects.mtlx import (
+    LAYER_PARAMS,
     absorbed_layers,
     coat_tint,
     freed_layers,
-    layer_roughnesses,
-    layer_textures,
-    layer_weights,
     layers_on,
     opaque_share,
 )
@@ -758,6 +756,8 @@ def _convert_maps(
     through = through_levels(map_set, summary)
     mixed: Blend | None = through or mixed_parameter(map_set, summary) or layer_parameter(map_set, summary)
     mixed = mixed or layer_levels(map_set, summary)
+    if through is None and mixed is not None and mixed.layer is not None:  # a layer blended per texel
+        job = hold_layer_numbers(map_set, summary, mixed, job, log)
     params = summary.sample()
     fits: dict[str, tuple[Material, Any]] = {}
     refined: list[levels.Axis] = []
@@ -860,7 +860,10 @@ def _fit_kind(source: Material, job: RemapJob, log: Callable[[str], None]) -> An
     fix = complete_fix(source.model, qty.material_values(source), job.target, job.fix)
     fix = glass_is_dielectric(source, job.target, fix, job.fix)
     job, fix, metal = free_partial_metal(source, job, fix, log)
-    return _fit_uniform(source, job, fix, log, metal)[0]
+    # a layered model's kinds fitted alike, with the layer on or off (a sheen map's black level onto OpenPBR: 0.037
+    # two-stage, 0.0068 three-stage); a glass's levels keep their one fit on the transmission probe
+    alike = source.model in LAYER_PARAMS and "transmission" not in layers_on(source.model, source.values)
+    return _fit_uniform(source, job, fix, log, metal, both=alike)[0]
 
 
 def fit_levels(
@@ -910,6 +913,55 @@ def level_fits(
     return fit_at
 
 
+def hold_layer_numbers(
+    map_set: MapSet, summary: MapSummary, layered: Blend, job: RemapJob, log: Callable[[str], None]
+) -> RemapJob:
+    """``job`` with target parameters held at one fit at the maps' typical texel (each map at its median) before a
+    layer's maps are blended per texel (:func:`~matremap.svbrdf.mixed.layer_levels`, a weight map): those the
+    target's file takes as numbers only (glTF's ior: the kinds' fits set them apart and the blend made a map of them,
+    refused when written), and under a coat's colour levels every number the sweep does not map: the colour tints
+    what passes through the coat, channel by channel, and moves none of them, but each level's fit would trade them
+    against it (a Standard Surface copper coat coloured by an image onto OpenPBR: coat_weight 0.75 at coat_color
+    0.95, and the coat's weight, roughness and the base's IOR became maps of that trade). A sheen's levels keep the
+    rest free: its brightness is the layer's weight in some models (OpenPBR's fuzz_weight follows glTF's sheen colour,
+    0.003 to 0.71 over SheenCloth's five levels); and so does the axis a Grid converts at (the layer's roughness)."""
+    from matremap.formats import written_constants
+    from matremap.renderers.registry import texture_refusal
+
+    spec = get_model(job.target)
+    constant = [
+        p.name
+        for p in spec.params
+        if p.name not in job.fix and (p.name in written_constants(spec.id) or texture_refusal(spec.id, [p.name]))
+    ]
+    tint = layered.tint if isinstance(layered, Grid) else layered
+    per_channel = isinstance(tint, Levels) and tint.per_channel
+    if not constant and not per_channel:
+        return job
+    held_maps = held_values(map_set, summary, job.target)
+    source = Material.create(map_set.spec.id, base_values(map_set, summary, held_maps))
+    r = _fit_kind(source, job, log)
+    values = r.target.to_dict()["params"]
+    names = set(constant)
+    if per_channel:
+        metal = spec.specialise(values).diffuse_only is None
+        mapped = {  # what the sweep maps the base maps onto (the quantities the maps vary)
+            getattr(qty.roughness_param(spec), "name", None),
+            getattr(qty.diffuse_param(spec), "name", None),
+            spec.reflectance.driven_param(metal) if spec.reflectance is not None else None,
+        }
+        kind = {**{n: values[n] for n, _, _ in spec.specialisations if n in values}, **job.fix}  # a metal or not
+        mapped -= set(unswept_params(map_set, summary, held_maps, spec, kind))
+        axis = LAYER_PARAMS.get(spec.id, {}).get(tint.layer or "") if isinstance(layered, Grid) else None
+        mapped.add(getattr(axis, "roughness", None))
+        names |= {p.name for p in spec.params if p.channels == 1 and p.name not in job.fix and p.name not in mapped}
+    held = {k: values[k] for k in spec.param_names if k in names and k in values}
+    if held:
+        why = f"{tint.name} tints; it moves no number" if per_channel else f"{job.target} takes them as numbers only"
+        log(f"levels: {_listed(held)} held at the fit at the typical texel, relative error {r.loss:.4f} ({why})")
+    return replace(job, fix={**job.fix, **held})
+
+
 def hold_constants(
     map_set: MapSet, summary: MapSummary, through: Levels | Grid, job: RemapJob, log: Callable[[str], None]
 ) -> RemapJob:
@@ -939,13 +991,18 @@ def hold_constants(
     base = Material.create(map_set.model, {**map_set.constants, **through.held, **others})
     r = _fit_kind(levels.at(axis, base, median), job, log)
     held = {n: r.target.to_dict()["params"][n] for n in names}
-    shown = ", ".join(f"{k} {np.round(v, 4).tolist()}" for k, v in list(held.items())[:4])
-    shown += f" and {len(held) - 4} more" if len(held) > 4 else ""
     log(
-        f"levels: {shown} held at the fit at the median {through.name} {median:.3g} (relative error {r.loss:.4f}): "
+        f"levels: {_listed(held)} held at the fit at the median {through.name} {median:.3g} (relative error "
+        f"{r.loss:.4f}): "
         f"{job.target} takes {'them' if len(held) > 1 else 'it'} as a constant only"
     )
     return replace(job, fix={**job.fix, **held})
+
+
+def _listed(values: Mapping[str, Any], first: int = 4) -> str:
+    """Parameter values for the log: the ``first`` few, and how many more."""
+    shown = ", ".join(f"{k} {np.round(v, 4).tolist()}" for k, v in list(values.items())[:first])
+    return shown + (f" and {len(values) - first} more" if len(values) > first else "")
 
 
 def _transform_for(
@@ -1234,8 +1291,6 @@ def _remap_file(
             f"convert (a layer on a textured material, or one no model draws): converting the rest to {target} "
             "would be wrong, so it is not converted"
         )
-    if not kept:
-        refuse_textured_layers(p, asset, target)
     with staged_folder(out, force) as stage:
         result = FileRemapResult(None, asset.model, target, asset.textured, notes=list(asset.notes))
         if asset.textured:
@@ -1278,24 +1333,6 @@ def dropped_check(asset: Any, verdict: Verdict, kept: bool, thresholds: Threshol
     return Verdict([*verdict.checks, Check("dropped", float(len(asset.dropped)), thresholds.dropped, where)])
 
 
-def refuse_textured_layers(path: Path, asset: Any, target: str) -> None:
-    """Refuse, before any work, a material whose layer's colour varies over its maps (a sheen colour map: a sweep's
-    quantities, roughness, F0 and diffuse, have no layer). A uniform layer over textured maps is converted
-    (:func:`hold_layers`), and so is a coat or sheen whose weight or roughness is a map (blended per texel between
-    the material with the layer and without it, or between a few levels of its roughness,
-    :mod:`matremap.svbrdf.mixed`), and a material that lets light through over a roughness map (levels of it, each
-    fitted on the transmission probe: :func:`~matremap.svbrdf.mixed.through_levels`, which refuses other maps)."""
-    # a coat or sheen mask, a layer's roughness map: blended per texel (svbrdf/mixed.py)
-    blended = [*layer_weights(get_model(asset.model)), *layer_roughnesses(asset.model)]
-    textured = [n for n in layer_textures(asset.model, asset.textures) if n not in blended]
-    if textured:
-        raise MatremapError(
-            f"{path}: material {asset.name!r}: its layer varies over the maps ({', '.join(textured)} textured), and a "
-            "layer's colour given as a map is not converted (a layer's weight or roughness map is, and a uniform "
-            f"colour), so it is not converted to {target}"
-        )
-
-
 def hold_layers(
     map_set: MapSet,
     summary: MapSummary,
@@ -1303,6 +1340,7 @@ def hold_layers(
     fix: dict[str, Any],
     job: RemapJob,
     log: Callable[[str], None],
+    typical: list[Material] | None = None,
 ) -> tuple[dict[str, Any], RemapJob]:
     """``fix`` and ``job`` for the sweep of maps under a uniform layer (a coat or sheen of one value over the
     whole material): the layer is a constant of the transform. It is fitted once, with the target's own layer
@@ -1311,7 +1349,8 @@ def hold_layers(
     the base maps under them, ``three-stage``: with a held coat a two-stage fit stops short (a gltf:pbr coat over
     a rough brown dielectric onto OpenPBR: 0.37 two-stage, 0.29 three-stage held at the source's coat, 0.006
     with the coat fitted first). A target without the layer absorbs it in each fit (noted; the gate judges
-    the look). The library is not used: its transforms were learned on materials without layers."""
+    the look). The library is not used: its transforms were learned on materials without layers. ``typical``
+    receives the fit at the typical texel (none when the target has no layer to free)."""
     on = layers_on(map_set.model, map_set.constants)
     if not on:
         return fix, job
@@ -1328,6 +1367,8 @@ def hold_layers(
             log(f"note: {note}")
         return fix, sweep_job
     r, _ = _fit_uniform(source, job, fix, log)
+    if typical is not None:
+        typical.append(r.target)
     spec = get_model(job.target)
     unswept = [n for n in unswept_params(map_set, summary, held, spec, fix) if n not in job.fix]
     values = {
@@ -1468,18 +1509,26 @@ def _output_name(
     return name
 
 
+#: a layered fit further off than this (relative RMSE) started at the source's layer is tried again from the target's
+#: defaults (Khronos SheenCloth's typical texel under a 0.33 sheen onto Standard Surface: 0.42 from the source's
+#: sheen, 0.015 from Standard Surface's defaults)
+RESTART_LOSS = 0.05
+
+
 def _fit_uniform(
     source: Material,
     job: RemapJob,
     full_fix: dict[str, Any],
     log: Callable[[str], None],
     metal: Mapping[str, float] | None = None,
+    both: bool = False,
 ) -> tuple[Any, RemapJob]:
     """The fit of a uniform remap (and the job with the strategy it used). A layer the source has and the target
     too is freed (:func:`~matremap.dialects.mtlx.freed_layers`, started at the source's) and fitted both
     three-stage and simple, the better kept: neither wins everywhere (measured, benchmarks/layered_remaps.py:
     three-stage takes a coat onto OpenPBR / glTF to 1e-4 where simple stops at 0.004-0.017; simple takes
-    OpenPBR's fuzz onto Standard Surface's sheen to 0.045 where three-stage stops at 0.35)."""
+    OpenPBR's fuzz onto Standard Surface's sheen to 0.045 where three-stage stops at 0.35). ``both``: so too
+    without a layer (a level of a layer's map where it is off, blended with the levels where it is on)."""
     from matremap.uniform import fit
 
     target = job.target
@@ -1491,8 +1540,8 @@ def _fit_uniform(
         log(
             f"layers: the source's layers are fitted with {target}'s ({', '.join(free)} freed, started at the source's)"
         )
-        if job.strategy == "two-stage":  # the freed layer refined jointly with the base, or all at once
-            strategies = ["three-stage", "simple"]
+    if (layered or both) and job.strategy == "two-stage":  # the layer refined jointly with the base, or all at once
+        strategies = ["three-stage", "simple"]
     best: Any = None
     probe, objective = sweep_probe(job)
     for strategy in strategies:
@@ -1514,6 +1563,25 @@ def _fit_uniform(
             break
     if len(strategies) > 1:
         log(f"layers: kept the {best[1].strategy} fit (loss {best[0].loss:.4f})")
+    if layered and best[0].loss > RESTART_LOSS and start:  # the source's layer may start in another basin
+        job = staged_strategy(replace(best[1], strategy=strategies[0]), log)
+        r = fit(
+            source,
+            target,
+            target_renderer=job.target_renderer,
+            fix=full_fix,
+            strategy=job.strategy,
+            scene=probe,
+            free=free,
+            start=dict(metal or {}),
+            objective=objective,
+        )
+        log(
+            f"layers: started at the source's layer the fit stopped at {best[0].loss:.4f}; from {target}'s defaults "
+            f"at {r.loss:.4f}" + (" (kept)" if r.loss < best[0].loss else "")
+        )
+        if r.loss < best[0].loss:
+            best = (r, job)
     return best
 
 

@@ -221,6 +221,11 @@ COAT_MAPS = {
 _COAT_SLOTS = {m.slot for m in COAT_MAPS.values()}
 
 
+#: gltf:pbr's sheen maps -> their KHR_materials_sheen texture (the colour in its sRGB RGB, the roughness in its alpha;
+#: converted at levels of them: :func:`~matremap.svbrdf.mixed.layer_levels`)
+SHEEN_MAPS = {"sheenColor": "sheenColorTexture", "sheenRoughness": "sheenRoughnessTexture"}
+
+
 def _coat_textures(cc: dict[str, Any]) -> list[str]:
     """A coat's textures that matremap does not convert (none of the ratified extension's: see :data:`COAT_MAPS`)."""
     return [k for k in _value_textures(cc) if k not in _COAT_SLOTS]
@@ -243,7 +248,7 @@ def layer_values(found: dict[str, dict[str, Any]], textured: bool = False) -> di
     ``gltf:metal-rough``)."""
     cc, sh, tr = found.get(CLEARCOAT), found.get(SHEEN), found.get(TRANSMISSION)
     coat = cc is not None and cc["clearcoatFactor"] > COAT_LOOK and not _coat_textures(cc)
-    sheen = sh is not None and SHEEN in " ".join(lost_look(found)) and not _value_textures(sh)
+    sheen = sh is not None and SHEEN in " ".join(lost_look(found))
     through = tr is not None and TRANSMISSION in " ".join(lost_look(found)) and not _textures(tr)
     vol = found.get(VOLUME)
     if not (coat or sheen or through):
@@ -260,7 +265,7 @@ def layer_values(found: dict[str, dict[str, Any]], textured: bool = False) -> di
             }
     if cc is not None and not _coat_textures(cc):
         out |= {"clearcoat": cc["clearcoatFactor"], "clearcoatRoughness": cc["clearcoatRoughnessFactor"]}
-    if sh is not None and not _value_textures(sh):
+    if sh is not None and (sheen or not _value_textures(sh)):  # its textures are read as maps by the factors
         out |= {"sheenColor": list(sh["sheenColorFactor"]), "sheenRoughness": sh["sheenRoughnessFactor"]}
     return out
 
@@ -278,6 +283,12 @@ def extension_notes(found: dict[str, dict[str, Any]], textured: bool = False) ->
         held = " (uniform over the maps: fitted once, held while the sweep fits the maps)" if uniform else ""
         if textured and "transmission" in layers:
             held = " (over maps: converted at levels of its roughness map, each fitted on the transmission probe)"
+        sheen_maps = [k for k in SHEEN_MAPS.values() if k in (found.get(SHEEN) or {})]
+        if "sheenColor" in layers and sheen_maps:
+            held = (
+                f" ({' and '.join(sheen_maps)} vary the sheen: converted at a few levels of it, the base maps swept "
+                "under each, and interpolated per texel)"
+            )
         exts = [
             e
             for e, k in ((CLEARCOAT, "clearcoat"), (SHEEN, "sheenColor"), (TRANSMISSION, "transmission"))
@@ -341,6 +352,7 @@ def extension_notes(found: dict[str, dict[str, Any]], textured: bool = False) ->
 __all__ = [
     "CLEARCOAT",
     "COAT_MAPS",
+    "SHEEN_MAPS",
     "EMISSIVE_STRENGTH",
     "IOR",
     "LAYERED_MODEL",

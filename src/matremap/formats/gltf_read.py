@@ -53,6 +53,7 @@ from matremap.formats.gltf_extensions import (
     LAYERED_MODEL,
     SCHEMAS,
     SHEEN,
+    SHEEN_MAPS,
     SPECULAR,
     TRANSMISSION,
     check_texture_info,
@@ -206,6 +207,8 @@ def read(
         for name, coat in COAT_MAPS.items():
             if coat.slot in found[CLEARCOAT]:
                 maps[name] = textures.read_layer_map(found[CLEARCOAT][coat.slot], coat.slot, coat.channel, layers[name])
+    if "sheenColor" in layers:  # a sheen colour map (RGB), a sheen roughness map (alpha)
+        maps |= textures.read_sheen_maps(found[SHEEN])
     normal = textures.read_normal(m)
     maps, normal = textures.at_one_size(maps, normal)
     doc.uv_set = textures.uv_set
@@ -424,6 +427,26 @@ class MaterialTextures:
         ``clearcoatRoughnessTexture`` G, its roughness), channel ``c`` times its factor."""
         tex = self.remapped(info, slot)
         return self.ref(tex, (channel(c, tex.channels),), False, factor)
+
+    def read_sheen_maps(self, sheen: dict[str, Any]) -> dict[str, TextureRef]:
+        """KHR_materials_sheen's textures as maps: ``sheenColor`` the sRGB RGB of sheenColorTexture times
+        sheenColorFactor, ``sheenRoughness`` the alpha of sheenRoughnessTexture times sheenRoughnessFactor (an
+        image without alpha is 1 there: the factor alone, noted)."""
+        maps: dict[str, TextureRef] = {}
+        for name, slot in SHEEN_MAPS.items():
+            if slot not in sheen:
+                continue
+            tex = self.remapped(sheen[slot], f"{SHEEN}.{slot}")
+            if name == "sheenColor":
+                rgb = tuple(channel(c, tex.channels) for c in range(3))
+                maps[name] = self.ref(tex, rgb, True, tuple(sheen["sheenColorFactor"]))
+                continue
+            a = alpha_channel(tex.channels)
+            if a is None:
+                self.notes.append(f"{slot} has no alpha channel, so it is 1 everywhere; using sheenRoughnessFactor")
+            else:
+                maps[name] = self.ref(tex, (a,), False, sheen["sheenRoughnessFactor"])
+        return maps
 
     def read_normal(self, m: dict[str, Any]) -> TextureRef | None:
         """The normal map (its scale is noted, not applied); a transformed one is baked and turned."""

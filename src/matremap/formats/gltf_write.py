@@ -56,6 +56,7 @@ from matremap.formats.gltf_extensions import (
     IOR,
     LAYERED_MODEL,
     SHEEN,
+    SHEEN_MAPS,
     SPECULAR,
     TRANSMISSION,
     VOLUME,
@@ -230,6 +231,24 @@ def coat_image(maps: dict[str, np.ndarray], exts: dict[str, Any], name: str) -> 
     return NewImage(name, png(code(pixels, False)), "image/png", old)
 
 
+def sheen_image(maps: dict[str, np.ndarray], exts: dict[str, Any]) -> NewImage | None:
+    """``sheenColor`` and ``sheenRoughness`` maps as KHR_materials_sheen's textures, in one PNG as the extension
+    reads them: the colour in its sRGB RGB, the roughness in its alpha (the factors are then 1), replacing the
+    copied extension's own (``exts``)."""
+    if "sheenColor" not in maps and "sheenRoughness" not in maps:
+        return None
+    shape = next(maps[k].shape[:2] for k in ("sheenColor", "sheenRoughness") if k in maps)
+    rgba = np.full((*shape, 4), 255, dtype=np.uint8)
+    if "sheenColor" in maps:
+        rgba[..., :3] = code(maps["sheenColor"], True)
+    if "sheenRoughness" in maps:
+        rgba[..., 3] = code(maps["sheenRoughness"], False)
+    else:
+        rgba = rgba[..., :3]
+    old = (exts.get(SHEEN) or {}).get("sheenColorTexture") or (exts.get(SHEEN) or {}).get("sheenRoughnessTexture")
+    return NewImage("sheen", png(rgba), "image/png", old)
+
+
 def normal_image(mat: dict[str, Any], normal: Path | None, source_normal: TextureRef | None) -> NewImage | None:
     """The result's normal map as a texture (a PNG or JPEG file as it is, anything else encoded as
     PNG), unless it is the source's own file used as stored (which the copy keeps)."""
@@ -378,6 +397,7 @@ def plan_material(doc: dict[str, Any], rep: Replacement) -> list[NewImage]:
     rep.spec_ext, spec_image = specular_image(rep.consts, rep.maps, rep.old_spec)
     images += [spec_image, normal_image(mat, rep.normal, rep.source_normal if rep.copied else None)]
     images += [coat_image(rep.maps, mat.get("extensions") or {}, slot) for slot in COAT_MAPS]
+    images.append(sheen_image(rep.maps, mat.get("extensions") or {}))
     if opacity is not None and not rep.copied:
         mat["alphaMode"] = "MASK" if opacity.settings.get("mode") == "mask" else "BLEND"
         if "cutoff" in opacity.settings:
@@ -418,6 +438,8 @@ def finish_material(doc: dict[str, Any], rep: Replacement, infos: dict[str, dict
         exts.pop(SPECULAR, None)
     if "clearcoat" in rep.consts:
         coat = {COAT_MAPS[n].slot: infos[n] for n in COAT_MAPS if n in infos}
+        if "sheen" in infos:  # one texture: the colour in its RGB, the roughness in its alpha
+            coat |= {SHEEN_MAPS[n]: dict(infos["sheen"]) for n in SHEEN_MAPS if n in rep.maps}
         layer_extensions(exts, rep.consts, keep_unread=rep.copied, coat_textures=coat)
     elif rep.source_layered:
         for name in (CLEARCOAT, SHEEN):
@@ -442,7 +464,7 @@ LAYER_EXTENSIONS = {
 
 
 #: gltf:pbr's layer parameters the writer takes as maps (each into its extension's texture)
-LAYER_MAPS = ("clearcoat", "clearcoatRoughness")
+LAYER_MAPS = ("clearcoat", "clearcoatRoughness", *SHEEN_MAPS)
 #: the textures of a layer extension that hold none of its values: a copy of the source keeps them
 KEPT_TEXTURES = {CLEARCOAT: "clearcoatNormalTexture", VOLUME: "thicknessTexture"}
 #: the parameters this writer takes as numbers only: KHR_materials_ior has no texture, and the layer extensions'
@@ -462,8 +484,9 @@ def layer_extensions(
     infinity, so it is left out). The ratified READMEs' property names; a replaced extension loses the textures
     of its values (the result's values are uniform), not those of :data:`KEPT_TEXTURES`. ``keep_unread``: in a copy of a
     glTF source, a transmission or volume the result has off is the source's, which the reader does not read into
-    gltf:pbr (only its coat and sheen): kept. ``coat_textures``: the textureInfos of ``clearcoat`` and
-    ``clearcoatRoughness`` maps by slot (their factors are then 1)."""
+    gltf:pbr (only its coat and sheen): kept. ``coat_textures``: the textureInfos of the layer maps by slot
+    (``clearcoatTexture``, ``clearcoatRoughnessTexture``, ``sheenColorTexture``, ``sheenRoughnessTexture``; their
+    factors are then 1)."""
 
     def one(name: str) -> float:
         return float(np.asarray(consts[name], dtype=float).reshape(-1)[0])
@@ -471,8 +494,14 @@ def layer_extensions(
     def rgb(name: str) -> list[float]:
         return [float(x) for x in np.broadcast_to(np.asarray(consts[name], dtype=float), (3,))]
 
+    given = coat_textures or {}
     factors = {m.slot: m.factor for m in COAT_MAPS.values()}
-    coat = {**{factors[k]: 1.0 for k in coat_textures or {}}, **(coat_textures or {})} or None
+    coat = {**{factors[k]: 1.0 for k in given if k in factors}, **{k: v for k, v in given.items() if k in factors}}
+    sheen_tex = {k: v for k, v in given.items() if k in SHEEN_MAPS.values()}
+    sheen_factors = {
+        **({"sheenColorFactor": [1.0, 1.0, 1.0]} if "sheenColorTexture" in sheen_tex else {}),
+        **({"sheenRoughnessFactor": 1.0} if "sheenRoughnessTexture" in sheen_tex else {}),
+    }
     values: dict[str, dict[str, Any] | None] = {
         CLEARCOAT: {
             "clearcoatFactor": one("clearcoat"),
@@ -481,8 +510,13 @@ def layer_extensions(
         }
         if one("clearcoat") > 0 or "clearcoatTexture" in (coat or {})
         else None,
-        SHEEN: {"sheenColorFactor": rgb("sheenColor"), "sheenRoughnessFactor": one("sheenRoughness")}
-        if max(rgb("sheenColor")) > 0
+        SHEEN: {
+            "sheenColorFactor": rgb("sheenColor"),
+            "sheenRoughnessFactor": one("sheenRoughness"),
+            **sheen_factors,
+            **sheen_tex,
+        }
+        if max(rgb("sheenColor")) > 0 or "sheenColorTexture" in sheen_tex
         else None,
         TRANSMISSION: {"transmissionFactor": one("transmission")} if one("transmission") > 0 else None,
         VOLUME: {

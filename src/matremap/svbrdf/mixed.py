@@ -12,8 +12,10 @@ as the glTF specification mixes its two BRDFs (``material = mix(dielectric_brdf,
 metallic)``); intermediate texels are blended too. A target parameter that is a constant on both
 sides stays a constant when the two agree, else it becomes a map (a glTF target's own metallic
 becomes the source's map); one that only one kind uses (a glTF target's ior, which a metal ignores)
-takes that kind's value everywhere. The texels outside the training domain are those outside the domain of
-a transform that contributes to them (the union over the kinds with a non-zero weight).
+takes that kind's value everywhere. The texels outside the training domain are those that take more than
+:data:`OUTSIDE_SHARE` of their weight from kinds whose transforms are outside their domain there (two kinds: any
+share; among levels a spline gives every level some weight at nearly every texel, and one level's extrapolation
+would otherwise mark the whole map).
 
 The target must express both kinds: one without a diffuse parameter (a conductor) cannot draw the
 dielectric texels and is refused before any sweep.
@@ -140,6 +142,14 @@ class Levels:
     per_channel: bool = False
     #: the map's median colour (a colour's levels): a texel the gate checks the channels' interpolation at
     typical: tuple[float, ...] | None = None
+    #: a sheen's colour: grey levels of its brightest channel, every parameter interpolated at a texel's brightest
+    #: channel, and the target's own layer colour given the texel's hue (its colour over that channel: :func:`chroma`)
+    chroma: bool = False
+
+    @property
+    def colour(self) -> bool:
+        """Whether the levels are greys of a colour map (channel by channel, or by brightness and hue)."""
+        return self.per_channel or self.chroma
 
     @property
     def kinds(self) -> tuple[str, ...]:
@@ -154,17 +164,24 @@ class Levels:
 
     def params(self, kind: str) -> dict[str, Any]:
         v = self.value(kind)
-        return {self.name: [v] * 3 if self.per_channel else v}  # a colour's level: a grey
+        return {self.name: [v] * 3 if self.colour else v}  # a colour's level: a grey
 
     def band_weights(self, values: Mapping[str, np.ndarray]) -> tuple[list[np.ndarray], list[np.ndarray] | None]:
         raw = values[self.name]
         return self.scalar_weights(raw), self.weights(raw) if self.per_channel else None
 
     def scalar_weights(self, values: np.ndarray) -> list[np.ndarray]:
-        """The weights a target's numbers take per texel: :meth:`weights` of ``values``, or of their channel mean
-        for a colour's levels (``values`` [..., 3])."""
+        """The weights a target's numbers take per texel: :meth:`weights` of ``values``, or, for a colour's levels
+        (``values`` [..., 3]), of their channel mean (:attr:`per_channel`) or brightest channel (:attr:`chroma`)."""
+        return self.weights(self.level_of(values))
+
+    def level_of(self, values: np.ndarray) -> np.ndarray:
+        """Where ``values`` lie among the levels: a colour's channel mean (:attr:`per_channel`) or brightest channel
+        (:attr:`chroma`), a number as it is."""
         a = np.asarray(values, dtype=np.float32)
-        return self.weights(a.mean(axis=-1) if self.per_channel and a.ndim and a.shape[-1] == 3 else a)
+        if self.colour and a.ndim and a.shape[-1] == 3:
+            return a.max(axis=-1) if self.chroma else a.mean(axis=-1)
+        return a
 
     def weights(self, values: np.ndarray) -> list[np.ndarray]:
         """The weight of each level per texel (they sum to 1; a spline's may be negative: the blend clips its result
@@ -195,6 +212,8 @@ class Levels:
         whose = f"{self.layer} roughness" if self.layer else self.name
         if self.per_channel:
             whose = f"{self.name} (channel by channel)"
+        elif self.chroma:
+            whose = f"{self.name} (by its brightest channel, its hue kept)"
         if len(self.levels) == 1:
             return f"{whose} {self.levels[0]:g} everywhere"
         return f"{whose} from {self.levels[0]:g} to {self.levels[-1]:g}, {len(self.levels)} levels"
@@ -214,6 +233,9 @@ class Grid:
     #: texels of the maps (roughness, colour) where the gate checks the separation: the smoothest, the roughest,
     #: the darkest and the brightest
     corners: tuple[tuple[float, tuple[float, ...]], ...] = ()
+    #: every parameter from both axes (a layer's roughness and colour over base maps, :meth:`band_weights`), not the
+    #: numbers from one and the colours from the other (a glass)
+    additive: bool = False
 
     @property
     def name(self) -> str:
@@ -221,7 +243,7 @@ class Grid:
 
     @property
     def layer(self) -> str | None:
-        return None
+        return self.rough.layer
 
     @property
     def held(self) -> Mapping[str, Any]:
@@ -242,9 +264,12 @@ class Grid:
         return self.axis(kind).value(kind)
 
     def params(self, kind: str) -> dict[str, Any]:
-        """A roughness level at the median colour, a grey level at the median roughness."""
+        """A roughness level at the median colour (an additive grid's: the grey of its level, as the colour's levels
+        are greys), a grey level at the median roughness."""
         if kind in self.rough.kinds:
-            return {**self.rough.params(kind), self.tint.name: list(self.tint.typical or (1.0, 1.0, 1.0))}
+            typical = np.asarray(self.tint.typical or (1.0, 1.0, 1.0), dtype=float)
+            colour = [float(self.tint.level_of(typical))] * 3 if self.additive else typical.tolist()
+            return {**self.rough.params(kind), self.tint.name: colour}
         return {**self.tint.params(kind), self.rough.name: self.typical_roughness}
 
     @property
@@ -261,7 +286,13 @@ class Grid:
 
     def band_weights(self, values: Mapping[str, np.ndarray]) -> tuple[list[np.ndarray], list[np.ndarray] | None]:
         """The numbers from the roughness levels (the colour levels weigh 0), the colours from the colour's levels
-        channel by channel (the roughness levels weigh 0)."""
+        channel by channel (the roughness levels weigh 0). An :attr:`additive` grid gives every parameter the sum
+        of what each axis moves it by from the typical texel, ``p(r, c) = p_r(r) + p_c(c) - p_r(r_typical)``
+        (the roughness axis interpolated at the typical roughness stands for the point where the axes cross): exact
+        where a parameter follows one axis only (a fuzz roughness the layer's roughness, a fuzz weight its colour)
+        and to first order where it follows both (a base colour under a sheen, dimmed by the sheen's albedo)."""
+        if self.additive:
+            return self._additive_weights(values)
         rough = self.rough.weights(values[self.rough.name])
         tint = self.tint.weights(values[self.tint.name])
         zero_scalar, zero_colour = np.zeros_like(rough[0]), np.zeros_like(tint[0])
@@ -270,29 +301,80 @@ class Grid:
             [*([zero_colour] * len(rough)), *tint],
         )
 
+    def _additive_weights(self, values: Mapping[str, np.ndarray]) -> tuple[list[np.ndarray], list[np.ndarray] | None]:
+        r = np.asarray(values[self.rough.name], dtype=np.float32)
+        moved = self.rough.weights(r)
+        crossing = self.rough.weights(np.full_like(r, self.typical_roughness))
+        rough = [w - w0 for w, w0 in zip(moved, crossing, strict=True)]
+        colour = values[self.tint.name]
+        scalar = [*rough, *self.tint.scalar_weights(colour)]
+        if not self.tint.per_channel:
+            return scalar, None
+        return scalar, [*(w[..., None] for w in rough), *self.tint.weights(colour)]
+
     def describe(self) -> str:
         return f"{self.rough.describe()}, and {self.tint.describe()}"
 
 
+#: among three kinds or more (levels), the share of a texel's weight (sum of |weights|) that must come from kinds
+#: outside their transforms' domain for the texel to count as outside: the levels that bracket it weigh 0.5 or more,
+#: the far ones a spline reaches with 0.01-0.1
+OUTSIDE_SHARE = 0.25
 #: levels a layer roughness map is converted at (:class:`Levels`)
 LEVELS = 5
 #: from this many levels on, a texel's value is the cubic spline through the levels' (linear below)
 SPLINE_LEVELS = 4
 
 
-def layer_levels(map_set: MapSet, summary: MapSummary) -> Levels | None:
-    """The first layer (a coat, a sheen) the material has whose roughness is a map that varies, or None."""
+#: layers whose colour a model draws as the colour of a lobe over a grey dimming of what lies below (a sheen: OpenPBR
+#: 1.1 fuzz, lerp(1, 1 - E_fuzz, fuzz_weight) under fuzz_color; glTF's sheen, 1 - max(sheenColor) E): a colour map of
+#: one is converted at grey levels of its brightest channel and its hue given back (:attr:`Levels.chroma`). A coat's
+#: colour tints what passes through it channel by channel (:attr:`Levels.per_channel`)
+CHROMA_LAYERS = ("sheen",)
+
+
+def layer_levels(map_set: MapSet, summary: MapSummary) -> Levels | Grid | None:
+    """The levels a layer (a coat, a sheen) whose roughness or colour is a map that varies is converted at, or None:
+    its roughness's (:class:`Levels`), its colour's (grey levels: a coat's interpolated channel by channel, a
+    sheen's by its brightest channel with its hue kept), or both (an additive :class:`Grid`). Each level is the map
+    set with the layer held there, its base maps converted under it (:func:`matremap.remap.hold_layers`). Two
+    layers that vary over the maps are refused in one line."""
     from matremap.dialects.mtlx import LAYER_PARAMS, LAYERS
 
     values = {**map_set.constants, **dict.fromkeys(map_set.maps, 1.0)}
+    sample = summary.sample()
+    found: list[Levels | Grid] = []
     for layer, own in LAYER_PARAMS.get(map_set.model, {}).items():
         weight_name = LAYERS[map_set.model][layer]
         on = float(np.max(np.asarray(values.get(weight_name, 0.0), dtype=float))) > 0.0
         stats = summary.stats.get(own.roughness or "")
-        if not on or stats is None or stats.hi - stats.lo <= 2 * TOLERANCE:
+        rough = stats is not None and stats.hi - stats.lo > 2 * TOLERANCE
+        colour = own.colour in map_set.maps and _varies(sample[own.colour])
+        if not on or not (rough or colour):
             continue
-        return Levels(own.roughness or "", _even_levels(stats), layer)
-    return None
+        r_levels = Levels(own.roughness or "", _even_levels(stats), layer) if rough and stats is not None else None
+        c_levels = None
+        if colour and own.colour is not None:
+            held = {r_levels.name: round(float(np.median(sample[r_levels.name])), 6)} if r_levels else {}
+            c_levels = _colour_levels(own.colour, summary, held, layer, chroma=layer in CHROMA_LAYERS)
+        if r_levels is not None and c_levels is not None:
+            found.append(Grid(r_levels, c_levels, additive=True))
+        else:
+            found.append(r_levels or c_levels)  # type: ignore[arg-type]
+    if len(found) > 1:
+        names = " and ".join(f"{f.layer}'s {f.name}" for f in found)
+        raise MatremapError(
+            f"{map_set.model}: the {names} vary over the maps; the maps of one layer are converted at a time (its "
+            "roughness and colour), so bake the other layer's to one value"
+        )
+    return found[0] if found else None
+
+
+def _varies(values: Any) -> bool:
+    """Whether a map's sampled ``values`` (a number or a colour per texel) vary over the texels."""
+    a = np.asarray(values, dtype=float)
+    flat = a.reshape(-1, a.shape[-1]) if a.ndim == 3 else a.reshape(-1, 1)
+    return bool(float(np.max(np.ptp(flat, axis=0))) > 2 * TOLERANCE)
 
 
 def through_levels(map_set: MapSet, summary: MapSummary) -> Levels | Grid | None:
@@ -353,11 +435,27 @@ def through_levels(map_set: MapSet, summary: MapSummary) -> Levels | Grid | None
     return Levels(name, _even_levels(summary.stats[name]), None, held)
 
 
-def _colour_levels(name: str, summary: MapSummary, held: Mapping[str, Any]) -> Levels:
-    """Grey levels over a colour map's range, interpolated channel by channel, with its median colour to check."""
+def _colour_levels(
+    name: str, summary: MapSummary, held: Mapping[str, Any], layer: str | None = None, chroma: bool = False
+) -> Levels:
+    """Grey levels over a colour map's range, interpolated channel by channel (``chroma``: over the range of its
+    brightest channel, interpolated there), with its median colour to check."""
     a = np.asarray(summary.sample()[name], dtype=float).reshape(-1, 3)
     typical = tuple(round(float(v), 6) for v in np.median(a, axis=0))
-    return Levels(name, _even_levels(summary.stats[name]), None, dict(held), per_channel=True, typical=typical)
+    if chroma:
+        top = a.max(axis=1)
+        levels = tuple(dict.fromkeys(round(float(v), 6) for v in np.linspace(top.min(), top.max(), LEVELS)))
+        return Levels(name, levels, layer, dict(held), typical=typical, chroma=True)
+    levels = _even_levels(summary.stats[name])
+    return Levels(name, levels, layer, dict(held), per_channel=True, typical=typical)
+
+
+def chroma(colour: np.ndarray) -> np.ndarray:
+    """A colour's hue and saturation without its brightness, ``c / max(c)`` per texel ([..., 3]; white where the
+    colour is black): what :attr:`Levels.chroma` gives back to the target's layer colour."""
+    c = np.asarray(colour, dtype=np.float32)
+    top = c.max(axis=-1, keepdims=True)
+    return np.where(top > 0, c / np.maximum(top, 1e-12), np.float32(1.0))
 
 
 def _even_levels(stats: Any) -> tuple[float, ...]:
@@ -436,14 +534,15 @@ def _check_layer_target(mixed: Blend, spec: ModelSpec, fix: Mapping[str, Any]) -
 
     own = LAYER_PARAMS.get(spec.id, {}).get(mixed.layer or "")
     varied = [LAYERS.get(spec.id, {}).get(mixed.layer or "")] if isinstance(mixed, Mixed) else []
-    varied += [own.roughness if own is not None else None] if isinstance(mixed, Levels) else []
+    for axis in () if isinstance(mixed, Mixed) else mixed.axes if isinstance(mixed, Grid) else (mixed,):
+        varied.append(None if own is None else own.colour if axis.colour else own.roughness)
     varied += [getattr(qty.roughness_param(spec), "name", None), getattr(qty.diffuse_param(spec), "name", None)]
     if spec.reflectance is not None:  # the kinds' F0 differs too (an IOR fitted under a coat and without it)
         varied.append(spec.reflectance.driven_param(spec.specialise(fix).diffuse_only is None))
     why = texture_refusal(spec.id, [n for n in varied if n is not None and n not in fix])
     if why is not None:
         whose = mixed.layer or "base"
-        what = f"with and without the {whose}" if isinstance(mixed, Mixed) else f"of each {whose} roughness"
+        what = f"with and without the {whose}" if isinstance(mixed, Mixed) else f"at each level of the {whose}"
         raise MatremapError(
             f"{why}, and the texels {what} ({mixed.name} map) need it as a map; choose a target that takes it as a map"
         )
@@ -581,12 +680,12 @@ class _Blended:
 
 
 def _plan(
-    sides: list[MapSet], weights: Path, info: ImageInfo, first_only: frozenset[str] = frozenset()
+    sides: list[MapSet], weights: Path, info: ImageInfo, borrowed: Mapping[str, list[int]] | None = None
 ) -> tuple[list[_Blended], dict[str, Any]]:
     """The maps to blend and the parameters that stay constants (options included); ``weights``, ``info``: the
-    source's map of the mixed parameter and its format. ``first_only``: parameters that take the first side's
-    value everywhere (a layer's colour and roughness, when the other side is bare: where the layer's weight is 0
-    they draw nothing; blended, a held coat roughness became a map running to 0)."""
+    source's map of the mixed parameter and its format. ``borrowed``: parameters whose value each side takes from
+    the side listed (a layer's colour and roughness where a side has the layer off: :func:`_borrowed`)."""
+    borrowed = borrowed or {}
     spec = sides[0].spec
     found = [_sources(ms) for ms in sides]
     for option in spec.option_names:
@@ -604,8 +703,8 @@ def _plan(
         if not have:
             continue
         values = [found[i][p.name] if i in have else found[have[0]][p.name] for i in range(len(sides))]
-        if p.name in first_only:
-            values = [values[0]] * len(sides)
+        if p.name in borrowed:
+            values = [values[j] for j in borrowed[p.name]]
         used = [i for i, r in enumerate(roles) if r.param(p.name).role != "other"]
         if used and len(used) < len(sides):
             values = [values[i] if i in used else values[used[0]] for i in range(len(sides))]
@@ -625,12 +724,15 @@ def blend(sides: list[MapSet], mixed: Blend, dest: Path, source: MapSet) -> int:
     from matremap.dialects.mtlx import LAYER_PARAMS
 
     spec = sides[0].spec
-    own = LAYER_PARAMS.get(spec.id, {}).get(mixed.layer or "") if isinstance(mixed, Mixed) else None
-    first_only = frozenset(n for n in (own.colour, own.roughness) if n) if own is not None else frozenset()
-    plan, constants = _plan(sides, source.maps[mixed.name], source.info[mixed.name], first_only)
+    own = LAYER_PARAMS.get(spec.id, {}).get(mixed.layer or "")
+    plan, constants = _plan(sides, source.maps[mixed.name], source.info[mixed.name], _borrowed(sides, mixed, own))
+    tint = mixed.tint if isinstance(mixed, Grid) else mixed
+    hue = (tint.name, own.colour) if isinstance(tint, Levels) and tint.chroma and own and own.colour else None
+    if hue is not None and hue[1] in constants:  # a uniform layer colour takes the texels' hue: a map
+        plan.append(_hued(spec, hue[1], constants.pop(hue[1]), sides, source.info[hue[0]], source.maps[mixed.name]))
     dest.mkdir(parents=True, exist_ok=False)
     try:
-        outside = _blend_bands(plan, mixed, dest, source, sides)
+        outside = _blend_bands(plan, mixed, dest, source, sides, hue)
         doc: dict[str, Any] = {"model": spec.id, "maps": {b.name: b.file for b in plan}}
         normal = sides[0].normal
         if normal is not None:
@@ -646,6 +748,36 @@ def blend(sides: list[MapSet], mixed: Blend, dest: Path, source: MapSet) -> int:
     return outside
 
 
+def _borrowed(sides: list[MapSet], mixed: Blend, own: Any) -> dict[str, list[int]]:
+    """For the target's layer colour and roughness (``own``: its :class:`~matremap.dialects.mtlx.Layer`), the side
+    each side takes them from: where a side has the layer off they draw nothing, and blended they would pull the
+    others' towards whatever that side holds (a held coat roughness became a map running to 0). With and without a
+    layer (a weight map): the layered side's everywhere. Levels of the layer: an off level (a sheen's colour at
+    black) takes the nearest level's with the layer on, on its own axis. A colour that is the layer's weight (glTF's
+    sheenColor) is not borrowed."""
+    if own is None:
+        return {}
+    names = [n for n in (None if own.weighted_colour else own.colour, own.roughness) if n]
+    if isinstance(mixed, Mixed):
+        return dict.fromkeys(names, [0] * len(sides))
+    n = len(mixed.rough.kinds) if isinstance(mixed, Grid) else len(sides)
+    axes = [list(range(n)), list(range(n, len(sides)))]
+    on = [float(np.max(np.asarray(ms.constants.get(own.weight, 1.0), dtype=float))) > 0.0 for ms in sides]
+    source = list(range(len(sides)))
+    for axis in axes:
+        lit = [i for i in axis if on[i]]
+        for i in axis:
+            if not on[i] and lit:
+                source[i] = min(lit, key=lambda j: abs(j - i))
+    return dict.fromkeys(names, source) if source != list(range(len(sides))) else {}
+
+
+def _hued(spec: ModelSpec, name: str, value: Any, sides: list[MapSet], info: ImageInfo, weights: Path) -> _Blended:
+    """A constant layer colour made a map, to take each texel's hue (:func:`chroma`)."""
+    out = _info(spec, name, sides, [value], info)
+    return _Blended(name, 3, [value] * len(sides), _file_name(name, sides, out, weights), out)
+
+
 def _key(v: _Source) -> tuple[int, str]:
     return id(v[0]), v[1]
 
@@ -655,8 +787,16 @@ def _band(v: _Source, read: dict[tuple[int, str], np.ndarray], channels: int, sh
     return _full(read[_key(v)] if _is_map(v) else v, channels, shape)
 
 
-def _blend_bands(plan: list[_Blended], mixed: Blend, dest: Path, source: MapSet, sides: list[MapSet]) -> int:
-    """Stream the blend of every planned map and the outside-domain mask into ``dest``; the mask's count."""
+def _blend_bands(
+    plan: list[_Blended],
+    mixed: Blend,
+    dest: Path,
+    source: MapSet,
+    sides: list[MapSet],
+    hue: tuple[str, str] | None = None,
+) -> int:
+    """Stream the blend of every planned map and the outside-domain mask into ``dest``; the mask's count. ``hue``:
+    (the source's layer colour, the target's) when the target's takes the source's hue per texel (:func:`chroma`)."""
     height, width = source.size
     spec = sides[0].spec
     readers: dict[tuple[int, str], MapReader] = {}
@@ -689,11 +829,18 @@ def _blend_bands(plan: list[_Blended], mixed: Blend, dest: Path, source: MapSet,
                     for w, v in zip(shares, b.sources, strict=True)
                 )
                 lo, hi = spec.param(b.name).bounds  # a spline between levels may overshoot them
-                writer.write_rows(y0, np.clip(sum(parts), lo, hi))
-            off = np.zeros(ws[0].shape, dtype=bool)
+                value = np.clip(sum(parts), lo, hi)
+                if hue is not None and b.name == hue[1]:
+                    value = np.clip(value * chroma(raw[hue[0]]), lo, hi)
+                writer.write_rows(y0, value)
+            outside_weight, total = np.zeros(ws[0].shape, dtype=np.float32), np.zeros(ws[0].shape, dtype=np.float32)
             for mask, share in zip(masks, ws, strict=True):
+                w_abs = np.where(np.abs(share) > TOLERANCE, np.abs(share), 0.0)
+                total += w_abs
                 if mask is not None:
-                    off |= (mask.read_rows(y0, y1)[..., 0] > 0.5) & (np.abs(share) > TOLERANCE)
+                    outside_weight += np.where(mask.read_rows(y0, y1)[..., 0] > 0.5, w_abs, 0.0)
+            share_out = OUTSIDE_SHARE if len(sides) > 2 else 0.0
+            off = outside_weight > share_out * np.maximum(total, TOLERANCE)
             writers[-1].write_rows(y0, off.astype(np.float32))
             outside += int(np.count_nonzero(off))
         for writer in writers:
