@@ -187,7 +187,7 @@ LEFT_BEHIND = "a glTF output keeps it as it is; other targets leave it out"
 
 def lost_look(found: dict[str, dict[str, Any]]) -> list[str]:
     """The extensions that carry the material's look: any transmission (its share of the base goes through: a
-    glass, or a part of one), a coloured sheen (above 0.5, or textured: velvet) or a clear coat above
+    glass, or a part of one), a sheen (above :data:`SHEEN_LOOK`, or textured: velvet) or a clear coat above
     :data:`COAT_LOOK` with textures of its own values. :func:`layer_values` reads the uniform ones into
     ``gltf:pbr``; the others are lost (refused for other models)."""
     lost = []
@@ -195,7 +195,9 @@ def lost_look(found: dict[str, dict[str, Any]]) -> list[str]:
     if tr and tr["transmissionFactor"] > 0:
         lost.append(f"{TRANSMISSION} (transmissionFactor {_g(tr['transmissionFactor'])}{_textures(tr)})")
     sh = found.get(SHEEN)
-    if sh and (max(sh["sheenColorFactor"]) > 0.5 or ("sheenColorTexture" in sh and max(sh["sheenColorFactor"]) > 0)):
+    if sh and (
+        max(sh["sheenColorFactor"]) > SHEEN_LOOK or ("sheenColorTexture" in sh and max(sh["sheenColorFactor"]) > 0)
+    ):
         lost.append(f"{SHEEN} (a coloured sheen: sheenColorFactor {_rgb(sh['sheenColorFactor'])}{_textures(sh)})")
     cc = found.get(CLEARCOAT)
     if cc and cc["clearcoatFactor"] > COAT_LOOK and _coat_textures(cc):
@@ -235,6 +237,11 @@ def _coat_textures(cc: dict[str, Any]) -> list[str]:
 LAYERED_MODEL = "gltf:pbr"
 #: a clear coat's factor past which it carries the look (a second, sharp highlight over the base)
 COAT_LOOK = 0.5
+#: a sheen colour's brightest channel past which the sheen carries the look: a velvet's colour is its sheen over a
+#: near-black base (Khronos GlamVelvetSofa's navy fabric: base 0.01, sheen [0.05, 0.17, 0.5]; its black one, sheen
+#: 0.13; SheenChair's peacock velvet, sheen [0.013, 0.284, 0.298] over a 0.1 base), which a cut at 0.5 read as faint
+#: and left out
+SHEEN_LOOK = 0.1
 
 
 def layer_values(found: dict[str, dict[str, Any]], textured: bool = False) -> dict[str, Any]:
@@ -352,6 +359,7 @@ def extension_notes(found: dict[str, dict[str, Any]], textured: bool = False) ->
 __all__ = [
     "CLEARCOAT",
     "COAT_MAPS",
+    "SHEEN_LOOK",
     "SHEEN_MAPS",
     "EMISSIVE_STRENGTH",
     "IOR",

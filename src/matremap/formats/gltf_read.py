@@ -203,12 +203,7 @@ def read(
     textures = MaterialTextures(FileReader(p, doc, data, confinement), where, notes)
     layers = layer_values(found)
     maps = textures.read_maps(pbr, found.get(SPECULAR, {}), constants)
-    if "clearcoat" in layers:  # a coat mask (R of clearcoatTexture), a coat roughness map (G of its texture)
-        for name, coat in COAT_MAPS.items():
-            if coat.slot in found[CLEARCOAT]:
-                maps[name] = textures.read_layer_map(found[CLEARCOAT][coat.slot], coat.slot, coat.channel, layers[name])
-    if "sheenColor" in layers:  # a sheen colour map (RGB), a sheen roughness map (alpha)
-        maps |= textures.read_sheen_maps(found[SHEEN])
+    maps |= textures.read_layer_maps(found, layers)
     normal = textures.read_normal(m)
     maps, normal = textures.at_one_size(maps, normal)
     doc.uv_set = textures.uv_set
@@ -427,6 +422,18 @@ class MaterialTextures:
         ``clearcoatRoughnessTexture`` G, its roughness), channel ``c`` times its factor."""
         tex = self.remapped(info, slot)
         return self.ref(tex, (channel(c, tex.channels),), False, factor)
+
+    def read_layer_maps(self, found: dict[str, dict[str, Any]], layers: dict[str, Any]) -> dict[str, TextureRef]:
+        """The maps of the layers read into gltf:pbr (``layers``): a coat mask (R of clearcoatTexture) and a coat
+        roughness map (G of its texture); a sheen's colour and roughness maps (:meth:`read_sheen_maps`)."""
+        maps: dict[str, TextureRef] = {}
+        if "clearcoat" in layers:
+            for name, coat in COAT_MAPS.items():
+                if coat.slot in found[CLEARCOAT]:
+                    maps[name] = self.read_layer_map(found[CLEARCOAT][coat.slot], coat.slot, coat.channel, layers[name])
+        if "sheenColor" in layers:
+            maps |= self.read_sheen_maps(found[SHEEN])
+        return maps
 
     def read_sheen_maps(self, sheen: dict[str, Any]) -> dict[str, TextureRef]:
         """KHR_materials_sheen's textures as maps: ``sheenColor`` the sRGB RGB of sheenColorTexture times

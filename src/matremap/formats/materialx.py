@@ -24,7 +24,7 @@ document without materials falls back to its shader nodes) and reads its surface
   that says so and lists every input it does not remap whose value differs from the node's
   default (coat, sheen, subsurface, transmission, thin film, anisotropy, ...);
 * a material whose look a layer carries -- a coloured coat or a coat of weight above 0.5, a sheen / fuzz above
-  0.5, gltf_pbr's clearcoat above 0.5 or a coloured sheen_color (:func:`lost_look`) -- is read instead into the
+  0.1, gltf_pbr's clearcoat above 0.5 or a sheen_color above 0.1 (:func:`lost_look`) -- is read instead into the
   shader's own layered model (:data:`LAYERED`: ``mtlx:standard_surface``, ``mtlx:open_pbr_surface``, ``gltf:pbr``),
   every input it models by name (OpenPBR's boolean ``geometry_thin_walled`` as 0 / 1; gltf_pbr's
   ``attenuation_distance`` default of "infinity" as gltf:pbr's 0), so that a fit carries the layer onto the
@@ -76,6 +76,7 @@ from matremap.errors import MatremapError
 from matremap.formats.asset import CarriedInput, MaterialAsset, TextureRef
 from matremap.formats.common import pick_material
 from matremap.formats.confine import Confinement, resolve_reference
+from matremap.formats.gltf_extensions import SHEEN_LOOK
 from matremap.formats.mtlx_document import EMISSION, FORMAT, MODEL, OPACITY, valid_document
 from matremap.formats.mtlx_document import mx as materialx_module
 from matremap.formats.mtlx_graph import Analysis, GraphEvaluator, PlainImage, parse_value
@@ -634,8 +635,8 @@ _LOOK = {
     "clearcoat": (None, 0.5),
     "transmission": (None, 0.0),
     "transmission_weight": (None, 0.0),
-    "sheen": (None, 0.5),
-    "fuzz_weight": (None, 0.5),
+    "sheen": (None, SHEEN_LOOK),
+    "fuzz_weight": (None, SHEEN_LOOK),
 }
 #: a coat weight past which even a white coat carries the look (a second, sharp highlight over the base)
 _WHITE_COAT = 0.5
@@ -674,7 +675,7 @@ def lost_look(shader: Any) -> list[str]:
         and not (sheen.getAttribute("nodename") or sheen.getAttribute("nodegraph"))
     ):
         rgb = [float(x) for x in sheen.getValueString().split(",")]
-        if max(rgb) > 0.5:  # a coloured sheen: velvet (glTF's rule, formats/gltf_extensions.lost_look)
+        if max(rgb) > SHEEN_LOOK:  # a sheen: velvet (glTF's rule, formats/gltf_extensions.lost_look)
             lost.append(f"sheen_color={', '.join(f'{x:.3g}' for x in rgb)}")
     return lost
 
