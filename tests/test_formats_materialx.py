@@ -109,7 +109,9 @@ def test_colour_spaces(tmp_path):
         read(doc(tmp_path, body.format(cs='colorspace="acescg"')))
 
 
-def test_standard_surface_translation_warns_about_what_it_drops(tmp_path):
+def test_standard_surface_is_read_into_its_own_model_with_what_it_does_not_model_listed(tmp_path):
+    """Standard Surface is read by name into mtlx:standard_surface (before: a hand-made translation onto glTF's
+    parameters, which no measure could check); the inputs it does not model are named in a note."""
     p = doc(
         tmp_path,
         """
@@ -128,39 +130,59 @@ def test_standard_surface_translation_warns_about_what_it_drops(tmp_path):
     <input name="surfaceshader" type="surfaceshader" nodename="SS"/></surfacematerial>""",
     )
     a = read(p)
-    assert a.constants["baseColor"] == pytest.approx([0.4, 0.3, 0.2])
-    assert a.constants["metallic"] == 1.0 and a.constants["roughness"] == 0.35 and a.constants["ior"] == 1.6
-    assert a.constants["specular"] == 1.0 and a.constants["specularColor"] == [1.0, 1.0, 1.0]  # library defaults
-    warning = a.notes[0]
-    assert warning.startswith("WARNING") and "hand-made translation" in warning
-    for dropped in ("coat=0.5", "specular_anisotropy=0.4"):
-        assert dropped in warning
-    assert "sheen" not in warning  # at its default
+    assert a.model == "mtlx:standard_surface" and not any("translation" in n for n in a.notes)
+    assert a.constants["base"] == 0.5 and a.constants["base_color"] == pytest.approx([0.8, 0.6, 0.4])
+    assert a.constants["metalness"] == 1.0 and a.constants["specular_roughness"] == 0.35
+    assert a.constants["specular_IOR"] == 1.6 and a.constants["coat"] == 0.5
+    first = a.notes[0]
+    assert first.startswith("standard_surface read into mtlx:standard_surface") and "specular_anisotropy=0.4" in first
+    assert "sheen" not in first  # modelled, and at its default
     # emission is not remapped but carried to the writer: emission_color (default white) x emission
     assert a.carried["emission"].value == pytest.approx((0.2, 0.2, 0.2)) and a.carried["emission"].texture is None
     assert any(n.startswith("carried unchanged") and "emission (0.2" in n for n in a.notes)
 
 
-def test_open_pbr_surface(tmp_path):
+def test_open_pbr_surface_is_read_into_its_own_model(tmp_path):
     p = doc(
         tmp_path,
         """
   <open_pbr_surface name="OP" type="surfaceshader">
     <input name="base_weight" type="float" value="0.5"/>
     <input name="base_color" type="color3" value="0.2, 0.4, 0.6"/>
+    <input name="base_diffuse_roughness" type="float" value="1"/>
     <input name="specular_roughness" type="float" value="0.2"/>
-    <input name="fuzz_weight" type="float" value="0.05"/>
   </open_pbr_surface>
   <surfacematerial name="M" type="material"><input name="surfaceshader" type="surfaceshader" nodename="OP"/>
   </surfacematerial>""",
     )
     a = read(p)
-    assert a.constants["baseColor"] == pytest.approx([0.1, 0.2, 0.3]) and a.constants["roughness"] == 0.2
-    assert a.constants["metallic"] == 0.0 and a.constants["ior"] == 1.5
-    assert "OpenPBR" in a.notes[0] and "fuzz_weight=0.05" in a.notes[0]
-    # a fuzz of 0.3 over a darkened base carries the look (a velvet's colour is its sheen): read into OpenPBR itself
-    p.write_text(p.read_text().replace('value="0.05"', 'value="0.3"'))
-    assert read(p).model == "mtlx:open_pbr_surface"
+    assert a.model == "mtlx:open_pbr_surface"
+    assert a.constants["base_weight"] == 0.5 and a.constants["base_color"] == pytest.approx([0.2, 0.4, 0.6])
+    # a diffuse roughness glTF has no slot for (EON): modelled, so a fit onto glTF sees it (it was dropped)
+    assert a.constants["base_diffuse_roughness"] == 1.0 and a.constants["specular_roughness"] == 0.2
+
+
+def test_an_open_pbr_diffuse_roughness_onto_gltf_is_fitted_not_copied(tmp_path, capsys):
+    """Before, the hand-made translation read this material as a glTF one, and the remap onto glTF was an identity
+    copy (exit 0) that dropped the diffuse roughness; now it is fitted, and glTF's Lambertian cannot flatten the
+    diffuse as EON does at roughness 1: the gate says so."""
+    pytest.importorskip("colour", reason="the quality gate needs colour-science")
+    from matremap.cli import main
+
+    p = doc(
+        tmp_path,
+        """
+  <open_pbr_surface name="OP" type="surfaceshader">
+    <input name="base_color" type="color3" value="0.7, 0.5, 0.3"/>
+    <input name="base_diffuse_roughness" type="float" value="1"/>
+    <input name="specular_roughness" type="float" value="0.4"/>
+  </open_pbr_surface>
+  <surfacematerial name="M" type="material"><input name="surfaceshader" type="surfaceshader" nodename="OP"/>
+  </surfacematerial>""",
+    )
+    code = main(["remap", str(p), "--to", "gltf:metal-rough", "-o", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 3 and "identity" not in err and "FAILED: fit_error" in err.strip().splitlines()[-1]
 
 
 def test_material_selection(tmp_path):

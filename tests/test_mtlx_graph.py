@@ -336,9 +336,9 @@ def test_a_graph_of_constants_folds_into_a_value(tmp_path):
     <output name="out" type="color3" nodename="n"/>""",
     )
     a = read(p)
-    assert "baseColor" not in a.textures
-    # hue 1/12 + 0.5 = 7/12 (azure), value 1 - 0.5: (0, 0.25, 0.5) times the default base weight 0.8... of 1
-    np.testing.assert_allclose(a.constants["baseColor"], [0.0, 0.25, 0.5], atol=1e-12)
+    assert "base_color" not in a.textures
+    # hue 1/12 + 0.5 = 7/12 (azure), value 1 - 0.5: (0, 0.25, 0.5) (read into the shader's own model, base weight apart)
+    np.testing.assert_allclose(a.constants["base_color"], [0.0, 0.25, 0.5], atol=1e-12)
     assert any("same everywhere" in n for n in a.notes)
 
 
@@ -362,9 +362,10 @@ def test_interface_inputs_fileprefix_and_colorspace_inheritance(tmp_path):
   </surfacematerial>""",
     )
     a = read(p)
-    ref = a.textures["baseColor"]
+    ref = a.textures["base_color"]
     decoded, _ = read_image(tmp_path / "tex" / "c.png", "srgb")  # the graph's colorspace, inherited
-    np.testing.assert_allclose(ref.bake()[0, 0] * np.asarray(ref.scale), decoded[0, 0] * [0.5, 1, 2] * 0.5, atol=1e-6)
+    np.testing.assert_allclose(ref.bake()[0, 0] * np.asarray(ref.scale), decoded[0, 0] * [0.5, 1, 2], atol=1e-6)
+    assert a.constants["base"] == 0.5  # the base weight is Standard Surface's own parameter
 
 
 def test_normalmap_scale_and_a_plain_normal_map(tmp_path):
@@ -405,8 +406,9 @@ def test_a_swizzle_of_an_older_document_is_read_through_its_upgrade(tmp_path):
         version="1.38",
     )
     a = read(p)
-    assert a.textures["roughness"].channels == (1,) and a.textures["roughness"].bake is None  # the file as it is
-    np.testing.assert_allclose(a.textures["baseColor"].bake(), IMG[..., ::-1], atol=1e-6)
+    rough = a.textures["specular_roughness"]
+    assert rough.channels == (1,) and rough.bake is None  # the file as it is
+    np.testing.assert_allclose(a.textures["base_color"].bake(), IMG[..., ::-1], atol=1e-6)
 
 
 def test_maps_of_one_material_are_brought_to_one_size(tmp_path):
@@ -423,8 +425,8 @@ def test_maps_of_one_material_are_brought_to_one_size(tmp_path):
   </surfacematerial>""",
     )
     a = read(p)
-    assert a.textures["roughness"].bake is None  # already the largest: used as it is
-    base = a.textures["baseColor"].bake()
+    assert a.textures["specular_roughness"].bake is None  # already the largest: used as it is
+    base = a.textures["base_color"].bake()
     assert base.shape == (4, 4, 3)
     # resampled bilinearly with periodic wrap: each source texel weighs the same, so the mean is kept
     np.testing.assert_allclose(base.mean(axis=(0, 1)), IMG.mean(axis=(0, 1)), atol=1e-6)

@@ -174,11 +174,13 @@ def test_write_all_copies_a_materialx_source_keeping_looks_and_names(tmp_path):
     assert [m.getName() for m in d.getMaterialNodes()] == [m.getName() for m in src.getMaterialNodes()]
     look = d.getLook("L_ChessSet")
     assert look is not None and len(look.getMaterialAssigns()) == 15
-    # the converted materials' shaders are gltf_pbr nodes under the source's shader names
-    for name, _ in results:
+    # the converted materials' shaders are nodes of their models (gltf_pbr; the bishop's maps, read into Standard
+    # Surface itself, a standard_surface) under the source's shader names
+    for name, result in results:
         old = mx.getShaderNodes(src.getNode(name))[0].getName()
         new = mx.getShaderNodes(d.getNode(name))
-        assert [n.getName() for n in new] == [old] and new[0].getCategory() == "gltf_pbr"
+        category = "standard_surface" if result.model == "mtlx:standard_surface" else "gltf_pbr"
+        assert [n.getName() for n in new] == [old] and new[0].getCategory() == category
     assert d.getNodeGraph("NG_BishopBlack") is None  # only the replaced shader used it
     assert d.getNodeGraph("NG_KingWhite") is not None and d.getNode("King_W").getCategory() == "standard_surface"
     # each converted material reads back to its converted values

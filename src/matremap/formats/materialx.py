@@ -14,23 +14,18 @@ document without materials falls back to its shader nodes) and reads its surface
 
 * ``gltf_pbr`` maps one to one onto ``gltf:metal-rough`` (base_color -> baseColor, metallic,
   roughness, ior, specular, specular_color -> specularColor);
-* ``standard_surface`` (and ``open_pbr_surface``) go through matremap's hand-made translation
-  of their base/specular/metalness subset: base_color x base -> baseColor, metalness -> metallic,
-  specular_roughness -> roughness (both are alpha = r^2), specular_IOR -> ior, specular ->
-  specular, specular_color -> specularColor (OpenPBR: base_color x base_weight, base_metalness,
-  specular_roughness, specular_ior, specular_weight, specular_color). The translation is approximate
-  -- Standard Surface's metal Fresnel uses specular_color as an edge tint that glTF's has no slot
-  for, its dielectric lobe is energy-conserving differently -- so the asset carries a warning note
-  that says so and lists every input it does not remap whose value differs from the node's
-  default (coat, sheen, subsurface, transmission, thin film, anisotropy, ...);
-* a material whose look a layer carries -- a coloured coat or a coat of weight above 0.5, a sheen / fuzz above
-  0.1, gltf_pbr's clearcoat above 0.5 or a sheen_color above 0.1 (:func:`lost_look`) -- is read instead into the
-  shader's own layered model (:data:`LAYERED`: ``mtlx:standard_surface``, ``mtlx:open_pbr_surface``, ``gltf:pbr``),
-  every input it models by name (OpenPBR's boolean ``geometry_thin_walled`` as 0 / 1; gltf_pbr's
-  ``attenuation_distance`` default of "infinity" as gltf:pbr's 0), so that a fit carries the layer onto the
-  target's instead of dropping it (issue 16). Any transmission is read the same way where the shader's
-  model transmits in the transmission probe (``renderers/embedded/transmission.py`` ``INTERFACES``), and fitted
-  there; elsewhere it stays lost;
+* ``standard_surface`` and ``open_pbr_surface`` are read into their own models (``mtlx:standard_surface``,
+  ``mtlx:open_pbr_surface``: Standard Surface 1.0.1 and OpenPBR 1.1 as their specifications draw them), every
+  input they model by name (OpenPBR's boolean ``geometry_thin_walled`` as 0 / 1), whatever the material: a
+  translation onto glTF's parameters would be a hand-made formula no measure can see (before, a layer-less one was
+  so translated, and an OpenPBR ``base_diffuse_roughness`` of 1 went onto glTF as an identity copy, exit 0); the
+  fit carries each input onto the target's, or fails the gate where the target cannot draw it. The inputs they do
+  not model are listed in a note (those that change the look also fail the gate's ``dropped`` check);
+* ``gltf_pbr`` is read into ``gltf:pbr`` instead where a layer carries the look -- its clearcoat above 0.5 or a
+  sheen_color above 0.1 (:func:`lost_look`) -- so that a fit carries the layer onto the target's instead of
+  dropping it (gltf_pbr's ``attenuation_distance`` default of "infinity" as gltf:pbr's 0). Any transmission is read
+  the same way where the shader's model transmits in the transmission probe
+  (``renderers/embedded/transmission.py`` ``INTERFACES``), and fitted there; elsewhere it stays lost;
 * ``UsdPreviewSurface`` (MaterialX's ``ND_UsdPreviewSurface_surfaceshader``) maps one to one onto
   ``usd:preview_surface``, whose parameters are its input names; ``useSpecularWorkflow`` becomes the
   model's option, and a specular-workflow material is read by the same rule as in a USD file
@@ -92,22 +87,6 @@ SHADERS: dict[str, dict[str, str]] = {
         "specular": "specular",
         "specular_color": "specularColor",
     },
-    "standard_surface": {
-        "base_color": "baseColor",
-        "metalness": "metallic",
-        "specular_roughness": "roughness",
-        "specular_IOR": "ior",
-        "specular": "specular",
-        "specular_color": "specularColor",
-    },
-    "open_pbr_surface": {
-        "base_color": "baseColor",
-        "base_metalness": "metallic",
-        "specular_roughness": "roughness",
-        "specular_ior": "ior",
-        "specular_weight": "specular",
-        "specular_color": "specularColor",
-    },
 }
 SHADERS["UsdPreviewSurface"] = {
     n: n for n in ("diffuseColor", "metallic", "roughness", "specularColor", "ior", "clearcoat", "clearcoatRoughness")
@@ -121,6 +100,9 @@ LAYERED = {
     "open_pbr_surface": "mtlx:open_pbr_surface",
     "gltf_pbr": "gltf:pbr",
 }
+#: shaders read into their own model whatever their inputs (LAYERED): their models are not glTF's, and the
+#: embedded renderer draws them as their specifications do, so the fit sees every difference
+OWN_MODEL = ("standard_surface", "open_pbr_surface")
 #: gltf_pbr input -> gltf:pbr parameter (MaterialX 1.39 ``libraries/bxdf/gltf_pbr.mtlx``); the MaterialX models'
 #: parameters are their input names
 GLTF_PBR_LAYERED = {
@@ -153,8 +135,6 @@ def layered_inputs(category: str) -> dict[str, str]:
     return {p.name: p.name for p in get_model(LAYERED[category]).params}
 
 
-#: the input that multiplies base_color
-WEIGHT = {"standard_surface": "base", "open_pbr_surface": "base_weight"}
 #: the shader input carrying the (tangent-space, through normalmap) normal
 NORMAL = {
     "gltf_pbr": "normal",
@@ -244,10 +224,9 @@ class _ShaderReader:
         self.category = shader.getCategory()
         self.layered = layered
         if layered:
-            self.model, self.table, self.weight = LAYERED[self.category], layered_inputs(self.category), None
+            self.model, self.table = LAYERED[self.category], layered_inputs(self.category)
         else:
             self.model, self.table = MODELS.get(self.category, MODEL), SHADERS[self.category]
-            self.weight = WEIGHT.get(self.category)
         self.ev = GraphEvaluator(doc, ctx.path, ctx.file, ctx.notes)
 
     def field(self, name: str, typ: str) -> _Field:
@@ -272,7 +251,7 @@ class _ShaderReader:
         return ndi.getValueString() if ndi is not None else ""
 
     def params(self) -> dict[str, _Field]:
-        """Model parameter -> its field (glTF's base colour x its weight)."""
+        """Model parameter -> its field."""
         spec = get_model(self.model)
         out = {}
         for input_name, param in self.table.items():
@@ -280,8 +259,6 @@ class _ShaderReader:
                 "boolean" if input_name in BOOLEAN_INPUTS else "color3" if spec.param(param).channels == 3 else "float"
             )
             out[param] = self.field(input_name, typ)
-        if self.weight is not None:
-            out["baseColor"] = out["baseColor"].times(self.field(self.weight, "float"))
         return out
 
     def textures(self, fields: dict[str, _Field]) -> dict[str, TextureRef]:
@@ -405,10 +382,9 @@ class _ShaderReader:
     def skipped(self) -> list[str]:
         """The inputs not remapped that are textured or differ from their defaults, as ``name=value``."""
         out = []
-        table, weight = self.table, self.weight
         for inp in self.shader.getInputs():
             n = inp.getName()
-            if n in table or n == weight or n in _NOT_LISTED:
+            if n in self.table or n in _NOT_LISTED:
                 continue
             if inp.getAttribute("nodename") or inp.getAttribute("nodegraph"):
                 out.append(f"{n} (textured)")
@@ -463,10 +439,15 @@ def _same(a: str, b: str) -> bool:
 def _shader_asset(ctx: _Ctx, shader: Any, name: str, index: int, doc: Any) -> MaterialAsset:
     """The asset of surface shader node ``shader`` (material ``name``, the ``index``-th of ``doc``)."""
     cat = shader.getCategory()
-    if cat not in SHADERS:
-        raise MatremapError(f"{ctx.path}: material {name!r} uses a {cat!r} shader; matremap reads {', '.join(SHADERS)}")
+    if cat not in SHADERS and cat not in LAYERED:
+        readable = ", ".join(dict.fromkeys([*SHADERS, *LAYERED]))
+        raise MatremapError(f"{ctx.path}: material {name!r} uses a {cat!r} shader; matremap reads {readable}")
     lost = lost_look(shader)
-    layered = cat in LAYERED and any(not _is_transmission(w) or _transmits(LAYERED[cat]) for w in lost)
+    # Standard Surface and OpenPBR always into their own models: a translation to glTF's would be a hand-made formula
+    # the gate cannot see (an OpenPBR base_diffuse_roughness of 1 went onto glTF as an identity copy, exit 0)
+    layered = cat in LAYERED and (
+        cat in OWN_MODEL or any(not _is_transmission(w) or _transmits(LAYERED[cat]) for w in lost)
+    )
     reader = _ShaderReader(ctx, shader, doc, layered)
     fields = reader.params()
     if reader.model in _IOR_INPUTS:
@@ -710,27 +691,16 @@ def _float_input(shader: Any, name: str) -> float | None:
 
 
 def _note_skipped(ctx: _Ctx, category: str, skipped: list[str], layered: str | None = None) -> None:
-    """Note the inputs not remapped; for a translated shader, warn first that the translation is approximate;
-    a shader read into its own layered model (``layered``) says so."""
+    """Note the inputs not remapped; a shader read into its own model (``layered``) says so first."""
     if layered is not None:
         ctx.notes.insert(
             0,
-            f"{category} read into {layered} (its layers are fitted, not dropped)"
+            f"{category} read into {layered} (every input it models, fitted onto the target)"
             + (f"; inputs not modelled: {', '.join(skipped)}" if skipped else ""),
         )
         return
-    if category in ("gltf_pbr", "UsdPreviewSurface"):
-        if skipped:
-            ctx.notes.append(f"{category} inputs not remapped: {', '.join(skipped)}")
-        return
-    what = "Standard Surface" if category == "standard_surface" else "OpenPBR Surface"
-    names = ", ".join(f"{k} -> {v}" for k, v in SHADERS[category].items() if k != "base_color")
-    ctx.notes.insert(
-        0,
-        f"WARNING: {what} read through matremap's hand-made translation to gltf:metal-rough "
-        f"(base_color x {WEIGHT[category]} -> baseColor, {names}); it is approximate"
-        + (f". Inputs NOT remapped: {', '.join(skipped)}" if skipped else "; every other input is at its default"),
-    )
+    if skipped:
+        ctx.notes.append(f"{category} inputs not remapped: {', '.join(skipped)}")
 
 
 def _clamp_colours(constants: dict[str, Any], notes: list[str], model: str = MODEL) -> None:
@@ -796,7 +766,6 @@ __all__ = [
     "MODELS",
     "NORMAL",
     "SHADERS",
-    "WEIGHT",
     "build_document",
     "lost_look",
     "material_names",
