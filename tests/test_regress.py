@@ -267,7 +267,9 @@ def test_a_constant_beside_a_map_takes_the_maps_shape():
 
 def test_a_quantity_read_only_by_scales_through_the_origin_answers_down_to_zero():
     """A black albedo is black in every renderer, so a diffuse mapped by a scale through the origin is exact at
-    0 even when the sweep's darkest point was not used (a red texture's black channels counted as outside)."""
+    0 even when the sweep's darkest point was not used (a red texture's black channels counted as outside); so is
+    the F0 a k_alpha mapping scales, k(alpha) * F0 (SheenChair's peacock velvet, a metal of base colour
+    (0, 0.094, 0.099), read wholly outside)."""
     from matremap.regress.transform import training_domain
 
     x = {
@@ -277,10 +279,13 @@ def test_a_quantity_read_only_by_scales_through_the_origin_answers_down_to_zero(
     }
     mappings = {
         "diffuse": {"kind": "scale", "input": "diffuse", "coef": [1.0, 1.0, 1.0]},
-        "reflectance": {"kind": "k_alpha", "coef": [1.0, 0.0, 0.0, 0.0, 0.0]},
+        "reflectance": {"kind": "k_alpha", "input": "reflectance", "coef": [1.0, 0.0, 0.0, 0.0, 0.0]},
         "roughness": {"kind": "poly", "input": "roughness", "coef": [0.0, 1.0]},
     }
     domain = training_domain(x, mappings)
     assert domain["diffuse"] == [0.0, 0.8]
-    assert domain["reflectance"] == [0.05, 0.5]  # read by k(alpha): not linear in it alone, kept as trained
+    assert domain["reflectance"] == [0.0, 0.5]  # k(alpha) * F0: through the origin at every alpha
+    assert domain["roughness"] == [0.2, 0.6]  # k's argument: kept as trained
+    mappings["diffuse"] = {"kind": "poly", "input": "diffuse", "coef": [0.1, 1.0]}  # an offset: not through 0
+    assert training_domain(x, mappings)["diffuse"] == [0.12, 0.8]
     assert domain["roughness"] == [0.2, 0.6]

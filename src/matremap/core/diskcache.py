@@ -38,8 +38,9 @@ CACHE_ENV = ("MATREMAP_CACHE", "MATREMAP_CACHE_DIR")
 #: F0 from their base colour; 5: a source's specular part no override isolates is full - diffuse, and Mitsuba 3's
 #: principled metal is its specular part; 6: OpenPBR and Standard Surface metals read F0 from their base colour,
 #: a reflectance mapping may carry a per-channel tint; 7: a roughness at its bound where the source's is at
-#: its own is learned from, not excluded; 8: so is a roughness at its bound fitted within LOSS_MIN)
-RESULTS_REVISION = 8
+#: its own is learned from, not excluded; 8: so is a roughness at its bound fitted within LOSS_MIN; 9: the F0 a
+#: k_alpha mapping scales reaches down to 0 in the learned domain)
+RESULTS_REVISION = 9
 
 
 def cache_dir() -> Path:

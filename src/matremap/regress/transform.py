@@ -385,14 +385,20 @@ def learn_transform(
 
 def training_domain(x: Mapping[str, np.ndarray], mappings: Mapping[str, Mapping[str, Any]]) -> dict[str, list[float]]:
     """The range of each source quantity the transform answers for: the training data's, except that a
-    quantity read only by ``scale`` mappings (target = c * source, through the origin: a Lambertian
-    albedo) reaches down to 0, where every such mapping is exact (a black albedo is black in every
-    renderer). Without it, a sweep whose darkest point was dropped (a high *relative* loss where only a
-    dim specular lobe is left to fit) made every texel with one black channel count as outside."""
+    quantity read only through the origin -- by ``scale`` mappings (target = c * source: a Lambertian albedo) or as
+    the F0 a ``k_alpha`` mapping scales (target F0 = k(alpha) * source F0) -- reaches down to 0, where every such
+    mapping is exact (a black albedo is black in every renderer, a black F0 channel reflects nothing). Without it, a
+    sweep whose darkest point was dropped (a high *relative* loss where only a dim specular lobe is left to fit) made
+    every texel with one black channel count as outside: the sweep's F0 axis starts above 0 (a black metal renders
+    black, refused), and Khronos SheenChair's peacock velvet, a metal of base colour (0, 0.094, 0.099), read wholly
+    outside."""
     domain = {name: [float(np.min(v)), float(np.max(v))] for name, v in x.items()}
     for name, rng in domain.items():
         readers = [m for m in mappings.values() if name in _inputs(m, x)]
-        if readers and all(m["kind"] == "scale" for m in readers) and rng[0] > 0.0:
+        through_origin = all(
+            m["kind"] == "scale" or (m["kind"] == "k_alpha" and m.get("input") == name) for m in readers
+        )
+        if readers and through_origin and rng[0] > 0.0:
             rng[0] = 0.0
     return domain
 
