@@ -73,6 +73,7 @@ from matremap.svbrdf.mixed import (
     Blend,
     Grid,
     Levels,
+    Mixed,
     layer_levels,
     layer_parameter,
     mixed_parameter,
@@ -929,10 +930,13 @@ def hold_layer_numbers(
     from matremap.renderers.registry import texture_refusal
 
     spec = get_model(job.target)
+    # a weight map's two kinds differ in kind (with the layer and without): a number the file takes only as a number is
+    # not held across them (glTF's ior fitted under a coat at the typical texel, 1.565, held over the bare kind of a
+    # 1.5 dielectric: its sweep sent roughness to 1 and a quarter of the texels outside; left free, a glTF output
+    # refuses the ior map the blend makes, in one line); what the renderer takes only as a number is
+    filed = () if isinstance(layered, Mixed) else written_constants(spec.id)
     constant = [
-        p.name
-        for p in spec.params
-        if p.name not in job.fix and (p.name in written_constants(spec.id) or texture_refusal(spec.id, [p.name]))
+        p.name for p in spec.params if p.name not in job.fix and (p.name in filed or texture_refusal(spec.id, [p.name]))
     ]
     tint = layered.tint if isinstance(layered, Grid) else layered
     per_channel = isinstance(tint, Levels) and tint.per_channel
