@@ -142,24 +142,24 @@ def test_standard_surface_is_read_into_its_own_model_with_what_it_does_not_model
     assert any(n.startswith("carried unchanged") and "emission (0.2" in n for n in a.notes)
 
 
-def test_open_pbr_surface_is_read_into_its_own_model(tmp_path):
-    p = doc(
-        tmp_path,
-        """
+#: an OpenPBR dielectric whose diffuse is EON at roughness 1 (glTF has no diffuse roughness)
+ROUGH_DIFFUSE = """
   <open_pbr_surface name="OP" type="surfaceshader">
-    <input name="base_weight" type="float" value="0.5"/>
-    <input name="base_color" type="color3" value="0.2, 0.4, 0.6"/>
+    <input name="base_weight" type="float" value="1"/>
+    <input name="base_color" type="color3" value="0.7, 0.5, 0.3"/>
     <input name="base_diffuse_roughness" type="float" value="1"/>
-    <input name="specular_roughness" type="float" value="0.2"/>
+    <input name="specular_roughness" type="float" value="0.4"/>
   </open_pbr_surface>
   <surfacematerial name="M" type="material"><input name="surfaceshader" type="surfaceshader" nodename="OP"/>
-  </surfacematerial>""",
-    )
-    a = read(p)
+  </surfacematerial>"""
+
+
+def test_open_pbr_surface_is_read_into_its_own_model(tmp_path):
+    a = read(doc(tmp_path, ROUGH_DIFFUSE))
     assert a.model == "mtlx:open_pbr_surface"
-    assert a.constants["base_weight"] == 0.5 and a.constants["base_color"] == pytest.approx([0.2, 0.4, 0.6])
+    assert a.constants["base_weight"] == 1.0 and a.constants["base_color"] == pytest.approx([0.7, 0.5, 0.3])
     # a diffuse roughness glTF has no slot for (EON): modelled, so a fit onto glTF sees it (it was dropped)
-    assert a.constants["base_diffuse_roughness"] == 1.0 and a.constants["specular_roughness"] == 0.2
+    assert a.constants["base_diffuse_roughness"] == 1.0 and a.constants["specular_roughness"] == 0.4
 
 
 def test_an_open_pbr_diffuse_roughness_onto_gltf_is_fitted_not_copied(tmp_path, capsys):
@@ -169,17 +169,7 @@ def test_an_open_pbr_diffuse_roughness_onto_gltf_is_fitted_not_copied(tmp_path, 
     pytest.importorskip("colour", reason="the quality gate needs colour-science")
     from matremap.cli import main
 
-    p = doc(
-        tmp_path,
-        """
-  <open_pbr_surface name="OP" type="surfaceshader">
-    <input name="base_color" type="color3" value="0.7, 0.5, 0.3"/>
-    <input name="base_diffuse_roughness" type="float" value="1"/>
-    <input name="specular_roughness" type="float" value="0.4"/>
-  </open_pbr_surface>
-  <surfacematerial name="M" type="material"><input name="surfaceshader" type="surfaceshader" nodename="OP"/>
-  </surfacematerial>""",
-    )
+    p = doc(tmp_path, ROUGH_DIFFUSE)
     code = main(["remap", str(p), "--to", "gltf:metal-rough", "-o", str(tmp_path / "out")])
     err = capsys.readouterr().err
     assert code == 3 and "identity" not in err and "FAILED: fit_error" in err.strip().splitlines()[-1]
