@@ -7,8 +7,12 @@
   reflectances are F0 values, so models speaking an IOR go through eq. (1) both ways. The paper's k is
   one for all channels; where the target's F0 has another hue than the source's (a coloured coat over a
   metal, absorbed into a model whose coat has no colour) a per-channel tint t multiplies it,
-  t k(alpha) s1, kept when it lowers the held-out error by more than 2 % (matremap's addition);
-* target diffuse = a per-channel scale of the source diffuse (least squares through the origin).
+  t k(alpha) s1, kept when it lowers the held-out error by more than 2 % (matremap's addition); the
+  coefficients stay within 1e3 (a fit that runs past it is refitted within it), and a constant F0 (the training
+  median) is kept instead where it predicts the held-out points as well (matremap's additions);
+* target diffuse = a per-channel scale of the source diffuse (least squares through the origin);
+* a target quantity that takes one value over the data (the sweep held it: glTF's ior, a number only, held
+  while the source's F0 varied) is that constant, as is one whose source counterpart does not vary.
 
 Every mapping is a small JSON object; :func:`evaluate` applies one to arrays of any shape.
 """
@@ -27,6 +31,9 @@ MAX_DEGREE = 4
 MIN_POINTS = 6
 #: a reflectance tint whose channels differ by at most this share is grey (not applied)
 TINT_MIN = 0.01
+#: largest coefficient of a k(alpha) fit (:func:`_fit_k_bounded`); transform files may hold up to
+#: :data:`matremap.regress.schema.MAX_MAGNITUDE`
+COEF_MAX = 1e3
 
 
 # -- the forms ---------------------------------------------------------------------------------
@@ -117,47 +124,66 @@ def fit_roughness(x: np.ndarray, y: np.ndarray, holdout: float = 0.2, seed: int 
     }
 
 
-def _fit_k(alpha: np.ndarray, s1: np.ndarray, s2: np.ndarray, terms: int) -> np.ndarray:
-    """Least squares on k(alpha) s1 - s2 (pooled channels), from a few starts."""
+def _fit_k(alpha: np.ndarray, s1: np.ndarray, s2: np.ndarray, terms: int, bound: float = np.inf) -> np.ndarray:
+    """Least squares on k(alpha) s1 - s2 (pooled channels), from a few starts; ``bound``: every coefficient within
+    [-bound, bound] (the rates c2, c4 within [0, bound])."""
     ratio = np.median(s2[s1 > 0] / s1[s1 > 0]) if np.any(s1 > 0) else 1.0
+    rates = np.isin(np.arange(terms), (2, 4))  # exp(-c2 alpha), exp(-c4 alpha^2): never negative
+    lo, hi = np.where(rates, 0.0, -bound), np.full(terms, bound)
 
     def from_start(c2: float, c4: float) -> Any:
-        x0 = [ratio, 0.0, c2, 0.0, c4] + ([0.0] * (terms - 5))
-        lo = [-np.inf, -np.inf, 0.0, -np.inf, 0.0] + [-np.inf] * (terms - 5)
-        return least_squares(lambda c: k_alpha(alpha, c) * s1 - s2, x0, bounds=(lo, np.inf), method="trf")
+        x0 = np.clip(np.array([ratio, 0.0, c2, 0.0, c4] + [0.0] * (terms - 5)), lo / 2, hi / 2)
+        return least_squares(lambda c: k_alpha(alpha, c) * s1 - s2, x0, bounds=(lo, hi), method="trf")
 
     starts = ((1.0, 1.0), (5.0, 5.0), (20.0, 2.0), (0.5, 20.0))
     return min((from_start(c2, c4) for c2, c4 in starts), key=lambda sol: sol.cost).x  # the first of the lowest
 
 
+def _fit_k_bounded(alpha: np.ndarray, s1: np.ndarray, s2: np.ndarray, terms: int) -> tuple[np.ndarray, bool]:
+    """:func:`_fit_k`, and where that gives a coefficient past :data:`COEF_MAX` (a fit the data do not determine),
+    the best fit with every coefficient within it instead; also whether it was so bounded.
+
+    k is a ratio of reflectances, of order 1 over the data (the shipped library's fits stay below 330 in every
+    coefficient). A coefficient past 1e3 is one of two things. Two terms cancelling to three digits or more: with
+    c2 -> 0, c0 + c1 exp(-c2 alpha) is the line c0 + c1 - c1 c2 alpha, and least squares walks down that valley
+    (c0 = 1478, c1 = -1479, c2 = 0.0047 on a Ward -> Ashikhmin-Shirley sweep; condition number of the
+    column-scaled Jacobian 7e7), and a float32 map evaluates k with an error of |c| 2^-24. Or a term anchored at
+    alpha = 0 that the data see only through exp(-c2 alpha) << 1: c1 = 8.8e8, c2 = 69 over alpha from 0.34 (a
+    spike at the lowest roughness, worth 0.05 there, 8.8e8 at alpha = 0), which no transform file may hold
+    (:data:`matremap.regress.schema.MAX_MAGNITUDE`). Bounding the coefficients (a trust region on them, the
+    lightest regularisation) keeps the first as good a fit and the second from running off; the held-out
+    comparison then weighs it like any other."""
+    c = _fit_k(alpha, s1, s2, terms)
+    if np.all(np.isfinite(c)) and np.max(np.abs(c)) <= COEF_MAX:
+        return c, False
+    return _fit_k(alpha, s1, s2, terms, COEF_MAX), True
+
+
 def fit_reflectance(
     alpha: np.ndarray | None, s1: np.ndarray, s2: np.ndarray, holdout: float = 0.2, seed: int = 0
 ) -> dict[str, Any]:
-    """s2 = k(alpha) s1 per channel; with no source roughness, a constant k."""
-    s1f, s2f = s1.ravel(), s2.ravel()
+    """s2 = k(alpha) s1 per channel (coefficients within :data:`COEF_MAX`: :func:`_fit_k_bounded`); with no source
+    roughness, a constant k. The form is chosen by held-out RMSE, then weighed against a constant s2 (the training
+    median): within 2 % of the chosen mapping's held-out error, the constant is kept. A target F0 that does not
+    follow the source's is the constant it is, not a k(alpha) s1 that can only approximate it: k(alpha) s1 = const
+    asks k to undo, at every alpha, a source F0 that varies (300-fold in the sweep where this was met), and the fit
+    chases which points each alpha happened to keep."""
+    train, test = holdout_split(len(s1), holdout, seed)
+    constant = _rmse(np.broadcast_to(np.median(s2[train], axis=0), s2[test].shape), s2[test])
     if alpha is None:
-        train, test = holdout_split(len(s1), holdout, seed)
-
-        def pooled(rows: np.ndarray) -> float:  # one k for every channel, least squares through the origin
-            return float(np.sum(s1[rows] * s2[rows]) / max(np.sum(s1[rows] * s1[rows]), 1e-300))
-
-        k = pooled(np.arange(len(s1)))
-        grey = _rmse(s1[test] * pooled(train), s2[test])  # held out with the estimator that gives the stored k
-        out = {"kind": "k_alpha", "input": "reflectance", "roughness": False, "coef": [k], "heldout_rmse": grey}
-        return _with_tint(out, s1, s2, np.full(len(s1), k), train, test, {"k": grey})
+        return _or_constant(_fit_grey_k(s1, s2, train, test), s2, constant)
+    s1f, s2f = s1.ravel(), s2.ravel()
     a = np.repeat(alpha, s1.shape[-1])
-    n = len(alpha)
-    train, test = holdout_split(n, holdout, seed)
     ch = s1.shape[-1]
     tr = (train[:, None] * ch + np.arange(ch)).ravel()
     te = (test[:, None] * ch + np.arange(ch)).ravel()
     scores, coefs = {}, {}
     for name, terms in (("paper", 5), ("paper+c5/alpha", 6)):
-        c = _fit_k(a[tr], s1f[tr], s2f[tr], terms)
+        c, _ = _fit_k_bounded(a[tr], s1f[tr], s2f[tr], terms)
         scores[name] = _rmse(k_alpha(a[te], c) * s1f[te], s2f[te])
         coefs[name] = terms
     form = min(scores, key=lambda f: (scores[f] > 1.02 * min(scores.values()), coefs[f]))
-    c = _fit_k(a, s1f, s2f, coefs[form])
+    c, bounded = _fit_k_bounded(a, s1f, s2f, coefs[form])
     out = {
         "kind": "k_alpha",
         "input": "reflectance",
@@ -165,9 +191,41 @@ def fit_reflectance(
         "form": form,
         "coef": c.tolist(),
         "heldout_rmse": scores[form],
-        "heldout_rmse_by_form": scores,
+        "heldout_rmse_by_form": {**scores, "constant": constant},
     }
-    return _with_tint(out, s1, s2, k_alpha(alpha, c), train, test, scores)
+    if bounded:
+        out["bounded"] = COEF_MAX
+    return _or_constant(
+        _with_tint(out, s1, s2, k_alpha(alpha, c), train, test, out["heldout_rmse_by_form"]), s2, constant
+    )
+
+
+def _fit_grey_k(s1: np.ndarray, s2: np.ndarray, train: np.ndarray, test: np.ndarray) -> dict[str, Any]:
+    """s2 = k s1 with one k for every channel (least squares through the origin)."""
+
+    def pooled(rows: np.ndarray) -> float:
+        return float(np.sum(s1[rows] * s2[rows]) / max(np.sum(s1[rows] * s1[rows]), 1e-300))
+
+    k = pooled(np.arange(len(s1)))
+    grey = _rmse(s1[test] * pooled(train), s2[test])  # held out with the estimator that gives the stored k
+    out = {"kind": "k_alpha", "input": "reflectance", "roughness": False, "coef": [k], "heldout_rmse": grey}
+    return _with_tint(out, s1, s2, np.full(len(s1), k), train, test, {"k": grey})
+
+
+def _or_constant(mapping: dict[str, Any], s2: np.ndarray, constant: float) -> dict[str, Any]:
+    """``mapping``, or the median of ``s2`` over the training data where that constant's held-out RMSE
+    (``constant``) is within 2 % of the mapping's: a target quantity the source does not drive."""
+    if constant > 1.02 * mapping["heldout_rmse"]:
+        return mapping
+    return {
+        "kind": "constant",
+        "value": np.median(s2, axis=0).tolist(),
+        "heldout_rmse": constant,
+        "heldout_rmse_by_form": {
+            **mapping.get("heldout_rmse_by_form", {"k": mapping["heldout_rmse"]}),
+            "constant": constant,
+        },
+    }
 
 
 def _scale(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -212,27 +270,32 @@ def fit_diffuse(d1: np.ndarray, d2: np.ndarray, holdout: float = 0.2, seed: int 
 
 def learn(data: TrainingData, holdout: float = 0.2, seed: int = 0) -> dict[str, dict[str, Any]]:
     """Mappings for every quantity the target speaks: fitted where the data varies, a constant
-    (the value seen in the sweep) where it does not."""
+    (the value seen in the sweep) where it does not -- where the source's quantity is held, and where the
+    target's is (a parameter the target takes as a number only, held at one value while the source's varies)."""
     if len(data) < MIN_POINTS:
         raise MatremapError(f"{len(data)} usable points: too few to learn a transform (need {MIN_POINTS})")
     mappings: dict[str, dict[str, Any]] = {}
     x, y = data.x, data.y
+
+    def fitted(name: str) -> bool:  # the source's quantity varies and so does the target's
+        return name in x and data.varies(name) and bool(np.ptp(y[name]) > 1e-12)
+
     if "roughness" in y:
-        if "roughness" in x and data.varies("roughness"):
+        if fitted("roughness"):
             mappings["roughness"] = fit_roughness(x["roughness"], y["roughness"], holdout, seed)
         else:
             mappings["roughness"] = {"kind": "constant", "value": float(np.median(y["roughness"]))}
     if "reflectance" in y:
-        if "reflectance" in x and data.varies("reflectance"):
+        if fitted("reflectance"):
             alpha = x["roughness"] if ("roughness" in x and data.varies("roughness")) else None
             mappings["reflectance"] = fit_reflectance(alpha, x["reflectance"], y["reflectance"], holdout, seed)
         else:
             mappings["reflectance"] = {"kind": "constant", "value": np.median(y["reflectance"], axis=0).tolist()}
     if "diffuse" in y:
-        if "diffuse" in x and data.varies("diffuse"):
+        if fitted("diffuse"):
             mappings["diffuse"] = fit_diffuse(x["diffuse"], y["diffuse"], holdout, seed)
         else:
             mappings["diffuse"] = {"kind": "constant", "value": np.median(y["diffuse"], axis=0).tolist()}
-    if all(m["kind"] == "constant" for m in mappings.values()):
+    if not any(name in x and data.varies(name) for name in mappings):
         raise MatremapError("the sweep varies no source quantity the target can follow: nothing to learn")
     return mappings
