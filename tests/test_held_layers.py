@@ -337,3 +337,56 @@ def test_a_textured_base_under_a_coat_mask_blends_a_coated_and_a_bare_conversion
     doc = json.loads((out / "maps" / "material.json").read_text())
     coat, ramp = grey(out / "maps" / doc["maps"]["coat_weight"]), grey(tmp_path / "in" / "coat.png")
     assert np.corrcoef(coat.ravel(), ramp.ravel())[0, 1] > 0.999 and coat[:, 0].max() < 1e-3
+
+
+def brass_like(folder: Path) -> Path:
+    """The MaterialX tiled brass's structure (its colour image is not in any snapshot reachable here): a white metal
+    under a coat whose colour is an sRGB image and whose roughness is a grey image that is also the base's roughness,
+    both through ``tiledimage`` nodes, as in ``standard_surface_brass_tiled.mtlx``."""
+    from matremap.svbrdf.textures import ImageInfo, write_image_like
+
+    folder.mkdir(parents=True, exist_ok=True)
+    y, x = np.mgrid[0:32, 0:32] / 31.0
+    colour = np.stack([0.9 - 0.2 * y, 0.7 - 0.3 * x, 0.3 + 0.1 * x * y], -1).astype(np.float32)
+    rough = (0.2 + 0.5 * (0.5 + 0.5 * np.sin(6 * x) * np.cos(5 * y))).astype(np.float32)
+    write_image_like(folder / "brass_color.png", colour, ImageInfo("png", "uint8", 3, 0, 0, "srgb"), force=True)
+    write_image_like(folder / "brass_roughness.png", rough, ImageInfo("png", "uint8", 1, 0, 0, "linear"), force=True)
+    image = '<tiledimage name="{0}" type="{1}"><input name="file" type="filename" value="{2}"{3} /></tiledimage>'
+    nodes = image.format("c", "color3", "brass_color.png", ' colorspace="srgb_texture"') + image.format(
+        "r", "float", "brass_roughness.png", ""
+    )
+    shader = (
+        '<standard_surface name="SR_brass1" type="surfaceshader"><input name="base" type="float" value="1" />'
+        '<input name="specular" type="float" value="0" /><input name="metalness" type="float" value="1" />'
+        '<input name="specular_roughness" type="float" nodename="r" /><input name="coat" type="float" value="1" />'
+        '<input name="coat_color" type="color3" nodename="c" />'
+        '<input name="coat_roughness" type="float" nodename="r" />'
+        "</standard_surface>"
+    )
+    material = (
+        '<surfacematerial name="Tiled_Brass" type="material">'
+        '<input name="surfaceshader" type="surfaceshader" nodename="SR_brass1" /></surfacematerial>'
+    )
+    doc = f'<?xml version="1.0"?>\n<materialx version="1.39">{nodes}{shader}{material}</materialx>\n'
+    (folder / "brass.mtlx").write_text(doc)
+    return folder / "brass.mtlx"
+
+
+@needs_materialx
+def test_a_brass_like_coat_colour_and_roughness_image_onto_gltf(tmp_path, capsys):
+    """Refused before ("a layer's colour given as a map is not converted"). glTF's clear coat has no colour: the coat's
+    colour goes into each level's base colour, so the written base colour follows the coat's image channel by channel;
+    the coat's roughness image (an additive grid's other axis) becomes a clearcoatRoughness map."""
+    src = brass_like(tmp_path / "in")
+    out = tmp_path / "out"
+    code, log = remap(capsys, src, "gltf:pbr", out)
+    assert code == 0 and "PASSED" in log, log[-800:]
+    assert "coat_roughness varies per texel" in log and "coat_color (channel by channel)" in log
+    from matremap.svbrdf.textures import load_map_set, read_image
+
+    written_set = load_map_set(out / "maps")
+    assert {"baseColor", "clearcoatRoughness"} <= set(written_set.maps)
+    base, _ = read_image(written_set.maps["baseColor"], written_set.colorspace.get("baseColor"), colour=True)
+    coat, _ = read_image(tmp_path / "in" / "brass_color.png", "srgb", colour=True)
+    for c in range(3):
+        assert np.corrcoef(base[..., c].ravel(), coat[..., c].ravel())[0, 1] > 0.85

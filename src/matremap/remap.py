@@ -925,7 +925,8 @@ def hold_layer_numbers(
     against it (a Standard Surface copper coat coloured by an image onto OpenPBR: coat_weight 0.75 at coat_color
     0.95, and the coat's weight, roughness and the base's IOR became maps of that trade). A sheen's levels keep the
     rest free: its brightness is the layer's weight in some models (OpenPBR's fuzz_weight follows glTF's sheen colour,
-    0.003 to 0.71 over SheenCloth's five levels); and so does the axis a Grid converts at (the layer's roughness)."""
+    0.003 to 0.71 over SheenCloth's five levels); and so does the axis a Grid converts at (the layer's roughness).
+    Under a coat's colour the target's other colours the sweep does not map are held too (a base colour)."""
     from matremap.formats import written_constants
     from matremap.renderers.registry import texture_refusal
 
@@ -943,7 +944,10 @@ def hold_layer_numbers(
     if not constant and not per_channel:
         return job
     held_maps = held_values(map_set, summary, job.target)
-    source = Material.create(map_set.spec.id, base_values(map_set, summary, held_maps))
+    values_at = base_values(map_set, summary, held_maps)
+    if isinstance(tint, Levels) and per_channel:  # the fit the levels' numbers and colours are held at: at a grey
+        values_at[tint.name] = [float(tint.level_of(np.asarray(values_at[tint.name], dtype=float)))] * 3
+    source = Material.create(map_set.spec.id, values_at)
     r = _fit_kind(source, job, log)
     values = r.target.to_dict()["params"]
     names = set(constant)
@@ -956,9 +960,19 @@ def hold_layer_numbers(
         }
         kind = {**{n: values[n] for n, _, _ in spec.specialisations if n in values}, **job.fix}  # a metal or not
         mapped -= set(unswept_params(map_set, summary, held_maps, spec, kind))
-        axis = LAYER_PARAMS.get(spec.id, {}).get(tint.layer or "") if isinstance(layered, Grid) else None
-        mapped.add(getattr(axis, "roughness", None))
-        names |= {p.name for p in spec.params if p.channels == 1 and p.name not in job.fix and p.name not in mapped}
+        own = LAYER_PARAMS.get(spec.id, {}).get(tint.layer or "")
+        mapped.add(getattr(own, "colour", None))  # what the levels convert
+        if isinstance(layered, Grid):
+            mapped.add(getattr(own, "roughness", None))
+        # colours too: a metal's colour under a coloured coat is the same product either way (base_color x
+        # coat_color), and each level's fit split it differently (a brass-like white metal under an image coat
+        # onto OpenPBR: coat_color 1.0, 0.33, 0.23, 0.64 at the roughness levels, one level's sweep left 5 points)
+        coloured = own is not None and own.colour is not None  # else the layer's colour is absorbed per level
+        names |= {
+            p.name
+            for p in spec.params
+            if p.name not in job.fix and p.name not in mapped and (p.channels == 1 or coloured)
+        }
     held = {k: values[k] for k in spec.param_names if k in names and k in values}
     if held:
         why = f"{tint.name} tints; it moves no number" if per_channel else f"{job.target} takes them as numbers only"
