@@ -49,6 +49,7 @@ from matremap.dialects.mtlx import (
     absorbed_layers,
     coat_tint,
     freed_layers,
+    layer_textures,
     layers_on,
     opaque_share,
 )
@@ -923,10 +924,12 @@ def hold_layer_numbers(
     refused when written), and under a coat's colour levels every number the sweep does not map: the colour tints
     what passes through the coat, channel by channel, and moves none of them, but each level's fit would trade them
     against it (a Standard Surface copper coat coloured by an image onto OpenPBR: coat_weight 0.75 at coat_color
-    0.95, and the coat's weight, roughness and the base's IOR became maps of that trade). A sheen's levels keep the
-    rest free: its brightness is the layer's weight in some models (OpenPBR's fuzz_weight follows glTF's sheen colour,
-    0.003 to 0.71 over SheenCloth's five levels); and so does the axis a Grid converts at (the layer's roughness).
-    Under a coat's colour the target's other colours the sweep does not map are held too (a base colour)."""
+    0.95, and the coat's weight, roughness and the base's IOR became maps of that trade). Under a sheen's colour the
+    base's numbers are held so, the sheen's own weight and roughness left free: its brightness is the layer's weight
+    in some models (OpenPBR's fuzz_weight follows glTF's sheen colour, 0.003 to 0.71 over SheenCloth's five levels;
+    the base's specular_ior, fitted per level, ran 1.50 to 1.33 and made a map a glTF output cannot hold); and so
+    is the axis a Grid converts at (the layer's roughness) left free. Under a coat's colour the target's other colours
+    the sweep does not map are held too (a base colour)."""
     from matremap.formats import written_constants
     from matremap.renderers.registry import texture_refusal
 
@@ -941,17 +944,18 @@ def hold_layer_numbers(
     ]
     tint = layered.tint if isinstance(layered, Grid) else layered
     per_channel = isinstance(tint, Levels) and tint.per_channel
-    if not constant and not per_channel:
+    colour = isinstance(tint, Levels) and tint.colour
+    if not constant and not colour:
         return job
     held_maps = held_values(map_set, summary, job.target)
     values_at = base_values(map_set, summary, held_maps)
-    if isinstance(tint, Levels) and per_channel:  # the fit the levels' numbers and colours are held at: at a grey
+    if isinstance(tint, Levels) and colour:  # the fit the levels' numbers are held at: at a grey, as every level is
         values_at[tint.name] = [float(tint.level_of(np.asarray(values_at[tint.name], dtype=float)))] * 3
     source = Material.create(map_set.spec.id, values_at)
     r = _fit_kind(source, job, log)
     values = r.target.to_dict()["params"]
     names = set(constant)
-    if per_channel:
+    if colour:
         metal = spec.specialise(values).diffuse_only is None
         mapped = {  # what the sweep maps the base maps onto (the quantities the maps vary)
             getattr(qty.roughness_param(spec), "name", None),
@@ -959,15 +963,18 @@ def hold_layer_numbers(
             spec.reflectance.driven_param(metal) if spec.reflectance is not None else None,
         }
         kind = {**{n: values[n] for n, _, _ in spec.specialisations if n in values}, **job.fix}  # a metal or not
-        mapped -= set(unswept_params(map_set, summary, held_maps, spec, kind))
+        base_maps = set(map_set.maps) - set(layer_textures(map_set.model, map_set.maps))
+        # no base map: every level is one uniform fit, and nothing is swept
+        mapped = mapped - set(unswept_params(map_set, summary, held_maps, spec, kind)) if base_maps else set()
         own = LAYER_PARAMS.get(spec.id, {}).get(tint.layer or "")
         mapped.add(getattr(own, "colour", None))  # what the levels convert
-        if isinstance(layered, Grid):
-            mapped.add(getattr(own, "roughness", None))
+        if isinstance(layered, Grid) or not per_channel:  # a sheen's weight and roughness follow its brightness
+            mapped |= {getattr(own, "roughness", None), getattr(own, "weight", None)}
         # colours too: a metal's colour under a coloured coat is the same product either way (base_color x
         # coat_color), and each level's fit split it differently (a brass-like white metal under an image coat
         # onto OpenPBR: coat_color 1.0, 0.33, 0.23, 0.64 at the roughness levels, one level's sweep left 5 points)
-        coloured = own is not None and own.colour is not None  # else the layer's colour is absorbed per level
+        # else the layer's colour is absorbed per level; a sheen's colour is a lobe's, not a tint of the base's
+        coloured = per_channel and own is not None and own.colour is not None
         names |= {
             p.name
             for p in spec.params
@@ -975,7 +982,7 @@ def hold_layer_numbers(
         }
     held = {k: values[k] for k in spec.param_names if k in names and k in values}
     if held:
-        why = f"{tint.name} tints; it moves no number" if per_channel else f"{job.target} takes them as numbers only"
+        why = f"{tint.name} varies; it moves none of them" if colour else f"{job.target} takes them as numbers only"
         log(f"levels: {_listed(held)} held at the fit at the typical texel, relative error {r.loss:.4f} ({why})")
     return replace(job, fix={**job.fix, **held})
 
