@@ -121,6 +121,19 @@ def test_the_colour_a_glass_transmits_is_what_the_fit_carries():
     assert 190.0 < hues[1] < 250.0  # blue
 
 
+def test_an_interface_of_ior_1_onto_gltf_reflects_nothing():
+    """An OpenPBR thin wall of IOR 1 (PhysicallyBased's Soap Bubble, its thin film apart) reflects nothing; glTF's
+    Schlick Fresnel at F0 0 still reaches 1 at grazing, so the read-across sets its specular factor to 0: the fit
+    ended at 0.27 with the rim reflecting (failing the gate), and matches now."""
+    bubble = Material.create(
+        "mtlx:open_pbr_surface",
+        {"specular_ior": 1.0, "specular_roughness": 0.0, "transmission_weight": 1.0, "geometry_thin_walled": 1.0},
+    )
+    r = fit(bubble, "gltf:pbr")
+    assert r.target.values["specular"][0] == 0.0
+    assert r.loss < 0.01
+
+
 # -- real files ----------------------------------------------------------------------------------------------
 
 

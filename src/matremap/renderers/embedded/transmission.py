@@ -499,6 +499,11 @@ def _mitsuba3_glass_start(model: str) -> Callable[[Interface], tuple[dict[str, A
 
 def _gltf_start(iface: Interface) -> tuple[dict[str, Any], tuple[str, ...]]:
     values = gltf_equivalent(iface)
+    if iface.eta <= 1.0 + 1e-6:
+        # an interface of IOR 1 reflects nothing at any angle, where glTF's Schlick Fresnel at F0 0 still reaches 1 at
+        # grazing: its specular factor 0 (KHR_materials_specular scales F0 and F90) is the match (PhysicallyBased's Soap
+        # Bubble onto glTF: 0.166 with the rim reflecting, 0.0000 with specular 0)
+        values["specular"] = 0.0
     return values, ("transmission",) if values["attenuationDistance"] == 0.0 else ("transmission", "attenuationColor")
 
 
