@@ -934,13 +934,10 @@ def hold_layer_numbers(
     from matremap.renderers.registry import texture_refusal
 
     spec = get_model(job.target)
-    # a weight map's two kinds differ in kind (with the layer and without): a number the file takes only as a number is
-    # not held across them (glTF's ior fitted under a coat at the typical texel, 1.565, held over the bare kind of a
-    # 1.5 dielectric: its sweep sent roughness to 1 and a quarter of the texels outside; left free, a glTF output
-    # refuses the ior map the blend makes, in one line); what the renderer takes only as a number is
-    filed = () if isinstance(layered, Mixed) else written_constants(spec.id)
     constant = [
-        p.name for p in spec.params if p.name not in job.fix and (p.name in filed or texture_refusal(spec.id, [p.name]))
+        p.name
+        for p in spec.params
+        if p.name not in job.fix and (p.name in written_constants(spec.id) or texture_refusal(spec.id, [p.name]))
     ]
     tint = layered.tint if isinstance(layered, Grid) else layered
     per_channel = isinstance(tint, Levels) and tint.per_channel
@@ -949,6 +946,12 @@ def hold_layer_numbers(
         return job
     held_maps = held_values(map_set, summary, job.target)
     values_at = base_values(map_set, summary, held_maps)
+    if isinstance(layered, Mixed):
+        # a weight map's kinds are the material with the layer and without: the base's numbers are the bare base's
+        # (glTF's ior fitted under a coat at the typical texel, 1.565 for a 1.5 dielectric, held over the bare kind
+        # sent its sweep's roughness to 1 and a quarter of the texels outside; not held, a glTF output refused the
+        # ior map the blend made)
+        values_at[layered.name] = layered.value(layered.kinds[1])
     if isinstance(tint, Levels) and colour:  # the fit the levels' numbers are held at: at a grey, as every level is
         values_at[tint.name] = [float(tint.level_of(np.asarray(values_at[tint.name], dtype=float)))] * 3
     source = Material.create(map_set.spec.id, values_at)
