@@ -973,10 +973,10 @@ def hold_layer_numbers(
         mapped.add(getattr(own, "colour", None))  # what the levels convert
         if isinstance(layered, Grid) or not per_channel:  # a sheen's weight and roughness follow its brightness
             mapped |= {getattr(own, "roughness", None), getattr(own, "weight", None)}
-        # colours too: a metal's colour under a coloured coat is the same product either way (base_color x
-        # coat_color), and each level's fit split it differently (a brass-like white metal under an image coat
-        # onto OpenPBR: coat_color 1.0, 0.33, 0.23, 0.64 at the roughness levels, one level's sweep left 5 points)
-        # else the layer's colour is absorbed per level; a sheen's colour is a lobe's, not a tint of the base's
+        # under a coat's colour, the colours too where the target's coat has one: a metal's colour under a coloured
+        # coat is the same product either way (base_color x coat_color), and each level's fit split it differently (a
+        # brass-like white metal under an image coat onto OpenPBR: coat_color 1.0, 0.33, 0.23, 0.64 at the roughness
+        # levels, one level's sweep left 5 points); without one, each level absorbs the coat's colour into the base's
         coloured = per_channel and own is not None and own.colour is not None
         names |= {
             p.name
@@ -1368,7 +1368,6 @@ def hold_layers(
     fix: dict[str, Any],
     job: RemapJob,
     log: Callable[[str], None],
-    typical: list[Material] | None = None,
 ) -> tuple[dict[str, Any], RemapJob]:
     """``fix`` and ``job`` for the sweep of maps under a uniform layer (a coat or sheen of one value over the
     whole material): the layer is a constant of the transform. It is fitted once, with the target's own layer
@@ -1377,8 +1376,7 @@ def hold_layers(
     the base maps under them, ``three-stage``: with a held coat a two-stage fit stops short (a gltf:pbr coat over
     a rough brown dielectric onto OpenPBR: 0.37 two-stage, 0.29 three-stage held at the source's coat, 0.006
     with the coat fitted first). A target without the layer absorbs it in each fit (noted; the gate judges
-    the look). The library is not used: its transforms were learned on materials without layers. ``typical``
-    receives the fit at the typical texel (none when the target has no layer to free)."""
+    the look). The library is not used: its transforms were learned on materials without layers."""
     on = layers_on(map_set.model, map_set.constants)
     if not on:
         return fix, job
@@ -1395,8 +1393,6 @@ def hold_layers(
             log(f"note: {note}")
         return fix, sweep_job
     r, _ = _fit_uniform(source, job, fix, log)
-    if typical is not None:
-        typical.append(r.target)
     spec = get_model(job.target)
     unswept = [n for n in unswept_params(map_set, summary, held, spec, fix) if n not in job.fix]
     values = {
@@ -1570,46 +1566,40 @@ def _fit_uniform(
         )
     if (layered or both) and job.strategy == "two-stage":  # the layer refined jointly with the base, or all at once
         strategies = ["three-stage", "simple"]
-    best: Any = None
     probe, objective = sweep_probe(job)
-    for strategy in strategies:
-        job = staged_strategy(replace(job, strategy=strategy), log)
+
+    def attempt(strategy: str, at: Mapping[str, Any]) -> tuple[Any, RemapJob]:
+        staged = staged_strategy(replace(job, strategy=strategy), log)
         r = fit(
             source,
             target,
-            target_renderer=job.target_renderer,  # None: the model's own (uniform.fit)
+            target_renderer=staged.target_renderer,  # None: the model's own (uniform.fit)
             fix=full_fix,
-            strategy=job.strategy,
+            strategy=staged.strategy,
             scene=probe,
             free=free,
-            start=start,
+            start=at,
             objective=objective,
         )
+        return r, staged
+
+    best: Any = None
+    for strategy in strategies:
+        r, staged = attempt(strategy, start)
         if best is None or r.loss < best[0].loss:
-            best = (r, job)
-        if job.strategy == "simple":  # forced (staged_strategy): no second fit
+            best = (r, staged)
+        if staged.strategy == "simple":  # forced (staged_strategy): no second fit
             break
     if len(strategies) > 1:
         log(f"layers: kept the {best[1].strategy} fit (loss {best[0].loss:.4f})")
     if layered and best[0].loss > RESTART_LOSS and start:  # the source's layer may start in another basin
-        job = staged_strategy(replace(best[1], strategy=strategies[0]), log)
-        r = fit(
-            source,
-            target,
-            target_renderer=job.target_renderer,
-            fix=full_fix,
-            strategy=job.strategy,
-            scene=probe,
-            free=free,
-            start=dict(metal or {}),
-            objective=objective,
-        )
+        r, staged = attempt(strategies[0], dict(metal or {}))
         log(
             f"layers: started at the source's layer the fit stopped at {best[0].loss:.4f}; from {target}'s defaults "
             f"at {r.loss:.4f}" + (" (kept)" if r.loss < best[0].loss else "")
         )
         if r.loss < best[0].loss:
-            best = (r, job)
+            best = (r, staged)
     return best
 
 

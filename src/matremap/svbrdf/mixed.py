@@ -370,11 +370,15 @@ def layer_levels(map_set: MapSet, summary: MapSummary) -> Levels | Grid | None:
     return found[0] if found else None
 
 
-def _varies(values: Any) -> bool:
-    """Whether a map's sampled ``values`` (a number or a colour per texel) vary over the texels."""
+def _texels(values: Any) -> np.ndarray:
+    """A map's sampled ``values`` (a number or a colour per texel) as rows of texels ``[n, channels]``."""
     a = np.asarray(values, dtype=float)
-    flat = a.reshape(-1, a.shape[-1]) if a.ndim == 3 else a.reshape(-1, 1)
-    return bool(float(np.max(np.ptp(flat, axis=0))) > 2 * TOLERANCE)
+    return a.reshape(-1, a.shape[-1]) if a.ndim == 3 else a.reshape(-1, 1)
+
+
+def _varies(values: Any) -> bool:
+    """Whether a map's sampled ``values`` vary over the texels (beyond the statistics' tolerance)."""
+    return bool(float(np.max(np.ptp(_texels(values), axis=0))) > 2 * TOLERANCE)
 
 
 def through_levels(map_set: MapSet, summary: MapSummary) -> Levels | Grid | None:
@@ -396,12 +400,10 @@ def through_levels(map_set: MapSet, summary: MapSummary) -> Levels | Grid | None
     held: dict[str, Any] = {}
     varying = []
     for name in map_set.maps:
-        a = np.asarray(sample[name], dtype=float)
-        flat = a.reshape(-1, a.shape[-1]) if spec.param(name).channels == 3 and a.ndim == 3 else a.reshape(-1, 1)
-        if float(np.max(np.ptp(flat, axis=0))) > 2 * TOLERANCE:
+        if _varies(sample[name]):
             varying.append(name)
         else:
-            med = np.median(flat, axis=0)
+            med = np.median(_texels(sample[name]), axis=0)
             held[name] = med.tolist() if spec.param(name).channels == 3 else float(med[0])
     rough = [n for n in varying if rp is not None and n == rp.name]
     colours = [n for n in varying if spec.param(n).channels == 3]
