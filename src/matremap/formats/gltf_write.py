@@ -437,10 +437,10 @@ def finish_material(doc: dict[str, Any], rep: Replacement, infos: dict[str, dict
     else:
         exts.pop(SPECULAR, None)
     if "clearcoat" in rep.consts:
-        coat = {COAT_MAPS[n].slot: infos[n] for n in COAT_MAPS if n in infos}
+        slots = {COAT_MAPS[n].slot: infos[n] for n in COAT_MAPS if n in infos}
         if "sheen" in infos:  # one texture: the colour in its RGB, the roughness in its alpha
-            coat |= {SHEEN_MAPS[n]: dict(infos["sheen"]) for n in SHEEN_MAPS if n in rep.maps}
-        layer_extensions(exts, rep.consts, keep_unread=rep.copied, coat_textures=coat)
+            slots |= {SHEEN_MAPS[n]: dict(infos["sheen"]) for n in SHEEN_MAPS if n in rep.maps}
+        layer_extensions(exts, rep.consts, keep_unread=rep.copied, layer_textures=slots)
     elif rep.source_layered:
         for name in (CLEARCOAT, SHEEN):
             exts.pop(name, None)
@@ -476,7 +476,7 @@ def layer_extensions(
     exts: dict[str, Any],
     consts: dict[str, Any],
     keep_unread: bool = False,
-    coat_textures: dict[str, dict[str, Any]] | None = None,
+    layer_textures: dict[str, dict[str, Any]] | None = None,
 ) -> None:
     """Set (or drop, where the layer is off) the layer extensions of a ``gltf:pbr`` result's uniform values:
     KHR_materials_clearcoat (clearcoatFactor > 0), _sheen (a sheen colour not black), _transmission
@@ -484,7 +484,7 @@ def layer_extensions(
     infinity, so it is left out). The ratified READMEs' property names; a replaced extension loses the textures
     of its values (the result's values are uniform), not those of :data:`KEPT_TEXTURES`. ``keep_unread``: in a copy of a
     glTF source, a transmission or volume the result has off is the source's, which the reader does not read into
-    gltf:pbr (only its coat and sheen): kept. ``coat_textures``: the textureInfos of the layer maps by slot
+    gltf:pbr (only its coat and sheen): kept. ``layer_textures``: the textureInfos of the layer maps by slot
     (``clearcoatTexture``, ``clearcoatRoughnessTexture``, ``sheenColorTexture``, ``sheenRoughnessTexture``; their
     factors are then 1)."""
 
@@ -494,7 +494,7 @@ def layer_extensions(
     def rgb(name: str) -> list[float]:
         return [float(x) for x in np.broadcast_to(np.asarray(consts[name], dtype=float), (3,))]
 
-    given = coat_textures or {}
+    given = layer_textures or {}
     factors = {m.slot: m.factor for m in COAT_MAPS.values()}
     coat = {**{factors[k]: 1.0 for k in given if k in factors}, **{k: v for k, v in given.items() if k in factors}}
     sheen_tex = {k: v for k, v in given.items() if k in SHEEN_MAPS.values()}
