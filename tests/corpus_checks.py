@@ -371,7 +371,51 @@ def _mx_input(doc: Any, base: Path, shader: Any, name: str) -> np.ndarray | floa
     rel = f.getResolvedValueString()
     cs = f.getColorSpace() or ""
     img = read_image(base / rel, srgb="srgb" in cs.lower())
+    coords = node.getInput("texcoord")
+    place = coords.getConnectedNode() if coords is not None else None
+    if place is not None and place.getCategory() == "place2d":
+        img = _placed(img, place, node)
     return img
+
+
+def _mx_number(node: Any, name: str, default: Any) -> np.ndarray:
+    inp = node.getInput(name)
+    if inp is None or not inp.hasValueString():
+        return np.asarray(default, dtype=np.float64)
+    v = inp.getValue()
+    try:
+        return np.array(v.asTuple(), dtype=np.float64)
+    except AttributeError:
+        return np.asarray(float(v), dtype=np.float64)
+
+
+def _placed(img: np.ndarray, place: Any, image: Any, n: int = 64) -> np.ndarray:
+    """What an image node shows over the surface's [0, 1]^2 when its texcoord comes through a ``place2d``, sampled on
+    an n x n grid (nearest texel): MaterialX 1.39 ``NG_place2d_vector2``, operation order SRT, uv' = rotate((uv -
+    pivot) / scale, degrees) - offset + pivot; the image's address modes (clamp, periodic, mirror) outside [0, 1];
+    UV (0, 0) at the image's lower left. Written here from the standard library's node graph, apart from matremap's
+    own evaluator."""
+    pivot, scale = _mx_number(place, "pivot", [0.0, 0.0]), _mx_number(place, "scale", [1.0, 1.0])
+    offset, angle = _mx_number(place, "offset", [0.0, 0.0]), float(_mx_number(place, "rotate", 0.0))
+    t = (np.arange(n) + 0.5) / n
+    uv = np.stack(np.meshgrid(t, 1.0 - t), axis=-1)  # rows from the top: v from 1 down
+    q = (uv - pivot) / scale
+    c, s_ = np.cos(np.radians(angle)), np.sin(np.radians(angle))
+    q = np.stack([c * q[..., 0] - s_ * q[..., 1], s_ * q[..., 0] + c * q[..., 1]], axis=-1) - offset + pivot
+
+    def address(x: np.ndarray, mode: str) -> np.ndarray:
+        if mode == "periodic":
+            return x % 1.0
+        if mode == "mirror":
+            return 1.0 - np.abs((x % 2.0) - 1.0)
+        return np.clip(x, 0.0, 1.0)  # clamp (constant borders are not drawn here)
+
+    modes = [str(image.getInputValue(k) or "periodic") for k in ("uaddressmode", "vaddressmode")]
+    u, v = address(q[..., 0], modes[0]), address(q[..., 1], modes[1])
+    h, w = img.shape[:2]
+    cols = np.clip((u * w).astype(int), 0, w - 1)
+    rows = np.clip(((1.0 - v) * h).astype(int), 0, h - 1)
+    return img[rows, cols]
 
 
 def mtlx_colour(path: str | os.PathLike, material: str | int | None = None) -> np.ndarray:

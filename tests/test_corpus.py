@@ -148,3 +148,15 @@ def test_a_uniform_material_with_a_normal_map_keeps_it_in_another_format(tmp_pat
     normal = tmp_path / "out" / re.search(r'name="filename" value="([^"]+)"', text).group(1)
     img = cc.read_image(normal, srgb=False)
     assert cc.varies(img)  # the map itself, not a flat (0.5, 0.5, 1)
+
+
+def test_the_checker_reads_an_image_through_its_place2d_as_the_surface_shows_it():
+    """The grey-sphere calibration (MaterialX, Apache-2.0) shows a window of a colourful chart through a place2d (scale
+    0.21, offset (-1.66, -0.49), clamp): its sphere is mostly the chart's clamped grey edge. Read whole, the chart made
+    the independent checker call matremap's grey output "hue lost" (two WRONG rows of benchmarks/real_assets.py)."""
+    pytest.importorskip("MaterialX")
+    src = one("mtlx-standard_surface_greysphere_calibration/**/standard_surface_greysphere_calibration.mtlx")
+    shown = cc.material_colour(src)
+    chart = cc.read_image(src.parents[3] / "Images" / "greysphere_calibration.png", srgb=True)
+    assert cc.mean_hue(chart) is not None  # the chart itself is colourful
+    assert cc.mean_hue(shown) is None and 0.15 < cc.mean_luminance(shown) < 0.25  # the window is grey
