@@ -91,7 +91,20 @@ def staging_started(folder: Path) -> bool:
 
 
 def mid_write(folder: Path) -> bool:
-    return any(f.is_file() and f.stat().st_size > 0 for m in marked(folder) for f in [m, *m.rglob("*")])
+    """Whether a file matremap has not finished holds bytes yet. The run renames and removes its temporary files while
+    this looks (a temporary map renamed between ``is_file`` and ``stat`` failed the check itself once): a file gone is
+    one not being written."""
+
+    def written(f: Path) -> bool:
+        try:
+            return f.is_file() and f.stat().st_size > 0
+        except FileNotFoundError:
+            return False
+
+    try:
+        return any(written(f) for m in marked(folder) for f in [m, *m.rglob("*")])
+    except FileNotFoundError:  # a staging folder removed while it was walked
+        return False
 
 
 def in_database(folder: Path) -> bool:
