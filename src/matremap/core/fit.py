@@ -835,14 +835,17 @@ def _resolved_goals(
     which = FULL if strategy in JOINT else SPECULAR
     warnings: list[str] = []
     # the transmission view resolves a narrow lobe in the blur of the background seen through it
-    sharpened = None
+    sharpened, seen = None, goals[which]
     if scene.transmission is None:
-        sharpened = yield from _below_resolution(source, goals[which], which, renderer, counter)
+        specular = part(source, SPECULAR) if strategy in JOINT else None
+        if specular is not None:  # a joint fit's full render: its diffuse hides a mirror's unresolved highlight
+            which, seen = SPECULAR, (yield from counter.pixels(renderer, [specular]))[0]
+        sharpened = yield from _below_resolution(source, seen, which, renderer, counter)
     if sharpened is not None:
         warnings.append(_sharpened_note(source, sharpened, scene))
         goals = yield from _source_goals(sharpened[0], strategy, scale, renderer, counter)
     elif scene.transmission is None:
-        warnings += _check_resolution(goals[which], scene)
+        warnings += _check_resolution(seen, scene)
     if not np.any(goals[FULL] > 0):
         raise MatremapError(
             f"{source.model} renders black on the probe ({scene.describe()}): there is nothing to fit; "
