@@ -169,3 +169,16 @@ def test_remap_refuses_unsafe_outputs(plastic, tmp_path, capsys, where):
         assert [p.name for p in out.iterdir()] == ["keep.txt"]
     else:
         assert not out.exists()
+
+
+def test_a_sweep_axis_spans_at_least_min_axis_where_a_map_hardly_varies():
+    """Khronos TransmissionTest's metal stripes have a roughness map of 0 to 5e-5: swept over that range, ten fits
+    differed by noise alone and the learned polynomial's coefficient reached -2.9e7 (the transform was refused). An
+    axis now spans at least MIN_AXIS, inside the parameter's bounds."""
+    from matremap.remap import MIN_AXIS, _range
+
+    lo, hi = _range([0.0, 5e-5], (0.0, 1.0), floor=0.0)
+    assert lo == 0.0 and hi >= MIN_AXIS / 2
+    lo, hi = _range([0.5, 0.5001], (0.0, 1.0))
+    assert hi - lo == pytest.approx(MIN_AXIS, abs=1e-6) and lo < 0.5 < hi
+    assert _range([0.2, 0.8], (0.0, 1.0)) == (0.188, 0.812)  # a real range: padded by 2 % as before

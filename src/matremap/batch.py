@@ -586,8 +586,7 @@ def assemble(out: Path, source: Path, done: Sequence[tuple[Item, Row]], target: 
     file format takes the target, the format cannot hold several, or no material converted)."""
     from matremap.core.material import Material
     from matremap.formats import READERS, write_all
-    from matremap.remap import default_suffix
-    from matremap.svbrdf.textures import load_map_set
+    from matremap.remap import converted_set, default_suffix
 
     fmt = READERS[source.suffix.lower()][0]
     suffix = default_suffix(target, fmt) or (
@@ -600,7 +599,7 @@ def assemble(out: Path, source: Path, done: Sequence[tuple[Item, Row]], target: 
     for item, _ in converted:
         folder = out / item.slot
         if (folder / "maps" / "material.json").is_file():
-            results.append((item.name, load_map_set(folder / "maps")))
+            results.append((item.name, converted_set(folder / "maps")))
         else:
             results.append((item.name, Material.from_dict(json.loads((folder / "material.json").read_text()))))
     dest = out / done[0][0].slot.split("/")[0] / f"{source.stem}{suffix}"

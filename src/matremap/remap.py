@@ -58,7 +58,7 @@ from matremap.regress import quantities as qty
 from matremap.regress.transform import Transform
 from matremap.renderers import renderer_for
 from matremap.svbrdf import levels
-from matremap.svbrdf.convert import MASK_NAME, convert, source_reference
+from matremap.svbrdf.convert import MANIFEST_NAME, MASK_NAME, convert, source_reference
 from matremap.svbrdf.evaluate import evaluate as evaluate_pair
 from matremap.svbrdf.evaluate import parse_rotations
 from matremap.svbrdf.mapstats import (
@@ -80,6 +80,7 @@ from matremap.svbrdf.mixed import (
     mixed_parameter,
     remap_mixed,
     through_levels,
+    transmission_parameter,
 )
 from matremap.svbrdf.quality import Check, Thresholds, Verdict, image_checks, map_checks, sample
 from matremap.svbrdf.textures import MapSet, load_map_set, map_values, read_image, texel_limit
@@ -104,6 +105,9 @@ class RemapResult:
     verdict: Verdict = field(default_factory=Verdict)
     #: the same model in and out: the maps were copied
     identity: bool = False
+    #: the gate's checks of the uniform fits the maps were converted through, where the evaluation cannot see them
+    #: (what a material lets through, at levels: :func:`~matremap.svbrdf.levels.checks`); part of ``verdict`` too
+    fitted: list[Check] = field(default_factory=list)
 
     def moved(self, stage: Path, out: Path) -> RemapResult:
         """The result with its paths moved from the staging folder to the output folder."""
@@ -227,8 +231,15 @@ def _range(values: Any, bounds: tuple[float, float], floor: float = 1e-4) -> tup
     v = np.asarray(values, dtype=float)
     lo, hi = float(np.min(v)), float(np.max(v))
     pad = 0.02 * (hi - lo) if hi > lo else 0.05 * max(abs(hi), 1e-3)
+    pad = max(pad, 0.5 * (MIN_AXIS - (hi - lo)))
     lo, hi = max(bounds[0], lo - pad, floor), min(bounds[1], hi + pad)
     return round(lo, 6), round(hi, 6)
+
+
+#: the narrowest a sweep axis spans: a map that varies by less than 8-bit steps (a roughness of 0 to 5e-5, Khronos
+#: TransmissionTest) swept over its own range gave fits that differ by noise alone, and a learned polynomial of
+#: roughness with coefficients of 3e7
+MIN_AXIS = 0.02
 
 
 #: a map counts as uniform when all its texels are within this of one value (an 8-bit step is 1/255)
@@ -578,7 +589,7 @@ def remap(
             if write is not None:
                 from matremap.formats import write_asset
 
-                write_asset(stage / write, load_map_set(stage / "maps"), force=True)
+                write_asset(stage / write, converted_set(stage / "maps", map_set.size), force=True)
     if write is not None:
         log(f"wrote {out / write}")
     return result.moved(stage, out)
@@ -642,7 +653,7 @@ def remap_into(
     conversion = _convert_maps(folder, map_set, summary, job, target_renderer, identity, log, seconds, fitted)
     texels, outside, clipped, constant, tpath, cached = conversion
     seconds["convert"] = time.perf_counter() - t
-    result_set = load_map_set(folder / "maps")
+    result_set = converted_set(folder / "maps", map_set.size)
     result_summary = summarise(result_set, limits=(SAMPLE_LIMIT,), render_side=side)
     checks = [
         Check(
@@ -689,8 +700,18 @@ def remap_into(
     write_text(folder / "verdict.json", json.dumps(verdict.to_dict(), indent=1) + "\n")
     seconds["total"] = time.perf_counter() - t0
     return RemapResult(
-        tpath, cached, folder / "maps", html, outside, texels, mean, seconds, verdict, identity is not None
+        tpath, cached, folder / "maps", html, outside, texels, mean, seconds, verdict, identity is not None, fitted
     )
+
+
+def converted_set(folder: Path, size: tuple[int, int] = (0, 0)) -> MapSet:
+    """The map set a conversion wrote into ``folder``; one whose every parameter came out uniform (a kind of a
+    blend whose levels all agree: a glass with a texture of one value) as its constants, at the source's ``size``."""
+    doc = json.loads((folder / MANIFEST_NAME).read_text())
+    if doc.get("maps"):
+        return load_map_set(folder)
+    normal = folder / doc["normal"] if doc.get("normal") else None
+    return MapSet(doc["model"], {}, folder, size, normal, dict(doc.get("params") or {}))
 
 
 def _clamped_where(clipped: int, constant: int) -> str:
@@ -755,9 +776,11 @@ def _convert_maps(
         log(f"identity: {_identity_words(identity)}: the maps are copied, nothing is fitted")
         copy_map_set(map_set, folder / "maps", identity)
         return int(np.prod(map_set.size)), 0, 0, 0, None, True
-    through = through_levels(map_set, summary)
-    mixed: Blend | None = through or mixed_parameter(map_set, summary) or layer_parameter(map_set, summary)
-    mixed = mixed or layer_levels(map_set, summary)
+    # metal and dielectric texels first (a metal's kind lets no light through), then a transmission weight map (the
+    # kinds with and without it), then a material letting light through at levels of its other maps
+    mixed: Blend | None = mixed_parameter(map_set, summary) or transmission_parameter(map_set, summary)
+    through = None if mixed is not None else through_levels(map_set, summary)
+    mixed = mixed or through or layer_parameter(map_set, summary) or layer_levels(map_set, summary)
     if through is None and mixed is not None and mixed.layer is not None:  # a layer blended per texel
         job = hold_layer_numbers(map_set, summary, mixed, job, log)
     params = summary.sample()
@@ -782,7 +805,7 @@ def _convert_maps(
                 target_renderer,
                 complete_fix(kind.model, {**kind.constants, **kind_params}, target, job.fix),
             ),
-            lambda kind, out: convert_kind(kind, out, kind_job(job, mixed, kind, summary), log, fits),
+            lambda kind, out: convert_kind(kind, out, kind_job(job, mixed, kind, summary), log, fits, fitted),
             log,
         )
         if through is not None:
@@ -818,13 +841,19 @@ def convert_kind(
     job: RemapJob,
     log: Callable[[str], None],
     fits: dict[str, tuple[Material, Any]] | None = None,
+    fitted: list[Check] | None = None,
 ) -> MapSet:
     """One kind of a map set blended per texel (:func:`~matremap.svbrdf.mixed.remap_mixed`), converted into
     ``out``: remapped as a map set, or, where no map is left (a uniform base under a coat mask, a level of a glass's
     roughness), fitted as one material (:func:`_fit_uniform`, its layers freed) whose values are the kind's
-    constants; ``fits`` (kind -> source and fit) receives such a fit."""
+    constants; ``fits`` (kind -> source and fit) receives such a fit. ``fitted`` receives the gate's checks of what
+    the evaluation cannot see: a kind that lets light through (a transmission map's glass kind), its fit on the
+    transmission probe, or its own levels' (:func:`~matremap.svbrdf.levels.checks`)."""
     if kind.maps:
-        return load_map_set(remap_into(out, kind, replace(job, evaluate=False), log).maps)
+        nested = remap_into(out, kind, replace(job, evaluate=False), log)
+        if fitted is not None:
+            fitted += [replace(c, where=f"{kind.root.name}: {c.where}") for c in nested.fitted]
+        return converted_set(nested.maps, kind.size)
     if fits is not None and kind.root.name in fits:  # fitted already (a level: svbrdf/levels.py)
         source, r = fits[kind.root.name]
     else:
@@ -833,6 +862,8 @@ def convert_kind(
         log(f"fit: {kind.root.name} as one material onto {job.target}, relative error {r.loss:.4f}")
         if fits is not None:
             fits[kind.root.name] = (source, r)
+        if fitted is not None and "transmission" in layers_on(source.model, source.values):
+            fitted += levels.probe_checks([(kind.root.name, r)], float(r.loss), kind.root.name, job.thresholds)
     out.mkdir(parents=True, exist_ok=False)
     params = r.target.to_dict()["params"]
     doc = {"model": r.target.model, "maps": {}, "params": params, "provenance": {"transform": f"fit ({r.loss:.4f})"}}
@@ -1325,7 +1356,7 @@ def _remap_file(
             source_dir = asset.to_map_set(stage / "source")
             result.remap = remap_into(stage, load_map_set(source_dir), job, log, title=f"{asset.model} -> {target}")
             result.verdict = result.remap.verdict
-            produced: Any = load_map_set(stage / "maps")
+            produced: Any = converted_set(stage / "maps")
         else:
             produced = _remap_uniform(asset.material(), job, stage, result, log)
             if asset.normal is not None:

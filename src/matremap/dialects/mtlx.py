@@ -287,6 +287,30 @@ def layer_weights(spec: ModelSpec) -> list[str]:
     return [n for n in names if spec.param(n).channels == 1]
 
 
+def transmission_weight(spec: ModelSpec) -> str | None:
+    """The scalar weight of ``spec``'s transmission (:data:`LAYERS`), or None (a model without one, or whose
+    transmission is a colour: Mitsuba 3's glasses): a map of it blends per texel the material letting light through
+    and the same material opaque, as each model mixes its transmission into the dielectric base linearly by its weight
+    (OpenPBR 1.1 transmission_weight, Standard Surface 1.0.1 transmission, glTF KHR_materials_transmission
+    transmissionFactor, Cycles Transmission Weight, Mitsuba 3 principled spec_trans)."""
+    name = LAYERS.get(spec.id, {}).get("transmission")
+    return name if name is not None and spec.param(name).channels == 1 else None
+
+
+#: the parameters only the light a model lets through uses (its tint, the depth that tint is reached at, a volume,
+#: a thin wall): where a texel lets no light through they draw nothing (OpenPBR 1.1 "Transmission", Standard Surface
+#: 1.0.1 "Specular transmission", glTF KHR_materials_volume)
+THROUGH_PARAMS: dict[str, tuple[str, ...]] = {
+    OPEN_PBR_SURFACE.id: ("transmission_color", "transmission_depth", "geometry_thin_walled"),
+    STANDARD_SURFACE.id: ("transmission_color", "transmission_depth", "thin_walled"),
+    "gltf:pbr": ("thickness", "attenuationDistance", "attenuationColor"),
+}
+#: models whose transmission has a colour of its own, so that a texel wholly letting light through shows none of the
+#: base colour (OpenPBR's and Standard Surface's base_color is the diffuse albedo only; glTF's, Blender's and Mitsuba's
+#: base colour is the glass's tint too)
+OWN_TINT = (OPEN_PBR_SURFACE.id, STANDARD_SURFACE.id)
+
+
 def layer_roughnesses(model: str) -> list[str]:
     """The roughness (or gloss) parameters of ``model``'s layers (:data:`LAYER_PARAMS`): a map of one is blended per
     texel between a few levels of it (:class:`matremap.svbrdf.mixed.Levels`)."""

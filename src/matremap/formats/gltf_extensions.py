@@ -23,9 +23,10 @@ transmission on the transmission probe); so is a textured material whose coat or
 its own values: the layer is fitted once and held while the sweep fits the base maps under it) or whose transmission
 is (converted at levels of its roughness map, :func:`~matremap.svbrdf.mixed.through_levels`); a faint layer is
 noted; a layer with textures of its own is listed in ``asset.lost`` and refused for other targets, except a coat's
-weight texture (``clearcoatTexture``: read as the ``clearcoat`` map, the material blended per texel with the coat
-and without it). A coat's own normal map (``clearcoatNormalTexture``) is noted: the target's coat follows the
-base's normal map.
+or a transmission's weight texture (``clearcoatTexture``, ``transmissionTexture``: read as the ``clearcoat`` or
+``transmission`` map, the material blended per texel with the layer and without it), a coat's roughness and a
+sheen's colour and roughness textures (converted at levels of them). A coat's own normal map
+(``clearcoatNormalTexture``) is noted: the target's coat follows the base's normal map.
 """
 
 from __future__ import annotations
@@ -223,6 +224,10 @@ COAT_MAPS = {
 _COAT_SLOTS = {m.slot for m in COAT_MAPS.values()}
 
 
+#: gltf:pbr's transmission weight map: R of KHR_materials_transmission's transmissionTexture times its factor (the
+#: material converted with the transmission and without it, blended per texel: svbrdf/mixed.py)
+TRANSMISSION_MAP = "transmissionTexture"
+
 #: gltf:pbr's sheen maps -> their KHR_materials_sheen texture (the colour in its sRGB RGB, the roughness in its alpha;
 #: converted at levels of them: :func:`~matremap.svbrdf.mixed.layer_levels`)
 SHEEN_MAPS = {"sheenColor": "sheenColorTexture", "sheenRoughness": "sheenRoughnessTexture"}
@@ -256,7 +261,7 @@ def layer_values(found: dict[str, dict[str, Any]], textured: bool = False) -> di
     cc, sh, tr = found.get(CLEARCOAT), found.get(SHEEN), found.get(TRANSMISSION)
     coat = cc is not None and cc["clearcoatFactor"] > COAT_LOOK and not _coat_textures(cc)
     sheen = sh is not None and SHEEN in " ".join(lost_look(found))
-    through = tr is not None and TRANSMISSION in " ".join(lost_look(found)) and not _textures(tr)
+    through = tr is not None and TRANSMISSION in " ".join(lost_look(found))
     vol = found.get(VOLUME)
     if not (coat or sheen or through):
         return {}
@@ -310,6 +315,12 @@ def extension_notes(found: dict[str, dict[str, Any]], textured: bool = False) ->
             f"{CLEARCOAT}.clearcoatTexture masks the coat: the material is converted with the coat and without it, "
             "and the two blended per texel by the mask"
         )
+    tr = found.get(TRANSMISSION)
+    if tr is not None and "transmission" in layers and TRANSMISSION_MAP in tr:
+        notes.append(
+            f"{TRANSMISSION}.{TRANSMISSION_MAP} varies how much light goes through: the material is converted with its "
+            "transmission and without it, and the two blended per texel by the map"
+        )
     if cc is not None and "clearcoat" in layers and "clearcoatRoughnessTexture" in cc:
         notes.append(
             f"{CLEARCOAT}.clearcoatRoughnessTexture varies the coat's roughness: the material is converted at a few "
@@ -334,7 +345,6 @@ def extension_notes(found: dict[str, dict[str, Any]], textured: bool = False) ->
             f"{SHEEN} colour {_rgb(sh['sheenColorFactor'])}, roughness {_g(sh['sheenRoughnessFactor'])}"
             f"{_textures(sh)}: a faint sheen the fit does not see; {LEFT_BEHIND}"
         )
-    tr = found.get(TRANSMISSION)
     vol = found.get(VOLUME)
     if "transmission" in layers and vol is not None and "thicknessTexture" in vol:
         notes.append(
@@ -368,6 +378,7 @@ __all__ = [
     "SHEEN",
     "SPECULAR",
     "TRANSMISSION",
+    "TRANSMISSION_MAP",
     "VOLUME",
     "check_texture_info",
     "extension_notes",

@@ -56,6 +56,7 @@ from matremap.formats.gltf_extensions import (
     SHEEN_MAPS,
     SPECULAR,
     TRANSMISSION,
+    TRANSMISSION_MAP,
     check_texture_info,
     extension_notes,
     layer_values,
@@ -425,7 +426,8 @@ class MaterialTextures:
 
     def read_layer_maps(self, found: dict[str, dict[str, Any]], layers: dict[str, Any]) -> dict[str, TextureRef]:
         """The maps of the layers read into gltf:pbr (``layers``): a coat mask (R of clearcoatTexture) and a coat
-        roughness map (G of its texture); a sheen's colour and roughness maps (:meth:`read_sheen_maps`)."""
+        roughness map (G of its texture); a sheen's colour and roughness maps (:meth:`read_sheen_maps`); a
+        transmission weight map (R of transmissionTexture)."""
         maps: dict[str, TextureRef] = {}
         if "clearcoat" in layers:
             for name, coat in COAT_MAPS.items():
@@ -433,6 +435,9 @@ class MaterialTextures:
                     maps[name] = self.read_layer_map(found[CLEARCOAT][coat.slot], coat.slot, coat.channel, layers[name])
         if "sheenColor" in layers:
             maps |= self.read_sheen_maps(found[SHEEN])
+        if "transmission" in layers and TRANSMISSION_MAP in found[TRANSMISSION]:
+            info = found[TRANSMISSION][TRANSMISSION_MAP]
+            maps["transmission"] = self.read_layer_map(info, TRANSMISSION_MAP, 0, layers["transmission"])
         return maps
 
     def read_sheen_maps(self, sheen: dict[str, Any]) -> dict[str, TextureRef]:

@@ -59,6 +59,7 @@ from matremap.formats.gltf_extensions import (
     SHEEN_MAPS,
     SPECULAR,
     TRANSMISSION,
+    TRANSMISSION_MAP,
     VOLUME,
 )
 from matremap.formats.gltf_read import DEFAULT_IOR, MODEL
@@ -249,6 +250,17 @@ def sheen_image(maps: dict[str, np.ndarray], exts: dict[str, Any]) -> NewImage |
     return NewImage("sheen", png(rgba), "image/png", old)
 
 
+def transmission_image(maps: dict[str, np.ndarray], exts: dict[str, Any]) -> NewImage | None:
+    """A ``transmission`` map as KHR_materials_transmission's ``transmissionTexture`` (its R channel of a linear
+    PNG; the factor is then 1), replacing the copied extension's own (``exts``)."""
+    if "transmission" not in maps:
+        return None
+    pixels = np.zeros((*maps["transmission"].shape[:2], 3))
+    pixels[..., 0] = maps["transmission"]
+    old = (exts.get(TRANSMISSION) or {}).get(TRANSMISSION_MAP)
+    return NewImage("transmission", png(code(pixels, False)), "image/png", old)
+
+
 def normal_image(mat: dict[str, Any], normal: Path | None, source_normal: TextureRef | None) -> NewImage | None:
     """The result's normal map as a texture (a PNG or JPEG file as it is, anything else encoded as
     PNG), unless it is the source's own file used as stored (which the copy keeps)."""
@@ -398,6 +410,7 @@ def plan_material(doc: dict[str, Any], rep: Replacement) -> list[NewImage]:
     images += [spec_image, normal_image(mat, rep.normal, rep.source_normal if rep.copied else None)]
     images += [coat_image(rep.maps, mat.get("extensions") or {}, slot) for slot in COAT_MAPS]
     images.append(sheen_image(rep.maps, mat.get("extensions") or {}))
+    images.append(transmission_image(rep.maps, mat.get("extensions") or {}))
     if opacity is not None and not rep.copied:
         mat["alphaMode"] = "MASK" if opacity.settings.get("mode") == "mask" else "BLEND"
         if "cutoff" in opacity.settings:
@@ -440,6 +453,8 @@ def finish_material(doc: dict[str, Any], rep: Replacement, infos: dict[str, dict
         slots = {COAT_MAPS[n].slot: infos[n] for n in COAT_MAPS if n in infos}
         if "sheen" in infos:  # one texture: the colour in its RGB, the roughness in its alpha
             slots |= {SHEEN_MAPS[n]: dict(infos["sheen"]) for n in SHEEN_MAPS if n in rep.maps}
+        if "transmission" in infos:
+            slots[TRANSMISSION_MAP] = infos["transmission"]
         layer_extensions(exts, rep.consts, keep_unread=rep.copied, layer_textures=slots)
     elif rep.source_layered:
         for name in (CLEARCOAT, SHEEN):
@@ -464,7 +479,7 @@ LAYER_EXTENSIONS = {
 
 
 #: gltf:pbr's layer parameters the writer takes as maps (each into its extension's texture)
-LAYER_MAPS = ("clearcoat", "clearcoatRoughness", *SHEEN_MAPS)
+LAYER_MAPS = ("clearcoat", "clearcoatRoughness", *SHEEN_MAPS, "transmission")
 #: the textures of a layer extension that hold none of its values: a copy of the source keeps them
 KEPT_TEXTURES = {CLEARCOAT: "clearcoatNormalTexture", VOLUME: "thicknessTexture"}
 #: the parameters this writer takes as numbers only: KHR_materials_ior has no texture, and the layer extensions'
@@ -485,8 +500,8 @@ def layer_extensions(
     of its values (the result's values are uniform), not those of :data:`KEPT_TEXTURES`. ``keep_unread``: in a copy of a
     glTF source, a transmission or volume the result has off is the source's, which the reader does not read into
     gltf:pbr (only its coat and sheen): kept. ``layer_textures``: the textureInfos of the layer maps by slot
-    (``clearcoatTexture``, ``clearcoatRoughnessTexture``, ``sheenColorTexture``, ``sheenRoughnessTexture``; their
-    factors are then 1)."""
+    (``clearcoatTexture``, ``clearcoatRoughnessTexture``, ``sheenColorTexture``, ``sheenRoughnessTexture``,
+    ``transmissionTexture``; their factors are then 1)."""
 
     def one(name: str) -> float:
         return float(np.asarray(consts[name], dtype=float).reshape(-1)[0])
@@ -502,6 +517,9 @@ def layer_extensions(
         **({"sheenColorFactor": [1.0, 1.0, 1.0]} if "sheenColorTexture" in sheen_tex else {}),
         **({"sheenRoughnessFactor": 1.0} if "sheenRoughnessTexture" in sheen_tex else {}),
     }
+    through: dict[str, Any] | None = {"transmissionFactor": one("transmission")} if one("transmission") > 0 else None
+    if TRANSMISSION_MAP in given:  # a weight map: its values in the texture, the factor 1
+        through = {"transmissionFactor": 1.0, TRANSMISSION_MAP: given[TRANSMISSION_MAP]}
     values: dict[str, dict[str, Any] | None] = {
         CLEARCOAT: {
             "clearcoatFactor": one("clearcoat"),
@@ -518,7 +536,7 @@ def layer_extensions(
         }
         if max(rgb("sheenColor")) > 0 or "sheenColorTexture" in sheen_tex
         else None,
-        TRANSMISSION: {"transmissionFactor": one("transmission")} if one("transmission") > 0 else None,
+        TRANSMISSION: through,
         VOLUME: {
             "thicknessFactor": one("thickness"),
             "attenuationColor": rgb("attenuationColor"),

@@ -63,6 +63,8 @@ def interpolated(levels: Levels, x: Any, fit_at: FitAt) -> Material:
 def at(levels: Levels, source: Material, x: Any) -> Material:
     """``source`` with the levels' parameter at ``x`` (a grey or a colour for a colour's levels)."""
     value = np.asarray(x, dtype=float).reshape(-1)
+    if levels.colour and len(levels.levels) == 1 and levels.typical is not None and np.allclose(value, levels.levels):
+        return source.with_params(levels.params(levels.kinds[0]))  # a uniform colour map: its colour itself
     if source.spec.param(levels.name).channels == 3:
         return source.with_params({levels.name: np.broadcast_to(value, (3,)).tolist()})
     return source.with_params({levels.name: float(value[0])})
@@ -147,10 +149,6 @@ def checks(
     worst of the levels' own errors, of the midpoints', of a colour's median texel and of a Grid's corners; and the
     colour and energy of the levels' probe renders (:func:`~matremap.svbrdf.quality.image_checks`). The evaluation
     under the environment draws the maps' reflection only; this is where what the glass lets through is judged."""
-    from matremap.core.fit import FULL, part
-    from matremap.renderers import get_renderer
-    from matremap.renderers.base import render_images
-
     errors: list[tuple[float, str]] = []
     fits = []
     for axis, fit_at, midpoints in axes:
@@ -172,6 +170,16 @@ def checks(
         f"levels: relative error on the transmission probe {min(errors)[0]:.4f}-{worst:.4f} over {len(fits)} "
         f"level(s), their midpoints and typical texels (worst at {where}); the evaluation draws reflection only"
     )
+    return probe_checks(fits, worst, where, thresholds)
+
+
+def probe_checks(fits: Sequence[tuple[str, Any]], worst: float, where: str, thresholds: Thresholds) -> list[Check]:
+    """The gate's checks of uniform fits (name, fit result) on their probe: ``fit_error`` (``worst``, at ``where``)
+    and the colour and energy of each fit's probe renders (:func:`~matremap.svbrdf.quality.image_checks`)."""
+    from matremap.core.fit import FULL, part
+    from matremap.renderers import get_renderer
+    from matremap.renderers.base import render_images
+
     scene = fits[0][1].scene
     pairs = []
     for name, r in fits:
@@ -192,6 +200,7 @@ __all__ = [
     "FitAt",
     "at",
     "checks",
+    "probe_checks",
     "corner_error",
     "interpolated",
     "midpoint",

@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from matremap.dialects.mtlx import layer_weights
+from matremap.dialects.mtlx import layer_weights, transmission_weight
 from matremap.svbrdf.textures import MapReader, MapSet, map_values
 
 #: the gate's map checks look at this many texels a side (:func:`matremap.svbrdf.quality.sample`)
@@ -241,7 +241,9 @@ def summarise(
     constants = {k: v for k, v in map_set.constants.items() if k in spec.param_names}
     k = stride(map_set.size, render_side) if render_side else 1
     special = {name: (value, spec.param(name).bounds) for name, value, _ in spec.specialisations}
-    for name in layer_weights(spec):  # a coat or sheen over part of the surface: counted as a specialisation is
+    through = transmission_weight(spec)
+    # a coat, a sheen or a transmission over part of the surface: counted as a specialisation is
+    for name in [*layer_weights(spec), *([through] if through else [])]:
         special.setdefault(name, (spec.param(name).bounds[1], spec.param(name).bounds))
     stats = {name: MapStats() for name in map_set.maps}
     hists: dict[str, _Histogram] = {}

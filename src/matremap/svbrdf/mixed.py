@@ -45,6 +45,7 @@ import numpy as np
 from matremap.core.imageio import write_text
 from matremap.core.models import ModelSpec
 from matremap.dialects import get_model, list_models
+from matremap.dialects.mtlx import transmission_weight
 from matremap.errors import MatremapError
 from matremap.regress import quantities as qty
 from matremap.svbrdf.convert import MANIFEST_NAME, MASK_NAME, source_reference
@@ -75,6 +76,9 @@ class Mixed:
     kinds: tuple[str, str] = ("metal", "dielectric")
     #: the layer whose weight the parameter is (None: a specialisation, metal and dielectric)
     layer: str | None = None
+    #: parameters the first kind holds at these values whatever the source's maps say: a metal's kind is converted
+    #: without the material's transmission (a metal lets no light through in any model here)
+    first_holds: Mapping[str, Any] = field(default_factory=dict)
 
     def weight(self, values: np.ndarray) -> np.ndarray:
         """The metal's share per texel of the mixed parameter's ``values``, in [0, 1]."""
@@ -95,8 +99,9 @@ class Mixed:
         return (self.name,)
 
     def params(self, kind: str) -> dict[str, Any]:
-        """The parameters a ``kind``'s map set holds in place of :attr:`inputs`."""
-        return {self.name: self.value(kind)}
+        """The parameters a ``kind``'s map set holds in place of :attr:`inputs` (and, for the first kind,
+        :attr:`first_holds`)."""
+        return {**(self.first_holds if kind == self.kinds[0] else {}), self.name: self.value(kind)}
 
     def band_weights(self, values: Mapping[str, np.ndarray]) -> tuple[list[np.ndarray], list[np.ndarray] | None]:
         """Each kind's weights per texel from the :attr:`inputs` maps' ``values``: for the target's numbers, and
@@ -163,8 +168,12 @@ class Levels:
         return (self.name,)
 
     def params(self, kind: str) -> dict[str, Any]:
+        """A roughness's level; a colour's level is a grey, but where it is the only one (a uniform colour map), the
+        map's median colour itself."""
         v = self.value(kind)
-        return {self.name: [v] * 3 if self.colour else v}  # a colour's level: a grey
+        if self.colour and len(self.levels) == 1 and self.typical is not None:
+            return {self.name: list(self.typical)}
+        return {self.name: [v] * 3 if self.colour else v}
 
     def band_weights(self, values: Mapping[str, np.ndarray]) -> tuple[list[np.ndarray], list[np.ndarray] | None]:
         raw = values[self.name]
@@ -426,11 +435,13 @@ def through_levels(map_set: MapSet, summary: MapSummary) -> Levels | Grid | None
             _colour_levels(colours[0], summary, {**held, rough[0]: round(float(np.median(r)), 6)}),
             corners,
         )
-    if not varying:  # every map uniform: one level of the first scalar map, the others held
+    if not varying:  # every map uniform: one level of the first scalar map (else of the roughness), the others held
         first = next((n for n in map_set.maps if spec.param(n).channels == 1), None)
-        if first is None:
-            return None
-        return Levels(first, (float(held.pop(first)),), None, held)
+        if first is not None:
+            return Levels(first, (float(held.pop(first)),), None, held)
+        colour = next(iter(map_set.maps))  # a colour map alone (Khronos TransmissionTest's GreenMask: a mask in alpha)
+        typical = tuple(round(float(v), 6) for v in np.broadcast_to(held.pop(colour), (3,)))
+        return Levels(colour, (round(float(np.mean(typical)), 6),), None, held, per_channel=True, typical=typical)
     name = varying[0]
     if spec.param(name).channels == 3:
         return _colour_levels(name, summary, held)
@@ -480,8 +491,26 @@ def mixed_parameter(map_set: MapSet, summary: MapSummary) -> Mixed | None:
         if stats.hi - stats.lo <= 2 * TOLERANCE or stats.specialisation is None:
             continue
         counts = stats.specialisation
-        return Mixed(name, float(counts.value), float(counts.other), counts)
+        through = transmission_weight(spec)
+        lets_through = through is not None and (
+            through in map_set.maps or float(np.max(np.asarray(map_set.constants.get(through, 0.0)))) > 0.0
+        )
+        holds = {through: 0.0} if lets_through and through is not None else {}
+        return Mixed(name, float(counts.value), float(counts.other), counts, first_holds=holds)
     return None
+
+
+def transmission_parameter(map_set: MapSet, summary: MapSummary) -> Mixed | None:
+    """The transmission weight (:func:`~matremap.dialects.mtlx.transmission_weight`) given as a map that is not
+    uniform, or None: the material is converted letting light through (weight 1: its other maps converted at levels
+    on the transmission probe, :func:`through_levels`) and opaque (weight 0), and the two blended per texel by the
+    map (Khronos TransmissionTest: a glass pattern over an opaque red, ``transmissionTexture``)."""
+    name = transmission_weight(map_set.spec)
+    stats = summary.stats.get(name or "")
+    if name is None or stats is None or stats.hi - stats.lo <= 2 * TOLERANCE or stats.specialisation is None:
+        return None
+    counts = stats.specialisation
+    return Mixed(name, float(counts.value), float(counts.other), counts, ("transmission", "bare"), "transmission")
 
 
 def layer_parameter(map_set: MapSet, summary: MapSummary) -> Mixed | None:
@@ -559,11 +588,12 @@ def kind_map_set(map_set: MapSet, mixed: Blend, kind: str, dest: Path) -> MapSet
         return os.path.relpath(Path(f).resolve(), dest.resolve())
 
     held = mixed.held if isinstance(mixed, Levels | Grid) else {}
-    maps = {k: f for k, f in map_set.maps.items() if k not in mixed.inputs and k not in held}
+    fixed = mixed.params(kind)
+    maps = {k: f for k, f in map_set.maps.items() if k not in mixed.inputs and k not in held and k not in fixed}
     doc: dict[str, Any] = {
         "model": map_set.model,
         "maps": {k: rel(f) for k, f in maps.items()},
-        "params": {**map_set.constants, **held, **mixed.params(kind)},
+        "params": {**map_set.constants, **held, **fixed},
         "colorspace": {k: map_set.colorspace[k] for k in maps if k in map_set.colorspace},
     }
     if map_set.normal is not None:
@@ -727,7 +757,8 @@ def blend(sides: list[MapSet], mixed: Blend, dest: Path, source: MapSet) -> int:
 
     spec = sides[0].spec
     own = LAYER_PARAMS.get(spec.id, {}).get(mixed.layer or "")
-    plan, constants = _plan(sides, source.maps[mixed.name], source.info[mixed.name], _borrowed(sides, mixed, own))
+    borrowed = _borrowed(sides, mixed, own) or _through_borrowed(sides, mixed)
+    plan, constants = _plan(sides, source.maps[mixed.name], source.info[mixed.name], borrowed)
     tint = mixed.tint if isinstance(mixed, Grid) else mixed
     hue = (tint.name, own.colour) if isinstance(tint, Levels) and tint.chroma and own and own.colour else None
     if hue is not None and hue[1] in constants:  # a uniform layer colour takes the texels' hue: a map
@@ -772,6 +803,47 @@ def _borrowed(sides: list[MapSet], mixed: Blend, own: Any) -> dict[str, list[int
             if not on[i] and lit:
                 source[i] = min(lit, key=lambda j: abs(j - i))
     return dict.fromkeys(names, source) if source != list(range(len(sides))) else {}
+
+
+def _through_borrowed(sides: list[MapSet], mixed: Blend) -> dict[str, list[int]]:
+    """Between a kind that lets light through and one that does not (a transmission weight map; a metal kind, held
+    opaque, beside a dielectric glass), the side each side takes the target's transmission parameters from: the
+    kind letting light through (what only the transmitted light uses: :data:`~matremap.dialects.mtlx.THROUGH_PARAMS`),
+    since the other draws nothing of them and a blend would pull a texel's tint towards whatever that side holds.
+    The transmission weight itself is blended (a metal's texels get 0: no renderer need know that a metal hides
+    it). Where the target's transmission has a colour of its own
+    (:data:`~matremap.dialects.mtlx.OWN_TINT`), its dielectric base colour is the opaque kind's (a texel wholly
+    letting light through shows none of it). Each model mixes its transmission in linearly by its weight and a metal
+    over it, so the blend is then exact at every weight."""
+    from matremap.dialects.mtlx import OWN_TINT, THROUGH_PARAMS
+
+    if not isinstance(mixed, Mixed) or len(sides) != 2:
+        return {}
+    spec = sides[0].spec
+    weight_name = transmission_weight(spec)
+    if weight_name is None:
+        return {}
+    on = [_lets_through(ms, weight_name) for ms in sides]
+    if on.count(True) != 1:
+        return {}
+    lit = on.index(True)
+    names = [n for n in THROUGH_PARAMS.get(spec.id, ()) if n in spec.param_names]
+    out = dict.fromkeys(names, [lit, lit])
+    diffuse = qty.diffuse_param(spec)
+    metal = any(_at_least(ms, n, v) for ms in sides for n, v, _ in spec.specialisations)
+    if mixed.layer == "transmission" and spec.id in OWN_TINT and diffuse is not None and not metal:
+        out[diffuse.name] = [1 - lit, 1 - lit]
+    return out
+
+
+def _lets_through(ms: MapSet, name: str) -> bool:
+    """Whether a converted kind lets light through (its transmission weight, a map or a constant, above 0)."""
+    return name in ms.maps or float(np.max(np.asarray(ms.constants.get(name, 0.0), dtype=float))) > 0.0
+
+
+def _at_least(ms: MapSet, name: str, value: float) -> bool:
+    """Whether a converted kind holds ``name`` at ``value`` somewhere (a metal: its metalness at 1): a map counts."""
+    return name in ms.maps or float(np.max(np.asarray(ms.constants.get(name, 0.0), dtype=float))) >= value
 
 
 def _hued(spec: ModelSpec, name: str, value: Any, sides: list[MapSet], info: ImageInfo, weights: Path) -> _Blended:

@@ -1,0 +1,100 @@
+"""A transmission weight given as a map (issue 16): Khronos TransmissionTest (tests/data/corpus, CC0), whose glass
+stripes are a ``transmissionTexture`` over an opaque red, was refused ("carries its look in
+KHR_materials_transmission"). The material is now converted letting light through and opaque, and the two blended per
+texel by the map (svbrdf/mixed.py ``transmission_parameter``); a metal beside a glass is converted opaque."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from matremap.cli import main
+from matremap.formats import read_asset
+
+sys.path.insert(0, str(Path(__file__).parent))
+import corpus_checks as cc  # noqa: E402
+
+TT = Path(__file__).resolve().parent / "data" / "corpus" / "gltf-TransmissionTest" / "TransmissionTest.glb"
+
+
+def _glb_texture(material: str, slot: str) -> np.ndarray:
+    """The R channel of a texture of a TransmissionTest material, decoded here (pygltflib's JSON, PIL), apart from
+    matremap's reader."""
+    doc, binary = cc.gltf_load(TT)
+    m = doc["materials"][cc.gltf_material_index(doc, material)]
+    info = m["extensions"]["KHR_materials_transmission"][slot]
+    source = doc["textures"][info["index"]]["source"]
+    return cc._image_from_bytes(cc.gltf_image_bytes(TT, doc, binary, source), srgb=False)[..., 0]
+
+
+def test_a_transmission_texture_is_read_as_a_map_of_the_transmission_weight():
+    asset = read_asset(TT, "RedTransTexture")
+    assert asset.model == "gltf:pbr" and not asset.lost
+    assert set(asset.textures) == {"transmission"}
+    assert asset.textures["transmission"].channels == (0,) and asset.textures["transmission"].scale == 1.0
+    assert any("transmissionTexture varies how much light goes through" in n for n in asset.notes)
+
+
+@pytest.mark.slow
+def test_a_transmission_map_onto_openpbr_writes_a_weight_map_that_follows_it_and_one_tint(tmp_path, capsys):
+    """The glass stripes and the opaque red between them: each kind fitted once (the glass on the transmission probe,
+    whose fit the gate checks since the evaluation draws reflection only), blended by the map. The written
+    transmission_weight follows the source's texture; the glass's tint is one colour, the glass kind's (the opaque
+    kind draws none of it), and the base colour the opaque kind's: both red."""
+    out = tmp_path / "out"
+    code = main(["remap", str(TT), "--material", "RedTransTexture", "--to", "mtlx:open_pbr_surface", "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 0, err[-800:]
+    assert "mixed: transmission varies per texel" in err
+    checks = json.loads((out / "verdict.json").read_text())["checks"]
+    assert any(c["name"] == "fit_error" and "transmission probe" in c["where"] for c in checks)
+    doc = json.loads((out / "maps" / "material.json").read_text())
+    assert "transmission_weight" in doc["maps"]
+    assert "transmission_color" not in doc["maps"] and "base_color" not in doc["maps"]
+    for name in ("transmission_color", "base_color"):
+        colour = np.asarray(doc["params"][name], dtype=float)
+        assert colour[0] > 0.8 and colour[1] < 0.25 and colour[2] < 0.15, (name, colour)
+    from matremap.svbrdf.textures import read_image
+
+    weight = np.asarray(read_image(out / "maps" / doc["maps"]["transmission_weight"], "linear")[0])[..., 0]
+    source = _glb_texture("RedTransTexture", "transmissionTexture")
+    assert weight.shape == source.shape
+    assert np.corrcoef(weight.ravel(), source.ravel())[0, 1] > 0.999
+    assert weight[source < 1e-3].max() < 1e-3 and weight[source > 0.999].min() > 0.95
+    ok, why = cc.mtlx_loads(next(out.glob("*.mtlx")))
+    assert ok, why
+
+
+def test_a_transmission_map_onto_gltf_is_written_as_a_transmission_texture(tmp_path, capsys):
+    out = tmp_path / "out"
+    code = main(["remap", str(TT), "--material", "RedTransTexture", "--to", "gltf:pbr", "-o", str(out)])
+    assert code == 0, capsys.readouterr().err[-800:]
+    written = out / "TransmissionTest.glb"
+    doc, binary = cc.gltf_load(written)
+    m = doc["materials"][cc.gltf_material_index(doc, "RedTransTexture")]
+    tr = m["extensions"]["KHR_materials_transmission"]
+    assert tr["transmissionFactor"] == 1.0
+    source = doc["textures"][tr["transmissionTexture"]["index"]]["source"]
+    got = cc._image_from_bytes(cc.gltf_image_bytes(written, doc, binary, source), srgb=False)[..., 0]
+    want = _glb_texture("RedTransTexture", "transmissionTexture")
+    assert got.shape == want.shape and np.abs(got - want).max() <= 1.0 / 255 + 1e-6
+    ok, why = cc.gltf_loads(written)
+    assert ok, why
+
+
+@pytest.mark.slow
+def test_a_glass_whose_colour_texture_is_uniform_keeps_its_colour(tmp_path, capsys):
+    """GreenMask: transmission 1 over a base colour texture whose colour is one value (its alpha is a MASK). Every
+    map being uniform, no level was found and the material fell through to a sweep of reflection (refused, "4 usable
+    points"); it is one fit on the transmission probe at the map's colour, not at its grey."""
+    out = tmp_path / "out"
+    code = main(["remap", str(TT), "--material", "GreenMask", "--to", "mtlx:open_pbr_surface", "-o", str(out)])
+    assert code == 0, capsys.readouterr().err[-800:]
+    doc = json.loads((out / "maps" / "material.json").read_text())
+    tint = np.asarray(doc["params"]["transmission_color"], dtype=float)
+    assert doc["params"]["transmission_weight"] == pytest.approx(1.0)
+    assert tint[1] > 0.6 and tint[0] < 0.3 and tint[2] < 0.3, tint  # green, as the source's 0.15, 0.83, 0.19
