@@ -84,19 +84,17 @@ def test_malformed_extension_values_are_refused_naming_the_material_and_field(tm
     assert "material 'bad'" in str(e.value) and "\n" not in str(e.value)
 
 
-@pytest.mark.parametrize(
-    "ext, lost",
-    [
-        ({"KHR_materials_transmission": {"transmissionFactor": 0.2, "transmissionTexture": {"index": 0}}}, "Texture"),
-        ({"KHR_materials_transmission": {"transmissionFactor": 0.2, "transmissionTexture": {"index": 0}}}, "0.2"),
-    ],
-)
-def test_a_textured_transmission_is_lost(tmp_path, ext, lost):
-    """A uniform transmission is read into gltf:pbr and fitted on the transmission probe
-    (test_transmission_fit.py); a textured one is not a uniform material and stays lost (a sheen's textures are read
-    as maps: test_sheen_maps.py)."""
+def test_a_textured_transmission_is_read_as_a_weight_map(tmp_path):
+    """A uniform transmission is read into gltf:pbr and fitted on the transmission probe (test_transmission_fit.py); a
+    textured one was lost (refused for other models): its texture's R times the factor is now gltf:pbr's
+    ``transmission`` map, blended per texel between the material letting light through and opaque
+    (test_transmission_maps.py)."""
+    ext = {"KHR_materials_transmission": {"transmissionFactor": 0.2, "transmissionTexture": {"index": 0}}}
     asset = read(make_file(tmp_path, "a.gltf", [{"extensions": ext}], {"t": ramp()}))
-    assert len(asset.lost) == 1 and lost in asset.lost[0] and asset.model == "gltf:metal-rough"
+    assert asset.lost == [] and asset.model == "gltf:pbr"
+    ref = asset.textures["transmission"]
+    assert ref.channels == (0,) and ref.scale == pytest.approx(0.2)
+    assert asset.constants["transmission"] == pytest.approx(0.2)
 
 
 @pytest.mark.parametrize(

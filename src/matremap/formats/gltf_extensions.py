@@ -315,12 +315,6 @@ def extension_notes(found: dict[str, dict[str, Any]], textured: bool = False) ->
             f"{CLEARCOAT}.clearcoatTexture masks the coat: the material is converted with the coat and without it, "
             "and the two blended per texel by the mask"
         )
-    tr = found.get(TRANSMISSION)
-    if tr is not None and "transmission" in layers and TRANSMISSION_MAP in tr:
-        notes.append(
-            f"{TRANSMISSION}.{TRANSMISSION_MAP} varies how much light goes through: the material is converted with its "
-            "transmission and without it, and the two blended per texel by the map"
-        )
     if cc is not None and "clearcoat" in layers and "clearcoatRoughnessTexture" in cc:
         notes.append(
             f"{CLEARCOAT}.clearcoatRoughnessTexture varies the coat's roughness: the material is converted at a few "
@@ -345,7 +339,18 @@ def extension_notes(found: dict[str, dict[str, Any]], textured: bool = False) ->
             f"{SHEEN} colour {_rgb(sh['sheenColorFactor'])}, roughness {_g(sh['sheenRoughnessFactor'])}"
             f"{_textures(sh)}: a faint sheen the fit does not see; {LEFT_BEHIND}"
         )
-    vol = found.get(VOLUME)
+    return notes + _through_notes(found, layers, lost)
+
+
+def _through_notes(found: dict[str, dict[str, Any]], layers: dict[str, Any], lost: str) -> list[str]:
+    """The notes of KHR_materials_transmission and _volume (``layers``: what :func:`layer_values` read)."""
+    notes = []
+    tr, vol = found.get(TRANSMISSION), found.get(VOLUME)
+    if tr is not None and "transmission" in layers and TRANSMISSION_MAP in tr:
+        notes.append(
+            f"{TRANSMISSION}.{TRANSMISSION_MAP} varies how much light goes through: the material is converted with its "
+            "transmission and without it, and the two blended per texel by the map"
+        )
     if "transmission" in layers and vol is not None and "thicknessTexture" in vol:
         notes.append(
             f"{VOLUME}.thicknessTexture is a rasteriser's stand-in for the length of the path through the object (the "
@@ -353,9 +358,7 @@ def extension_notes(found: dict[str, dict[str, Any]], textured: bool = False) ->
             "converted; the volume's length comes from the geometry (thicknessFactor "
             f"{_g(vol['thicknessFactor'])} > 0: a volume, not a thin wall); a glTF copy keeps it"
         )
-    if "transmission" in layers:
-        pass  # read into gltf:pbr above
-    elif tr is not None and TRANSMISSION not in " ".join(lost):
+    if "transmission" not in layers and tr is not None and TRANSMISSION not in lost:
         notes.append(f"{TRANSMISSION} factor 0: nothing goes through")
     if vol is not None and "transmission" not in layers:
         notes.append(

@@ -809,12 +809,15 @@ def _through_borrowed(sides: list[MapSet], mixed: Blend) -> dict[str, list[int]]
     """Between a kind that lets light through and one that does not (a transmission weight map; a metal kind, held
     opaque, beside a dielectric glass), the side each side takes the target's transmission parameters from: the
     kind letting light through (what only the transmitted light uses: :data:`~matremap.dialects.mtlx.THROUGH_PARAMS`),
-    since the other draws nothing of them and a blend would pull a texel's tint towards whatever that side holds.
-    The transmission weight itself is blended (a metal's texels get 0: no renderer need know that a metal hides
-    it). Where the target's transmission has a colour of its own
-    (:data:`~matremap.dialects.mtlx.OWN_TINT`), its dielectric base colour is the opaque kind's (a texel wholly
-    letting light through shows none of it). Each model mixes its transmission in linearly by its weight and a metal
-    over it, so the blend is then exact at every weight."""
+    since the other draws nothing of them and a blend would pull a texel's tint towards whatever that side holds;
+    beside a metal, the weight too: every model here mixes its metal over the dielectric base and its transmission
+    (OpenPBR 1.1 base_metalness, Standard Surface 1.0.1 metalness, glTF's metallic, Cycles' (1 - Metallic), Mitsuba
+    3's principled), so the metal's texels hide it, and a texel half metal keeps the source's whole transmission under
+    its dielectric half (blended, its weight fell to a half and showed the base colour as diffuse: TransmissionTest's
+    YellowTransMetal onto Standard Surface, a yellow edge on every stripe where the source shows none). Where the
+    target's transmission has a colour of its own (:data:`~matremap.dialects.mtlx.OWN_TINT`), its dielectric base
+    colour is the opaque kind's (a texel wholly letting light through shows none of it). Each model mixes its
+    transmission in linearly by its weight and a metal over it, so the blend is then exact at every weight."""
     from matremap.dialects.mtlx import OWN_TINT, THROUGH_PARAMS
 
     if not isinstance(mixed, Mixed) or len(sides) != 2:
@@ -828,6 +831,8 @@ def _through_borrowed(sides: list[MapSet], mixed: Blend) -> dict[str, list[int]]
         return {}
     lit = on.index(True)
     names = [n for n in THROUGH_PARAMS.get(spec.id, ()) if n in spec.param_names]
+    if mixed.layer is None:  # a metal beside a glass: the metal's own weight (0, held) is hidden under it anyway
+        names.append(weight_name)
     out = dict.fromkeys(names, [lit, lit])
     diffuse = qty.diffuse_param(spec)
     metal = any(_at_least(ms, n, v) for ms in sides for n, v, _ in spec.specialisations)

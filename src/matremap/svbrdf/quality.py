@@ -164,8 +164,8 @@ def luminance(rgb: np.ndarray) -> np.ndarray:
 
 def luminance_error(source: np.ndarray, target: np.ndarray, mask: np.ndarray) -> float:
     """|mean Y_t - mean Y_s| / mean Y_s over the masked pixels (inf when the source is black and the
-    target is not, 0 when both are)."""
-    ys, yt = float(luminance(source[mask]).mean()), float(luminance(target[mask]).mean())
+    target is not, 0 when both are; black: below :data:`DARK`)."""
+    ys, yt = (y if y > DARK else 0.0 for y in (float(luminance(a[mask]).mean()) for a in (source, target)))
     if ys <= 0.0:
         return 0.0 if yt <= 0.0 else float("inf")
     return abs(yt - ys) / ys
@@ -189,6 +189,12 @@ def delta_e_2000(source: np.ndarray, target: np.ndarray, mask: np.ndarray) -> np
     return np.asarray(colour.delta_E(labs[0], labs[1], method="CIE 2000"), dtype=np.float64)
 
 
+#: a render's mean luminance below this is black (linear units of the probe's and environment's renders, where a
+#: white Lambertian sphere reads 0.1 to 1): a mirror under directional lights shows nothing, and its renders read
+#: 1e-21 on one side and 0 on the other, a luminance error of 1 or 1e18 between two black images
+DARK = 1e-6
+
+
 def image_checks(
     pairs: Sequence[tuple[str, np.ndarray, np.ndarray]], mask: np.ndarray, thresholds: Thresholds
 ) -> list[Check]:
@@ -207,6 +213,7 @@ def image_checks(
         de.append(d)
         worst_lum = max(worst_lum, (luminance_error(s, t, mask), where))
         worst_de = max(worst_de, (float(d.mean()) if d.size else 0.0, where))
+    ys, yt = (y if y > DARK * len(pairs) else 0.0 for y in (ys, yt))  # sums over the pairs
     lum = 0.0 if ys <= 0 and yt <= 0 else (abs(yt - ys) / ys if ys > 0 else float("inf"))
     d_all = np.concatenate(de) if de else np.zeros(0)
     n = len(pairs)
@@ -216,7 +223,9 @@ def image_checks(
             "luminance_error",
             lum,
             thresholds.luminance_error,
-            over + (f"; worst {worst_lum[1]}: {worst_lum[0]:.3g}" if n > 1 else ""),
+            over
+            + (f"; worst {worst_lum[1]}: {worst_lum[0]:.3g}" if n > 1 else "")
+            + ("; the source renders black, the target does not" if lum == float("inf") else ""),
         ),
         Check(
             "delta_e",
