@@ -1353,7 +1353,13 @@ def _remap_file(
     with staged_folder(out, force) as stage:
         result = FileRemapResult(None, asset.model, target, asset.textured, notes=list(asset.notes))
         if asset.textured:
+            if equivalence(asset.model, target) is not None:  # an identity copies the maps as they are
+                asset.coverage = None
+            before = len(asset.notes)
             source_dir = asset.to_map_set(stage / "source")
+            for note in asset.notes[before:]:  # what reading the maps decided (the texels the surface shows)
+                log(f"note: {note}")
+                result.notes.append(note)
             result.remap = remap_into(stage, load_map_set(source_dir), job, log, title=f"{asset.model} -> {target}")
             result.verdict = result.remap.verdict
             produced: Any = converted_set(stage / "maps")

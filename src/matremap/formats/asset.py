@@ -86,6 +86,12 @@ class CarriedInput:
     settings: Mapping[str, Any] = field(default_factory=dict)
 
 
+#: a surface showing at least this share of its textures counts as showing them all
+FULL_COVERAGE = 0.98
+#: maps up to this many texels are filled where the surface does not show them (read whole: 16M texels)
+FILL_TEXELS = 4096 * 4096
+
+
 @dataclass
 class MaterialAsset:
     """One material of a file, in a matremap model's terms.
@@ -115,6 +121,9 @@ class MaterialAsset:
     lost: list[str] = field(default_factory=list)
     carried: dict[str, CarriedInput] = field(default_factory=dict)
     dropped: list[str] = field(default_factory=list)
+    #: the texels the material's surface shows (a glTF mesh's UV triangles:
+    #: :class:`~matremap.formats.gltf_coverage.Coverage`, its ``mask(size)``), None where every texel counts
+    coverage: Any = None
 
     @property
     def textured(self) -> bool:
@@ -159,8 +168,45 @@ class MaterialAsset:
         }
         if self.normal is not None:
             manifest["normal"] = self._kept_file(self.normal, "normal", out)
+        if self.coverage is not None and sizes:
+            self._fill_uncovered(spec, out, maps, colorspace, next(iter(sizes.values())))
         (out / "material.json").write_text(json.dumps(manifest, indent=1))
         return out
+
+    def _fill_uncovered(
+        self, spec: Any, out: Path, maps: dict[str, str], colorspace: dict[str, str], size: tuple[int, int]
+    ) -> None:
+        """Rewrite ``maps`` (the manifest's files, in ``out``) with the texels the surface does not show
+        (:attr:`coverage`) filled from the nearest it shows, and say so in :attr:`notes`: what no triangle shows
+        then neither decides a conversion (the typical texel, the ranges swept, metal and dielectric shares) nor
+        fails its checks. Skipped where the surface shows nearly all of them, and past :data:`FILL_TEXELS`."""
+        from matremap.formats.gltf_coverage import covered_share, fill_uncovered
+        from matremap.svbrdf.textures import ImageInfo, read_image, write_image_like
+
+        mask = self.coverage.mask(size)
+        share = covered_share(mask)
+        if mask is None or share >= FULL_COVERAGE:
+            return
+        if size[0] * size[1] > FILL_TEXELS:
+            self.notes.append(
+                f"the material's triangles show {100 * share:.0f}% of its {size[1]}x{size[0]} textures; maps this "
+                "large are read whole (what no triangle shows counts too)"
+            )
+            return
+        for name, f in list(maps.items()):
+            path = Path(f) if Path(f).is_absolute() else out / f
+            p = spec.param(name)
+            image, _ = read_image(path, colorspace[name], colour=p.channels == 3 and p.role != "other")
+            filled = fill_uncovered(image, mask)
+            fname = f"{name.replace(' ', '_')}_shown.exr"
+            h, w, c = filled.shape
+            write_image_like(out / fname, filled, ImageInfo("exr", "float", c, w, h, "linear"), force=True)
+            maps[name], colorspace[name] = fname, "linear"
+        self.notes.append(
+            f"the material's triangles show {100 * share:.0f}% of its textures (an atlas shared with other materials, "
+            "or unused space): the texels they do not show are filled from the nearest they show, so that only what "
+            "the surface shows decides the conversion and its checks"
+        )
 
     def normal_file(self, workdir: str | os.PathLike) -> Path | None:
         """The asset's normal map as a file a writer can use: the texture itself, or (extracted or baked)

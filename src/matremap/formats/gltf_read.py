@@ -45,6 +45,7 @@ from matremap.formats.gltf_container import (
     digest_matches,
     parse_container,
 )
+from matremap.formats.gltf_coverage import material_coverage
 from matremap.formats.gltf_extensions import (
     CLEARCOAT,
     COAT_MAPS,
@@ -201,7 +202,8 @@ def read(
     found = read_extensions(p, where, ext, n_textures)
     doc.extensions = found
     constants = read_factors(p, where, pbr, found)
-    textures = MaterialTextures(FileReader(p, doc, data, confinement), where, notes)
+    reader = FileReader(p, doc, data, confinement)
+    textures = MaterialTextures(reader, where, notes)
     layers = layer_values(found)
     maps = textures.read_maps(pbr, found.get(SPECULAR, {}), constants)
     maps |= textures.read_layer_maps(found, layers)
@@ -213,6 +215,7 @@ def read(
             "normalTexture on a material with no other texture: it is converted as a uniform material, so only a "
             "glTF output keeps the normal map"
         )
+    coverage = material_coverage(reader, idx, textures.uv_set)[0] if maps else None
     carried = textures.read_carried(m, pbr, found)
     notes += extension_notes(found, textured=bool(maps))
     note_unknown(ext, obj, notes)
@@ -244,6 +247,7 @@ def read(
         lost=lost,
         carried=carried,
         dropped=dropped_extensions(ext),
+        coverage=coverage,
     )
 
 
