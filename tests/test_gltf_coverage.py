@@ -103,3 +103,22 @@ def test_a_corner_of_a_shared_texture_is_converted_from_that_corner_alone(tmp_pa
     inside = written[top + 2 :, : round(0.4 * w) - 2]
     assert cc.hue_difference(cc.mean_hue(inside), cc.mean_hue(corner)) < 3.0
     assert cc.mean_luminance(inside) == pytest.approx(cc.mean_luminance(corner), rel=0.1)
+
+
+def test_uvs_are_read_with_their_stride_and_normalised_integers():
+    """§3.6.2: a TEXCOORD may be normalised unsigned bytes, interleaved with other attributes (byteStride)."""
+    from matremap.formats.gltf_coverage import _accessor
+
+    class Reader:
+        path = Path("x.gltf")
+        views = [{"buffer": 0, "byteLength": 12, "byteStride": 4}]
+        accessors = [{"bufferView": 0, "componentType": 5121, "normalized": True, "type": "VEC2", "count": 3}]
+
+        def item(self, key, index, where):
+            return {"accessors": self.accessors, "bufferViews": self.views}[key][index]
+
+        def buffer_view(self, index, where):  # u, v, then two bytes of another attribute, per vertex
+            return bytes([0, 255, 9, 9, 51, 102, 9, 9, 255, 0, 9, 9])
+
+    uv = _accessor(Reader(), 0, "here", uv=True)
+    np.testing.assert_allclose(uv, [[0.0, 1.0], [0.2, 0.4], [1.0, 0.0]])

@@ -34,7 +34,11 @@ COARSE = 1024
 #: rasterised exactly: the box is at most a texel or two wider than the triangle, which the growth covers anyway
 SMALL = 3
 #: the accessor component types a TEXCOORD may have (§3.7.2.1): float, normalised unsigned byte and short
-_COMPONENTS = {5126: (np.float32, None), 5121: (np.uint8, 255.0), 5123: (np.uint16, 65535.0)}
+_COMPONENTS: dict[int, tuple[type, float | None]] = {
+    5126: (np.float32, None),
+    5121: (np.uint8, 255.0),
+    5123: (np.uint16, 65535.0),
+}
 _INDICES = {5121: np.uint8, 5123: np.uint16, 5125: np.uint32}
 _VARIANTS = "KHR_materials_variants"
 
@@ -105,7 +109,7 @@ def material_coverage(reader: FileReader, material: int, uv_set: int) -> tuple[C
     KHR_materials_variants mapping to it) on ``TEXCOORD_<uv_set>``, and a note; (None, why) when there are none or
     they cannot be read."""
     doc = reader.doc.json
-    meshes = doc.get("meshes") if isinstance(doc.get("meshes"), list) else []
+    meshes: list[Any] = doc["meshes"] if isinstance(doc.get("meshes"), list) else []
     found: list[np.ndarray] = []
     used = 0
     try:
@@ -155,12 +159,13 @@ def _uv_triangles(reader: FileReader, prim: dict[str, Any], uv_set: int, where: 
         idx = np.arange(len(uv), dtype=np.int64)
     if idx.size and (idx.min() < 0 or idx.max() >= len(uv)):
         raise MatremapError(f"{reader.path}: {where}.indices point past its {len(uv)} vertices")
+    tri: np.ndarray = np.zeros((0, 3), dtype=np.int64)
     if mode == 4:
         tri = idx[: idx.size - idx.size % 3].reshape(-1, 3)
-    elif mode == 5:  # strip: (i, i+1, i+2), winding irrelevant here
-        tri = np.stack([idx[:-2], idx[1:-1], idx[2:]], axis=1) if idx.size >= 3 else np.zeros((0, 3), np.int64)
-    else:  # fan: (0, i+1, i+2)
-        tri = np.stack([np.full(idx.size - 2, idx[0]), idx[1:-1], idx[2:]], 1) if idx.size >= 3 else np.zeros((0, 3))
+    elif idx.size >= 3 and mode == 5:  # strip: (i, i+1, i+2), winding irrelevant here
+        tri = np.stack([idx[:-2], idx[1:-1], idx[2:]], axis=1)
+    elif idx.size >= 3:  # fan: (0, i+1, i+2)
+        tri = np.stack([np.full(idx.size - 2, idx[0]), idx[1:-1], idx[2:]], axis=1)
     return uv[tri.astype(np.int64)]
 
 
@@ -171,31 +176,31 @@ def _accessor(reader: FileReader, index: Any, where: str, uv: bool) -> np.ndarra
     if "sparse" in acc or "bufferView" not in acc:
         raise MatremapError(f"{reader.path}: accessors[{index}] is sparse or has no bufferView")
     ctype, count, kind = acc.get("componentType"), acc.get("count"), acc.get("type")
+    norm: float | None = None
+    dtype: np.dtype[Any]
     if uv:
         if kind != "VEC2" or ctype not in _COMPONENTS or (ctype != 5126 and not acc.get("normalized")):
             raise MatremapError(f"{reader.path}: accessors[{index}] is not a VEC2 of float or normalised integers")
-        dtype, norm = _COMPONENTS[ctype]
+        dtype, norm = np.dtype(_COMPONENTS[ctype][0]), _COMPONENTS[ctype][1]
         n = 2
     else:
         if kind != "SCALAR" or ctype not in _INDICES:
             raise MatremapError(f"{reader.path}: accessors[{index}] is not a SCALAR of unsigned integers")
-        dtype, norm, n = _INDICES[ctype], None, 1
+        dtype, n = np.dtype(_INDICES[ctype]), 1
     if not is_index(count):
         raise MatremapError(f"{reader.path}: accessors[{index}].count is not a count")
+    count = int(count or 0)
     view = reader.item("bufferViews", acc["bufferView"], where)
-    data = reader.buffer_view(acc["bufferView"], where)
-    size = np.dtype(dtype).itemsize * n
-    stride = view.get("byteStride") or size
-    offset = acc.get("byteOffset", 0)
+    data = np.frombuffer(reader.buffer_view(acc["bufferView"], where), dtype=np.uint8)
+    size = dtype.itemsize * n
+    stride, offset = view.get("byteStride") or size, acc.get("byteOffset", 0)
     if not is_index(offset) or not is_index(stride) or stride < size:
         raise MatremapError(f"{reader.path}: accessors[{index}] has a bad byteOffset or byteStride")
-    if count and offset + stride * (count - 1) + size > len(data):
-        raise MatremapError(f"{reader.path}: accessors[{index}] runs past the end of its bufferView")
-    raw = np.frombuffer(data, dtype=np.uint8, count=max(0, stride * (count - 1) + size) if count else 0, offset=offset)
     if count == 0:
-        return np.zeros((0, n) if n > 1 else (0,), dtype=np.float64 if uv else np.int64)
-    padded = np.concatenate([raw, np.zeros(stride * count - raw.size, dtype=np.uint8)])
-    rows = padded.reshape(count, stride)[:, :size]
+        return np.zeros((0, n) if uv else (0,), dtype=np.float64 if uv else np.int64)
+    if offset + stride * (count - 1) + size > data.size:
+        raise MatremapError(f"{reader.path}: accessors[{index}] runs past the end of its bufferView")
+    rows = np.lib.stride_tricks.as_strided(data[offset:], shape=(count, size), strides=(stride, 1))
     out = np.ascontiguousarray(rows).view(dtype).reshape(count, n)
     if not uv:
         return out.reshape(-1)
