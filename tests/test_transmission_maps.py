@@ -98,3 +98,32 @@ def test_a_glass_whose_colour_texture_is_uniform_keeps_its_colour(tmp_path, caps
     tint = np.asarray(doc["params"]["transmission_color"], dtype=float)
     assert doc["params"]["transmission_weight"] == pytest.approx(1.0)
     assert tint[1] > 0.6 and tint[0] < 0.3 and tint[2] < 0.3, tint  # green, as the source's 0.15, 0.83, 0.19
+
+
+@pytest.mark.slow
+def test_a_mitsuba_principled_spec_trans_texture_is_a_transmission_weight_map(tmp_path, capsys):
+    """Mitsuba 3's principled with ``spec_trans`` given by a bitmap was refused as a lost look ("a textured glass is
+    not a uniform material"); it is blended per texel as glTF's transmissionTexture is, onto OpenPBR's
+    transmission_weight."""
+    from matremap.core.imageio import write_image
+
+    y, x = np.mgrid[0:64, 0:64]
+    stripes = ((x // 8) % 2).astype(np.float32)
+    write_image(tmp_path / "stripes.png", np.repeat(stripes[..., None], 3, axis=-1))
+    (tmp_path / "scene.xml").write_text(
+        '<scene version="3.0.0"><bsdf type="principled" id="glassy">'
+        '<rgb name="base_color" value="0.8, 0.3, 0.1"/><float name="roughness" value="0.2"/>'
+        '<texture type="bitmap" name="spec_trans"><string name="filename" value="stripes.png"/>'
+        '<boolean name="raw" value="true"/></texture></bsdf></scene>'
+    )
+    out = tmp_path / "out"
+    code = main(["remap", str(tmp_path / "scene.xml"), "--to", "mtlx:open_pbr_surface", "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 0, err[-800:]
+    assert "mixed: spec_trans varies per texel" in err
+    from matremap.svbrdf.textures import read_image
+
+    doc = json.loads((out / "maps" / "material.json").read_text())
+    weight = np.asarray(read_image(out / "maps" / doc["maps"]["transmission_weight"], "linear")[0])[..., 0]
+    assert np.corrcoef(weight.ravel(), stripes.ravel())[0, 1] > 0.99
+    assert weight[stripes == 0].max() < 1e-3 and weight[stripes == 1].min() > 0.9

@@ -464,18 +464,17 @@ def finish(scene: MitsubaScene, parts: Parts, index: int) -> MaterialAsset:
 
 #: principled lobes the embedded renderer does not draw, and what they are (its clearcoat and sheen it draws, and
 #: fits carry them onto the other layered models' coat and sheen; a uniform spec_trans is fitted on the transmission
-#: probe, a textured one is not a uniform material)
+#: probe, a textured one blended per texel with and without it: svbrdf/mixed.py ``transmission_parameter``)
 LAYERS = {"anisotropic": "anisotropy"}
-TEXTURED_ONLY = {"spec_trans": "transmission"}
 
 
 def lost_layers(parts: Parts) -> list[str]:
-    """The look a ``principled`` material carries in lobes no fit can draw (anisotropic, a textured spec_trans):
-    kept onto itself, refused onto other models."""
+    """The look a ``principled`` material carries in lobes no fit can draw (anisotropic): kept onto itself, refused
+    onto other models."""
     if parts.model != "mitsuba3:principled":
         return []
     lost = []
-    for name, what in {**LAYERS, **TEXTURED_ONLY}.items():
+    for name, what in LAYERS.items():
         value = parts.constants.get(name, 0.0)
         if name in parts.textures or (name in LAYERS and float(np.max(value)) > 0.0):
             lost.append(
