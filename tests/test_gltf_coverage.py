@@ -122,3 +122,19 @@ def test_uvs_are_read_with_their_stride_and_normalised_integers():
 
     uv = _accessor(Reader(), 0, "here", uv=True)
     np.testing.assert_allclose(uv, [[0.0, 1.0], [0.2, 0.4], [1.0, 0.0]])
+
+
+@pytest.mark.parametrize("material", ["BottomLeftMat", "BottomRightMat", "TopLeftMat", "TopRightMat"])
+def test_the_usd_and_gltf_texture_coordinate_tests_show_the_same_texels(material):
+    """The same scene written by two third parties in two formats (Khronos' glTF, and the usd-wg assets' USD: st
+    with its origin at the image's lower-left, faces bound through UsdShadeMaterialBindingAPI): each plane's
+    material shows the same corner of its texture (formats/usd_coverage.py)."""
+    pytest.importorskip("pxr")
+    usd = CORPUS / "usd-TextureCoordinateTest" / "TextureCoordinateTest.usda"
+    from matremap.formats.usd import read as read_usd
+
+    a = read_usd(usd, f"/Asset/Materials/UsdPreviewSurface/Materials/{material}")
+    m_usd = a.coverage.mask((512, 512))
+    m_gltf = read_asset(TCT, material).coverage.mask((512, 512))
+    union = np.count_nonzero(m_usd | m_gltf)
+    assert np.count_nonzero(m_usd & m_gltf) / union > 0.98 and 0.15 < m_usd.mean() < 0.17

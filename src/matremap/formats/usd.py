@@ -318,6 +318,13 @@ def read(
         )
     asset.document = UsdSource(p, names[index])
     asset.index = index
+    if asset.textures and len(ctx.primvars) <= 1:  # the texels its meshes show (formats/usd_coverage.py)
+        from matremap.formats.usd_coverage import material_coverage
+
+        try:
+            asset.coverage = material_coverage(pxr, stage, found[index], next(iter(ctx.primvars), "st"))[0]
+        except (RuntimeError, ValueError, TypeError):  # meshes USD cannot answer for: every texel counts
+            asset.coverage = None
     return asset
 
 
