@@ -251,6 +251,7 @@ def test_a_glass_whose_roughness_and_tint_both_vary_is_a_grid_of_levels(tmp_path
     res = remap(root, None, "mitsuba3:roughdielectric", tmp_path / "out", log=logs.append, evaluate=False)
     assert res.verdict.passed, res.verdict
     assert any("roughness from 0 to 1, 5 levels, and baseColor (channel by channel)" in m for m in logs)
+    assert any("held at the fit at the typical texel" in m and "for the colour's levels" in m for m in logs)
     out = load_map_set(tmp_path / "out" / "maps")
     alpha = np.atleast_3d(read_image(out.maps["alpha"], "linear")[0])[..., 0]
     rough = np.atleast_3d(read_image(load_map_set(root).maps["roughness"], "linear")[0])[..., 0]

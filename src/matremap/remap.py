@@ -913,12 +913,36 @@ def fit_levels(
     refined: list[levels.Axis] = []
     for axis in axes:
         others = through.others(axis) if isinstance(through, Grid) else {}
-        fit_at = level_fits(map_set, axis, others, job, fits, log)
+        axis_job = job
+        if isinstance(through, Grid) and axis is through.tint and axis.per_channel:
+            axis_job = crossing_numbers(map_set, through, job, log)
+        fit_at = level_fits(map_set, axis, others, axis_job, fits, log)
         final, midpoints = levels.refine(axis, fit_at, log)
         refined.append((final, fit_at, midpoints))
     if isinstance(through, Grid):
         return Grid(refined[0][0], refined[1][0], through.corners), refined
     return refined[0][0], refined
+
+
+def crossing_numbers(map_set: MapSet, grid: Grid, job: RemapJob, log: Callable[[str], None]) -> RemapJob:
+    """``job`` with every number of the target held at one fit where a glass's :class:`Grid` crosses (its typical
+    roughness and colour), for the fits of its colour's levels: the blend takes a texel's numbers from the roughness
+    levels and only its colours from the colour's, so those must be fitted as colours alone. Left free, the black
+    level of Khronos GlassHurricaneCandleHolder's glass was fitted as an opaque black dielectric (OpenPBR
+    transmission_weight 0.0001, IOR 1.78, an arbitrary transmission_color (0, 0, 0.73)), and at its roughest black
+    texel the blend wrote that colour under the roughness levels' transmission weight 1: 0.45 off."""
+    spec = get_model(job.target)
+    base = Material.create(map_set.model, {**map_set.constants, **grid.held})
+    typical = grid.tint.typical or (1.0, 1.0, 1.0)
+    source = levels.at(grid.tint, levels.at(grid.rough, base, grid.typical_roughness), typical)
+    r = _fit_kind(source, job, log)
+    values = r.target.to_dict()["params"]
+    held = {p.name: values[p.name] for p in spec.params if p.channels == 1 and p.name not in job.fix}
+    log(
+        f"levels: {_listed(held)} held at the fit at the typical texel (roughness {grid.typical_roughness:.3g}, "
+        f"colour {np.round(typical, 3).tolist()}; relative error {r.loss:.4f}) for the colour's levels"
+    )
+    return replace(job, fix={**job.fix, **held})
 
 
 def level_fits(
