@@ -492,10 +492,7 @@ def mixed_parameter(map_set: MapSet, summary: MapSummary) -> Mixed | None:
             continue
         counts = stats.specialisation
         through = transmission_weight(spec)
-        lets_through = through is not None and (
-            through in map_set.maps or float(np.max(np.asarray(map_set.constants.get(through, 0.0)))) > 0.0
-        )
-        holds = {through: 0.0} if lets_through and through is not None else {}
+        holds = {through: 0.0} if through is not None and _lets_through(map_set, through) else {}
         return Mixed(name, float(counts.value), float(counts.other), counts, first_holds=holds)
     return None
 
