@@ -39,6 +39,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[1]
 CORPUS = ROOT / "tests" / "data" / "corpus"
 sys.path.insert(0, str(ROOT / "tests"))
@@ -630,6 +632,16 @@ def output_colour(path: Path, asset: Asset, n_input_materials: int | None) -> tu
         return None, ok, f"{msg}; colour: {type(e).__name__}: {e}"[:200]
 
 
+def shown(colour: Any, src: Path, material: str | int | None) -> Any:
+    """A colour map ([H, W, 3]) of a glTF source's material, or of its conversion (laid on the same UVs), reduced to
+    the texels the material's triangles show (tests/corpus_checks.py ``gltf_shown``, apart from matremap's own): a
+    texture shared with other materials (an atlas) is judged where this one shows it, as matremap converts it."""
+    if colour is None or np.ndim(colour) != 3 or colour.shape[0] * colour.shape[1] <= 1 or cc.file_kind(src) != "gltf":
+        return colour
+    mask = cc.gltf_shown(src, material, colour.shape[:2])
+    return colour if mask is None or mask.all() or not mask.any() else colour[mask][None]
+
+
 def run_case(asset: Asset, target: str, extra: list[str], out_root: Path, timeout: float, common: list[str]) -> Case:
     src = CORPUS / asset.file
     out = out_root / case_name(asset, target)
@@ -655,7 +667,7 @@ def run_case(asset: Asset, target: str, extra: list[str], out_root: Path, timeou
 
     try:
         cin = material_colour(src, asset.material)
-        s_in = cc.summary(cin)
+        s_in = cc.summary(shown(cin, src, asset.material))
         c.lum_in, c.hue_in, c.in_varies = s_in["lum"], s_in["hue"], s_in["varies"]
         n_in = len(cc.gltf_load(src)[0].get("materials", [])) if cc.file_kind(src) == "gltf" else None
     except Exception as e:  # noqa: BLE001
@@ -669,7 +681,7 @@ def run_case(asset: Asset, target: str, extra: list[str], out_root: Path, timeou
         else:
             cout, c.loads, c.loads_msg = output_colour(f, asset, n_in)
             if cout is not None:
-                s = cc.summary(cout)
+                s = cc.summary(shown(cout, src, asset.material))
                 c.lum_out, c.hue_out, c.out_varies, c.out_zero = s["lum"], s["hue"], s["varies"], s["zero"]
                 if c.identity and cin is not None:
                     c.identity_diff = cc.max_abs_diff(cin, cout)

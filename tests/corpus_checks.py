@@ -212,6 +212,59 @@ def _image_from_bytes(data: bytes, srgb: bool) -> np.ndarray:
         return read_image(f, srgb=srgb)
 
 
+_GLTF_DTYPES = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
+
+
+def _gltf_accessor(path: Path, doc: dict[str, Any], binary: bytes | None, index: int) -> np.ndarray:
+    """An accessor's elements as floats [count, components] (glTF 2.0 §3.6.2; normalised integers divided by their
+    maximum; no sparse accessors)."""
+    acc = doc["accessors"][index]
+    view = doc["bufferViews"][acc["bufferView"]]
+    data = _gltf_buffer(path, doc, binary, view["buffer"])
+    dtype = np.dtype(_GLTF_DTYPES[acc["componentType"]])
+    n = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}[acc["type"]]
+    stride = view.get("byteStride") or dtype.itemsize * n
+    start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+    rows = [np.frombuffer(data, dtype, n, start + i * stride) for i in range(acc["count"])]
+    out = np.array(rows, dtype=np.float64).reshape(acc["count"], n)
+    return out / np.iinfo(dtype).max if acc.get("normalized") and dtype.kind in "iu" else out
+
+
+def gltf_shown(path: str | os.PathLike, material: str | int | None, shape: tuple[int, int]) -> np.ndarray | None:
+    """The texels of a map of ``shape`` (H, W) that the triangles drawn with a glTF material show through
+    TEXCOORD_0 (mode 4 only; glTF §3.8.3: UV (0, 0) is the image's top-left), drawn with PIL's polygon filler;
+    None when no triangle uses the material or a UV leaves [0, 1] (a tiled texture: every texel counts)."""
+    from PIL import Image, ImageDraw
+
+    path = Path(path)
+    doc, binary = gltf_load(path)
+    idx = gltf_material_index(doc, material)
+    h, w = shape
+    canvas = Image.new("L", (w, h), 0)
+    draw = ImageDraw.Draw(canvas)
+    drawn = False
+    for mesh in doc.get("meshes", []):
+        for prim in mesh.get("primitives", []):
+            variants = prim.get("extensions", {}).get("KHR_materials_variants", {}).get("mappings", [])
+            if idx != prim.get("material") and idx not in [m.get("material") for m in variants]:
+                continue
+            if prim.get("mode", 4) != 4 or "TEXCOORD_0" not in prim["attributes"]:
+                return None
+            uv = _gltf_accessor(path, doc, binary, prim["attributes"]["TEXCOORD_0"])
+            if uv.size and (uv.min() < -1e-6 or uv.max() > 1 + 1e-6):
+                return None
+            if "indices" in prim:
+                tris = _gltf_accessor(path, doc, binary, prim["indices"]).astype(np.int64).reshape(-1, 3)
+            else:
+                tris = np.arange(len(uv)).reshape(-1, 3)
+            for t in tris:
+                draw.polygon([(float(uv[k, 0] * w), float(uv[k, 1] * h)) for k in t], fill=255)
+            drawn = True
+    if not drawn:
+        return None
+    return np.asarray(canvas) > 0
+
+
 def gltf_material_index(doc: dict[str, Any], material: str | int | None) -> int:
     """Index of a material given by name or index (default 0)."""
     if material is None:
