@@ -157,3 +157,26 @@ def test_the_independent_checker_sees_the_same_texels(file, material):
     theirs = cc.gltf_shown(path, material, (512, 512))
     assert ours is not None and theirs is not None
     assert np.count_nonzero(ours & theirs) / np.count_nonzero(ours | theirs) > 0.95  # edges differ by a texel
+
+
+def test_a_glass_sharing_an_atlas_with_its_metal_frame_reads_its_own_texels_only(tmp_path):
+    """Khronos GlassHurricaneCandleHolder (fetched on demand): the glass and its frame share one ORM atlas whose
+    metallic is 1 in the frame's part. Read whole, the glass "varied its metallic map" and was refused; read where its
+    triangles show it (26 %: the checker's own count), its metallic map is 0 everywhere and it is converted at levels
+    of its roughness and colour."""
+    from large_assets import large_asset
+
+    from matremap.svbrdf.mapstats import summarise
+    from matremap.svbrdf.mixed import through_levels
+    from matremap.svbrdf.textures import load_map_set, read_image
+
+    path = large_asset("gltf-GlassHurricaneCandleHolder") / "GlassHurricaneCandleHolder.gltf"
+    orm = cc.read_image(path.parent / "GlassHurricaneCandleHolder_orm.png", srgb=False)
+    shown = cc.gltf_shown(path, "GlassHurricaneCandleHolder-glass", orm.shape[:2])
+    assert shown is not None and 0.2 < shown.mean() < 0.3
+    assert orm[..., 2].max() == 1.0 and orm[..., 2][shown].max() == 0.0  # metal only where the glass is not
+    asset = read_asset(path, "GlassHurricaneCandleHolder-glass")
+    ms = load_map_set(asset.to_map_set(tmp_path / "source"))
+    assert any("triangles show 26% of its textures" in n for n in asset.notes)
+    assert float(np.asarray(read_image(ms.maps["metallic"], "linear", colour=False)[0]).max()) == 0.0
+    assert through_levels(ms, summarise(ms)) is not None  # converted at levels, not refused
