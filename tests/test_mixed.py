@@ -97,3 +97,21 @@ def test_half_metal_onto_a_conductor_is_refused_in_one_line_before_any_sweep(tmp
     assert "(metallic 0 on 50% of the texels)" in line and "choose a target with one, e.g. mitsuba06:" in line
     assert "sweep:" not in err and "mixed:" not in err and not out.exists()
     assert [p.name for p in tmp_path.iterdir()] == ["in"]
+
+
+def test_two_kinds_files_of_one_name_for_two_parameters_become_two_files(tmp_path):
+    """A metal kind's F0 map and a dielectric kind's IOR map are each its conversion's "specular" map: both named
+    material_specular.exr, the blend wrote the two parameters into one file and corrupted it (Khronos
+    LightsPunctualLamp's lamp onto OpenPBR: "cannot read rows 0-511 ... corrupt or truncated"). Each gets its own."""
+    from matremap.svbrdf.mixed import _plan
+    from matremap.svbrdf.textures import ImageInfo, MapSet
+
+    model = "mtlx:open_pbr_surface"
+    grey, rgb = ImageInfo("exr", "float", 1, 4, 4, "linear"), ImageInfo("exr", "float", 3, 4, 4, "linear")
+    metal = MapSet(model, {"base_color": tmp_path / "a" / "material_specular.exr"}, tmp_path / "a", (4, 4))
+    metal.info = {"base_color": rgb}
+    glass = MapSet(model, {"specular_ior": tmp_path / "b" / "material_specular.exr"}, tmp_path / "b", (4, 4))
+    glass.info = {"specular_ior": grey}
+    plan, _ = _plan([metal, glass], tmp_path / "metallic.png", grey)
+    files = [b.file for b in plan if b.name in ("base_color", "specular_ior")]
+    assert len(files) == 2 and len(set(files)) == 2
