@@ -154,6 +154,22 @@ ASSETS: list[Asset] = [
         note="KHR_materials_transmission/volume, roughness texture",
     ),
     Asset(
+        "TransmissionTest-stripes",
+        "gltf-TransmissionTest/TransmissionTest.glb",
+        "gltf:pbr",
+        [OPENPBR, GLTF],
+        material="RedTransTexture",
+        note="KHR_materials_transmission with a transmissionTexture (glass stripes over an opaque red)",
+    ),
+    Asset(
+        "TransmissionTest-metal",
+        "gltf-TransmissionTest/TransmissionTest.glb",
+        "gltf:pbr",
+        [OPENPBR],
+        material="YellowTransMetal",
+        note="KHR_materials_transmission over a metallic map (metal stripes beside glass)",
+    ),
+    Asset(
         "ClearcoatWicker",
         "gltf-ClearcoatWicker/ClearcoatWicker.glb",
         "gltf:pbr",  # textured under a uniform coat: read into gltf:pbr, the coat held over the sweep (issue 16)
