@@ -742,11 +742,11 @@ def _plan(
             continue
         out = _info(spec, p.name, sides, [v for v in values if not _is_map(v)], info)
         plan.append(_Blended(p.name, p.channels, values, _file_name(p.name, sides, out, weights), out))
-    used: set[str] = set()
+    taken: set[str] = set()
     for b in plan:  # two kinds' files of one name for two parameters (a metal's F0 and a dielectric's IOR are each
-        if b.file in used:  # kind's "specular" map): one file each, or both would be written to one and corrupt it
+        if b.file in taken:  # kind's "specular" map): one file each, or both would be written to one and corrupt it
             b.file = f"{Path(b.file).stem}_{b.name.replace(' ', '_')}{Path(b.file).suffix}"
-        used.add(b.file)
+        taken.add(b.file)
     return plan, constants
 
 
