@@ -96,3 +96,19 @@ def test_thresholds_parse_and_refuse_nonsense():
     for bad in ("nope=1", "delta_e", "delta_e=x", "delta_e=-1", "delta_e=nan"):
         with pytest.raises(MatremapError, match="--max-error"):
             Thresholds.parse([bad])
+
+
+def test_two_black_renders_agree_and_a_black_source_says_so():
+    """A mirror under directional lights renders black: 1e-21 on one side and 0 on the other read a luminance error
+    of 1 (or 1e18), failing a remap between two black images. Below DARK a render is black; a target that shows
+    something where the source is black fails with the reason."""
+    from matremap.svbrdf.quality import Thresholds, image_checks, luminance_error
+
+    mask = np.ones((4, 4), dtype=bool)
+    black, faint, lit = np.zeros((4, 4, 3)), np.full((4, 4, 3), 1e-21), np.full((4, 4, 3), 0.2)
+    assert luminance_error(faint, black, mask) == 0.0 and luminance_error(black, faint, mask) == 0.0
+    lum = next(c for c in image_checks([("view", faint, black)], mask, Thresholds()) if c.name == "luminance_error")
+    assert lum.value == 0.0 and lum.passed
+    lum = next(c for c in image_checks([("view", black, lit)], mask, Thresholds()) if c.name == "luminance_error")
+    assert lum.value == float("inf") and "the source renders black, the target does not" in lum.where
+    assert luminance_error(lit, 1.1 * lit, mask) == pytest.approx(0.1)

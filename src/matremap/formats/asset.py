@@ -121,7 +121,7 @@ class MaterialAsset:
     lost: list[str] = field(default_factory=list)
     carried: dict[str, CarriedInput] = field(default_factory=dict)
     dropped: list[str] = field(default_factory=list)
-    #: the texels the material's surface shows (a glTF mesh's UV triangles:
+    #: the texels the material's surface shows (the UV triangles of the glTF primitives or USD faces drawn with it:
     #: :class:`~matremap.formats.gltf_coverage.Coverage`, its ``mask(size)``), None where every texel counts
     coverage: Any = None
 

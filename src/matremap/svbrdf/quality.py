@@ -165,7 +165,13 @@ def luminance(rgb: np.ndarray) -> np.ndarray:
 def luminance_error(source: np.ndarray, target: np.ndarray, mask: np.ndarray) -> float:
     """|mean Y_t - mean Y_s| / mean Y_s over the masked pixels (inf when the source is black and the
     target is not, 0 when both are; black: below :data:`DARK`)."""
-    ys, yt = (y if y > DARK else 0.0 for y in (float(luminance(a[mask]).mean()) for a in (source, target)))
+    return _relative(float(luminance(source[mask]).mean()), float(luminance(target[mask]).mean()), DARK)
+
+
+def _relative(ys: float, yt: float, dark: float) -> float:
+    """|yt - ys| / ys of two mean luminances, each below ``dark`` read as black: inf when only the source is, 0 when
+    both are."""
+    ys, yt = (y if y > dark else 0.0 for y in (ys, yt))
     if ys <= 0.0:
         return 0.0 if yt <= 0.0 else float("inf")
     return abs(yt - ys) / ys
@@ -213,8 +219,7 @@ def image_checks(
         de.append(d)
         worst_lum = max(worst_lum, (luminance_error(s, t, mask), where))
         worst_de = max(worst_de, (float(d.mean()) if d.size else 0.0, where))
-    ys, yt = (y if y > DARK * len(pairs) else 0.0 for y in (ys, yt))  # sums over the pairs
-    lum = 0.0 if ys <= 0 and yt <= 0 else (abs(yt - ys) / ys if ys > 0 else float("inf"))
+    lum = _relative(ys, yt, DARK * len(pairs))  # sums over the pairs
     d_all = np.concatenate(de) if de else np.zeros(0)
     n = len(pairs)
     over = f"over {n} view(s)" if n > 1 else pairs[0][0]
