@@ -289,3 +289,21 @@ def test_a_quantity_read_only_by_scales_through_the_origin_answers_down_to_zero(
     mappings["diffuse"] = {"kind": "poly", "input": "diffuse", "coef": [0.1, 1.0]}  # an offset: not through 0
     assert training_domain(x, mappings)["diffuse"] == [0.12, 0.8]
     assert domain["roughness"] == [0.2, 0.6]
+
+
+def test_too_few_points_say_how_many_the_sweep_left_out():
+    """A sweep whose fits are poor (UsdPreviewSurface at roughness 1 onto roughplastic: 7 of 8 fits at relative error
+    0.61, left out as loss outliers) said only "1 usable points: too few to learn a transform"; it says why."""
+    import numpy as np
+
+    from matremap.dialects import get_model
+    from matremap.regress.data import TrainingData
+    from matremap.regress.parametric import learn
+
+    spec = get_model("gltf:metal-rough")
+    x = {"diffuse": np.full((1, 3), 0.5)}
+    data = TrainingData(spec, spec, {}, {}, x, dict(x), {}, {"rows": 8, "used": 1, "excluded_flagged": 7}, {})
+    with pytest.raises(MatremapError) as e:
+        learn(data)
+    msg = str(e.value)
+    assert "1 usable points" in msg and "7 of its 8 fits were left out" in msg and "\n" not in msg

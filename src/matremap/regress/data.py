@@ -33,6 +33,19 @@ class TrainingData:
     def __len__(self) -> int:
         return len(next(iter(self.x.values())))
 
+    def too_few(self, need: int) -> MatremapError:
+        """The error of a sweep that left fewer than ``need`` points to learn from, saying how many it fitted and how
+        many the stability analysis left out (a target that cannot draw the source there fits it badly)."""
+        used, rows = len(self), int(self.provenance.get("rows", len(self)))
+        flagged = int(self.provenance.get("excluded_flagged", 0))
+        why = (
+            f"; {flagged} of its {rows} fits were left out as unstable or poor (the target does not draw this source "
+            "well there: see matremap sweep-report on the sweep database; try another target model)"
+            if flagged
+            else ""
+        )
+        return MatremapError(f"{used} usable points: too few to learn a transform (need {need}){why}")
+
     def varies(self, name: str) -> bool:
         """Whether a source quantity takes more than one value in the data."""
         v = self.x.get(name)

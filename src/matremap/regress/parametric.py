@@ -273,7 +273,7 @@ def learn(data: TrainingData, holdout: float = 0.2, seed: int = 0) -> dict[str, 
     (the value seen in the sweep) where it does not -- where the source's quantity is held, and where the
     target's is (a parameter the target takes as a number only, held at one value while the source's varies)."""
     if len(data) < MIN_POINTS:
-        raise MatremapError(f"{len(data)} usable points: too few to learn a transform (need {MIN_POINTS})")
+        raise data.too_few(MIN_POINTS)
     mappings: dict[str, dict[str, Any]] = {}
     x, y = data.x, data.y
 

@@ -197,7 +197,7 @@ def learn(data: TrainingData, holdout: float = 0.2, seed: int = 0) -> dict[str, 
     """Mappings for every quantity the target speaks: an SVR where the source counterpart
     varies, a constant (the value seen in the sweep) where it does not."""
     if len(data) < MIN_POINTS:
-        raise MatremapError(f"{len(data)} usable points: too few to learn a transform (need {MIN_POINTS})")
+        raise data.too_few(MIN_POINTS)
     x, y = data.x, data.y
     varying: list[str] = [n for n in ("roughness", "reflectance", "diffuse") if n in x and data.varies(n)]
     rough = ["roughness"] if "roughness" in varying else []
