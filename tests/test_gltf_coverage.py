@@ -43,10 +43,10 @@ def test_each_plane_of_the_texture_coordinate_test_shows_its_own_corner(material
 
 
 def test_a_triangle_across_the_tile_edge_wraps_and_one_over_a_whole_tile_covers_all():
-    across = Coverage(np.array([[[0.9, 0.1], [1.1, 0.1], [1.1, 0.3]]]), 1).mask((100, 100))
+    across = Coverage(np.array([[[0.9, 0.1], [1.1, 0.1], [1.1, 0.3]]])).mask((100, 100))
     assert across[11, 95] and across[11, 5] and not across[11, 50]  # the repeat wrap (§3.8.4) takes it round
-    assert Coverage(np.array([[[0.0, 0.0], [2.0, 0.0], [0.0, 2.0]]]), 1).mask((100, 100)) is None
-    tiny = Coverage(np.array([[[0.501, 0.501], [0.502, 0.501], [0.501, 0.502]]]), 1).mask((100, 100))
+    assert Coverage(np.array([[[0.0, 0.0], [2.0, 0.0], [0.0, 2.0]]])).mask((100, 100)) is None
+    tiny = Coverage(np.array([[[0.501, 0.501], [0.502, 0.501], [0.501, 0.502]]])).mask((100, 100))
     assert tiny.sum() >= 1 and tiny[50, 50]  # smaller than a texel: its texel still counts
 
 

@@ -46,9 +46,8 @@ _VARIANTS = "KHR_materials_variants"
 class Coverage:
     """The UV triangles of one material (``uv`` [T, 3, 2]) and what they cover at a map size (:meth:`mask`)."""
 
-    def __init__(self, uv: np.ndarray, primitives: int) -> None:
+    def __init__(self, uv: np.ndarray) -> None:
         self.uv = np.asarray(uv, dtype=np.float64)
-        self.primitives = primitives
 
     def mask(self, size: tuple[int, int]) -> np.ndarray | None:
         """The texels of a map of ``size`` (H, W) the triangles show (bool [H, W]), or None when they show them all
@@ -104,30 +103,26 @@ def _mark(grid: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> None:
         grid[np.clip(rows[t].astype(np.intp), 0, h - 1), np.clip(cols[t].astype(np.intp), 0, w - 1)] = True
 
 
-def material_coverage(reader: FileReader, material: int, uv_set: int) -> tuple[Coverage | None, str]:
+def material_coverage(reader: FileReader, material: int, uv_set: int) -> Coverage | None:
     """The UV triangles of every mesh primitive drawn with ``material`` (its ``material``, or a
-    KHR_materials_variants mapping to it) on ``TEXCOORD_<uv_set>``, and a note; (None, why) when there are none or
-    they cannot be read."""
+    KHR_materials_variants mapping to it) on ``TEXCOORD_<uv_set>``; None when no primitive draws it, one draws points
+    or lines, or their UVs cannot be read (every texel counts then)."""
     doc = reader.doc.json
     meshes: list[Any] = doc["meshes"] if isinstance(doc.get("meshes"), list) else []
     found: list[np.ndarray] = []
-    used = 0
     try:
         for m, mesh in enumerate(meshes):
             prims = mesh.get("primitives") if isinstance(mesh, dict) else None
             for p, prim in enumerate(prims if isinstance(prims, list) else []):
                 if not isinstance(prim, dict) or material not in _materials(prim):
                     continue
-                used += 1
                 tris = _uv_triangles(reader, prim, uv_set, f"meshes[{m}].primitives[{p}]")
                 if tris is None:
-                    return None, f"meshes[{m}].primitives[{p}] draws no triangles (mode {prim.get('mode', 4)})"
+                    return None
                 found.append(tris)
-    except MatremapError as e:
-        return None, f"its triangles' UVs could not be read ({str(e).split(': ', 1)[-1]})"
-    if not found:
-        return None, "no mesh primitive uses it"
-    return Coverage(np.concatenate(found), used), f"{used} primitive(s)"
+    except MatremapError:
+        return None
+    return Coverage(np.concatenate(found)) if found else None
 
 
 def _materials(prim: dict[str, Any]) -> set[int]:

@@ -215,7 +215,7 @@ def read(
             "normalTexture on a material with no other texture: it is converted as a uniform material, so only a "
             "glTF output keeps the normal map"
         )
-    coverage = material_coverage(reader, idx, textures.uv_set)[0] if maps else None
+    coverage = material_coverage(reader, idx, textures.uv_set) if maps else None
     carried = textures.read_carried(m, pbr, found)
     notes += extension_notes(found, textured=bool(maps))
     note_unknown(ext, obj, notes)

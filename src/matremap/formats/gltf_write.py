@@ -226,9 +226,14 @@ def coat_image(maps: dict[str, np.ndarray], exts: dict[str, Any], name: str) -> 
     if name not in maps:
         return None
     coat = COAT_MAPS[name]
-    old = (exts.get(CLEARCOAT) or {}).get(coat.slot)
-    pixels = np.zeros((*maps[name].shape[:2], 3))
-    pixels[..., coat.channel] = maps[name]
+    return channel_image(name, maps[name], coat.channel, (exts.get(CLEARCOAT) or {}).get(coat.slot))
+
+
+def channel_image(name: str, values: np.ndarray, channel: int, old: Any) -> NewImage:
+    """A scalar map as one channel of a linear RGB PNG (the others 0), the texture of a layer extension whose value
+    it reads from that channel, replacing the copied extension's own ``old`` textureInfo."""
+    pixels = np.zeros((*values.shape[:2], 3))
+    pixels[..., channel] = values
     return NewImage(name, png(code(pixels, False)), "image/png", old)
 
 
@@ -255,10 +260,7 @@ def transmission_image(maps: dict[str, np.ndarray], exts: dict[str, Any]) -> New
     PNG; the factor is then 1), replacing the copied extension's own (``exts``)."""
     if "transmission" not in maps:
         return None
-    pixels = np.zeros((*maps["transmission"].shape[:2], 3))
-    pixels[..., 0] = maps["transmission"]
-    old = (exts.get(TRANSMISSION) or {}).get(TRANSMISSION_MAP)
-    return NewImage("transmission", png(code(pixels, False)), "image/png", old)
+    return channel_image("transmission", maps["transmission"], 0, (exts.get(TRANSMISSION) or {}).get(TRANSMISSION_MAP))
 
 
 def normal_image(mat: dict[str, Any], normal: Path | None, source_normal: TextureRef | None) -> NewImage | None:

@@ -322,7 +322,7 @@ def read(
         from matremap.formats.usd_coverage import material_coverage
 
         try:
-            asset.coverage = material_coverage(pxr, stage, found[index], next(iter(ctx.primvars), "st"))[0]
+            asset.coverage = material_coverage(pxr, stage, found[index], next(iter(ctx.primvars), "st"))
         except (RuntimeError, ValueError, TypeError):  # meshes USD cannot answer for: every texel counts
             asset.coverage = None
     return asset

@@ -19,12 +19,11 @@ import numpy as np
 from matremap.formats.gltf_coverage import Coverage
 
 
-def material_coverage(pxr: Any, stage: Any, material: Any, primvar: str = "st") -> tuple[Coverage | None, str]:
-    """The st triangles of every mesh face drawn with ``material`` (a UsdShade.Material), as a :class:`Coverage`,
-    and a note; (None, why) when there are none or they cannot be read."""
+def material_coverage(pxr: Any, stage: Any, material: Any, primvar: str = "st") -> Coverage | None:
+    """The st triangles of every mesh face drawn with ``material`` (a UsdShade.Material), as a :class:`Coverage`;
+    None when no mesh is bound to it or one has no readable ``primvar`` (every texel counts then)."""
     target = material.GetPath()
     found: list[np.ndarray] = []
-    meshes = 0
     for prim in pxr.Usd.PrimRange(stage.GetPseudoRoot(), pxr.Usd.TraverseInstanceProxies()):
         if not prim.IsA(pxr.UsdGeom.Mesh):
             continue
@@ -33,12 +32,9 @@ def material_coverage(pxr: Any, stage: Any, material: Any, primvar: str = "st") 
             continue
         tris = _st_triangles(pxr, pxr.UsdGeom.Mesh(prim), primvar, faces)
         if tris is None:
-            return None, f"{prim.GetPath()} has no readable {primvar} primvar"
+            return None
         found.append(tris)
-        meshes += 1
-    if not found:
-        return None, "no mesh is bound to it"
-    return Coverage(np.concatenate(found), meshes), f"{meshes} mesh(es)"
+    return Coverage(np.concatenate(found)) if found else None
 
 
 def _bound(pxr: Any, prim: Any) -> Any:
