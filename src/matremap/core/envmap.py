@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -72,14 +73,28 @@ class EnvMap:
         edges = np.cos(math.pi * np.arange(self.height + 1) / self.height)
         return (edges[:-1] - edges[1:]) * (2.0 * math.pi / self.width)
 
-    def lookup(self, directions: np.ndarray, rotation_deg: float = 0.0) -> np.ndarray:
-        """Radiance [..., 3] seen along unit ``directions`` [..., 3] (nearest texel) with the map
+    def texels(self, directions: np.ndarray, rotation_deg: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """Row and column indices [...] of the texels seen along unit ``directions`` [..., 3] with the map
         turned by ``rotation_deg`` about +y (as in :func:`directional_lights`)."""
         d = rotate_y(np.asarray(directions, dtype=float), -rotation_deg)
         theta, phi = direction_to_latlong(d)
         i = np.clip((theta / math.pi * self.height).astype(int), 0, self.height - 1)
         j = np.mod((phi / (2.0 * math.pi) * self.width).astype(int), self.width)
-        return self.radiance[i, j]
+        return i, j
+
+    def lookup(self, directions: np.ndarray, rotation_deg: float = 0.0) -> np.ndarray:
+        """Radiance [..., 3] seen along unit ``directions`` [..., 3] (nearest texel) with the map
+        turned by ``rotation_deg`` about +y (as in :func:`directional_lights`)."""
+        return self.radiance[self.texels(directions, rotation_deg)]
+
+    @cached_property
+    def light_density(self) -> np.ndarray:
+        """Per texel [H, W], the density (per steradian) with which :func:`directional_lights` picks a
+        direction there: luminance / (sum of luminance x solid angle) (read-only)."""
+        dist = _distribution(self)
+        out = dist.weights / (dist.total * self.solid_angles()[:, None])
+        out.flags.writeable = False
+        return out
 
     def mean_radiance(self) -> np.ndarray:
         """Solid-angle weighted mean radiance (RGB): irradiance / pi of a surface seeing it all."""

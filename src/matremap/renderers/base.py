@@ -41,11 +41,13 @@ class EnvironmentLight:
     """An environment map as a light source. Renderers that trace the map itself (Mitsuba 3, Cycles)
     use ``env``; the embedded renderer samples it into ``lights`` directional lights (importance
     sampled with ``seed``, see :func:`~matremap.core.envmap.directional_lights`), the same set for every
-    material at a given rotation."""
+    material at a given rotation, and ``mirror_samples`` directions about each pixel's mirror direction
+    (:mod:`~matremap.renderers.embedded.mirror_samples`; 0: the lights alone)."""
 
     env: EnvMap
     lights: int = 256
     seed: int = 0
+    mirror_samples: int = 64
     _cache: dict[float, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict, repr=False)
 
     def directional(self, rotation_deg: float) -> tuple[np.ndarray, np.ndarray]:

@@ -18,7 +18,7 @@ import json
 import math
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -241,9 +241,11 @@ def irradiance_scale_under(light: EnvironmentLight, source_model: str, target_mo
     """Scale that brings source renders to the target's irradiance units under ``light`` (1 when they
     share a renderer family, :func:`~matremap.core.calibrate.same_units`): least-squares ratio of the
     white Lambertian references drawn by the embedded renderer, noise free and in each family's units
-    (the mean brightness of Cycles' environment renders is within 0.03 % of its emulation's)."""
+    (the mean brightness of Cycles' environment renders is within 0.03 % of its emulation's), both under the
+    directional lights alone (a Lambertian needs no mirror samples; both references then see the same light)."""
     if same_units(source_model, target_model):
         return 1.0
+    light = replace(light, mirror_samples=0)
     families = [get_model(m).family for m in (source_model, target_model)]
     images = []
     for family in families:

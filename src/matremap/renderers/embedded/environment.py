@@ -19,6 +19,10 @@ from matremap.dialects import get_model
 from matremap.errors import MatremapError
 from matremap.renderers.base import PARTS, EnvironmentLight
 from matremap.renderers.embedded.geometry import LocalGeometry
+from matremap.renderers.embedded.microfacet import ALPHA_MIN
+from matremap.renderers.embedded.mirror_samples import MIRROR_SAMPLES, mirror_directions
+from matremap.renderers.embedded.mirror_samples import density as mirror_density
+from matremap.renderers.embedded.mirror_samples import samples as mirror_sample_directions
 from matremap.renderers.textured import (
     SurfacePixels,
     check_normal_map,
@@ -127,6 +131,11 @@ class SVBRDFRender:
         self.bump_alpha2 = None
         self.specular_params = None  # per-pixel parameters of the glossy closures, when drawn apart
         self.has_diffuse = part != "specular"
+        # whether the model has a glossy lobe (mirror samples serve nothing else); every part of it is sampled
+        # alike, so that its parts add up to the full render, but a diffuse part does not draw mirrors: its
+        # overrides may switch the lobe off by making it one (glTF's roughness 0)
+        self.has_glossy = spec.part_overrides("specular", params) is not None
+        self.mirror_alpha = ALPHA_MIN if part != "diffuse" else 0.0
         self.glossy_normals = self.normals
         if spec.normal_mapping == "cycles" and normal_map is not None and not self.black:
             self.glossy_normals = ensure_valid_specular_reflection(self.surface.normal, self.surface.view, self.normals)
@@ -137,66 +146,105 @@ class SVBRDFRender:
             elif part == "full" and spec_over is not None:
                 self.specular_params = _per_pixel_params(spec, params, self.surface, spec_over)
 
-    def render(self, directions: np.ndarray, intensities: np.ndarray) -> np.ndarray:
+    def render(
+        self,
+        directions: np.ndarray,
+        intensities: np.ndarray,
+        env: EnvMap | None = None,
+        rotation_deg: float = 0.0,
+        mirror_samples: int = 0,
+    ) -> np.ndarray:
         """Radiance float32 [res, res, 3] under directional lights (unit directions [L, 3] towards
-        the light, RGB intensities [L, 3])."""
+        the light, RGB intensities [L, 3]). With ``env``, the map the lights sample (turned by
+        ``rotation_deg``), and ``mirror_samples`` > 0, each pixel also takes that many directions of the map
+        about its mirror direction, combined with the lights by multiple importance sampling
+        (:mod:`~matremap.renderers.embedded.mirror_samples`): glossy lobes narrower than the lights' spacing,
+        and mirrors, then show the map."""
         res = self.resolution
         out = np.zeros((res * res, 3), dtype=np.float32)
         if self.black:
             return out.reshape(res, res, 3)
         wi = np.asarray(directions, dtype=float)
         inten = np.asarray(intensities, dtype=float)
-        n_lights = wi.shape[0]
-        surf = self.surface
-        n_pix = surf.pixels.size
-        chunk = max(1, CHUNK_ELEMENTS // max(n_lights, 1))
+        n_pix = self.surface.pixels.size
+        chunk = max(1, CHUNK_ELEMENTS // max(wi.shape[0], 1))
         radiance = np.empty((n_pix, 3))
-        for start in range(0, n_pix, chunk):
-            sl = slice(start, min(start + chunk, n_pix))
-            n = self.normals[sl]
-            wo = surf.view[sl]
-            cos_i = wi @ n.T  # [L, p]
-            cos_o = np.broadcast_to(np.sum(n * wo, axis=-1), cos_i.shape)
-            i_dot_o = wi @ wo.T
-            # light from below the geometric surface is blocked by the object itself, whatever the
-            # shading normal says (as in a path tracer: the sphere occludes it)
-            cos_g = wi @ surf.normal[sl].T
-            lit = (cos_i > 0.0) & (cos_o > 0.0) & (cos_g > 0.0)
-            if self.bump_alpha2 is None:
-                frame = _frame(wi, wo, n, surf.tangent[sl], lit)  # the shading frame (anisotropic models)
-                geo = LocalGeometry(
-                    np.where(lit, cos_i, 1.0), np.where(lit, cos_o, 1.0), np.where(lit, i_dot_o, 1.0), frame
-                )
-                fcos = np.where(lit, self._evaluate(self.params, sl, geo, cos_i.shape), 0.0)  # [C, L, p]
-            else:
-                # Cycles with a normal map: a diffuse closure is lit wherever the light is above both
-                # the bent and the smooth normal, seen from either side, and softened by the bump
-                # shadowing term; a glossy closure shades with its raised normal
-                lit_d = (cos_i > 0.0) & (cos_g > 0.0)
-                geo = LocalGeometry(np.where(lit_d, cos_i, 1.0), np.where(lit, cos_o, 1.0), np.where(lit, i_dot_o, 1.0))
-                # the diffuse closures: the model less its glossy part, at the same geometry
-                diffuse: float | np.ndarray = 0.0
-                if self.has_diffuse:
-                    diffuse = self._evaluate(self.params, sl, geo, cos_i.shape)
-                    if self.specular_params is not None:
-                        diffuse = diffuse - self._evaluate(self.specular_params, sl, geo, cos_i.shape)
-                glossy: float | np.ndarray = 0.0
-                if self.specular_params is not None:
-                    ng = self.glossy_normals[sl]
-                    gi = wi @ ng.T
-                    go = np.broadcast_to(np.sum(ng * wo, axis=-1), gi.shape)
-                    lit_g = (gi > 0.0) & (go > 0.0) & (cos_g > 0.0)
-                    ggeo = LocalGeometry(
-                        np.where(lit_g, gi, 1.0), np.where(lit_g, go, 1.0), np.where(lit_g, i_dot_o, 1.0)
-                    )
-                    glossy = np.where(lit_g, self._evaluate(self.specular_params, sl, ggeo, gi.shape), 0.0)
-                term = bump_shadowing(self.bump_alpha2[sl], cos_g)
-                fcos = glossy + np.where(lit_d, diffuse, 0.0) * term
-            for c in range(3):
-                f = fcos[min(c, fcos.shape[0] - 1)]  # [L, p]
-                radiance[sl, c] = np.sum(f * inten[:, c, None], axis=0)
-        out[surf.pixels] = radiance
+        if env is None or mirror_samples <= 0 or not self.has_glossy:
+            for start in range(0, n_pix, chunk):
+                sl = slice(start, min(start + chunk, n_pix))
+                radiance[sl] = self._shade(wi, inten[:, None, :], sl)
+        else:
+            # N_L p_L of each light (the lights are drawn with the map's light density)
+            lights_density = len(wi) * env.light_density[env.texels(wi, rotation_deg)]
+            for start in range(0, n_pix, chunk):
+                sl = slice(start, min(start + chunk, n_pix))
+                r = mirror_directions(self.glossy_normals[sl], self.surface.view[sl])
+                mixed = lights_density[:, None] + mirror_samples * mirror_density(wi, r)  # [L, p]
+                share = (lights_density[:, None] / mixed)[..., None]
+                radiance[sl] = self._shade(wi, inten[:, None, :] * share, sl, self.mirror_alpha)
+                d, p_b = mirror_sample_directions(r, self.surface.tangent[sl], mirror_samples)
+                texels = env.texels(d, rotation_deg)
+                mixed = len(wi) * env.light_density[texels] + mirror_samples * p_b[:, None]
+                radiance[sl] += self._shade(d, env.radiance[texels] / mixed[..., None], sl, self.mirror_alpha)
+        out[self.surface.pixels] = radiance
         return out.reshape(res, res, 3)
+
+    def _shade(self, wi: np.ndarray, weights: np.ndarray, sl: slice, mirror_alpha: float = 0.0) -> np.ndarray:
+        """Radiance [p, 3] of the pixels ``sl`` lit from directions ``wi`` ([K, 3], shared by the pixels, or
+        [K, p, 3], per pixel) with RGB weights [K, 1 or p, 3] (a light's intensity, or the radiance a sample
+        sees over its density); mirrors drawn as lobes of ``mirror_alpha`` (:class:`.geometry.LocalGeometry`)."""
+        surf = self.surface
+        n = self.normals[sl]
+        wo = surf.view[sl]
+        cos_i = _dot(wi, n)  # [K, p]
+        cos_o = np.broadcast_to(np.sum(n * wo, axis=-1), cos_i.shape)
+        i_dot_o = _dot(wi, wo)
+        # light from below the geometric surface is blocked by the object itself, whatever the
+        # shading normal says (as in a path tracer: the sphere occludes it)
+        cos_g = _dot(wi, surf.normal[sl])
+        lit = (cos_i > 0.0) & (cos_o > 0.0) & (cos_g > 0.0)
+        if self.bump_alpha2 is None:
+            frame = _frame(wi, wo, n, surf.tangent[sl], lit)  # the shading frame (anisotropic models)
+            geo = LocalGeometry(
+                np.where(lit, cos_i, 1.0), np.where(lit, cos_o, 1.0), np.where(lit, i_dot_o, 1.0), frame, mirror_alpha
+            )
+            fcos = np.where(lit, self._evaluate(self.params, sl, geo, cos_i.shape), 0.0)  # [C, K, p]
+        else:
+            fcos = self._bumped(wi, sl, (cos_i, cos_o, cos_g, i_dot_o), mirror_alpha)
+        out = np.empty((cos_i.shape[1], 3))
+        for c in range(3):
+            out[:, c] = np.sum(fcos[min(c, fcos.shape[0] - 1)] * weights[..., c], axis=0)
+        return out
+
+    def _bumped(self, wi: np.ndarray, sl: slice, cosines: tuple[np.ndarray, ...], mirror_alpha: float) -> np.ndarray:
+        """f cos [C, K, p] as Cycles shades with a normal map: a diffuse closure is lit wherever the light is
+        above both the bent and the smooth normal, seen from either side, and softened by the bump
+        shadowing term; a glossy closure shades with its raised normal. ``cosines``: n.i, n.o, ng.i, i.o."""
+        cos_i, cos_o, cos_g, i_dot_o = cosines
+        lit = (cos_i > 0.0) & (cos_o > 0.0) & (cos_g > 0.0)
+        lit_d = (cos_i > 0.0) & (cos_g > 0.0)
+        geo = LocalGeometry(
+            np.where(lit_d, cos_i, 1.0), np.where(lit, cos_o, 1.0), np.where(lit, i_dot_o, 1.0), None, mirror_alpha
+        )
+        # the diffuse closures: the model less its glossy part, at the same geometry
+        diffuse: float | np.ndarray = 0.0
+        if self.has_diffuse:
+            diffuse = self._evaluate(self.params, sl, geo, cos_i.shape)
+            if self.specular_params is not None:
+                diffuse = diffuse - self._evaluate(self.specular_params, sl, geo, cos_i.shape)
+        glossy: float | np.ndarray = 0.0
+        if self.specular_params is not None:
+            ng = self.glossy_normals[sl]
+            gi = _dot(wi, ng)
+            go = np.broadcast_to(np.sum(ng * self.surface.view[sl], axis=-1), gi.shape)
+            lit_g = (gi > 0.0) & (go > 0.0) & (cos_g > 0.0)
+            ggeo = LocalGeometry(
+                np.where(lit_g, gi, 1.0), np.where(lit_g, go, 1.0), np.where(lit_g, i_dot_o, 1.0), None, mirror_alpha
+            )
+            glossy = np.where(lit_g, self._evaluate(self.specular_params, sl, ggeo, gi.shape), 0.0)
+        assert self.bump_alpha2 is not None
+        term = bump_shadowing(self.bump_alpha2[sl], cos_g)
+        return np.asarray(glossy + np.where(lit_d, diffuse, 0.0) * term)
 
     def _evaluate(
         self, per_pixel: Mapping[str, np.ndarray], sl: slice, geo: LocalGeometry, shape: tuple[int, int]
@@ -208,6 +256,11 @@ class SVBRDFRender:
         return np.broadcast_to(fcos, (1, channels) + shape)[0]
 
 
+def _dot(w: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """w.v [K, p] of directions ``w`` [K, 3] (shared by the pixels) or [K, p, 3] (per pixel) with ``v`` [p, 3]."""
+    return w @ v.T if w.ndim == 2 else np.einsum("kpj,pj->kp", w, v)
+
+
 def _frame(
     wi: np.ndarray, wo: np.ndarray, n: np.ndarray, tangent: np.ndarray, lit: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -216,7 +269,7 @@ def _frame(
     s = tangent - n * np.sum(n * tangent, axis=-1, keepdims=True)
     s /= np.maximum(np.linalg.norm(s, axis=-1, keepdims=True), 1e-12)
     t = np.cross(n, s)
-    i_s, i_t = wi @ s.T, wi @ t.T
+    i_s, i_t = _dot(wi, s), _dot(wi, t)
     o_s, o_t = (np.broadcast_to(np.sum(wo * v, axis=-1), lit.shape) for v in (s, t))
     return tuple(np.where(lit, a, 0.0) for a in (i_s, i_t, o_s, o_t))  # type: ignore[return-value]
 
@@ -274,22 +327,26 @@ def render_svbrdf(
     normal_map: np.ndarray | None = None,
     lights: int = 256,
     seed: int = 0,
+    mirror_samples: int = MIRROR_SAMPLES,
 ) -> np.ndarray:
     """Render a textured material on the sphere or plane under ``env`` turned by ``rotation_deg``.
 
     ``params`` maps the model's parameter names to constants or textures (see the module doc);
     missing parameters take the model's defaults, ``options`` its options. ``part`` is ``full``,
     ``specular`` (the model's ``specular_only`` overrides; black when it has no specular part) or
-    ``diffuse``. Returns linear radiance float32 [res, res, 3], black off the object.
+    ``diffuse``. ``lights`` directional lights sample the map, and ``mirror_samples`` directions per pixel
+    about its mirror direction (0: the lights alone; see :meth:`SVBRDFRender.render`). Returns linear radiance
+    float32 [res, res, 3], black off the object.
     """
     r = SVBRDFRender(model, params, options, geometry, resolution, part, normal_map)
     directions, intensities = directional_lights(env, lights, rotation_deg, seed)
-    return r.render(directions, intensities)
+    return r.render(directions, intensities, env, rotation_deg, mirror_samples)
 
 
 class EmbeddedEnvironmentRender:
     """The embedded renderer's :class:`~matremap.renderers.base.EnvironmentRender`: an
-    :class:`SVBRDFRender` lit by the environment's directional lights at each rotation."""
+    :class:`SVBRDFRender` lit by the environment's directional lights and its samples about each pixel's
+    mirror direction (``light.mirror_samples``) at each rotation."""
 
     label = "embedded emulation"
 
@@ -297,4 +354,5 @@ class EmbeddedEnvironmentRender:
         self.prepared, self.light = prepared, light
 
     def render(self, rotation_deg: float) -> np.ndarray:
-        return self.prepared.render(*self.light.directional(rotation_deg))
+        light = self.light
+        return self.prepared.render(*light.directional(rotation_deg), light.env, rotation_deg, light.mirror_samples)

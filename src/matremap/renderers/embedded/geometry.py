@@ -23,6 +23,10 @@ class LocalGeometry:
     i_dot_o: np.ndarray
     #: (i.s, i.t, o.s, o.t): light and view directions along the tangent and bitangent, or None
     frame: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+    #: the alpha a mirror is drawn with (:func:`~matremap.renderers.embedded.microfacet.drawn_alpha`): 0 under
+    #: point lights, which never reach a mirror's delta lobe (it is zero); the narrowest lobe (1e-4) where the
+    #: renderer samples the mirror direction (an environment render's mirror samples)
+    mirror_alpha: float = 0.0
 
     @cached_property
     def h_len2(self) -> np.ndarray:

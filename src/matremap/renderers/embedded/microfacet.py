@@ -150,3 +150,13 @@ def g1_anisotropic(
     b = np.sqrt((au * vx) ** 2 + (av * vy) ** 2) / vz
     g1 = g1_ggx if distribution == "ggx" else g1_beckmann_rational
     return g1(b, np.ones_like(b))
+
+
+def drawn_alpha(alpha, g) -> np.ndarray:
+    """``alpha`` as a lobe is drawn on the geometry ``g``: floored at ``g.mirror_alpha`` where the renderer
+    samples the mirror direction (a mirror then shows what it reflects, as a lobe of alpha 1e-4, as narrow as
+    Mitsuba's; see :mod:`~matremap.renderers.embedded.mirror_samples`); as given elsewhere, where the evaluators
+    draw a mirror as zero (no point light reaches its delta lobe)."""
+    floor = getattr(g, "mirror_alpha", 0.0)
+    a = np.asarray(alpha, dtype=float)
+    return np.maximum(a, floor) if floor > 0.0 else a

@@ -20,7 +20,7 @@ INV_PI = 1.0 / np.pi
 
 
 def glossy(p, opt, g):
-    alpha = p["Roughness"] ** 2
+    alpha = mf.drawn_alpha(p["Roughness"] ** 2, g)
     distribution = opt["distribution"]
     if distribution == "ashikhmin_shirley":
         lobe = _ashikhmin_shirley(alpha, g)

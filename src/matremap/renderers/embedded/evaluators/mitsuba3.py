@@ -170,9 +170,23 @@ def roughconductor_anisotropic(p, opt, g):
     return p["specular_reflectance"] * conductor_fresnel(p, opt, g) * (d * gg / (4.0 * g.cos_o))
 
 
-def delta_glass(p, opt, g):
-    """``dielectric`` / ``thindielectric``: a delta reflection, zero under point lights."""
-    return 0.0 * p["specular_reflectance"] * g.cos_o
+def delta_glass(p, opt, g, thin: bool = False):
+    """``dielectric`` / ``thindielectric``: a delta reflection, zero under point lights; where the renderer
+    samples the mirror direction (``g.mirror_alpha``), drawn as GGX of that alpha with the exact Fresnel R of
+    eta = int_ior / ext_ior, the thin slab's R' = 2R / (1 + R) (its internal reflections summed)."""
+    if not getattr(g, "mirror_alpha", 0.0) > 0.0:
+        return 0.0 * p["specular_reflectance"] * g.cos_o
+    alpha = mf.drawn_alpha(0.0, g)
+    r = fresnel_dielectric(g.i_dot_h, p["int_ior"] / p["ext_ior"])
+    if thin:
+        r = 2.0 * r / (1.0 + r)
+    lobe = mf.d_ggx(g.cos_h, g.tan2_h, alpha) * mf.g_mitsuba06("ggx", g.tan_i, g.tan_o, alpha) / (4.0 * g.cos_o)
+    return p["specular_reflectance"] * r * lobe
+
+
+def delta_thin_glass(p, opt, g):
+    """``thindielectric``'s reflection (:func:`delta_glass`)."""
+    return delta_glass(p, opt, g, thin=True)
 
 
 def roughdielectric(p, opt, g):
@@ -188,7 +202,7 @@ def roughdielectric(p, opt, g):
 EVALUATORS = {
     DIELECTRIC.id: delta_glass,
     ROUGHDIELECTRIC.id: roughdielectric,
-    THINDIELECTRIC.id: delta_glass,
+    THINDIELECTRIC.id: delta_thin_glass,
     DIFFUSE.id: diffuse,
     ROUGHCONDUCTOR.id: roughconductor,
     ROUGHCONDUCTOR_ANISOTROPIC.id: roughconductor_anisotropic,

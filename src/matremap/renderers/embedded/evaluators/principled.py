@@ -257,7 +257,7 @@ def f82_b(f0, tint) -> np.ndarray:
 def ggx_lobe(rough, g) -> np.ndarray:
     """The white single-scatter GGX lobe times cos(theta_light): D G2 / (4 cos_view), zero for a
     near-mirror (alpha = rough^2)."""
-    alpha = rough * rough
+    alpha = mf.drawn_alpha(rough * rough, g)
     d = mf.d_ggx(g.cos_h, g.tan2_h, alpha)
     g2 = mf.g_height_correlated(mf.lambda_ggx(g.tan_i, alpha), mf.lambda_ggx(g.tan_o, alpha))
     return np.where(alpha * alpha <= MIRROR_ALPHA2, 0.0, d * g2 / (4.0 * g.cos_o))
