@@ -128,3 +128,13 @@ def test_the_evaluation_sees_the_colour_of_chrome(tmp_path, studio):
     )
     assert not wrong.verdict.passed
     assert "delta_e" in {c.name for c in wrong.verdict.failed}
+
+
+def test_a_principled_mirror_is_sampled_too(studio):
+    """Mitsuba 3's principled has no specular-only part; its lobe (alpha >= 0.001) is sampled all the same: the
+    lights alone draw its chrome black but for a few pixels that catch a light."""
+    args = ("mitsuba3:principled", {"base_color": [0.2, 0.2, 0.2], "metallic": 1.0, "roughness": 0.0}, {}, studio)
+    m = inner()
+    sampled = render_svbrdf(*args, resolution=RES)[m]
+    lights_only = render_svbrdf(*args, resolution=RES, mirror_samples=0)[m]
+    assert np.median(sampled) > 0.02 > 100 * np.median(lights_only)

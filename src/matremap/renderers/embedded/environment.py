@@ -131,10 +131,10 @@ class SVBRDFRender:
         self.bump_alpha2 = None
         self.specular_params = None  # per-pixel parameters of the glossy closures, when drawn apart
         self.has_diffuse = part != "specular"
-        # whether the model has a glossy lobe (mirror samples serve nothing else); every part of it is sampled
-        # alike, so that its parts add up to the full render, but a diffuse part does not draw mirrors: its
-        # overrides may switch the lobe off by making it one (glTF's roughness 0)
-        self.has_glossy = spec.part_overrides("specular", params) is not None
+        # whether the model has a specular lobe (a specular reflectance; mirror samples serve nothing else);
+        # every part of it is sampled alike, so that its parts add up to the full render, but a diffuse part does
+        # not draw mirrors: its overrides may switch the lobe off by making it one (glTF's roughness 0)
+        self.has_glossy = spec.reflectance is not None
         self.mirror_alpha = ALPHA_MIN if part != "diffuse" else 0.0
         self.glossy_normals = self.normals
         if spec.normal_mapping == "cycles" and normal_map is not None and not self.black:
