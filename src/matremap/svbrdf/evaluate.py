@@ -357,7 +357,10 @@ def _settings(
         "target": _describe(tgt),
         "environment": f"{env.name} ({env.width} x {env.height})",
         "geometry": f"{geometry}, {resolution} x {resolution} pixels",
-        "lights": f"{lights} directional lights importance-sampled from the environment",
+        "lights": (
+            f"{lights} directional lights importance-sampled from the environment (embedded renderer), and "
+            f"{EnvironmentLight.mirror_samples} samples about each pixel's mirror direction"
+        ),
         "renderers": f"source: {prepared[('source', 'full')].label}, target: {prepared[('target', 'full')].label}",
         "irradiance": f"source scaled by {scale:.6g}" if scale != 1.0 else "same renderer family (no scaling)",
         "exposure": ", ".join(f"{p} x{exposure[p]:.4g}" for p in PARTS),
