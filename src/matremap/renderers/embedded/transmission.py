@@ -184,11 +184,14 @@ def standard_surface_interface(values: Mapping[str, Any]) -> Interface:
     dielectric Fresnel the share reflected at each crossing; transm_color = transmission_color when
     transmission_depth is 0 (a tint, applied once, as OpenPBR's and MaterialX's standard_surface to
     open_pbr_surface translation read it), else white with the interior's extinction
-    sigma = -ln(transmission_color) / transmission_depth. ``thin_walled`` 1: "light does not undergo refraction
-    ... the refractive index is set to that of the surrounding medium", so no bending; a crossing then loses
-    what the specular layer above reflects (specular specular_color times the Fresnel of specular_IOR), and a
-    depth > 0 leaves no tint (no interior). The coat over it all (coat_color, 1 - E_coat) is not applied, as
-    for OpenPBR."""
+    sigma = -ln(transmission_color) / transmission_depth. ``thin_walled`` 1: "light does not undergo refraction"
+    -- no bending: a thin wall crossed in and straight out, each crossing through the rough microsurface of
+    specular_IOR, as MaterialX 1.39's ``standard_surface`` graph draws it (its ``transmission_bsdf`` refracts with
+    specular_IOR and the transmission roughness whatever ``thin_walled``), so a rough wall blurs what lies behind
+    (the spec's "refractive index ... of the surrounding medium" taken literally, eta 1, blurs nothing: a rough
+    glTF thin glass fitted 0.43 off); a crossing then loses what the specular layer above reflects (specular
+    specular_color times the Fresnel of specular_IOR), and a depth > 0 leaves no tint (no interior). The coat over
+    it all (coat_color, 1 - E_coat) is not applied, as for OpenPBR."""
     ior = max(_scalar(values, "specular_IOR"), 1.0 + 1e-9)
     thin = _scalar(values, "thin_walled") >= 0.5
     layer = _scalar(values, "specular") * float(np.max(_rgb(values, "specular_color")))
@@ -202,7 +205,7 @@ def standard_surface_interface(values: Mapping[str, Any]) -> Interface:
     weight = np.clip(_scalar(values, "transmission"), 0.0, 1.0) * (1.0 - np.clip(_scalar(values, "metalness"), 0, 1))
     return Interface(
         weight=np.full(3, weight),
-        eta=1.0 if thin else ior,
+        eta=ior,
         alpha=_scalar(values, "specular_roughness") ** 2,
         tint=colour if depth <= 0.0 else np.ones(3),
         sigma=beer_sigma(colour, depth) if not thin and depth > 0.0 else np.zeros(3),
