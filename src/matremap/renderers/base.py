@@ -25,6 +25,7 @@ import numpy as np
 
 from matremap.core.envmap import EnvMap, directional_lights
 from matremap.errors import MatremapError
+from matremap.renderers.embedded.mirror_samples import MIRROR_SAMPLES
 
 if TYPE_CHECKING:
     from matremap.core.material import Material, SVMaterial
@@ -47,7 +48,7 @@ class EnvironmentLight:
     env: EnvMap
     lights: int = 256
     seed: int = 0
-    mirror_samples: int = 64
+    mirror_samples: int = MIRROR_SAMPLES
     _cache: dict[float, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict, repr=False)
 
     def directional(self, rotation_deg: float) -> tuple[np.ndarray, np.ndarray]:

@@ -82,7 +82,8 @@ _SHEEN_QUAD = (160, 96)
 
 def ggx_lobe(rough, g) -> np.ndarray:
     """The white single-scatter GGX lobe times cos(theta_light): D G2 / (4 cos_view), alpha = rough^2,
-    height-correlated Smith G2; zero for a mirror (alpha^2 <= 1e-14)."""
+    height-correlated Smith G2; zero for a mirror (alpha^2 <= 1e-14) under point lights, a lobe of ``g.mirror_alpha``
+    where the renderer samples the mirror direction (:func:`~matremap.renderers.embedded.microfacet.drawn_alpha`)."""
     alpha = mf.drawn_alpha(np.asarray(rough, dtype=float) ** 2, g)
     a = np.maximum(alpha, 1e-7)
     d = mf.d_ggx(g.cos_h, g.tan2_h, a)

@@ -256,7 +256,8 @@ def f82_b(f0, tint) -> np.ndarray:
 
 def ggx_lobe(rough, g) -> np.ndarray:
     """The white single-scatter GGX lobe times cos(theta_light): D G2 / (4 cos_view), zero for a
-    near-mirror (alpha = rough^2)."""
+    near-mirror (alpha = rough^2) under point lights, a lobe of ``g.mirror_alpha`` where the renderer samples the
+    mirror direction (:func:`~matremap.renderers.embedded.microfacet.drawn_alpha`)."""
     alpha = mf.drawn_alpha(rough * rough, g)
     d = mf.d_ggx(g.cos_h, g.tan2_h, alpha)
     g2 = mf.g_height_correlated(mf.lambda_ggx(g.tan_i, alpha), mf.lambda_ggx(g.tan_o, alpha))

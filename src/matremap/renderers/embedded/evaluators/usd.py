@@ -22,7 +22,8 @@ def smith_schlick_g1(cos_v: np.ndarray, k: np.ndarray) -> np.ndarray:
 
 
 def ggx_lobe(roughness: np.ndarray, g) -> np.ndarray:
-    """D G / (4 N.L N.E) times N.L: GGX with alpha = roughness^2 and Storm's separable Smith-Schlick G."""
+    """D G / (4 N.L N.E) times N.L: GGX with alpha = roughness^2 and Storm's separable Smith-Schlick G; a mirror
+    zero under point lights, a lobe of ``g.mirror_alpha`` where the renderer samples the mirror direction."""
     alpha = mf.drawn_alpha(roughness * roughness, g)
     a = np.maximum(alpha, 1e-7)
     d = mf.d_ggx(g.cos_h, g.tan2_h, a)
