@@ -25,7 +25,6 @@ import numpy as np
 
 from matremap.core.envmap import EnvMap, directional_lights
 from matremap.errors import MatremapError
-from matremap.renderers.embedded.mirror_samples import MIRROR_SAMPLES
 
 if TYPE_CHECKING:
     from matremap.core.material import Material, SVMaterial
@@ -33,6 +32,9 @@ if TYPE_CHECKING:
 
 #: the parts of a material a render can draw
 PARTS = ("full", "specular", "diffuse")
+#: samples per pixel about the mirror direction in the embedded renderer's environment renders
+#: (:mod:`~matremap.renderers.embedded.mirror_samples`; 0: the directional lights alone)
+MIRROR_SAMPLES = 64
 #: the evaluation geometries
 GEOMETRIES = ("sphere", "plane")
 

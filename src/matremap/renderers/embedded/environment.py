@@ -17,11 +17,11 @@ from matremap.core.envmap import EnvMap, directional_lights
 from matremap.core.models import ModelSpec
 from matremap.dialects import get_model
 from matremap.errors import MatremapError
-from matremap.renderers.base import PARTS, EnvironmentLight
+from matremap.renderers.base import MIRROR_SAMPLES, PARTS, EnvironmentLight
 from matremap.renderers.embedded.geometry import LocalGeometry
 from matremap.renderers.embedded.microfacet import ALPHA_MIN
-from matremap.renderers.embedded.mirror_samples import MIRROR_SAMPLES, mirror_directions
 from matremap.renderers.embedded.mirror_samples import density as mirror_density
+from matremap.renderers.embedded.mirror_samples import mirror_directions
 from matremap.renderers.embedded.mirror_samples import samples as mirror_sample_directions
 from matremap.renderers.textured import (
     SurfacePixels,

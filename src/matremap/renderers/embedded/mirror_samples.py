@@ -24,8 +24,6 @@ import math
 
 import numpy as np
 
-#: mirror samples per pixel in an evaluation render (0: the directional lights alone)
-MIRROR_SAMPLES = 64
 #: angles to the mirror direction the samples span (rad): from a hundredth of the narrowest microfacet lobe
 #: (2 alpha at alpha = 1e-4) up to a radian, past which the lights resolve every lobe
 THETA_MIN, THETA_MAX = 1e-6, 1.0

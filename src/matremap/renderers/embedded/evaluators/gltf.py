@@ -23,7 +23,8 @@ CLEARCOAT_F0 = 0.04
 def specular_dv(roughness, opt, g) -> np.ndarray:
     """D V cos(theta_light) of glTF's specular_brdf (Appendix B): GGX, alpha = roughness^2, Smith visibility
     height-correlated or separable (option ``visibility``); zero for a mirror under point lights, a lobe of
-    ``g.mirror_alpha`` where the renderer samples the mirror direction (:func:`~matremap.renderers.embedded.microfacet.drawn_alpha`)."""
+    ``g.mirror_alpha`` where the renderer samples the mirror direction
+    (:func:`~matremap.renderers.embedded.microfacet.drawn_alpha`)."""
     alpha = mf.drawn_alpha(roughness**2, g)
     a = np.maximum(alpha, 1e-7)
     d = mf.d_ggx(g.cos_h, g.tan2_h, a)
