@@ -298,3 +298,10 @@ def test_a_two_stage_fit_whose_parts_are_coupled_is_refined_jointly():
     # parts that do not depend on each other keep their two stages
     plain = fit(source.with_params({"roughness": 0.4}), "mitsuba06:roughplastic", fix={"distribution": "ggx"})
     assert [s.name for s in plain.stages] == ["diffuse", "specular"] and plain.loss < COUPLED
+    # a fit as far off as its stage is a target that cannot draw the source (a copper as Ward: Ward's clamp): left
+    copper = Material.create(
+        "mitsuba06:roughconductor",
+        {"distribution": "ggx", "alpha": 0.25, "eta": [0.2, 0.92, 1.1], "k": [3.9, 2.45, 2.14], "extEta": 1.0},
+    )
+    poor = fit(copper, "mitsuba06:ward", scene=Scene.probe([0.0], resolution=64), fix={"variant": "ward"})
+    assert [s.name for s in poor.stages] == ["diffuse", "specular"] and poor.loss > COUPLED

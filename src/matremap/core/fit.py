@@ -919,6 +919,7 @@ def _strategy_stages(
         # a part the source has not is switched off first: the other is then fitted as the target draws it
         # without it (a Lambertian onto OpenPBR: its diffuse fitted under a 1.5-IOR specular layer, 0.24)
         order.sort(key=lambda stage: float(np.sum(goals[stage[0]] ** 2)) > ABSENT * total)
+        first_stage = len(stages)
         for which_part, params in order:
             current = yield from _run_stage(
                 which_part,
@@ -933,7 +934,8 @@ def _strategy_stages(
                 project=True,
             )
         if strategy == "two-stage":
-            current = yield from _coupled(current, free_params, goals[FULL], renderer, counter, stages)
+            parts = max((s.loss for s in stages[first_stage:]), default=0.0)
+            current = yield from _coupled(current, free_params, goals[FULL], parts, renderer, counter, stages)
     if strategy == "separable":
         return (
             yield from _run_stage(
@@ -968,27 +970,32 @@ def _strategy_stages(
     return current
 
 
-#: a two-stage fit whose full render is further than this from the source's (relative RMSE) is refined jointly
+#: a two-stage fit whose full render is further than this from the source's (relative RMSE), and ``COUPLING`` times
+#: further than either stage from its part, is refined jointly
 COUPLED = 0.1
+COUPLING = 2.0
 
 
 def _coupled(
     current: Material,
     free_params: list[ParamSpec],
     goal: np.ndarray,
+    parts: float,
     renderer: Renderer,
     counter: _Counter,
     stages: list[StageReport],
 ) -> Steps[Material]:
     """A two-stage fit refined over every free parameter at once, from where it stands, when its full render is
-    more than ``COUPLED`` off although each part was fitted on its own: the target's parts then depend on each
-    other's parameters. Mitsuba 3's ``roughplastic`` darkens its diffuse as alpha grows (to a third at alpha 1,
-    the energy its tabulated rough transmittance loses; Mitsuba 3 issue 1155, a furnace test at alpha 1), so a
-    diffuse fitted at the starting alpha was far too dark at the fitted one: UsdPreviewSurface at roughness 1 came
-    out 0.62 off, jointly 0.005 (the coat's IOR at 1, its diffuse 0.49). The refinement is kept when closer."""
+    more than ``COUPLED`` off and ``COUPLING`` times further than the worst of its stages from its part (``parts``):
+    each part matched on its own and the whole did not, so the target's parts depend on each other's parameters (a
+    fit as far off as its stages is a target that cannot draw the source, and is left as it is). Mitsuba 3's
+    ``roughplastic`` darkens its diffuse as alpha grows (to a third at alpha 1, the energy its tabulated rough
+    transmittance loses; Mitsuba 3 issue 1155, a furnace test at alpha 1), so a diffuse fitted at the starting
+    alpha was far too dark at the fitted one: UsdPreviewSurface at roughness 1 came out 0.62 off (stages 0.046 and
+    4e-7), jointly 0.005 (the coat's IOR at 1, its diffuse 0.49). The refinement is kept when closer."""
     norm = float(np.linalg.norm(goal)) or 1.0
     before = float(np.linalg.norm((yield from counter.pixels(renderer, [current]))[0] - goal)) / norm
-    if not before > COUPLED:
+    if not (before > COUPLED and before > COUPLING * parts):
         return current
     joint = yield from _run_stage(
         FULL, free_params, current, goal, 1.0, renderer, counter, stages, name="joint (coupled parts)", coarse=False
