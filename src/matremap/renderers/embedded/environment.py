@@ -108,7 +108,7 @@ class SVBRDFRender:
         part: str = "full",
         normal_map: np.ndarray | None = None,
     ) -> None:
-        from matremap.renderers.embedded.evaluators import EVALUATORS
+        from matremap.renderers.embedded.evaluators import EVALUATORS, FRAMED
 
         if part not in PARTS:
             raise MatremapError(f"unknown render part {part!r}; use one of {', '.join(PARTS)}")
@@ -117,6 +117,7 @@ class SVBRDFRender:
             raise MatremapError(f"model {spec.id} has no embedded evaluator")
         self.spec = spec
         self.evaluator = EVALUATORS[spec.id]
+        self.framed = spec.id in FRAMED  # the shading frame is computed for the models that read it
         self.options = check_options(spec, params, options or {})
         self.surface = surface_pixels(geometry, int(resolution))
         overrides = spec.part_overrides(part, params)
@@ -204,7 +205,7 @@ class SVBRDFRender:
         cos_g = _dot(wi, surf.normal[sl])
         lit = (cos_i > 0.0) & (cos_o > 0.0) & (cos_g > 0.0)
         if self.bump_alpha2 is None:
-            frame = _frame(wi, wo, n, surf.tangent[sl], lit)  # the shading frame (anisotropic models)
+            frame = _frame(wi, wo, n, surf.tangent[sl], lit) if self.framed else None  # anisotropic models
             geo = LocalGeometry(
                 np.where(lit, cos_i, 1.0), np.where(lit, cos_o, 1.0), np.where(lit, i_dot_o, 1.0), frame, mirror_alpha
             )

@@ -34,4 +34,7 @@ EVALUATORS: dict[str, Evaluator] = {
     **standard_surface.EVALUATORS,
 }
 
-__all__ = ["EVALUATORS", "Evaluator"]
+#: the models whose evaluator reads the shading frame (``LocalGeometry.frame``): the others are spared computing it
+FRAMED = mitsuba3.FRAMED
+
+__all__ = ["EVALUATORS", "FRAMED", "Evaluator"]

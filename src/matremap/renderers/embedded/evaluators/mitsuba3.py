@@ -198,6 +198,9 @@ def roughdielectric(p, opt, g):
     return p["specular_reflectance"] * fresnel_dielectric(g.i_dot_h, eta) * (d * gg / (4.0 * g.cos_o))
 
 
+#: the models whose evaluator reads the shading frame (``g.frame``)
+FRAMED = frozenset({ROUGHCONDUCTOR_ANISOTROPIC.id})
+
 #: model id -> evaluator
 EVALUATORS = {
     DIELECTRIC.id: delta_glass,
