@@ -13,7 +13,7 @@ import pytest
 
 from matremap.cli import main
 from matremap.formats import read_asset
-from matremap.formats.gltf_coverage import Coverage, fill_uncovered
+from matremap.formats.uv_coverage import Coverage, fill_uncovered
 
 sys.path.insert(0, str(Path(__file__).parent))
 import corpus_checks as cc  # noqa: E402

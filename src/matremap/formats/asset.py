@@ -122,7 +122,7 @@ class MaterialAsset:
     carried: dict[str, CarriedInput] = field(default_factory=dict)
     dropped: list[str] = field(default_factory=list)
     #: the texels the material's surface shows (the UV triangles of the glTF primitives or USD faces drawn with it:
-    #: :class:`~matremap.formats.gltf_coverage.Coverage`, its ``mask(size)``), None where every texel counts
+    #: :class:`~matremap.formats.uv_coverage.Coverage`, its ``mask(size)``), None where every texel counts
     coverage: Any = None
 
     @property
@@ -180,7 +180,7 @@ class MaterialAsset:
         (:attr:`coverage`) filled from the nearest it shows, and say so in :attr:`notes`: what no triangle shows
         then neither decides a conversion (the typical texel, the ranges swept, metal and dielectric shares) nor
         fails its checks. Skipped where the surface shows nearly all of them, and past :data:`FILL_TEXELS`."""
-        from matremap.formats.gltf_coverage import covered_share, fill_uncovered
+        from matremap.formats.uv_coverage import covered_share, fill_uncovered
         from matremap.svbrdf.textures import ImageInfo, read_image, write_image_like
 
         mask = self.coverage.mask(size)

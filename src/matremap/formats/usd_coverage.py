@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from matremap.formats.gltf_coverage import Coverage
+from matremap.formats.uv_coverage import Coverage
 
 
 def material_coverage(pxr: Any, stage: Any, material: Any, primvar: str = "st") -> Coverage | None:
