@@ -255,3 +255,18 @@ def test_a_rough_thin_walled_standard_surface_blurs_as_openpbr_does():
     c, _ = tr.transmitted(smooth, scene)
     assert np.linalg.norm(a[mask] - b[mask]) < 0.05 * np.linalg.norm(b[mask])
     assert np.linalg.norm(a[mask] - c[mask]) > 0.2 * np.linalg.norm(c[mask])  # blurred: not the smooth wall's
+
+
+def test_a_smooth_glass_reflects_the_map_in_the_probe_image():
+    """What a smooth glass reflects is in the transmission view (its mirror direction sampled): drawn by the lights
+    alone it was missing, the sphere showing only what the glass lets through."""
+    scene = tr.TransmissionScene(resolution=RES)
+    smooth = glass()
+    through, mask = tr.transmitted(smooth, scene)
+    image = tr.render(smooth, scene)
+    reflected = image[mask] - through[mask].astype(np.float32)
+    assert reflected.min() > -1e-5 and reflected.mean() > 0.05 * through[mask].mean()
+    # brightest at the rim, where the Fresnel factor rises
+    radius = np.hypot(*np.meshgrid(np.arange(RES) - (RES - 1) / 2, np.arange(RES) - (RES - 1) / 2))[mask]
+    rim, centre = radius > 0.8 * radius.max(), radius < 0.4 * radius.max()
+    assert reflected[rim].mean() > 2.0 * reflected[centre].mean()
