@@ -40,8 +40,10 @@ CACHE_ENV = ("MATREMAP_CACHE", "MATREMAP_CACHE_DIR")
 #: a reflectance mapping may carry a per-channel tint; 7: a roughness at its bound where the source's is at
 #: its own is learned from, not excluded; 8: so is a roughness at its bound fitted within LOSS_MIN; 9: the F0 a
 #: k_alpha mapping scales reaches down to 0 in the learned domain; 10: a target quantity the sweep held is learned
-#: as a constant, as is a reflectance a constant predicts as well, and k(alpha) coefficients stay within 1e3)
-RESULTS_REVISION = 10
+#: as a constant, as is a reflectance a constant predicts as well, and k(alpha) coefficients stay within 1e3;
+#: 11: a two-stage fit whose parts are coupled is refined jointly, Standard Surface's thin wall blurs, and the
+#: transmission view draws a glass's mirror reflection)
+RESULTS_REVISION = 11
 
 
 def cache_dir() -> Path:
