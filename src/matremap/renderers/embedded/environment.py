@@ -281,7 +281,7 @@ def ensure_valid_specular_reflection(ng: np.ndarray, view: np.ndarray, n: np.nda
     surface (``ensure_valid_specular_reflection`` in Cycles' ``kernel/closure/bsdf_util.h``): in the
     plane of ng and n, the normal's height solves a quadratic in n_z^2."""
     dot = lambda a, b: np.sum(a * b, axis=-1)  # noqa: E731
-    r = 2.0 * dot(n, view)[:, None] * n - view
+    r = mirror_directions(n, view)
     iz = dot(view, ng)
     t = np.minimum(0.9 * iz, 0.01)
     valid = dot(ng, r) >= t
