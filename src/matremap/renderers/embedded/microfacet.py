@@ -157,6 +157,5 @@ def drawn_alpha(alpha, g) -> np.ndarray:
     samples the mirror direction (a mirror then shows what it reflects, as a lobe of alpha 1e-4, as narrow as
     Mitsuba's; see :mod:`~matremap.renderers.embedded.mirror_samples`); as given elsewhere, where the evaluators
     draw a mirror as zero (no point light reaches its delta lobe)."""
-    floor = getattr(g, "mirror_alpha", 0.0)
     a = np.asarray(alpha, dtype=float)
-    return np.maximum(a, floor) if floor > 0.0 else a
+    return np.maximum(a, g.mirror_alpha) if g.mirror_alpha > 0.0 else a

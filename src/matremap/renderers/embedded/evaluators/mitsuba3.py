@@ -174,7 +174,7 @@ def delta_glass(p, opt, g, thin: bool = False):
     """``dielectric`` / ``thindielectric``: a delta reflection, zero under point lights; where the renderer
     samples the mirror direction (``g.mirror_alpha``), drawn as GGX of that alpha with the exact Fresnel R of
     eta = int_ior / ext_ior, the thin slab's R' = 2R / (1 + R) (its internal reflections summed)."""
-    if not getattr(g, "mirror_alpha", 0.0) > 0.0:
+    if not g.mirror_alpha > 0.0:
         return 0.0 * p["specular_reflectance"] * g.cos_o
     alpha = mf.drawn_alpha(0.0, g)
     r = fresnel_dielectric(g.i_dot_h, p["int_ior"] / p["ext_ior"])
