@@ -59,10 +59,11 @@ def cmd_learn(args: argparse.Namespace) -> int:
         file=sys.stderr,
     )
     for name, e in t.errors.items():
-        lo, hi = t.domain.get(name, (0.0, 0.0))
         held = e.get("heldout_rmse")
         held_text = f"held-out RMSE {held:.3g}" if held is not None else "not fitted (constant)"
-        print(f"  {name}: {held_text}, training domain [{lo:.4g}, {hi:.4g}]", file=sys.stderr)
+        span = t.domain.get(name)  # the source's counterpart (a glTF coat has no colour of its own)
+        where = f", training domain [{span[0]:.4g}, {span[1]:.4g}]" if span else ", the source has no counterpart"
+        print(f"  {name}: {held_text}{where}", file=sys.stderr)
     return 0
 
 

@@ -42,8 +42,10 @@ CACHE_ENV = ("MATREMAP_CACHE", "MATREMAP_CACHE_DIR")
 #: k_alpha mapping scales reaches down to 0 in the learned domain; 10: a target quantity the sweep held is learned
 #: as a constant, as is a reflectance a constant predicts as well, and k(alpha) coefficients stay within 1e3;
 #: 11: a two-stage fit whose parts are coupled is refined jointly, Standard Surface's thin wall blurs, and the
-#: transmission view draws a glass's mirror reflection)
-RESULTS_REVISION = 11
+#: transmission view draws a glass's mirror reflection; 12: a sweep that frees a target's layer starts it at the
+#: source's and keeps the better of a three-stage and a simple fit, and a transform learns the layers its sweep
+#: varies)
+RESULTS_REVISION = 12
 
 
 def cache_dir() -> Path:

@@ -115,8 +115,10 @@ def load_training_data(db: str | Path, reverse: bool = False, exclude_flagged: b
     tgt_params = [r["target"] for r in ok]
     src_opts = {o: src_params[0][o] for o in src_spec.option_names}
     tgt_opts = {o: tgt_params[0][o] for o in tgt_spec.option_names}
-    x = qty.read(src_spec, _values(src_spec, src_params))
-    y = qty.read(tgt_spec, _values(tgt_spec, tgt_params))
+    src_values = _values(src_spec, src_params)
+    layers = layers_on(src_spec, src_values)
+    x = qty.read(src_spec, src_values, layers)
+    y = qty.read(tgt_spec, _values(tgt_spec, tgt_params), layers)
     template_src = config.source.to_dict()["params"]
     template_tgt = Material.create(tgt_spec.id, tgt_params[0]).to_dict()["params"]
     provenance = {
@@ -130,6 +132,20 @@ def load_training_data(db: str | Path, reverse: bool = False, exclude_flagged: b
     if reverse:
         return TrainingData(tgt_spec, src_spec, tgt_opts, src_opts, y, x, template_src, provenance, template_tgt)
     return TrainingData(src_spec, tgt_spec, src_opts, tgt_opts, x, y, template_tgt, provenance, template_src)
+
+
+def layers_on(spec: ModelSpec, values: dict[str, np.ndarray]) -> tuple[str, ...]:
+    """The layers a sweep varies (on at some point, and one of its weight, colour or roughness not the same at every
+    point): their quantities are learned too. A layer the sweep held (a textured material's uniform coat) stays a
+    value of the transform's source template, which its application checks texels against
+    (:meth:`~matremap.regress.transform.Transform.apply`)."""
+    out = []
+    for name, layer in qty.layer_params(spec).items():
+        if name not in qty.LAYERS or float(np.max(qty.read_layer(name, layer, values)[f"{name}_weight"])) <= 0.0:
+            continue
+        if any(np.ptp(v, axis=0).max() > 1e-12 for v in qty.read_layer(name, layer, values).values()):
+            out.append(name)
+    return tuple(out)
 
 
 def store_config_summary(config: Any) -> dict[str, Any]:

@@ -12,7 +12,11 @@
   median) is kept instead where it predicts the held-out points as well (matremap's additions);
 * target diffuse = a per-channel scale of the source diffuse (least squares through the origin);
 * a target quantity that takes one value over the data (the sweep held it: glTF's ior, a number only, held
-  while the source's F0 varied) is that constant, as is one whose source counterpart does not vary.
+  while the source's F0 varied) is that constant, as is one whose source counterpart does not vary;
+* a layer's quantities (issue 16, matremap's addition; :mod:`.quantities`): its weight and roughness a polynomial of
+  the source layer's own (as roughness above), its colour a per-channel scale of the source layer's colour (as the
+  diffuse). Each layer is mapped from its own counterpart alone: a coat's look is its weight, IOR and roughness,
+  whatever lies under it (the models layer by albedo scaling), and the held-out errors say how well that holds.
 
 Every mapping is a small JSON object; :func:`evaluate` applies one to arrays of any shape.
 """
@@ -76,7 +80,7 @@ def evaluate(mapping: dict[str, Any], x: dict[str, np.ndarray]) -> np.ndarray:
     """Apply one parametric mapping to source quantities ``x``."""
     kind, coef = mapping["kind"], mapping.get("coef", [])
     if kind == "polynomial":
-        return polynomial(coef, np.asarray(x["roughness"]))
+        return polynomial(coef, np.asarray(x[mapping.get("input", "roughness")]))
     if kind == "k_alpha":
         refl = np.asarray(x["reflectance"])
         if not mapping.get("roughness", True):
@@ -90,10 +94,18 @@ def evaluate(mapping: dict[str, Any], x: dict[str, np.ndarray]) -> np.ndarray:
         v = np.asarray(x[mapping["input"]])
         return v * np.asarray(coef, dtype=v.dtype if np.issubdtype(v.dtype, np.floating) else float)
     if kind == "constant":
-        shape = np.shape(x["roughness"]) if "roughness" in x else np.shape(next(iter(x.values())))[:-1]
+        shape = element_shape(x)
         v = np.asarray(mapping["value"], dtype=float)
         return np.broadcast_to(v, (*shape, *v.shape))
     raise MatremapError(f"unknown parametric mapping kind {kind!r}")
+
+
+def element_shape(x: dict[str, np.ndarray]) -> tuple[int, ...]:
+    """The per-element shape of quantity arrays (a scalar quantity's shape, an RGB one's without its channels)."""
+    from matremap.regress.quantities import is_scalar
+
+    name = next((n for n in x if is_scalar(n)), None)
+    return np.shape(x[name]) if name is not None else np.shape(next(iter(x.values())))[:-1]
 
 
 # -- fitting -------------------------------------------------------------------------------------
@@ -101,8 +113,11 @@ def _rmse(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.sqrt(np.mean((np.asarray(a) - np.asarray(b)) ** 2)))
 
 
-def fit_roughness(x: np.ndarray, y: np.ndarray, holdout: float = 0.2, seed: int = 0) -> dict[str, Any]:
-    """Polynomial y = p(x), degree chosen by held-out RMSE, then refitted on all points."""
+def fit_roughness(
+    x: np.ndarray, y: np.ndarray, holdout: float = 0.2, seed: int = 0, name: str = "roughness"
+) -> dict[str, Any]:
+    """Polynomial y = p(x), degree chosen by held-out RMSE, then refitted on all points (``name``: the source
+    quantity x is, a roughness or a layer's weight or roughness)."""
     train, test = holdout_split(len(x), holdout, seed)
     scores = {}
     for d in range(1, MAX_DEGREE + 1):
@@ -111,12 +126,12 @@ def fit_roughness(x: np.ndarray, y: np.ndarray, holdout: float = 0.2, seed: int 
         coef = np.polyfit(x[train], y[train], d)
         scores[d] = _rmse(np.polyval(coef, x[test]), y[test])
     if not scores:
-        raise MatremapError("too few distinct roughness values to fit a polynomial (need at least 2)")
+        raise MatremapError(f"too few distinct {name} values to fit a polynomial (need at least 2)")
     degree = min(scores, key=lambda d: (scores[d] > 1.02 * min(scores.values()), d))  # simplest within 2 %
     coef = np.polyfit(x, y, degree)
     return {
         "kind": "polynomial",
-        "input": "roughness",
+        "input": name,
         "coef": coef.tolist(),
         "degree": degree,
         "heldout_rmse": scores[degree],
@@ -260,12 +275,33 @@ def _with_tint(
     }
 
 
-def fit_diffuse(d1: np.ndarray, d2: np.ndarray, holdout: float = 0.2, seed: int = 0) -> dict[str, Any]:
-    """Per-channel scale through the origin."""
+def fit_diffuse(
+    d1: np.ndarray, d2: np.ndarray, holdout: float = 0.2, seed: int = 0, name: str = "diffuse"
+) -> dict[str, Any]:
+    """Per-channel scale through the origin (``name``: the source quantity d1 is, the diffuse or a layer's colour)."""
 
     train, test = holdout_split(len(d1), holdout, seed)
     heldout = _rmse(d1[test] * _scale(d1[train], d2[train]), d2[test])
-    return {"kind": "scale", "input": "diffuse", "coef": _scale(d1, d2).tolist(), "heldout_rmse": heldout}
+    return {"kind": "scale", "input": name, "coef": _scale(d1, d2).tolist(), "heldout_rmse": heldout}
+
+
+def learn_layers(data: TrainingData, holdout: float = 0.2, seed: int = 0) -> dict[str, dict[str, Any]]:
+    """The mappings of the layers' quantities the target speaks (module docstring): each from its source
+    counterpart where both vary, else the constant the target took (a layer the sweep held)."""
+    from matremap.regress.quantities import LAYER_QUANTITIES, is_scalar
+
+    out: dict[str, dict[str, Any]] = {}
+    for name in LAYER_QUANTITIES:
+        if name not in data.y:
+            continue
+        y = data.y[name]
+        if name in data.x and data.varies(name) and bool(np.ptp(y) > 1e-12):
+            fit = fit_roughness if is_scalar(name) else fit_diffuse
+            out[name] = fit(data.x[name], y, holdout, seed, name=name)
+        else:
+            v = np.median(y, axis=0)
+            out[name] = {"kind": "constant", "value": float(v) if v.ndim == 0 else v.tolist()}
+    return out
 
 
 def learn(data: TrainingData, holdout: float = 0.2, seed: int = 0) -> dict[str, dict[str, Any]]:
@@ -296,6 +332,7 @@ def learn(data: TrainingData, holdout: float = 0.2, seed: int = 0) -> dict[str, 
             mappings["diffuse"] = fit_diffuse(x["diffuse"], y["diffuse"], holdout, seed)
         else:
             mappings["diffuse"] = {"kind": "constant", "value": np.median(y["diffuse"], axis=0).tolist()}
+    mappings.update(learn_layers(data, holdout, seed))
     if not any(name in x and data.varies(name) for name in mappings):
         raise MatremapError("the sweep varies no source quantity the target can follow: nothing to learn")
     return mappings

@@ -48,11 +48,11 @@ MAX_STEPS = 8
 MAX_SUPPORT = 20_000
 #: the mapping kinds and the quantities each may write
 KINDS = {
-    "polynomial": ("roughness",),
+    "polynomial": tuple(q for q in qty.QUANTITIES if qty.is_scalar(q)),
     "k_alpha": ("reflectance",),
-    "scale": ("reflectance", "diffuse"),
+    "scale": tuple(q for q in qty.QUANTITIES if not qty.is_scalar(q)),
     "constant": qty.QUANTITIES,
-    "svr": qty.QUANTITIES,
+    "svr": ("roughness", "reflectance", "diffuse"),
 }
 #: most coefficients of a polynomial (degree 4, as :mod:`.parametric` fits)
 MAX_POLY_COEFS = 5
@@ -175,7 +175,7 @@ def mapping(name: str, m: Any, source: ModelSpec, target: ModelSpec, where: str)
         inputs = svr_mapping(name, m, at)
     elif kind == "constant":
         v = m.get("value")
-        if name == "roughness":
+        if qty.is_scalar(name):
             number(v, f"{at}.value")
         else:
             numbers(v, f"{at}.value", (3,))
@@ -189,11 +189,12 @@ def mapping(name: str, m: Any, source: ModelSpec, target: ModelSpec, where: str)
 
 def parametric_mapping(kind: str, name: str, m: Mapping[str, Any], at: str) -> list[str]:
     """Check a polynomial, k_alpha or scale mapping; returns the quantities it reads."""
-    if kind == "polynomial":
-        if m.get("input", "roughness") != "roughness":
-            raise MatremapError(f"{at}: a polynomial reads roughness, not {_show(m.get('input'))}")
+    if kind == "polynomial":  # of its own counterpart: a roughness of the roughness, a layer's weight of its weight
+        source = m.get("input", "roughness")
+        if source != name:
+            raise MatremapError(f"{at}: a polynomial for {name} reads {name}, not {_show(source)}")
         numbers(m.get("coef"), f"{at}.coef", tuple(range(1, MAX_POLY_COEFS + 1)))
-        return ["roughness"]
+        return [source]
     if kind == "k_alpha":
         uses_roughness = m.get("roughness", True)
         if not isinstance(uses_roughness, bool):
@@ -208,10 +209,11 @@ def parametric_mapping(kind: str, name: str, m: Mapping[str, Any], at: str) -> l
             raise MatremapError(f"{at}.coef: the exponential rates c2 and c4 must not be negative")
         return ["reflectance", "roughness"]
     source = m.get("input")
-    if source not in ("reflectance", "diffuse"):
-        raise MatremapError(f"{at}: a scale reads reflectance or diffuse, not {_show(source)}")
+    allowed = ("reflectance", "diffuse") if qty.layer_of(name) is None else (name,)
+    if source not in allowed:
+        raise MatremapError(f"{at}: a scale for {name} reads {' or '.join(allowed)}, not {_show(source)}")
     numbers(m.get("coef"), f"{at}.coef", (1, 3))
-    return [source]
+    return [str(source)]
 
 
 def svr_mapping(name: str, m: Mapping[str, Any], at: str) -> list[str]:
@@ -220,10 +222,10 @@ def svr_mapping(name: str, m: Mapping[str, Any], at: str) -> list[str]:
     if (
         not isinstance(inputs, list)
         or not inputs
-        or not all(isinstance(q, str) and q in qty.QUANTITIES for q in inputs)
+        or not all(isinstance(q, str) and q in KINDS["svr"] for q in inputs)
         or len(set(inputs)) != len(inputs)
     ):
-        raise MatremapError(f"{at}.inputs must be a list of distinct quantities ({', '.join(qty.QUANTITIES)})")
+        raise MatremapError(f"{at}.inputs must be a list of distinct quantities ({', '.join(KINDS['svr'])})")
     per_channel = m.get("per_channel")
     if per_channel is not (name != "roughness"):
         raise MatremapError(f"{at}.per_channel must be {str(name != 'roughness').lower()} for {name}")

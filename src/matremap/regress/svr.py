@@ -221,4 +221,6 @@ def learn(data: TrainingData, holdout: float = 0.2, seed: int = 0) -> dict[str, 
             mappings[name] = fit_svr(X, y[name], inputs, True, holdout, seed)
     if all(m["kind"] == "constant" for m in mappings.values()):
         raise MatremapError("the sweep varies no source quantity the target can follow: nothing to learn")
-    return mappings
+    from matremap.regress.parametric import learn_layers
+
+    return {**mappings, **learn_layers(data, holdout, seed)}  # a layer's quantities as the parametric method maps them

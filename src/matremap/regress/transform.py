@@ -45,6 +45,8 @@ METHODS = (*LEARNERS, "chain")
 DOMAIN_SLACK = 1e-6
 #: texels per chunk when applying to large arrays
 CHUNK = 1 << 16
+#: a layer parameter no mapping reads counts as the value its sweep held when within this of it
+LAYER_TOLERANCE = 0.01
 
 if TYPE_CHECKING:
     from matremap.regress.data import TrainingData
@@ -212,8 +214,8 @@ class Transform:
                 outside = outside | o
             return out, outside
         src = get_model(self.source)
-        x = qty.read(src, arrays)
-        outside = np.zeros(shape, dtype=bool)
+        x = qty.read(src, arrays, self.layers)
+        outside = self._unmapped_layers(src, arrays, shape)
         for name, v in x.items():
             # two reductions settle the common case: everything finite and inside the domain
             probe = v[:1] if qty.uniform(v) else v
@@ -228,7 +230,8 @@ class Transform:
             # roughness is one value per element, the others one per channel: or the channel columns
             # (any(axis=-1) over 3 channels is several times slower); a uniform input's mask (shape
             # (), or (3,) before its columns are taken) broadcasts over the elements
-            for col in [off] if name == "roughness" or off.ndim == 0 else [off[..., c] for c in range(off.shape[-1])]:
+            scalar = qty.is_scalar(name)
+            for col in [off] if scalar or off.ndim == 0 else [off[..., c] for c in range(off.shape[-1])]:
                 outside |= col
         y = {}
         for name, m in self.mappings.items():
@@ -241,6 +244,28 @@ class Transform:
                 y[name] = evaluate_mapping(m, x)
             self._check_finite(name, y[name])
         return qty.write(get_model(self.target), y, self.template, clipped, self._slack()), outside
+
+    @property
+    def layers(self) -> frozenset[str]:
+        """The source's layers whose quantities the transform maps (those its training domain names)."""
+        return frozenset(filter(None, (qty.layer_of(k) for k in self.domain)))
+
+    def _unmapped_layers(self, src: ModelSpec, arrays: Mapping[str, np.ndarray], shape: tuple[int, ...]) -> np.ndarray:
+        """Where a layer the transform does not map differs from the layer its sweep held (:attr:`source_template`):
+        outside the training domain. A transform learned on bare materials says nothing of a coated texel, and one
+        learned under a held coat (a textured material's sweep) nothing of another coat."""
+        outside = np.zeros(shape, dtype=bool)
+        for name, layer in qty.layer_params(src).items():
+            if name in self.layers:
+                continue
+            held = qty.read_layer(name, layer, _complete(src, {}, self.source_template))
+            here = qty.read_layer(name, layer, arrays)
+            for q, v in here.items():
+                if q != f"{name}_weight" and float(held[f"{name}_weight"]) <= 0.0:
+                    continue  # a layer held off: its colour and roughness draw nothing
+                off = np.abs(v - held[q]) > LAYER_TOLERANCE
+                outside |= off if qty.is_scalar(q) else np.any(off, axis=-1)
+        return outside
 
     def _slack(self) -> dict[str, float]:
         """Each quantity's held-out RMSE (its training RMSE where nothing was held out): how far past a

@@ -122,18 +122,7 @@ def fit_chain(
         try:
             source = Material.create(cfg.source.model, source_params)
             start = warm if cfg.continuation else None
-            result = yield from fit_steps(
-                source,
-                cfg.target,
-                cfg.strategy,
-                cfg.scene,
-                cfg.source_renderer,
-                cfg.target_renderer,
-                fix=cfg.fix,
-                free=cfg.free,
-                start=start,
-                objective=cfg.objective,
-            )
+            result = yield from fit_point(cfg, source, start)
             row.update(
                 target=result.params,
                 loss=result.loss,
@@ -166,6 +155,48 @@ def fit_chain(
         row["finished"] = time.time()
         rows.append(row)
     return rows
+
+
+#: a layered point's fit further off than this (relative RMSE), started at the source's layer, is fitted again from
+#: the target's defaults (the uniform remap's rule, :data:`matremap.remap.RESTART_LOSS`)
+LAYER_RESTART_LOSS = 0.05
+
+
+def fit_point(cfg: SweepConfig, source: Material, start: dict[str, Any] | None) -> Steps[Any]:
+    """One point's fit. A layer of the source that the sweep frees on the target (``--free coat_weight``...) is
+    started at the source's layer (:func:`~matremap.dialects.mtlx.freed_layers`) and, with the default two-stage
+    strategy, fitted both three-stage and simple, the better kept, then once more from the target's defaults when
+    still poor: the rule of a uniform remap (:func:`matremap.remap._fit_uniform`, measured there), so that a library
+    sweep over a coat learns what remapping one material would give."""
+    from matremap.dialects.mtlx import freed_layers
+
+    layered: dict[str, Any] = {}
+    if start is None and cfg.free:
+        _, at = freed_layers(source.model, source.values, get_model(cfg.target), held=cfg.fix)
+        layered = {k: v for k, v in at.items() if k in cfg.free}
+    attempts: list[tuple[str, dict[str, Any] | None]] = [(cfg.strategy, start)]
+    if layered:
+        strategies = ["three-stage", "simple"] if cfg.strategy == "two-stage" else [cfg.strategy]
+        attempts = [(strategy, layered) for strategy in strategies]
+    best = None
+    for i, (strategy, begin) in enumerate([*attempts, (attempts[0][0], None)]):
+        if i == len(attempts) and (not layered or best is None or best.loss <= LAYER_RESTART_LOSS):
+            break  # the restart from the target's defaults: only for a layered fit that stayed poor
+        r = yield from fit_steps(
+            source,
+            cfg.target,
+            strategy,
+            cfg.scene,
+            cfg.source_renderer,
+            cfg.target_renderer,
+            fix=cfg.fix,
+            free=cfg.free,
+            start=begin,
+            objective=cfg.objective,
+        )
+        if best is None or r.loss < best.loss:
+            best = r
+    return best
 
 
 def fit_lines(
