@@ -294,6 +294,27 @@ def test_not_a_database_gives_a_matremap_error(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
+def test_any_parameter_at_its_bound_fitted_closely_is_learned_from(ward_db):
+    """Not only a roughness: an F0 at its upper bound (or a rough plastic's coat IOR at 1, its coat turned off to draw
+    a roughness-1 specular as diffuse: the usd-wg TextureCoordinateTest, whose brightest grid point was excluded and
+    58 % of its texels then fell outside the learned domain) fitted within LOSS_MIN is the closest the target gets;
+    the same fit further off than the sweep's typical one stays flagged."""
+    from matremap.sweep.stability import LOSS_MIN
+
+    rows, grid, config = load(ward_db)
+    rows = copy.deepcopy(rows)
+    typical = max(LOSS_MIN, float(np.median([r["loss"] for r in rows])))
+    close, far = key_at(grid, (2, 2)), key_at(grid, (2, 3))
+    hi = get_model("mitsuba06:pbr").param("F0").bounds[1]
+    for r in rows:
+        if r["key"] in (close, far):
+            r["target"]["F0"] = [hi] * 3
+            r["loss"] = 0.5 * LOSS_MIN if r["key"] == close else 3.0 * typical
+    a = analyse(rows, grid, config)
+    assert not any(f.startswith("bound") for f in a.flags[close])
+    assert "bound:F0" in a.flags[far]
+
+
 # ---------------------------------------------------------------------------------------------
 # Export
 

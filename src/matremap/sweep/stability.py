@@ -72,7 +72,9 @@ finished points on the grid and gives every point a list of flag reasons. It is 
     the target's roughest (or smoothest) is then the closest it gets, and as close as anywhere, the mapping
     saturating there (a rough glTF base under a sheen onto OpenPBR: glTF roughness 0.85 to 0.99 all fitted at
     OpenPBR's 1 within 0.6 to 0.7 %, excluded before, and 30 % of Khronos SheenCloth's texels then counted outside
-    the learned domain).
+    the learned domain), nor any other parameter at its bound fitted so closely: a rough plastic's coat turned off
+    (int_ior at 1) to draw UsdPreviewSurface's roughness-1 specular as diffuse, 0.3 % off at the grid's brightest
+    diffuse colour, was excluded, and 58 % of the usd-wg TextureCoordinateTest's texels counted outside.
 
 ``loss``
     The loss is an outlier of the sweep: its robust z-score on log(loss), (log L - median) /
@@ -336,7 +338,8 @@ def _value_tests(
     # the ends of the ranges meeting, or the closest the target gets and as close as the sweep's fits: a
     # saturation, not a stuck fit
     loss = row.get("loss")
-    saturated = _roughness_at_bound(row.get("source"), source) or (loss is not None and float(loss) <= close)
+    good = loss is not None and float(loss) <= close
+    saturated = _roughness_at_bound(row.get("source"), source) or good
     for name in tested:
         if name not in values:
             continue
@@ -353,8 +356,8 @@ def _value_tests(
         at_hi = [c for c in chans if c >= hi - tol]
         if at_lo and p.scales_image and lo == 0.0:
             at_lo = []  # a black part is an answer, not a stuck fit
-        if p.role == "roughness" and saturated:
-            at_lo, at_hi = [], []  # the end of the source's range maps to the end of the target's
+        if (p.role == "roughness" and saturated) or good:
+            at_lo, at_hi = [], []  # the end of the source's range maps to the end of the target's, or the closest
         if at_lo or at_hi:
             reasons.append(f"bound:{name}")
             details.append(
