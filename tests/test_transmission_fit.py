@@ -232,3 +232,16 @@ def test_a_smooth_glass_onto_a_model_that_cannot_be_as_smooth_is_fitted_at_its_n
     assert bsdf is not None
     values = {e.get("name"): e.get("value") for e in bsdf}
     assert float(values["spec_trans"]) > 0.95 and float(values["roughness"]) < 0.1
+
+
+def test_an_opaque_source_under_a_probe_its_target_renderer_does_not_draw_is_not_called_transmissive():
+    """An opaque UsdPreviewSurface onto Mitsuba 3's rough plastic under the environment probe: the real Mitsuba 3
+    backend draws the point-light probe only and the embedded renderer does not emulate that model. The message said
+    "the source transmits light"; it names the probe instead."""
+    from matremap.uniform import fit as uniform_fit
+
+    pytest.importorskip("mitsuba")
+    source = Material.create("usd:preview_surface", {"diffuseColor": [0.16] * 3, "roughness": 1.0})
+    with pytest.raises(MatremapError) as err:
+        uniform_fit(source, "mitsuba3:roughplastic", scene=parse_probe("env", resolution=32))
+    assert "transmits" not in str(err.value) and "not the env probe" in str(err.value)

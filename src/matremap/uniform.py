@@ -107,7 +107,13 @@ def _probe_renderer(name: str | Renderer | None, model: str, through: transmissi
     if name is not None or through.scene is None or probe_support(renderer, through.scene) is None:
         return renderer
     embedded = get_renderer("embedded")
+    kind = "transmission" if through.scene.transmission is not None else through.scene.kind
     if not embedded.can_render(model):
+        if kind != "transmission":  # the probe the user chose (env, mixed), not one a glass brings
+            raise MatremapError(
+                f"the {renderer.name} renderer draws the point-light probe only, not the {kind} probe, and the "
+                f"embedded renderer does not emulate {model}: use --probe point"
+            )
         from matremap.renderers.embedded.transmission import INTERFACES
 
         raise MatremapError(
@@ -116,7 +122,7 @@ def _probe_renderer(name: str | Renderer | None, model: str, through: transmissi
             f"the embedded renderer draws ({', '.join(sorted(INTERFACES))})"
         )
     through.notes.append(
-        f"{model} drawn by the embedded emulation: the {renderer.name} renderer does not draw the transmission probe"
+        f"{model} drawn by the embedded emulation: the {renderer.name} renderer does not draw the {kind} probe"
     )
     return embedded
 
