@@ -41,6 +41,7 @@ from matremap.core.atomic import staged_folder
 from matremap.core.envmap import resolve as resolve_envmap
 from matremap.core.imageio import write_image, write_text
 from matremap.core.material import Material, SVMaterial
+from matremap.core.models import microfacet_of
 from matremap.core.scene import Scene, parse_probe
 from matremap.dialects import get_model, list_models
 from matremap.dialects.equivalence import Equivalence, equivalence
@@ -580,6 +581,7 @@ def remap(
         check_material_file_name(write, job.target)
     with texel_limit(job.max_texels):
         map_set = load_map_set(maps, source_model)
+        job = same_distribution(job, map_set.model, map_set.options, log)
         out = Path(out)
         root = Path(map_set.root).resolve()
         if out.resolve() == root or root in out.resolve().parents:
@@ -1366,6 +1368,7 @@ def _remap_file(
     name = _output_name(p, target, asset.format, write, out, log)
     job = RemapJob(target, dict(fix or {}), **{k: v for k, v in options.items() if v is not None or k == "scene"})
     job = anisotropic_probe(job, asset.model, log)
+    job = same_distribution(job, asset.model, asset.constants, log)
     kept = asset.format in ("gltf", "mitsuba-xml") and target == asset.model
     kept = kept and same_options(asset.constants, target, job.fix)
     if asset.lost and not kept:  # a material onto its own model keeps its layers; anything else loses them
@@ -1545,6 +1548,39 @@ def anisotropic_probe(job: RemapJob, model: str, log: Callable[[str], None]) -> 
         return job
     log(f"note: {model} is anisotropic: fitted under lights at {ANISOTROPIC_PROBE_LIGHTS} degrees (both roughnesses)")
     return replace(job, scene=Scene.probe(ANISOTROPIC_PROBE_LIGHTS))
+
+
+#: the family of each microfacet distribution an option names: GGX drawn with its multiple scattering (Cycles'
+#: multi_ggx) is GGX; Mitsuba 0.6's ``as`` is Cycles' ``ashikhmin_shirley``
+DISTRIBUTION_FAMILY = {"multi_ggx": "ggx", "ashikhmin_shirley": "as"}
+
+
+def same_distribution(job: RemapJob, model: str, options: Mapping[str, Any], log: Callable[[str], None]) -> RemapJob:
+    """``job`` with the target's ``distribution`` option set to the source's microfacet distribution where the user
+    left it open and the target's default is another one (:func:`~matremap.core.models.microfacet_of`): a glTF,
+    UsdPreviewSurface or MaterialX material draws GGX, and Mitsuba 3's rough plastic and conductor default to
+    Beckmann, whose lobe has no GGX tail (UsdPreviewSurface at roughness 1 onto Mitsuba 3's rough plastic: 0.38 as
+    Beckmann, 0.015 as GGX). A target whose default is of the same family keeps it (Cycles' Principled BSDF:
+    multi_ggx for a GGX source)."""
+    spec = get_model(job.target)
+    if "distribution" in job.fix or "distribution" not in spec.option_names:
+        return job
+    source = microfacet_of(get_model(model), options)
+    option = spec.option("distribution")
+    if source is None:
+        return job
+    family = DISTRIBUTION_FAMILY.get(source, source)
+    if DISTRIBUTION_FAMILY.get(option.default, option.default) == family:
+        return job
+    same = [c for c in option.choices if DISTRIBUTION_FAMILY.get(c, c) == family]
+    if not same:
+        return job
+    choice = source if source in same else same[0]
+    log(
+        f"note: {job.target} distribution={choice}, the source's microfacet distribution (its default is "
+        f"{option.default}; --fix distribution={option.default} to keep it)"
+    )
+    return replace(job, fix={**job.fix, "distribution": choice})
 
 
 def uniform_identity(source: Material, target: str, fix: Mapping[str, Any]) -> Equivalence | None:

@@ -123,6 +123,10 @@ class ModelSpec:
     #: beyond it the renderer rescales them (Mitsuba 0.6's ensureEnergyConservation), so a fit loses
     #: nothing by staying inside
     affine_sum_limit: float | None = None
+    #: the microfacet distribution of a model that draws one without an option choosing it (``ggx``: glTF 2.0
+    #: Appendix B, UsdPreviewSurface, OpenPBR 1.1, Standard Surface 1.0.1, Mitsuba 3's principled); a model with a
+    #: ``distribution`` option says it there (:func:`microfacet_of`)
+    microfacet: str | None = None
 
     def specialise(self, values: Mapping[str, Any]) -> ModelSpec:
         """The spec as a fit sees it when parameters are held at given values.
@@ -199,3 +203,11 @@ class ModelSpec:
 
 
 __all__ = ["ROLES", "SPECULAR_ROLES", "ModelSpec", "OptionSpec", "ParamSpec"]
+
+
+def microfacet_of(spec: ModelSpec, options: Mapping[str, Any]) -> str | None:
+    """The microfacet distribution a material of ``spec`` with ``options`` draws: its ``distribution`` option's
+    value (or that option's default), else the model's own (:attr:`ModelSpec.microfacet`), else None."""
+    if "distribution" in spec.option_names:
+        return str(options.get("distribution", spec.option("distribution").default))
+    return spec.microfacet

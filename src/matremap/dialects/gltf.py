@@ -58,6 +58,7 @@ from matremap.core.reflectance import MetalRough
 
 METAL_ROUGH = ModelSpec(
     id="gltf:metal-rough",
+    microfacet="ggx",
     summary="glTF 2.0 metallic-roughness PBR (GGX, Schlick), with KHR_materials_ior/specular",
     params=(
         ParamSpec(
@@ -120,6 +121,7 @@ METAL_ROUGH = ModelSpec(
 
 PBR = ModelSpec(
     id="gltf:pbr",
+    microfacet="ggx",
     summary="glTF 2.0 metallic-roughness with KHR_materials_ior/specular/sheen/clearcoat/transmission/volume",
     params=(
         *METAL_ROUGH.params,

@@ -235,6 +235,7 @@ ROUGHPLASTIC = ModelSpec(
 
 PRINCIPLED = ModelSpec(
     id="mitsuba3:principled",
+    microfacet="ggx",
     summary="Disney principled BSDF (Mitsuba 3 principled); fit it with --strategy simple",
     params=(
         _rgb("base_color", "diffuse", 0.5, 1.0, doc="base colour (diffuse albedo; metal reflectance)"),

@@ -78,6 +78,7 @@ _MULTISCATTER = OptionSpec(
 
 OPEN_PBR_SURFACE = ModelSpec(
     id="mtlx:open_pbr_surface",
+    microfacet="ggx",
     summary="OpenPBR Surface 1.1 (opaque): EON diffuse, F82-tint metal, coat, fuzz; albedo-scaled layers",
     params=(
         _held("base_weight", 1.0, doc="multiplier of base_color (diffuse albedo and metal F0)"),
@@ -118,6 +119,7 @@ OPEN_PBR_SURFACE = ModelSpec(
 
 STANDARD_SURFACE = ModelSpec(
     id="mtlx:standard_surface",
+    microfacet="ggx",
     summary="Autodesk Standard Surface 1.0.1: Oren-Nayar, artist-friendly metal, coat, sheen, specular transmission",
     params=(
         _held("base", 1.0, doc="multiplier of base_color"),

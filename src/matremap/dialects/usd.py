@@ -120,6 +120,7 @@ class PreviewSurfaceMetalness(Reflectance):
 
 PREVIEW_SURFACE = ModelSpec(
     id="usd:preview_surface",
+    microfacet="ggx",
     summary="UsdPreviewSurface 2.5 (metalness or specular workflow, GGX, Schlick, clearcoat), as Storm draws it",
     params=(
         ParamSpec(
