@@ -43,8 +43,8 @@ CACHE_ENV = ("MATREMAP_CACHE", "MATREMAP_CACHE_DIR")
 #: as a constant, as is a reflectance a constant predicts as well, and k(alpha) coefficients stay within 1e3;
 #: 11: a two-stage fit whose parts are coupled is refined jointly, Standard Surface's thin wall blurs, and the
 #: transmission view draws a glass's mirror reflection; 12: a sweep that frees a target's layer starts it at the
-#: source's and keeps the better of a three-stage and a simple fit, and a transform learns the layers its sweep
-#: varies)
+#: source's and keeps the better of a three-stage and a simple fit, a transform learns the layers its sweep
+#: varies, and any parameter at its bound fitted as closely as the sweep's typical fit is learned from)
 RESULTS_REVISION = 12
 
 
