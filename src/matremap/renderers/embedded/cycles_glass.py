@@ -34,6 +34,7 @@ import numpy as np
 
 from matremap.core.diskcache import cache_dir, load_tables, save_tables
 from matremap.core.optics import fresnel_dielectric, ior_from_f0
+from matremap.renderers.embedded import quadrature
 
 #: nodes per axis of ``ggx_glass_E`` (roughness, cos_view, z) and ``ggx_glass_Eavg`` (roughness, z)
 GLASS_NODES = 16
@@ -45,13 +46,6 @@ _QUAD = (40, 40)
 _MU_NODES = 48
 
 
-def _gauss01(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Gauss-Legendre nodes and weights on [0, 1] pushed through the smoothstep (flat at the panel ends)."""
-    x, w = np.polynomial.legendre.leggauss(n)
-    x, w = 0.5 * (x + 1.0), 0.5 * w
-    return x * x * (3.0 - 2.0 * x), 6.0 * x * (1.0 - x) * w
-
-
 def _lambda(cos2, a2) -> np.ndarray:
     """Smith's GGX Lambda of a direction at cos^2 theta = ``cos2`` (either side of the surface)."""
     cos2 = np.maximum(cos2, 1e-300)
@@ -61,7 +55,7 @@ def _lambda(cos2, a2) -> np.ndarray:
 def _panels(u_breaks: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Quadrature nodes and weights [N, k n, 1] in u over the panels between consecutive ``u_breaks``
     [N, ..., k + 1]."""
-    xs, ws = _gauss01(n)
+    xs, ws = quadrature.smoothstep(n)
     u_breaks = u_breaks.reshape(len(u_breaks), -1)
     lo, hi = u_breaks[:, :-1, None], u_breaks[:, 1:, None]
     u = lo + (hi - lo) * xs
@@ -86,7 +80,7 @@ def glass_albedo_exact(mu, rough, eta, quad: tuple[int, int] | None = None) -> n
     sin_o = np.sqrt(1.0 - mu * mu)
     lam_o = _lambda(mu * mu, a2)
     g1_o = 1.0 / (1.0 + lam_o)
-    px, pw = _gauss01(n_phi)
+    px, pw = quadrature.smoothstep(n_phi)
 
     def u_of(t):
         return t * t / (a2 + t * t)
@@ -150,7 +144,7 @@ def _build() -> tuple[np.ndarray, np.ndarray]:
     """The tables E [z, mu, r] and E_avg [z, r]."""
     rough, mus, iors = _nodes()
     n = GLASS_NODES
-    xs, ws = _gauss01(_MU_NODES)
+    xs, ws = quadrature.smoothstep(_MU_NODES)
     e = np.zeros((n, n, n))
     e_avg = np.zeros((n, n))
     for k, ior in enumerate(iors):

@@ -62,6 +62,7 @@ import numpy as np
 from matremap.core.diskcache import cache_dir, load_tables, save_tables
 from matremap.core.optics import f0_from_ior, fresnel_dielectric, ior_from_f0
 from matremap.renderers.embedded import microfacet as mf
+from matremap.renderers.embedded import quadrature
 
 INV_PI = 1.0 / np.pi
 #: below this alpha^2 a GGX lobe is a mirror: zero under point lights
@@ -133,8 +134,7 @@ def refracted_cos(mu, eta) -> np.ndarray:
 def average_fresnel(eta, n: int = 64) -> np.ndarray:
     """E_F(eta) = 2 integral of F(mu, eta) mu dmu over [0, 1] (OpenPBR 1.1 footnote avg_fresnel), by
     Gauss-Legendre quadrature; ``eta`` broadcasts."""
-    x, w = np.polynomial.legendre.leggauss(n)
-    mu, w = 0.5 * (x + 1.0), 0.5 * w
+    mu, w = quadrature.unit(n)
     eta = np.asarray(eta, dtype=float)[..., None]
     return np.sum(2.0 * mu * w * fresnel_dielectric(mu, eta), axis=-1)
 
@@ -277,13 +277,6 @@ def gltf_sheen(rough, g) -> np.ndarray:
 # -- numerical directional albedos ----------------------------------------------------------------
 
 
-def _gauss01(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Gauss-Legendre on [0, 1] through the smoothstep 3x^2 - 2x^3 (flat ends absorb square-root edges)."""
-    x, w = np.polynomial.legendre.leggauss(n)
-    x, w = 0.5 * (x + 1.0), 0.5 * w
-    return x * x * (3.0 - 2.0 * x), 6.0 * x * (1.0 - x) * w
-
-
 def ggx_weighted_albedo(
     mu, rough, weight: Callable[[np.ndarray], np.ndarray], quad: tuple[int, int] | None = None
 ) -> np.ndarray:
@@ -301,7 +294,7 @@ def ggx_weighted_albedo(
     sin_o = np.sqrt(1.0 - mu * mu)
     t_all, t_none = (1.0 - sin_o) / mu, (1.0 + sin_o) / mu
     u1, u2 = t_all**2 / (a2 + t_all**2), t_none**2 / (a2 + t_none**2)
-    xs, ws = _gauss01(n_u)
+    xs, ws = quadrature.smoothstep(n_u)
     u = np.concatenate([u1 * xs[:, None], u1 + (u2 - u1) * xs[:, None]], axis=-2)
     wu = np.concatenate([u1 * ws[:, None], (u2 - u1) * ws[:, None]], axis=-2)
     tan2 = a2 * u / np.maximum(1.0 - u, 1e-300)
@@ -310,7 +303,7 @@ def ggx_weighted_albedo(
     with np.errstate(divide="ignore", invalid="ignore"):
         edge = np.where(t > 0.0, mu * (tan2 - 1.0) / (2.0 * sin_o * t), -1.0)
     phi_max = np.arccos(np.clip(edge, -1.0, 1.0))
-    px, pw = _gauss01(n_phi)
+    px, pw = quadrature.smoothstep(n_phi)
     o_m = sin_o * t * cos_m * np.cos(phi_max * px) + mu * cos_m
     cos_i = 2.0 * o_m * cos_m - mu
     ok = (o_m > 0.0) & (cos_i > 0.0)
@@ -334,12 +327,11 @@ def sheen_albedo_numeric(mu, rough, quad: tuple[int, int] | None = None, lobe=No
     from matremap.renderers.embedded.geometry import LocalGeometry
 
     n_t, n_p = quad or _SHEEN_QUAD
-    x, w = np.polynomial.legendre.leggauss(n_t // 2)
-    x, w = 0.5 * (x + 1.0), 0.5 * w
+    x, w = quadrature.unit(n_t // 2)
     ct = np.concatenate([0.5 * x, 0.5 + 0.5 * x])
     wt = np.concatenate([0.5 * w, 0.5 * w])
-    xp, wp = np.polynomial.legendre.leggauss(n_p)
-    phi, wphi = 0.5 * np.pi * (xp + 1.0), 0.5 * np.pi * wp
+    xp, wp = quadrature.unit(n_p)
+    phi, wphi = np.pi * xp, np.pi * wp
     mu = np.clip(np.asarray(mu, dtype=float).reshape(-1, 1, 1), 1e-4, 1.0)
     rough = np.asarray(rough, dtype=float).reshape(-1, 1, 1)
     st = np.sqrt(1.0 - ct * ct)[:, None]

@@ -71,6 +71,7 @@ import numpy as np
 
 from matremap.core.diskcache import cache_dir, load_tables, save_tables
 from matremap.core.optics import fresnel_dielectric
+from matremap.renderers.embedded import quadrature
 from matremap.renderers.embedded.microfacet import ALPHA_MIN, g1_beckmann_rational, g1_ggx, phong_exponent
 
 __all__ = [
@@ -112,11 +113,6 @@ def _canonical(distribution: str) -> str:
 
 # ---------------------------------------------------------------------------------------------
 # direct numerical integration
-
-
-def _gauss01(n: int) -> tuple[np.ndarray, np.ndarray]:
-    x, w = np.polynomial.legendre.leggauss(n)
-    return 0.5 * (x + 1.0), 0.5 * w
 
 
 def _v_of_cos(distribution: str, cos_m: np.ndarray, alpha: np.ndarray) -> np.ndarray:
@@ -189,9 +185,9 @@ def _integrate(distribution, mu, alpha, eta, quad, workers=None, chunk_elems=1 <
     mu, alpha, eta = (np.ravel(a).astype(float) for a in np.broadcast_arrays(mu, alpha, eta))
     alpha = np.maximum(alpha, ALPHA_MIN)
     n1, n2, nphi = quad
-    t1, w1 = _gauss01(n1)
-    t2, w2 = _gauss01(n2)
-    wphi, wwphi = _gauss01(nphi)
+    t1, w1 = quadrature.unit(n1)
+    t2, w2 = quadrature.unit(n2)
+    wphi, wwphi = quadrature.unit(nphi)
     nodes = (t1[:, None], w1[:, None], t2[:, None], w2[:, None], wphi, wphi * wwphi)
     step = max(1, chunk_elems // ((n1 + n2) * nphi))
     out = np.empty(mu.size)
@@ -413,7 +409,7 @@ def _fdr_table(d: str, side: str, t_pad: np.ndarray) -> np.ndarray:
     inside = side == "int"
     a = _alpha_nodes(d)[:, None, None]
     e = _etap_nodes()[None, :, None]
-    g, gw = _gauss01(4)
+    g, gw = quadrature.unit(4)
     k = (np.arange(_N_MU - 1)[:, None] + g[None, :]).ravel()  # index coordinates
     i, t = _cell(k, _N_MU)
     vals = np.einsum("aekt,kt->aek", t_pad[1:-1, 1:-1][:, :, i[:, None] + np.arange(4)], _cr_weights(t))

@@ -15,6 +15,7 @@ import numpy as np
 from matremap.core.diskcache import cache_dir, load_tables, save_tables
 from matremap.dialects.cycles import DIFFUSE, GLOSSY
 from matremap.renderers.embedded import microfacet as mf
+from matremap.renderers.embedded import quadrature
 
 INV_PI = 1.0 / np.pi
 
@@ -45,14 +46,6 @@ _ALBEDO_FORMAT = 1
 _ALBEDO_QUAD = (64, 64, 48)
 
 
-def _smooth_gauss(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Gauss-Legendre nodes on [0, 1] pushed through x -> 3x^2 - 2x^3, whose zero slope at both ends
-    absorbs the square-root behaviour of the integrand at the panel ends."""
-    x, w = np.polynomial.legendre.leggauss(n)
-    x, w = 0.5 * (x + 1.0), 0.5 * w
-    return x * x * (3.0 - 2.0 * x), 6.0 * x * (1.0 - x) * w
-
-
 def ggx_directional_albedo(mu, rough, quad: tuple[int, int] | None = None) -> np.ndarray:
     """E(mu, r): the fraction of light the white single-scatter GGX lobe (height-correlated Smith G,
     alpha = r^2) reflects towards a viewer at cos theta = mu, integrated numerically.
@@ -72,7 +65,7 @@ def ggx_directional_albedo(mu, rough, quad: tuple[int, int] | None = None) -> np
     a2 = (np.clip(rough.reshape(-1, 1, 1), 0.0, 1.0) ** 2) ** 2  # alpha^2
     a2 = np.maximum(a2, 1e-30)
     sin_o = np.sqrt(1.0 - mu * mu)
-    xs, ws = _smooth_gauss(n_u)
+    xs, ws = quadrature.smoothstep(n_u)
     ends = []
     for t in ((1.0 - sin_o) / mu, (1.0 + sin_o) / mu):  # tan(theta_o / 2), cot(theta_o / 2)
         ends.append(t * t / (a2 + t * t))
@@ -86,7 +79,7 @@ def ggx_directional_albedo(mu, rough, quad: tuple[int, int] | None = None) -> np
     with np.errstate(divide="ignore", invalid="ignore"):
         cos_phi_max = np.where(t > 0.0, mu * (tan2 - 1.0) / (2.0 * sin_o * t), -1.0)
     phi_max = np.arccos(np.clip(cos_phi_max, -1.0, 1.0))
-    px, pw = _smooth_gauss(n_phi)
+    px, pw = quadrature.smoothstep(n_phi)
     phi = phi_max * px
     o_m = sin_o * sin_m * np.cos(phi) + mu * cos_m
     cos_i = 2.0 * o_m * cos_m - mu
@@ -118,8 +111,7 @@ def _build_albedo_tables() -> tuple[np.ndarray, np.ndarray]:
     nodes = np.maximum(np.arange(n) / (n - 1), 1e-4)
     e = np.stack([ggx_directional_albedo(nodes, r) for r in nodes], axis=1)  # [mu, r]
     # E_avg = integral of 2 mu E(mu) over [0, 1]: three panels, denser where E varies fastest
-    x, w = np.polynomial.legendre.leggauss(_ALBEDO_QUAD[2])
-    x, w = 0.5 * (x + 1.0), 0.5 * w
+    x, w = quadrature.unit(_ALBEDO_QUAD[2])
     edges = (0.0, 0.05, 0.3, 1.0)
     mus = np.concatenate([a + (b - a) * x for a, b in zip(edges[:-1], edges[1:], strict=False)])
     wts = np.concatenate([(b - a) * w for a, b in zip(edges[:-1], edges[1:], strict=False)])

@@ -90,6 +90,7 @@ from matremap.core.optics import f0_from_ior, fresnel_dielectric, ior_from_f0
 from matremap.dialects.cycles import PRINCIPLED
 from matremap.renderers.embedded import layering as ly
 from matremap.renderers.embedded import microfacet as mf
+from matremap.renderers.embedded import quadrature
 from matremap.renderers.embedded.cycles_glass import glass_multiscatter_scale
 from matremap.renderers.embedded.cycles_sheen_ltc import sheen_ltc_table
 from matremap.renderers.embedded.evaluators.cycles import ggx_albedo, multiscatter_scale
@@ -108,14 +109,6 @@ _TABLE_QUAD = (48, 48)
 def cycles_ior_from_f0(f0) -> np.ndarray:
     """Cycles' ``ior_from_F0``: (1 + sqrt F0)/(1 - sqrt F0) with F0 clamped to [0, 0.99]."""
     return ior_from_f0(np.clip(np.asarray(f0, dtype=float), 0.0, 0.99))
-
-
-def _gauss01(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Gauss-Legendre nodes and weights on [0, 1], pushed through the smoothstep x -> 3x^2 - 2x^3
-    (flat at both ends, which tames the square-root edges of the integrands at panel ends)."""
-    x, w = np.polynomial.legendre.leggauss(n)
-    x, w = 0.5 * (x + 1.0), 0.5 * w
-    return x * x * (3.0 - 2.0 * x), 6.0 * x * (1.0 - x) * w
 
 
 def visible_normal_mean(mu, rough, weight, quad: tuple[int, int] | None = None) -> np.ndarray:
@@ -138,7 +131,7 @@ def visible_normal_mean(mu, rough, weight, quad: tuple[int, int] | None = None) 
     sin_o = np.sqrt(1.0 - mu * mu)
     t_all, t_none = (1.0 - sin_o) / mu, (1.0 + sin_o) / mu
     u1, u2 = t_all**2 / (a2 + t_all**2), t_none**2 / (a2 + t_none**2)
-    xs, ws = _gauss01(n_u)
+    xs, ws = quadrature.smoothstep(n_u)
     u = np.concatenate([u1 * xs[:, None], u1 + (u2 - u1) * xs[:, None]], axis=-2)
     wu = np.concatenate([u1 * ws[:, None], (u2 - u1) * ws[:, None]], axis=-2)
     tan2 = a2 * u / np.maximum(1.0 - u, 1e-300)
@@ -147,7 +140,7 @@ def visible_normal_mean(mu, rough, weight, quad: tuple[int, int] | None = None) 
     with np.errstate(divide="ignore", invalid="ignore"):
         edge = np.where(t > 0.0, mu * (tan2 - 1.0) / (2.0 * sin_o * t), -1.0)
     phi_max = np.arccos(np.clip(edge, -1.0, 1.0))
-    px, pw = _gauss01(n_phi)
+    px, pw = quadrature.smoothstep(n_phi)
     o_m = sin_o * t * cos_m * np.cos(phi_max * px) + mu * cos_m
     lam_o = 0.5 * (np.sqrt(1.0 + a2 * (1.0 - mu * mu) / (mu * mu)) - 1.0)
     ok = o_m > 0.0
