@@ -818,8 +818,9 @@ def _through_borrowed(sides: list[MapSet], mixed: Blend) -> dict[str, list[int]]
     its dielectric half (blended, its weight fell to a half and showed the base colour as diffuse: TransmissionTest's
     YellowTransMetal onto Standard Surface, a yellow edge on every stripe where the source shows none). Where the
     target's transmission has a colour of its own (:data:`~matremap.dialects.mtlx.OWN_TINT`), its dielectric base
-    colour is the opaque kind's (a texel wholly letting light through shows none of it). Each model mixes its
-    transmission in linearly by its weight and a metal over it, so the blend is then exact at every weight."""
+    colour is the opaque kind's (a texel wholly letting light through shows none of it), and so beside a metal where
+    the glass lets all light through. Each model mixes its transmission in linearly by its weight and a metal over
+    it, so the blend is then exact at every weight."""
     from matremap.dialects.mtlx import OWN_TINT, THROUGH_PARAMS
 
     if not isinstance(mixed, Mixed) or len(sides) != 2:
@@ -840,7 +841,19 @@ def _through_borrowed(sides: list[MapSet], mixed: Blend) -> dict[str, list[int]]
     metal = any(_at_least(ms, n, v) for ms in sides for n, v, _ in spec.specialisations)
     if mixed.layer == "transmission" and spec.id in OWN_TINT and diffuse is not None and not metal:
         out[diffuse.name] = [1 - lit, 1 - lit]
+    elif (
+        mixed.layer is None and spec.id in OWN_TINT and diffuse is not None and _wholly_through(sides[lit], weight_name)
+    ):
+        # a metal beside a glass that lets all light through: the glass's base colour draws nothing, and its fit
+        # left it wherever the descent did (TransmissionTest's YellowTransMetal onto OpenPBR: pink under a yellow
+        # tint); the metal's colour, the source's one base colour, is written there instead
+        out[diffuse.name] = [1 - lit, 1 - lit]
     return out
+
+
+def _wholly_through(ms: MapSet, name: str) -> bool:
+    """Whether a converted kind lets all light through (its transmission weight a constant 1)."""
+    return name not in ms.maps and float(np.min(np.asarray(ms.constants.get(name, 0.0), dtype=float))) >= 1.0 - 1e-6
 
 
 def _lets_through(ms: MapSet, name: str) -> bool:
