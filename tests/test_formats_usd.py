@@ -148,11 +148,17 @@ def test_a_usdz_member_is_extracted_to_the_private_cache_and_copied_into_the_map
     assert all("cache" not in str(v) for v in manifest["maps"].values())
 
 
-def test_a_tga_texture_is_refused_in_one_line_naming_the_member():
+def test_an_unreadable_texture_is_refused_in_one_line_naming_it(tmp_path):
+    """A texture that is not an image (here, text named .png) is refused in one line naming the file. (A Targa
+    texture, refused so until 2026-11-27, is read: tests/test_usd_roughness_test.py.)"""
+    import shutil
+
+    shutil.copy(COORD, tmp_path / COORD.name)
+    (tmp_path / "TextureCoordinateTemplate.png").write_text("not an image")
     with pytest.raises(MatremapError) as e:
-        read_asset(ROUGH, "Tex033")
+        read_asset(tmp_path / COORD.name, "BottomLeftMat")
     msg = str(e.value)
-    assert "\n" not in msg and "0/roughness.tga" in msg and "targa" in msg
+    assert "\n" not in msg and "TextureCoordinateTemplate.png" in msg and "not a readable image" in msg
 
 
 # ------------------------------------------------------------------------------------------------

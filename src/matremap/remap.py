@@ -175,8 +175,12 @@ def sweep_grid(map_set: MapSet, summary: MapSummary, held: Mapping[str, float] |
         lo, hi = _range(ranges[dp.name], dp.bounds, floor=1e-3)
         # two levels learn the diffuse mapping beside other axes; alone it needs enough points to learn from,
         # from the darkest texel (a diffuse-only source at 0 renders black, is refused, and the domain would
-        # start at the next point, leaving the darkest texels outside it)
-        axes.append(f"{dp.name}=0.0;{hi!r}" if axes else f"{dp.name}={lo!r}:{hi!r}:{DIFFUSE_ONLY_POINTS}")
+        # start at the next point, leaving the darkest texels outside it); so too under a partial metal, whose base
+        # colour is its metal's F0 as well (usd-wg RoughnessTest: its darkest level, fitted poorly, was left out,
+        # and with two levels nothing was learned of the colour)
+        partial = _partial_metal(spec.id, {**map_set.constants, **(held or {})}) is not None
+        two = axes and not partial
+        axes.append(f"{dp.name}=0.0;{hi!r}" if two else f"{dp.name}={lo!r}:{hi!r}:{DIFFUSE_ONLY_POINTS}")
     if not axes:
         raise MatremapError(f"the map set gives no roughness, specular or diffuse map of {spec.id} to remap")
     return ",".join(axes)
@@ -819,7 +823,7 @@ def _convert_maps(
     fix = complete_fix(map_set.model, {**map_set.constants, **summary.ranges(), **held}, target, job.fix)
     check_before_rendering(map_set, params, held, target, target_renderer, fix)
     t0 = time.perf_counter()
-    fix, job = hold_layers(map_set, summary, held, fix, job, log)
+    fix, job = held_for_sweep(map_set, summary, held, fix, job, log)
     transform, tpath, cached = _transform_for(map_set, summary, fix, target_renderer, job, log)
     seconds["transform"] = time.perf_counter() - t0
     with warnings.catch_warnings():  # the outside-domain count is logged below
@@ -1423,6 +1427,50 @@ def dropped_check(asset: Any, verdict: Verdict, kept: bool, thresholds: Threshol
     n = len(asset.dropped)
     where = f"left out: {', '.join(asset.dropped)} (no model here converts it; --max-error dropped={n} accepts)"
     return Verdict([*verdict.checks, Check("dropped", float(len(asset.dropped)), thresholds.dropped, where)])
+
+
+def held_for_sweep(
+    map_set: MapSet,
+    summary: MapSummary,
+    held: Mapping[str, float],
+    fix: dict[str, Any],
+    job: RemapJob,
+    log: Callable[[str], None],
+) -> tuple[dict[str, Any], RemapJob]:
+    """``fix`` and ``job`` with the target values a sweep of maps holds, each fitted once at the maps' typical
+    texel: a uniform partial metal's metalness (:func:`hold_partial_metal`), a uniform layer (:func:`hold_layers`)."""
+    fix, job = hold_partial_metal(map_set, summary, held, fix, job, log)
+    return hold_layers(map_set, summary, held, fix, job, log)
+
+
+def hold_partial_metal(
+    map_set: MapSet,
+    summary: MapSummary,
+    held: Mapping[str, float],
+    fix: dict[str, Any],
+    job: RemapJob,
+    log: Callable[[str], None],
+) -> tuple[dict[str, Any], RemapJob]:
+    """``fix`` and ``job`` for the sweep of maps whose material is a uniform partial metal (its metalness one value
+    strictly between 0 and 1, a colour texture beside it): the target's metalness, where the user left it open, is
+    fitted once on the maps' typical texel (freed from the source's, :func:`free_partial_metal`) and held while the
+    sweep fits the other maps under it, with the simple strategy (the base colour is both the diffuse and the
+    metal's colour, which the staged strategies' parts split apart). Held at 0, as a material with a diffuse part is
+    otherwise, usd-wg's RoughnessTest Const033 (UsdPreviewSurface metallic 0.6 over a colour texture) onto glTF
+    failed: a dielectric cannot draw the bright coloured specular of the texture's lighter half (IOR at its bound
+    5), those fits were left out, and 97 % of the texels fell outside the learned domain."""
+    source = Material.create(map_set.spec.id, base_values(map_set, summary, held))
+    free_job, free_fix, metal = free_partial_metal(source, job, fix, log)
+    if not metal:
+        return fix, job
+    r, _ = _fit_uniform(source, free_job, free_fix, log, metal)
+    values = {name: round(float(r.target.values[name][0]), 6) for name in metal}
+    shown = ", ".join(f"{k} {v:g}" for k, v in values.items())
+    log(
+        f"partial metal: {shown} fitted at the maps' median texel (relative error {r.loss:.4f}), held while the sweep "
+        "fits the other maps under it (simple strategy)"
+    )
+    return {**fix, **values}, replace(job, strategy="simple")
 
 
 def hold_layers(

@@ -187,6 +187,24 @@ class Conductor(Reflectance):
         return [self.k]
 
 
+def metal_blend_colour(
+    f0: np.ndarray, albedo: np.ndarray, metallic: np.ndarray, f0_dielectric: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The base colour, and the dielectric part's F0, with which F0 = mix(F0_d, colour, m) and albedo =
+    colour (1 - m) read back (Burley 2012 §5.3 "metallic"; glTF 2.0 appendix B), per texel of ``metallic`` m:
+    a metal (m >= 0.5) keeps F0 exactly, colour (F0 - F0_d (1 - m)) / m with the held ``f0_dielectric``; a
+    dielectric keeps the albedo, colour albedo / (1 - m) and F0_d (F0 - m colour) / (1 - m). At m = 1 and m = 0
+    these are F0 and the albedo themselves."""
+    m = metallic
+    metal = m >= 0.5
+    if not bool(np.any((m > 0.0) & (m < 1.0))):
+        return np.where(metal, f0, albedo), f0
+    colour = np.where(
+        metal, (f0 - f0_dielectric * (1.0 - m)) / np.maximum(m, 1e-12), albedo / np.maximum(1.0 - m, 1e-12)
+    )
+    return colour, np.clip((f0 - colour * m) / np.maximum(1.0 - m, 1e-12), 0.0, 1.0)
+
+
 @dataclass(frozen=True)
 class MetalRough(Reflectance):
     """glTF metallic-roughness with KHR_materials_ior / KHR_materials_specular:
@@ -232,10 +250,12 @@ class MetalRough(Reflectance):
         """glTF metallic-roughness from F0 and albedo, the template's metallic deciding per texel:
         a metal (metallic >= 0.5) takes F0 as base colour; a dielectric takes the albedo as base colour
         and F0 through specularColor = F0 / f0(ior) / specular (KHR_materials_specular), written only
-        where it differs from the template's."""
-        metal = (np.asarray(out[self.metallic]) >= 0.5)[..., None]
+        where it differs from the template's; a partial metal as :func:`metal_blend_colour` says."""
+        m = as_floats(out[self.metallic])[..., None]
+        metal = m >= 0.5
         albedo = np.asarray(out[self.base_color]) if diffuse is None else as_floats(diffuse)
-        out[self.base_color] = np.where(metal, f0, albedo)
+        colour, f0 = metal_blend_colour(f0, albedo, m, self.f0({**out, self.metallic: 0.0}, channels))
+        out[self.base_color] = colour
         driven = [self.base_color]
         if not np.all(metal):
             ior = np.asarray(out[self.ior])[..., None]
@@ -291,7 +311,7 @@ class Metalness(Reflectance):
     base colour, and scale the diffuse by 1 - metallic). Written back per texel as glTF's metal-roughness is:
     a metal (the template's metallic >= 0.5) takes F0 as its base colour, a dielectric takes its albedo as
     base colour and F0 through the dielectric part (an IOR, a specular level), written only where it is not
-    metal."""
+    metal; a partial metal as :func:`metal_blend_colour` says."""
 
     base_color: str
     metallic: str
@@ -326,14 +346,16 @@ class Metalness(Reflectance):
     def write_f0(
         self, f0: np.ndarray, out: MutableMapping[str, Any], channels: Channels, diffuse: np.ndarray | None = None
     ) -> list[str]:
-        metal = (np.asarray(out[self.metallic]) >= 0.5)[..., None]
+        m = as_floats(out[self.metallic])[..., None]
+        metal = m >= 0.5
         albedo = np.asarray(out[self.base_color]) if diffuse is None else as_floats(diffuse)
-        out[self.base_color] = np.where(metal, f0, albedo)
+        colour, part = metal_blend_colour(f0, albedo, m, self.dielectric.f0(out, channels))
+        out[self.base_color] = colour
         driven = [self.base_color]
         if not np.all(metal):
             name = self.dielectric.driven_param(False)
             held = np.asarray(out[name], dtype=float)
-            self.dielectric.write_f0(f0, out, channels)
+            self.dielectric.write_f0(part, out, channels)
             out[name] = np.where(metal[..., 0] if held.ndim < metal.ndim else metal, held, np.asarray(out[name]))
             driven.append(name)
         return driven

@@ -69,7 +69,7 @@ from matremap.dialects import get_model
 from matremap.dialects.usd import specular_workflow
 from matremap.errors import MatremapError
 from matremap.formats.asset import CarriedInput, MaterialAsset, TextureRef
-from matremap.formats.bake import UVTransform, bake_image, rotate, scale, translate
+from matremap.formats.bake import MAX_SIDE, UVTransform, bake_image, rotate, scale, texels_needed, translate
 from matremap.formats.common import ResultParts, pick_material, place_map, result_parts
 from matremap.formats.confine import Confinement, resolve_reference
 
@@ -380,6 +380,9 @@ class _Texture:
     ref: TextureRef | None = None
     constant: list[float] | None = None
     primvar: str = "st"
+    #: the map size it keeps its texels at (height, width), and the same texture baked at another size
+    size: tuple[int, int] | None = None
+    at_size: Callable[[tuple[int, int]], TextureRef] | None = None
 
 
 def _texture_file(ctx: _Ctx, node: Any) -> tuple[Path, bool, str]:
@@ -479,7 +482,8 @@ def _uv_texture(ctx: _Ctx, node: Any, output: str, param: str) -> _Texture:
 
     f, extracted, written = _texture_file(ctx, node)
     try:
-        channels = image_info(f, "linear").channels
+        header = image_info(f, "linear")
+        channels = header.channels
     except MatremapError as e:
         why = str(e).split(": ", 1)[-1] if extracted else str(e)
         raise MatremapError(ctx.where(f"texture {written!r}: {why}")) from None
@@ -504,25 +508,39 @@ def _uv_texture(ctx: _Ctx, node: Any, output: str, param: str) -> _Texture:
             )
         )
     transform = UVTransform(matrix, "bottom-left", (wrap[0], wrap[1]), 0.0)
+    size = texels_needed((header.height, header.width), matrix) if not transform.identity else None
+    size = size or (header.height, header.width)
+
+    def at_size(hw: tuple[int, int]) -> TextureRef:
+        return TextureRef(f, None, "linear", 1.0, extracted, _baker(f, colorspace, picked, sc, bias, transform, hw))
+
     if transform.identity and np.all(bias == 0.0):
         factor: float | tuple[float, ...] = float(sc[0]) if len(set(sc.tolist())) == 1 else tuple(sc.tolist())
-        return _Texture(TextureRef(f, picked, colorspace, factor, extracted), primvar=primvar)
-    bake = _baker(f, colorspace, picked, sc, bias, transform)
-    return _Texture(TextureRef(f, None, "linear", 1.0, extracted, bake), primvar=primvar)
+        return _Texture(
+            TextureRef(f, picked, colorspace, factor, extracted), primvar=primvar, size=size, at_size=at_size
+        )
+    return _Texture(at_size(size), primvar=primvar, size=size, at_size=at_size)
 
 
 def _baker(
-    f: Path, colorspace: str, picked: tuple[int, ...], sc: np.ndarray, bias: np.ndarray, transform: UVTransform
+    f: Path,
+    colorspace: str,
+    picked: tuple[int, ...],
+    sc: np.ndarray,
+    bias: np.ndarray,
+    transform: UVTransform,
+    size: tuple[int, int] | None = None,
 ) -> Callable[[], np.ndarray]:
-    """What the renderer sees at each texel: the channels sampled through ``transform``, x scale + bias."""
+    """What the renderer sees at each texel: the channels sampled through ``transform`` (bilinearly, at ``size``
+    texels; the image's own size by default), x scale + bias."""
 
     def bake() -> np.ndarray:
         from matremap.svbrdf.textures import read_image
 
         image, _ = read_image(f, colorspace)
         image = np.atleast_3d(image)[..., list(picked)]
-        if not transform.identity:
-            image = bake_image(image, transform)
+        if not transform.identity or (size is not None and size != image.shape[:2]):
+            image = bake_image(image, transform, size)
         return (image * sc.astype(np.float32) + bias.astype(np.float32)).astype(np.float32)
 
     return bake
@@ -549,18 +567,20 @@ def _preview_asset(ctx: _Ctx, shader: Any) -> MaterialAsset:
     spec = get_model(MODEL)
     constants: dict[str, Any] = {}
     textures: dict[str, TextureRef] = {}
+    read: dict[str, _Texture] = {}
     for name in PARAMS:
         size = spec.param(name).channels
         value, conn = _value_source(ctx, shader, name)
         if conn is not None:
             tex = _connected_texture(ctx, conn, name)
             if tex.ref is not None:
-                textures[name] = tex.ref
+                textures[name], read[name] = tex.ref, tex
             else:
                 constants[name] = (tex.constant or [0.0]) * (3 if size == 3 else 1)
         elif value is not None:
             nums = _numbers(ctx, value, name, size)
             constants[name] = nums if size == 3 else nums[0]
+    textures = _at_one_size(ctx, textures, read)
     flag, conn = _value_source(ctx, shader, "useSpecularWorkflow")
     if conn is not None:
         raise MatremapError(ctx.where("useSpecularWorkflow is connected; USD allows it a value only"))
@@ -588,6 +608,29 @@ def _preview_asset(ctx: _Ctx, shader: Any) -> MaterialAsset:
         notes=ctx.notes,
         carried=carried,
     )
+
+
+def _at_one_size(ctx: _Ctx, textures: dict[str, TextureRef], read: Mapping[str, _Texture]) -> dict[str, TextureRef]:
+    """The textures at one size, as a map set needs them: the largest any of them keeps its texels at (a texture
+    tiled 3 times asks for 3 times its size), capped at :data:`~matremap.formats.bake.MAX_SIDE` per side; one of
+    another size is resampled there (bilinearly, with its transform and wrap: UsdUVTexture's default filter), with
+    a note. USD gives each texture its own image (usd-wg's RoughnessTest: a 1280x1024 colour beside a 256x256
+    Targa roughness)."""
+    sizes = {k: t.size for k, t in read.items() if t.size is not None}
+    if len(set(sizes.values())) <= 1:
+        return textures
+    size = (min(max(h for h, _ in sizes.values()), MAX_SIDE), min(max(w for _, w in sizes.values()), MAX_SIDE))
+    out = dict(textures)
+    resampled = []
+    for name, tex in read.items():
+        if tex.size != size and tex.at_size is not None:
+            out[name] = tex.at_size(size)
+            resampled.append(name)
+    ctx.notes.append(
+        f"{', '.join(sorted(resampled))} resampled to {size[1]}x{size[0]} texels (bilinear, with the transform and "
+        "wrap each is read through): a map set's maps share one size"
+    )
+    return out
 
 
 def _clamp(ctx: _Ctx, spec: Any, constants: dict[str, Any]) -> None:

@@ -676,9 +676,9 @@ def _info(spec: ModelSpec, name: str, sides: list[MapSet], constants: list[Any],
     8/16-bit files; float EXR when either side's constant, and so the blend between them, lies outside [0, 1])."""
     infos = [ms.info[name] for ms in sides if name in ms.info]
     if infos:
-        return next((i for i in infos if not i.integer), infos[0])
+        return next((i for i in infos if not i.integer), infos[0]).written()
     p = spec.param(name)
-    base = next((i for ms in sides for i in ms.info.values()), weights)
+    base = next((i for ms in sides for i in ms.info.values()), weights).written()
     colour = p.channels == 3 and p.role in ("diffuse", "specular", "fresnel")
     info = base.like(channels=p.channels, colorspace="srgb" if colour and base.integer else "linear", path="")
     values = np.concatenate([np.asarray(c, dtype=float).reshape(-1) for c in constants])

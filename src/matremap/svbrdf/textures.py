@@ -63,7 +63,10 @@ _CS_ALIASES = {
     "lin_srgb": "linear",
 }
 #: OIIO format names -> the extensions matremap writes
-_FORMATS = {"png": "png", "jpeg": "jpg", "tiff": "tif", "openexr": "exr"}
+_FORMATS = {"png": "png", "jpeg": "jpg", "tiff": "tif", "openexr": "exr", "targa": "tga"}
+#: the formats matremap writes maps in; a map read in another (a USD asset's Targa texture) is written as PNG (8 or
+#: 16 bits) or EXR
+WRITTEN_FORMATS = ("png", "jpg", "tif", "exr")
 MAP_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr")
 MANIFESTS = ("material.json", "material.toml")
 CONVENTIONS = ("diffuse", "specular", "roughness", "normal")
@@ -153,7 +156,7 @@ def normalise_colorspace(name: Any, where: str = "") -> str:
 class ImageInfo:
     """What a file holds and how its values are encoded.
 
-    ``format``: png, jpg, tif or exr; ``pixel_type``: uint8, uint16, half or float;
+    ``format``: png, jpg, tif, exr, or tga (read only: :meth:`written`); ``pixel_type``: uint8, uint16, half or float;
     ``colorspace``: srgb or linear (how integer code values map to linear values; float files are
     linear unless a manifest says otherwise)."""
 
@@ -180,6 +183,13 @@ class ImageInfo:
 
     def like(self, **changes: Any) -> ImageInfo:
         return replace(self, **changes)
+
+    def written(self) -> ImageInfo:
+        """This format as a map is written: itself, or for a format matremap reads only (Targa), PNG for integer
+        pixels and EXR for float ones."""
+        if self.format in WRITTEN_FORMATS:
+            return self
+        return self.like(format="png", compression=None) if self.integer else self.like(format="exr", compression=None)
 
 
 def default_colorspace(pixel_type: str, colour: bool) -> str:
@@ -218,7 +228,7 @@ def _info_from(inp, path, colorspace, colour) -> ImageInfo:
     _check_texels(path, spec.width, spec.height)
     fmt = _FORMATS.get(inp.format_name())
     if fmt is None:
-        raise MatremapError(f"{path}: {inp.format_name()} images are not supported; use PNG, JPEG, TIFF or EXR")
+        raise MatremapError(f"{path}: {inp.format_name()} images are not supported; use PNG, JPEG, TIFF, EXR or TGA")
     base = str(spec.format)
     pixel_type = base if base in ("uint8", "uint16", "half", "float") else "float"
     cs = normalise_colorspace(colorspace, f"{path}: ") if colorspace else default_colorspace(pixel_type, colour)
@@ -408,9 +418,9 @@ def transform_image(
 
 def output_info(info: ImageInfo, out_format: str | None) -> ImageInfo:
     """``info`` with the file format / pixel type replaced as ``out_format`` (a key of
-    :data:`OUT_FORMATS`) says; None keeps them."""
+    :data:`OUT_FORMATS`) says; None keeps them (a format read only becomes one written: :meth:`ImageInfo.written`)."""
     if out_format is None:
-        return info
+        return info.written()
     if out_format not in OUT_FORMATS:
         raise MatremapError(f"unknown output format {out_format!r}; use one of {', '.join(OUT_FORMATS)}")
     fmt, pixel_type = OUT_FORMATS[out_format]
