@@ -207,7 +207,7 @@ def test_a_sweep_of_a_glass_fits_each_point_on_the_transmission_probe(tmp_path):
     src.write_text(json.dumps({"model": "gltf:pbr", "params": {**glass().to_dict()["params"]}}))
     db = tmp_path / "db.sqlite"
     cmd = [sys.executable, "-m", "matremap", "sweep", "--source", str(src), "--to", "mtlx:open_pbr_surface"]
-    cmd += ["--grid", "roughness=0.2;0.4", "--db", str(db), "--workers", "1", "--no-progress"]
+    cmd += ["--grid", "roughness=0.2;0.4", "--db", str(db), "--workers", "1", "--no-progress", "--size", "64"]
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stdout + res.stderr
     rows = sqlite3.connect(db).execute("select loss, target, warnings from points").fetchall()
