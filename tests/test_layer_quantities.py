@@ -156,3 +156,20 @@ def test_a_sweep_that_frees_a_coat_starts_it_at_the_sources():
     assert row["status"] == "ok", row["message"]
     assert row["loss"] < 0.05
     assert row["target"]["coat_weight"] > 0.2
+
+
+def test_a_roughness_is_learned_only_where_the_target_draws_a_lobe():
+    """A fit that turned the target's specular off (a rough plastic's coat at IOR 1) leaves its roughness anywhere;
+    the roughness mapping is learned from the rows where the lobe is drawn (target roughness = source's there)."""
+    from matremap.regress.parametric import learn
+
+    rng = np.random.default_rng(3)
+    n = 40
+    r = rng.uniform(0.05, 0.9, n)
+    off = np.arange(n) % 3 == 0  # a third of the fits turned the lobe off, their roughness arbitrary
+    f0 = np.where(off[:, None], 0.0, 0.04) * np.ones((n, 3))
+    data = _coat_data(n)
+    data.x = {"roughness": r, "reflectance": np.full((n, 3), 0.04), "diffuse": data.x["diffuse"]}
+    data.y = {"roughness": np.where(off, rng.uniform(0, 1, n), r), "reflectance": f0, "diffuse": data.y["diffuse"]}
+    mapping = learn(data)["roughness"]
+    assert mapping["heldout_rmse"] < 1e-9 and mapping["degree"] == 1
