@@ -234,7 +234,12 @@ PAIRS: tuple[Pair, ...] = (
         renderer="cycles",
     ),
     # what users bring (issue 20): the README's examples into glTF, and the real-asset corpus's textured glTF
-    # materials into Cycles' Principled BSDF at its default distribution and into Mitsuba 3's rough plastic
+    # materials into Cycles' Principled BSDF at its default distribution. Not into Mitsuba 3's rough plastic (shipped
+    # until 2026-11-27): its coat darkens the diffuse with roughness, which one diffuse scale cannot follow (held-out
+    # 0.019; Khronos BoxTextured through it failed the gate at luminance 0.69, swept for its own maps it passes at
+    # 1 - SSIM 0.029; the greysphere calibration chained through it failed, swept passes at 0.047), and relearned
+    # with today's coupled fits, which turn the coat down where a rough specular reads as diffuse under the
+    # headlight, its roughness held out at 0.13: swept per material instead
     Pair(
         "wardclassic-gltf-dielectric",
         "mitsuba06:ward",
@@ -242,17 +247,6 @@ PAIRS: tuple[Pair, ...] = (
         "alpha=0.03:0.7:10,specularReflectance=0.02:0.5:6,diffuseReflectance=0;0.6",
         source_params={"variant": "ward"},
         fix={"metallic": 0.0},
-    ),
-    Pair(
-        "gltf-dielectric-mitsuba3plastic",
-        "gltf:metal-rough",
-        "mitsuba3:roughplastic",
-        "roughness=0.05:1:6,baseColor=0:1:5,ior=1.4:1.6:3",
-        source_params={"metallic": 0.0},
-        fix={"distribution": "ggx"},
-        renderer="mitsuba3",
-        reverse=False,
-        keep_flagged=True,
     ),
     Pair(
         "cycles-gltf-metal",
