@@ -252,3 +252,12 @@ def test_a_kind_of_a_blended_map_set_needs_a_route_only_where_it_is_used(tmp_pat
     used[:, 4:] = True
     found = library_transform(ms, params, "cycles:principled", fix, logs.append, within=used)
     assert found is not None and "gltf-metal-cyclesprincipled" in logs[-1]
+
+
+def test_prediction_differences_read_a_source_template_older_than_its_model():
+    """A shipped transform learned before its source model gained parameters (Cycles' Principled coat and sheen):
+    comparing it with another transform takes the model's defaults for them (it raised KeyError 'Coat Weight')."""
+    entry = next(e for e in entries() if e.name == "cyclesprincipled-ward")
+    assert "Coat Weight" not in entry.transform.source_template
+    d = max_prediction_difference(entry.transform, entry.transform)
+    assert set(d) >= {"roughness", "reflectance"} and max(d.values()) == 0.0

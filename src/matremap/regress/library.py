@@ -634,7 +634,8 @@ def max_prediction_difference(a: Transform, b: Transform, samples: int = 200, se
     for name, (lo, hi) in a.domain.items():
         shape = (samples,) if name == "roughness" else (samples, 3)
         x[name] = rng.uniform(lo, hi, shape)
-    values = qty.write(spec, x, a.source_template)
+    template = {**{p.name: p.default for p in spec.params}, **a.source_template}  # parameters added since: defaults
+    values = qty.write(spec, x, template)
     ya, _ = a.apply(values)
     yb, _ = b.apply(values)
     tspec = get_model(a.target)
