@@ -141,9 +141,8 @@ def layers_on(spec: ModelSpec, values: dict[str, np.ndarray]) -> tuple[str, ...]
     (:meth:`~matremap.regress.transform.Transform.apply`)."""
     out = []
     for name, layer in qty.layer_params(spec).items():
-        if name not in qty.LAYERS or float(np.max(qty.read_layer(name, layer, values)[f"{name}_weight"])) <= 0.0:
-            continue
-        if any(np.ptp(v, axis=0).max() > 1e-12 for v in qty.read_layer(name, layer, values).values()):
+        q = qty.read_layer(name, layer, values) if name in qty.LAYERS else {}
+        if q and float(np.max(q[f"{name}_weight"])) > 0.0 and any(np.ptp(v, axis=0).max() > 1e-12 for v in q.values()):
             out.append(name)
     return tuple(out)
 

@@ -166,8 +166,8 @@ def fit_point(cfg: SweepConfig, source: Material, start: dict[str, Any] | None) 
     """One point's fit. A layer of the source that the sweep frees on the target (``--free coat_weight``...) is
     started at the source's layer (:func:`~matremap.dialects.mtlx.freed_layers`) and, with the default two-stage
     strategy, fitted both three-stage and simple, the better kept, then once more from the target's defaults when
-    still poor: the rule of a uniform remap (:func:`matremap.remap._fit_uniform`, measured there), so that a library
-    sweep over a coat learns what remapping one material would give."""
+    still poor: the rule of a uniform remap (:func:`matremap.remap._fit_uniform`, measured there), so that each point
+    of a sweep over a coat is fitted as remapping that one material would fit it."""
     from matremap.dialects.mtlx import freed_layers
 
     layered: dict[str, Any] = {}
