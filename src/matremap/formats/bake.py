@@ -156,6 +156,22 @@ def bake_image(image: np.ndarray, transform: UVTransform, size: tuple[int, int] 
     return sample(image, ls, lt, transform.wrap, transform.border)
 
 
+def shared_size(needs: list[tuple[int, int]]) -> tuple[int, int]:
+    """The one size (height, width) a material's maps are made at: the largest each of them needs (its image's size
+    times its tiling, :func:`texels_needed`), capped at :data:`MAX_SIDE` per side."""
+    return min(max(n[0] for n in needs), MAX_SIDE), min(max(n[1] for n in needs), MAX_SIDE)
+
+
+def resampled_note(names: list[str], size: tuple[int, int], needs: list[tuple[int, int]]) -> str:
+    """The note that says which textures were resampled to ``size`` (and that it was capped, when it was)."""
+    h, w = max(n[0] for n in needs), max(n[1] for n in needs)
+    capped = f", capped at {MAX_SIDE} per side from {w}x{h}" if (h, w) != size else ""
+    return (
+        f"{', '.join(sorted(names))} resampled to {size[1]}x{size[0]} texels (bilinear, with the transform and wrap "
+        f"each is read through{capped}): a map set's maps share one size"
+    )
+
+
 def texels_needed(image_size: tuple[int, int], matrix: np.ndarray) -> tuple[int, int]:
     """The map size (height, width) that keeps every texel of an image of ``image_size`` seen through the
     3x3 lookup ``matrix``: the image's size times the lookup's derivatives (a texture tiled 7 times across
@@ -172,6 +188,8 @@ __all__ = [
     "WRAP_MODES",
     "UVTransform",
     "bake_image",
+    "resampled_note",
+    "shared_size",
     "rotate",
     "sample",
     "scale",

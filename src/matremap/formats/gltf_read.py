@@ -35,7 +35,7 @@ from matremap.core.atomic import temp_prefix
 from matremap.core.material import Material
 from matremap.errors import MatremapError
 from matremap.formats.asset import CarriedInput, MaterialAsset, TextureRef
-from matremap.formats.bake import MAX_SIDE
+from matremap.formats.bake import resampled_note, shared_size
 from matremap.formats.confine import Confinement
 from matremap.formats.gltf_container import (
     FileReader,
@@ -494,8 +494,7 @@ class MaterialTextures:
         if not slots:
             return maps, normal
         need = [tex.need for tex, _ in slots.values()]
-        h, w = max(n[0] for n in need), max(n[1] for n in need)
-        size = (min(h, MAX_SIDE), min(w, MAX_SIDE))
+        size = shared_size(need)
         if all(tex.size == size for tex, _ in slots.values()):
             return maps, normal
 
@@ -508,11 +507,7 @@ class MaterialTextures:
 
         resampled = sorted({tex.slot for tex, _ in slots.values() if tex.size != size})
         if resampled:
-            capped = f", capped at {MAX_SIDE} per side from {w}x{h}" if (h, w) != size else ""
-            self.notes.append(
-                f"{', '.join(resampled)} resampled to {size[1]}x{size[0]} texels (bilinear, with the transform and "
-                f"wrap each is read through{capped}): a map set's maps share one size"
-            )
+            self.notes.append(resampled_note(resampled, size, need))
         return {k: sized(r) for k, r in maps.items()}, sized(normal) if normal is not None else None
 
     def note_baked(self, tex: SlotTexture) -> None:

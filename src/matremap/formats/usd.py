@@ -69,7 +69,16 @@ from matremap.dialects import get_model
 from matremap.dialects.usd import specular_workflow
 from matremap.errors import MatremapError
 from matremap.formats.asset import CarriedInput, MaterialAsset, TextureRef
-from matremap.formats.bake import MAX_SIDE, UVTransform, bake_image, rotate, scale, texels_needed, translate
+from matremap.formats.bake import (
+    UVTransform,
+    bake_image,
+    resampled_note,
+    rotate,
+    scale,
+    shared_size,
+    texels_needed,
+    translate,
+)
 from matremap.formats.common import ResultParts, pick_material, place_map, result_parts
 from matremap.formats.confine import Confinement, resolve_reference
 
@@ -616,20 +625,17 @@ def _at_one_size(ctx: _Ctx, textures: dict[str, TextureRef], read: Mapping[str, 
     another size is resampled there (bilinearly, with its transform and wrap: UsdUVTexture's default filter), with
     a note. USD gives each texture its own image (usd-wg's RoughnessTest: a 1280x1024 colour beside a 256x256
     Targa roughness)."""
-    sizes = {k: t.size for k, t in read.items() if t.size is not None}
-    if len(set(sizes.values())) <= 1:
+    needs = [t.size for t in read.values() if t.size is not None]
+    if len(set(needs)) <= 1:
         return textures
-    size = (min(max(h for h, _ in sizes.values()), MAX_SIDE), min(max(w for _, w in sizes.values()), MAX_SIDE))
+    size = shared_size(needs)
     out = dict(textures)
     resampled = []
     for name, tex in read.items():
         if tex.size != size and tex.at_size is not None:
             out[name] = tex.at_size(size)
             resampled.append(name)
-    ctx.notes.append(
-        f"{', '.join(sorted(resampled))} resampled to {size[1]}x{size[0]} texels (bilinear, with the transform and "
-        "wrap each is read through): a map set's maps share one size"
-    )
+    ctx.notes.append(resampled_note(resampled, size, needs))
     return out
 
 
