@@ -15,7 +15,7 @@ specification's appendix B (``F0 = mix(dielectric F0, baseColor, metallic)``); s
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Mapping, MutableMapping
+from collections.abc import Callable, Mapping, MutableMapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -188,19 +188,19 @@ class Conductor(Reflectance):
 
 
 def metal_blend_colour(
-    f0: np.ndarray, albedo: np.ndarray, metallic: np.ndarray, f0_dielectric: np.ndarray
+    f0: np.ndarray, albedo: np.ndarray, metallic: np.ndarray, f0_dielectric: Callable[[], np.ndarray]
 ) -> tuple[np.ndarray, np.ndarray]:
     """The base colour, and the dielectric part's F0, with which F0 = mix(F0_d, colour, m) and albedo =
     colour (1 - m) read back (Burley 2012 §5.3 "metallic"; glTF 2.0 appendix B), per texel of ``metallic`` m:
     a metal (m >= 0.5) keeps F0 exactly, colour (F0 - F0_d (1 - m)) / m with the held ``f0_dielectric``; a
     dielectric keeps the albedo, colour albedo / (1 - m) and F0_d (F0 - m colour) / (1 - m). At m = 1 and m = 0
-    these are F0 and the albedo themselves."""
+    these are F0 and the albedo themselves; ``f0_dielectric`` (per texel) is only asked for a partial metal."""
     m = metallic
     metal = m >= 0.5
     if not bool(np.any((m > 0.0) & (m < 1.0))):
         return np.where(metal, f0, albedo), f0
     colour = np.where(
-        metal, (f0 - f0_dielectric * (1.0 - m)) / np.maximum(m, 1e-12), albedo / np.maximum(1.0 - m, 1e-12)
+        metal, (f0 - f0_dielectric() * (1.0 - m)) / np.maximum(m, 1e-12), albedo / np.maximum(1.0 - m, 1e-12)
     )
     return colour, np.clip((f0 - colour * m) / np.maximum(1.0 - m, 1e-12), 0.0, 1.0)
 
@@ -254,7 +254,7 @@ class MetalRough(Reflectance):
         m = as_floats(out[self.metallic])[..., None]
         metal = m >= 0.5
         albedo = np.asarray(out[self.base_color]) if diffuse is None else as_floats(diffuse)
-        colour, f0 = metal_blend_colour(f0, albedo, m, self.f0({**out, self.metallic: 0.0}, channels))
+        colour, f0 = metal_blend_colour(f0, albedo, m, lambda: self.f0({**out, self.metallic: 0.0}, channels))
         out[self.base_color] = colour
         driven = [self.base_color]
         if not np.all(metal):
@@ -349,7 +349,7 @@ class Metalness(Reflectance):
         m = as_floats(out[self.metallic])[..., None]
         metal = m >= 0.5
         albedo = np.asarray(out[self.base_color]) if diffuse is None else as_floats(diffuse)
-        colour, part = metal_blend_colour(f0, albedo, m, self.dielectric.f0(out, channels))
+        colour, part = metal_blend_colour(f0, albedo, m, lambda: self.dielectric.f0(out, channels))
         out[self.base_color] = colour
         driven = [self.base_color]
         if not np.all(metal):
