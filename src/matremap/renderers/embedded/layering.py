@@ -418,22 +418,32 @@ def _lerp(x, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return i, i + 1, x - i
 
 
+def _one_value(a: np.ndarray) -> float | None:
+    """The value every element of ``a`` holds, or None when they differ (or there are none)."""
+    return float(a.flat[0]) if a.size and float(np.min(a)) == float(np.max(a)) else None
+
+
+def _shaped(out: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """``out`` broadcast (as a copy) to ``shape`` where it is not that shape already."""
+    return out if np.shape(out) == shape else np.array(np.broadcast_to(out, shape))
+
+
 def _bilinear(table: np.ndarray, mu, rough, plane=()) -> np.ndarray:
     """``table[*plane, mu, r]`` read bilinearly in (sqrt(mu), r) (nodes as :func:`mu_nodes` and
     :func:`rough_nodes` make them, as many as the table has); ``plane`` indexes leading axes."""
     n_mu, n_rough = table.shape[-2:]
     r = np.asarray(rough, dtype=float)
-    if all(np.ndim(p) == 0 for p in plane) and r.size and float(np.min(r)) == float(np.max(r)):
+    one = _one_value(r)
+    if all(np.ndim(p) == 0 for p in plane) and one is not None:
         # one roughness (a uniform material): the table's column at it, then linear along mu -- the same
         # bilinear value with two gathers per pixel from a short column instead of four from the table
-        r0, r1, tr = _lerp(r.flat[0], n_rough)
+        r0, r1, tr = _lerp(one, n_rough)
         column = (1 - tr) * table[(*plane, slice(None), r0)] + tr * table[(*plane, slice(None), r1)]
         m0, m1, tm = _lerp(np.sqrt(np.clip(mu, 0.0, 1.0)), n_mu)
         out = column[m0]
         out *= 1 - tm
         out += tm * column[m1]
-        shape = np.broadcast_shapes(np.shape(mu), r.shape)
-        return out if out.shape == shape else np.array(np.broadcast_to(out, shape))
+        return _shaped(out, np.broadcast_shapes(np.shape(mu), r.shape))
     m0, m1, tm = _lerp(np.sqrt(np.clip(mu, 0.0, 1.0)), n_mu)
     r0, r1, tr = _lerp(rough, n_rough)
     row0 = (1 - tr) * table[(*plane, m0, r0)] + tr * table[(*plane, m0, r1)]
@@ -451,11 +461,10 @@ def dielectric_albedo(mu, rough, f0) -> np.ndarray:
     ``f0`` (eta = (1 + sqrt F0)/(1 - sqrt F0)), read trilinearly from the table."""
     table = albedo_tables()["dielectric"]
     f = np.asarray(f0, dtype=float)
-    one = f.size > 0 and float(np.min(f)) == float(np.max(f))  # one F0 (a uniform material): scalar planes
-    k0, k1, tk = _lerp(np.sqrt(np.sqrt(np.clip(f.flat[0] if one else f, 0.0, 1.0))), F0_NODES)
+    one = _one_value(f)  # one F0 (a uniform material): scalar planes, so that _bilinear reads one column
+    k0, k1, tk = _lerp(np.sqrt(np.sqrt(np.clip(f if one is None else one, 0.0, 1.0))), F0_NODES)
     out = (1 - tk) * _bilinear(table, mu, rough, (k0,)) + tk * _bilinear(table, mu, rough, (k1,))
-    shape = np.broadcast_shapes(np.shape(out), f.shape)
-    return out if not one or np.shape(out) == shape else np.array(np.broadcast_to(out, shape))
+    return _shaped(out, np.broadcast_shapes(np.shape(out), f.shape))
 
 
 def sheen_albedo(mu, rough) -> np.ndarray:
