@@ -1,4 +1,4 @@
-"""What matremap does with hostile and malformed inputs (issue 19's probe), one row per case.
+"""What matremap does with hostile and malformed inputs, one row per case.
 
 Each case builds its input in a fresh temporary folder, runs the command line in a fresh process with a
 fresh cache folder, and classifies the outcome:
@@ -953,6 +953,21 @@ CASES: list[tuple[str, str, Callable[[Path], str]]] = [
     ("remap FILE killed (SIGKILL) mid-write, rerun", "8 leftovers", remap_file_killed),
     ("sweep killed (SIGKILL), then rerun", "8 leftovers", sweep_killed),
     ("sweep interrupted (SIGINT), then rerun", "8 leftovers", sweep_sigint),
+    # second round (2026-11-28), one block per class: outputs and --force
+    #
+    #
+    # second round: interruption, caches, orphans and leftovers
+    #
+    #
+    # second round: a batch's change detection, its own folders, concurrent runs
+    #
+    #
+    # second round: memory per reader
+    #
+    #
+    # second round: expansion bounds, clean lines instead of exit 70, messages
+    #
+    #
 ]
 
 
