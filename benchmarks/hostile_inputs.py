@@ -900,6 +900,65 @@ def sweep_sigint(tmp: Path) -> str:
     return interrupted(tmp, args, signal.SIGINT, db_started, "s.sqlite")
 
 
+# -- outputs and --force ----------------------------------------------------------------------------------
+
+
+def files_under(folder: Path) -> dict[str, bytes]:
+    return {q.relative_to(folder).as_posix(): q.read_bytes() for q in sorted(folder.rglob("*")) if q.is_file()}
+
+
+def kept(tmp: Path, project: Path, args: list[str]) -> str:
+    """Run ``args`` in ``tmp``: ``refused`` when it exits 2 and every file of ``project`` is as it was,
+    ``DATA LOSS`` when one went missing or changed."""
+    before = files_under(project)
+    p = cli(args, tmp)
+    if "Traceback (most recent call last)" in p.stderr:
+        return "TRACEBACK"
+    after = files_under(project) if project.exists() else {}
+    if any(after.get(k) != v for k, v in before.items()):
+        return "DATA LOSS"
+    return "refused" if p.returncode == 2 else f"exit {p.returncode}"
+
+
+def user_project(tmp: Path) -> Path:
+    """``proj/in/m.gltf`` with its texture in ``proj/in/tex``, beside other work of the user's."""
+    textured_gltf(tmp / "proj" / "in", "tex/base.png")
+    (tmp / "proj" / "in" / "tex").mkdir()
+    (tmp / "proj" / "in" / "base.png").rename(tmp / "proj" / "in" / "tex" / "base.png")
+    (tmp / "proj" / "notes.txt").write_text("the user's notes")
+    return tmp / "proj"
+
+
+def force_above_input(tmp: Path) -> str:
+    proj = user_project(tmp)
+    return kept(tmp, proj, ["remap", "proj/in/m.gltf", "--to", "mitsuba06:ward", "-o", "proj", "--force"])
+
+
+def force_on_texture_folder(tmp: Path) -> str:
+    proj = user_project(tmp)
+    return kept(tmp, proj, ["remap", "proj/in/m.gltf", "--to", "mitsuba06:ward", "-o", "proj/in/tex", "--force"])
+
+
+def force_above_map_set(tmp: Path) -> str:
+    shutil.copytree(ROOT / "examples" / "blue-plastic", tmp / "proj" / "maps")
+    (tmp / "proj" / "notes.txt").write_text("the user's notes")
+    return kept(tmp, tmp / "proj", ["remap", "proj/maps", "--to", "mitsuba06:pbr", "-o", "proj", "--force"])
+
+
+def force_on_users_folder(tmp: Path) -> str:
+    user_project(tmp)
+    (tmp / "work").mkdir()
+    (tmp / "work" / "keep.txt").write_text("mine")
+    return kept(tmp, tmp / "work", ["remap", "proj/in/m.gltf", "--to", "gltf:metal-rough", "-o", "work", "--force"])
+
+
+def force_on_cache(tmp: Path) -> str:
+    user_project(tmp)
+    (tmp / "cache" / "transforms").mkdir(parents=True)
+    (tmp / "cache" / "transforms" / "t.json").write_text("{}")
+    return kept(tmp, tmp / "cache", ["remap", "proj/in/m.gltf", "--to", "gltf:metal-rough", "-o", "cache", "--force"])
+
+
 CASES: list[tuple[str, str, Callable[[Path], str]]] = [
     ("glTF image uri, absolute path elsewhere", "1 confinement", gltf_absolute_uri),
     ("glTF image uri ../", "1 confinement", gltf_parent_uri),
@@ -954,6 +1013,11 @@ CASES: list[tuple[str, str, Callable[[Path], str]]] = [
     ("sweep killed (SIGKILL), then rerun", "8 leftovers", sweep_killed),
     ("sweep interrupted (SIGINT), then rerun", "8 leftovers", sweep_sigint),
     # second round (2026-11-28), one block per class: outputs and --force
+    ("remap FILE -o PROJECT --force (input inside)", "R2.1 data loss", force_above_input),
+    ("remap FILE -o TEXTURE-FOLDER --force", "R2.1 data loss", force_on_texture_folder),
+    ("remap MAPS -o PROJECT --force (maps inside)", "R2.1 data loss", force_above_map_set),
+    ("remap -o USER-FOLDER --force (not matremap's)", "R2.1 data loss", force_on_users_folder),
+    ("remap -o CACHE --force", "R2.1 data loss", force_on_cache),
     #
     #
     # second round: interruption, caches, orphans and leftovers

@@ -198,7 +198,7 @@ def test_staged_folder_appears_whole_or_not_at_all(tmp_path):
             pass
     with staged_folder(out, force=True) as stage:
         (stage / "b.txt").write_text("2")
-    assert sorted(p.name for p in out.iterdir()) == ["b.txt"]  # replaced whole
+    assert sorted(p.name for p in out.iterdir()) == [".matremap.json", "b.txt"]  # replaced whole, with its record
     assert [p.name for p in tmp_path.iterdir()] == ["out"]
 
 
@@ -315,9 +315,10 @@ def test_a_recovery_killed_at_any_rename_is_finished_by_the_next(tmp_path):
 
 
 def test_a_folder_swap_killed_at_any_rename_leaves_the_old_or_the_new_folder(tmp_path):
-    def previous(folder):
+    def previous(folder):  # an output matremap wrote (it carries the record)
         (folder / "result").mkdir(parents=True)
         (folder / "result" / "x.txt").write_text("old")
+        atomic.record_written(folder / "result")
 
     previous(tmp_path / "count")
     renames = int(killed_at(tmp_path / "count", 0, "folder").stdout)

@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from matremap import __version__
+from matremap.core.atomic import record_written
 from matremap.core.imageio import write_text
 from matremap.errors import EXIT_INTERRUPTED, EXIT_QUALITY, MatremapError
 
@@ -669,10 +670,12 @@ def remap_item(
     if folder.is_dir():
         write_text(folder / "log.txt", "\n".join(lines) + "\n")
         write_text(folder / ITEM_FILE, json.dumps({"key": key, "row": row.to_dict()}, indent=1) + "\n")
+        record_written(folder, ["log.txt", ITEM_FILE])  # so that a rerun may replace the folder
     elif row.verdict in ("refused", "error"):  # nothing was written: keep the reason beside the others
         folder.mkdir(parents=True)
         write_text(folder / "log.txt", "\n".join([*lines, row.reason]) + "\n")
         write_text(folder / ITEM_FILE, json.dumps({"key": key, "row": row.to_dict()}, indent=1) + "\n")
+        record_written(folder, ["log.txt", ITEM_FILE])
     return row.to_dict()
 
 

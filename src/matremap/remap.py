@@ -55,6 +55,7 @@ from matremap.dialects.mtlx import (
     opaque_share,
 )
 from matremap.errors import MatremapError, TransformChecksumError
+from matremap.formats.confine import recorded_references
 from matremap.regress import quantities as qty
 from matremap.regress.transform import Transform
 from matremap.renderers import renderer_for
@@ -119,6 +120,14 @@ class RemapResult:
             return out / path.relative_to(stage)
 
         return replace(self, maps=move(self.maps) or self.maps, report=move(self.report))
+
+
+def cache_folders(job: RemapJob) -> list[Path]:
+    """The cache folders a run reads and writes (matremap's cache, and the job's transform cache when it
+    names its own): no output folder may be, hold or lie inside one."""
+    from matremap.core.diskcache import cache_dir
+
+    return [cache_dir(), *([job.cache] if job.cache is not None else [])]
 
 
 def default_cache() -> Path:
@@ -587,10 +596,7 @@ def remap(
         map_set = load_map_set(maps, source_model)
         job = same_distribution(job, map_set.model, map_set.options, log)
         out = Path(out)
-        root = Path(map_set.root).resolve()
-        if out.resolve() == root or root in out.resolve().parents:
-            raise MatremapError(f"{out} is inside the input folder {root}; choose another output folder")
-        with staged_folder(out, force) as stage:
+        with staged_folder(out, force, protected=[map_set.root, *map_set.files, *cache_folders(job)]) as stage:
             result = remap_into(stage, map_set, job, log, title=f"{map_set.model} -> {job.target}: {Path(maps).name}")
             if write is not None:
                 from matremap.formats import write_asset
@@ -1362,7 +1368,8 @@ def _remap_file(
     from matremap.formats import read_asset, write_asset
 
     p = Path(path)
-    asset = read_asset(p, material)
+    with recorded_references() as references:
+        asset = read_asset(p, material)
     for note in asset.notes:
         log(f"note: {note}")
     target = get_model(target_model).id
@@ -1381,7 +1388,8 @@ def _remap_file(
             f"convert (a layer on a textured material, or one no model draws): converting the rest to {target} "
             "would be wrong, so it is not converted"
         )
-    with staged_folder(out, force) as stage:
+    read = [p, *references, *(t.path for t in asset.textures.values() if not t.extracted), *cache_folders(job)]
+    with staged_folder(out, force, protected=read) as stage:
         result = FileRemapResult(None, asset.model, target, asset.textured, notes=list(asset.notes))
         if asset.textured:
             if equivalence(asset.model, target) is not None:  # an identity copies the maps as they are

@@ -43,7 +43,7 @@ import shutil
 import signal
 import tempfile
 import threading
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from types import TracebackType
@@ -416,26 +416,110 @@ class AtomicFiles:
 # a whole folder
 
 
+#: the record a published output folder carries of what matremap wrote in it (relative paths)
+OUTPUT_RECORD = ".matremap.json"
+
+
+def written_entries(folder: str | os.PathLike[str]) -> set[str] | None:
+    """The relative paths (files and folders) the output record of ``folder`` lists, or None when the folder
+    has no record matremap wrote."""
+    try:
+        doc = json.loads((Path(folder) / OUTPUT_RECORD).read_text())
+    except (OSError, ValueError):
+        return None
+    entries = doc.get("entries") if isinstance(doc, dict) and doc.get("written_by") == "matremap" else None
+    if not isinstance(entries, list) or not all(isinstance(e, str) for e in entries):
+        return None
+    return set(entries)
+
+
+def _tree_entries(folder: Path) -> list[str]:
+    """Every path under ``folder`` (files, folders, links), relative, sorted; links are not followed."""
+    found = []
+    for root, dirs, files in os.walk(folder):
+        rel = Path(root).relative_to(folder)
+        found += [(rel / name).as_posix() for name in [*dirs, *files]]
+    return sorted(found)
+
+
+def record_written(folder: str | os.PathLike[str], names: list[str] | None = None) -> None:
+    """Write ``folder``'s output record: every path in it now (``names`` None), or the paths it already
+    lists plus ``names`` (relative paths), for files added after the folder was published."""
+    from matremap.core.imageio import write_text
+
+    folder = Path(folder)
+    entries = set(_tree_entries(folder)) if names is None else (written_entries(folder) or set()) | set(names)
+    write_text(folder / OUTPUT_RECORD, _record_text(entries))
+
+
+def _record_text(entries: set[str]) -> str:
+    return json.dumps({"written_by": "matremap", "entries": sorted(entries - {OUTPUT_RECORD})}, indent=0) + "\n"
+
+
+def _write_record(stage: Path, entries: set[str]) -> None:
+    """The record of a staging folder, written in place (nothing sees the folder before it is moved in)."""
+    (stage / OUTPUT_RECORD).write_text(_record_text(entries))
+
+
+def foreign_entries(folder: Path) -> list[str]:
+    """The paths under ``folder`` that its output record does not list (all of them when it has none)."""
+    written = written_entries(folder) or set()
+    return [e for e in _tree_entries(folder) if e != OUTPUT_RECORD and e not in written]
+
+
+def _contains(folder: Path, path: Path) -> bool:
+    return path == folder or folder in path.parents
+
+
+def check_output_folder(out: Path, protected: Iterable[str | os.PathLike[str]] = ()) -> None:
+    """Refuse ``out`` as an output folder when it is, or holds, one of the ``protected`` paths (the
+    inputs, the files they reference, the cache), or lies inside a protected folder: replacing ``out``
+    would remove them. Paths are compared resolved (links followed)."""
+    target = out.resolve()
+    for p in protected:
+        q = Path(p).resolve()
+        if _contains(target, q):
+            what = "is a folder" if q == target else f"holds {q.relative_to(target)},"
+            raise MatremapError(f"{out} {what} which the run reads; choose an output folder apart from the inputs")
+        if q.is_dir() and _contains(q, target):
+            raise MatremapError(f"{out} lies inside {p}, which the run reads; choose an output folder apart from it")
+
+
 @contextmanager
-def staged_folder(out: str | os.PathLike[str], force: bool = False) -> Iterator[Path]:
+def staged_folder(
+    out: str | os.PathLike[str], force: bool = False, protected: Iterable[str | os.PathLike[str]] = ()
+) -> Iterator[Path]:
     """A whole output folder written all or nothing: the block writes into a hidden folder beside
     ``out`` (``.matremap-partial-<owner>-<name>-*``), which replaces ``out`` when the block ends without
     an error and is removed when it fails, so a failed run leaves nothing behind and a retry needs no
-    ``--force``. An existing ``out`` that is not empty is refused unless ``force``; with ``force`` it is
-    replaced whole (moved aside into ``.matremap-old-*`` for the moment of the swap). What dead runs
-    left beside ``out`` is put right first (:func:`clean_stale`). Only ``out``'s parent folders may be
-    created (they are left in place)."""
+    ``--force``. The published folder carries an output record (:data:`OUTPUT_RECORD`) of every path in
+    it. An existing ``out`` that is not empty is replaced only with ``force``, and only when everything in
+    it is listed in its record (a folder matremap wrote); anything else in it is refused, force or not, so
+    ``--force`` never removes a file matremap did not write. ``out`` may not be, hold or lie inside a
+    ``protected`` path (:func:`check_output_folder`). The replaced folder is moved aside into
+    ``.matremap-old-*`` for the moment of the swap. What dead runs left beside ``out`` is put right first
+    (:func:`clean_stale`). Only ``out``'s parent folders may be created (they are left in place)."""
     out = Path(out)
+    check_output_folder(out, protected)
     if out.parent.is_dir():
         clean_stale(out.parent)
     if out.exists() and not out.is_dir():
         raise MatremapError(f"{out} exists and is not a folder; choose an output folder")
-    if out.is_dir() and any(out.iterdir()) and not force:
-        raise MatremapError(f"{out} exists and is not empty; pass --force to replace it")
+    if out.is_dir() and any(out.iterdir()):
+        foreign = foreign_entries(out)
+        if foreign:
+            shown = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
+            raise MatremapError(
+                f"{out} holds files matremap did not write ({shown}); choose a new or empty output folder "
+                "(--force replaces only a folder matremap wrote)"
+            )
+        if not force:
+            raise MatremapError(f"{out} exists and is not empty; pass --force to replace it")
     out.parent.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=temp_prefix("partial", out.name), dir=out.parent))
     try:
         yield stage
+        _write_record(stage, set(_tree_entries(stage)))
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
         raise
@@ -466,10 +550,15 @@ def _umask() -> int:
 __all__ = [
     "FORCE_HINT",
     "MARK",
+    "OUTPUT_RECORD",
     "STAGING_PREFIX",
     "AtomicFiles",
+    "check_output_folder",
     "clean_stale",
+    "foreign_entries",
     "owner_token",
+    "record_written",
     "staged_folder",
     "temp_prefix",
+    "written_entries",
 ]

@@ -10,6 +10,8 @@ same whether or not the named file exists, so a refused reference tells nothing 
 raises. A reader given no confinement takes the one in effect (:func:`allowed_paths`, which the command
 line enters around a command); with none in effect, only the asset's folder is allowed.
 :func:`output_inside` checks that a user-named output file stays inside its output folder.
+:func:`recorded_references` collects every reference the readers resolve inside it: the files an output
+folder must never hold (see :func:`matremap.core.atomic.staged_folder`).
 """
 
 from __future__ import annotations
@@ -25,6 +27,8 @@ from matremap.errors import MatremapError
 
 #: the folders allowed beyond each asset's own, for the readers called in this context
 _ALLOWED: ContextVar[tuple[Path, ...]] = ContextVar("matremap_allowed_paths", default=())
+#: where the references resolved in this context are collected (None: not collected)
+_RECORDED: ContextVar[list[Path] | None] = ContextVar("matremap_recorded_references", default=None)
 
 
 @dataclass(frozen=True)
@@ -70,7 +74,22 @@ def resolve_reference(ref: str, asset_folder: Path, what: str, confinement: Conf
             f"{what} {ref!r} points outside the asset folder {asset_folder.resolve()}; "
             f"pass --allow-path DIR to allow it"
         )
+    recorded = _RECORDED.get()
+    if recorded is not None:
+        recorded.append(resolved)
     return resolved
+
+
+@contextmanager
+def recorded_references() -> Iterator[list[Path]]:
+    """A list that receives every reference :func:`resolve_reference` resolves inside the block (resolved
+    paths, in the order read; a reference read twice is listed twice)."""
+    found: list[Path] = []
+    token = _RECORDED.set(found)
+    try:
+        yield found
+    finally:
+        _RECORDED.reset(token)
 
 
 @contextmanager
@@ -93,4 +112,4 @@ def output_inside(out_dir: str | os.PathLike, name: str, option: str = "--write"
     return target
 
 
-__all__ = ["Confinement", "allowed_paths", "output_inside", "resolve_reference"]
+__all__ = ["Confinement", "allowed_paths", "output_inside", "recorded_references", "resolve_reference"]
