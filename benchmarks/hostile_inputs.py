@@ -756,8 +756,9 @@ def bronze_tiled(folder: Path, size: int = 1024) -> Path:
 
 
 def hidden(tmp: Path) -> list[Path]:
-    """Hidden files and folders (staging, temporary files) anywhere under ``tmp``, the cache aside."""
-    return [f for f in tmp.rglob(".*") if "cache" not in f.relative_to(tmp).parts]
+    """Hidden files and folders (staging, temporary files) anywhere under ``tmp``, the cache and the output
+    record of a finished folder (``.matremap.json``) aside."""
+    return [f for f in tmp.rglob(".*") if "cache" not in f.relative_to(tmp).parts and f.name != ".matremap.json"]
 
 
 def staging_started(tmp: Path) -> bool:
@@ -959,6 +960,26 @@ def force_on_cache(tmp: Path) -> str:
     return kept(tmp, tmp / "cache", ["remap", "proj/in/m.gltf", "--to", "gltf:metal-rough", "-o", "cache", "--force"])
 
 
+def cache_sweep_started(tmp: Path) -> bool:
+    """Whether a sweep database in the transform cache holds a fitted point."""
+    import sqlite3
+
+    for db in (tmp / "cache").rglob("*.sqlite"):
+        try:
+            with sqlite3.connect(db, timeout=0.1) as con:
+                if con.execute("select count(*) from points").fetchone()[0] >= 1:
+                    return True
+        except sqlite3.Error:
+            continue
+    return False
+
+
+def remap_sweep_sigint(tmp: Path) -> str:
+    args = ["remap", str(ROOT / "examples" / "bronze"), "--to", "mitsuba06:pbr", "--fix", "distribution=as"]
+    args += ["-o", "out", "--sweep", "--no-evaluate", "--workers", "1"]
+    return interrupted(tmp, args, signal.SIGINT, cache_sweep_started, "out")
+
+
 CASES: list[tuple[str, str, Callable[[Path], str]]] = [
     ("glTF image uri, absolute path elsewhere", "1 confinement", gltf_absolute_uri),
     ("glTF image uri ../", "1 confinement", gltf_parent_uri),
@@ -1018,6 +1039,7 @@ CASES: list[tuple[str, str, Callable[[Path], str]]] = [
     ("remap MAPS -o PROJECT --force (maps inside)", "R2.1 data loss", force_above_map_set),
     ("remap -o USER-FOLDER --force (not matremap's)", "R2.1 data loss", force_on_users_folder),
     ("remap -o CACHE --force", "R2.1 data loss", force_on_cache),
+    ("remap MAPS --sweep interrupted (SIGINT), rerun", "R2.2 cache poisoned", remap_sweep_sigint),
     #
     #
     # second round: interruption, caches, orphans and leftovers

@@ -488,6 +488,7 @@ def cached_transform(
             in_flight=2 * getattr(executor, "slots", 1),
         )
     log(f"sweep: {describe(swept)}")
+    swept.raise_if_interrupted()
     transform = learn_transform(db)
     log(
         f"learn: {transform.describe()}, held-out RMSE "

@@ -592,6 +592,7 @@ def build_pair(
             config, grid, str(db), executor, executor_name=desc, in_flight=2 * getattr(executor, "slots", 1)
         )
     log(f"{pair.name}: {describe(summary)}")
+    summary.raise_if_interrupted()
     written = []
     directions = [(False, pair.name)] + ([(True, reverse_name(pair.name))] if pair.reverse else [])
     for reverse, name in directions:

@@ -252,6 +252,12 @@ class SweepSummary:
     def rate(self) -> float:
         return self.done / self.seconds if self.seconds > 0 else 0.0
 
+    def raise_if_interrupted(self) -> None:
+        """Re-raise the interruption the sweep stopped for: nothing may be learned from, or cached after, a
+        sweep cut short (its database keeps the finished points and a rerun resumes it)."""
+        if self.interrupted:
+            raise KeyboardInterrupt
+
 
 def plan(config: SweepConfig, grid: Grid, finished: set[str]) -> tuple[list[list[tuple]], list[dict | None]]:
     """Lines of unfinished points (key, swept, source params) and each line's warm start."""
