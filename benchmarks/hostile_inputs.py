@@ -980,6 +980,29 @@ def remap_sweep_sigint(tmp: Path) -> str:
     return interrupted(tmp, args, signal.SIGINT, cache_sweep_started, "out")
 
 
+def two_remaps_one_cache(tmp: Path) -> str:
+    """Two remaps needing the same transform at once: ``handled`` when one sweeps and the other waits for it."""
+    env = {**os.environ, "MATREMAP_CACHE_DIR": str(tmp / "cache"), "MATREMAP_CACHE": str(tmp / "cache")}
+    args = ["remap", str(ROOT / "examples" / "bronze"), "--to", "mitsuba06:pbr", "--fix", "distribution=as"]
+    args += ["--sweep", "--no-evaluate", "--workers", "1"]
+    runs = [
+        subprocess.Popen(
+            [sys.executable, "-m", MODULE, *spelled([*args, "-o", f"out{i}"])],
+            cwd=tmp,
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for i in range(2)
+    ]
+    errs = [r.communicate(timeout=900)[1] for r in runs]
+    if any(r.returncode != 0 for r in runs):
+        return f"exit {[r.returncode for r in runs]}"
+    swept = sum("points fitted" in e for e in errs)
+    return "handled" if swept == 1 else f"SWEPT TWICE ({swept} sweeps)"
+
+
 CASES: list[tuple[str, str, Callable[[Path], str]]] = [
     ("glTF image uri, absolute path elsewhere", "1 confinement", gltf_absolute_uri),
     ("glTF image uri ../", "1 confinement", gltf_parent_uri),
@@ -1040,6 +1063,7 @@ CASES: list[tuple[str, str, Callable[[Path], str]]] = [
     ("remap -o USER-FOLDER --force (not matremap's)", "R2.1 data loss", force_on_users_folder),
     ("remap -o CACHE --force", "R2.1 data loss", force_on_cache),
     ("remap MAPS --sweep interrupted (SIGINT), rerun", "R2.2 cache poisoned", remap_sweep_sigint),
+    ("two remaps sharing a cache, the same sweep", "R2.9 coordination", two_remaps_one_cache),
     #
     #
     # second round: interruption, caches, orphans and leftovers

@@ -31,6 +31,7 @@ import time
 import warnings
 from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +41,7 @@ from matremap import __version__
 from matremap.core.atomic import staged_folder
 from matremap.core.envmap import resolve as resolve_envmap
 from matremap.core.imageio import write_image, write_text
+from matremap.core.locks import exclusive
 from matremap.core.material import Material, SVMaterial
 from matremap.core.models import microfacet_of
 from matremap.core.scene import Scene, parse_probe
@@ -436,12 +438,9 @@ def cached_transform(
 ) -> tuple[Transform, Path | None, bool]:
     """The transform for these maps (``summary``: their statistics) and models: from the cache, or swept
     and learned now (and cached, unless some of the sweep's fits failed: then the next run fits those
-    again, from the sweep's database, instead of reusing a transform learned without them)."""
-    from matremap.regress.transform import learn_transform
-    from matremap.sweep.executors import make_executor
-    from matremap.sweep.grid import parse_grid
-    from matremap.sweep.run import SweepConfig, describe, run_sweep
-    from matremap.sweep.store import discard_if_damaged
+    again, from the sweep's database, instead of reusing a transform learned without them). Runs that need
+    the same transform at once compute it once: the others wait for it (:func:`matremap.core.locks.exclusive`)."""
+    from matremap.sweep.run import SweepConfig
 
     spec = map_set.spec
     held = held_values(map_set, summary, target)
@@ -460,6 +459,22 @@ def cached_transform(
         objective=objective,
     )
     path = transform_cache_path(cache, config, grid_text)
+    waiting = partial(log, "transform: another run is computing the same transform; waiting for it")
+    with exclusive(path.with_suffix(".lock"), on_wait=waiting):  # the second run takes the first's result
+        return _cached_or_learned(path, config, grid_text, spec, workers, log)
+
+
+def _cached_or_learned(
+    path: Path, config: Any, grid_text: str, spec: Any, workers: int | None, log: Callable[[str], None]
+) -> tuple[Transform, Path | None, bool]:
+    """:func:`cached_transform` holding the transform's lock: the cached one at ``path``, else swept (resuming
+    the sweep's database beside it), learned and cached."""
+    from matremap.regress.transform import learn_transform
+    from matremap.sweep.executors import make_executor
+    from matremap.sweep.grid import parse_grid
+    from matremap.sweep.run import describe, run_sweep
+    from matremap.sweep.store import discard_if_damaged
+
     if path.is_file():
         try:
             t = Transform.load(path, require_checksum=True)
