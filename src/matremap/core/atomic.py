@@ -445,11 +445,17 @@ def _tree_entries(folder: Path) -> list[str]:
 def record_written(folder: str | os.PathLike[str], names: list[str] | None = None) -> None:
     """Write ``folder``'s output record: every path in it now (``names`` None), or the paths it already
     lists plus ``names`` (relative paths), for files added after the folder was published."""
-    from matremap.core.imageio import write_text
-
     folder = Path(folder)
     entries = set(_tree_entries(folder)) if names is None else (written_entries(folder) or set()) | set(names)
-    write_text(folder / OUTPUT_RECORD, _record_text(entries))
+    fd, tmp = tempfile.mkstemp(prefix=temp_prefix("tmp", "record"), dir=folder)
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(_record_text(entries))
+        os.chmod(tmp, 0o666 & ~_umask())
+        os.replace(tmp, folder / OUTPUT_RECORD)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
 
 
 def _record_text(entries: set[str]) -> str:
