@@ -167,6 +167,7 @@ LAYERS: dict[str, dict[str, str]] = {
     "mitsuba3:principled": {"coat": "clearcoat", "sheen": "sheen", "transmission": "spec_trans"},
     "gltf:pbr": {"coat": "clearcoat", "sheen": "sheenColor", "transmission": "transmission"},
     "cycles:principled": {"coat": "Coat Weight", "sheen": "Sheen Weight", "transmission": "Transmission Weight"},
+    "usd:preview_surface": {"coat": "clearcoat"},
     # Mitsuba 3's glasses transmit whatever their parameters: the multiplier of what goes through stands for a weight
     **{
         glass: {"transmission": "specular_transmittance"}
@@ -210,6 +211,7 @@ LAYER_PARAMS: dict[str, dict[str, Layer]] = {
         "coat": Layer("Coat Weight", "Coat Tint", "Coat Roughness"),
         "sheen": Layer("Sheen Weight", "Sheen Tint", "Sheen Roughness"),
     },
+    "usd:preview_surface": {"coat": Layer("clearcoat", None, "clearcoatRoughness")},
 }
 
 
