@@ -1707,7 +1707,7 @@ def _remap_uniform(
         )
         write_image(stage / "compare.png", comparison_strip(same), force=True)
         return copied
-    held = uniform_remap.held_values(source, target, job.fix, log)
+    held = uniform_remap.choose_held(source, target, job.fix, log)
     r, job = _fit_uniform(source, replace(job, strategy=held.strategy or job.strategy), held.fix, log, held.start)
     for w in r.warnings:
         log(f"warning: {w}")

@@ -24,7 +24,6 @@ from typing import Any
 import numpy as np
 
 from matremap.core.material import Material
-from matremap.core.scene import Scene
 from matremap.dialects import get_model
 from matremap.regress import quantities as qty
 from matremap.svbrdf.quality import Check, Thresholds, Verdict, image_checks
@@ -35,7 +34,7 @@ ANISOTROPIC_PROBE_LIGHTS = (0.0, 45.0)
 
 @dataclass
 class Held:
-    """The target's values as a uniform remap holds them (:func:`held_values`)."""
+    """The target's values as a uniform remap holds them (:func:`choose_held`)."""
 
     #: the user's fixes and the values chosen for the target
     fix: dict[str, Any]
@@ -48,7 +47,7 @@ class Held:
         return "simple" if self.start else None
 
 
-def held_values(source: Material, target: str, fix: Mapping[str, Any], log: Callable[[str], None]) -> Held:
+def choose_held(source: Material, target: str, fix: Mapping[str, Any], log: Callable[[str], None]) -> Held:
     """The target's held values for ``source`` (:func:`complete_fix`, :func:`glass_is_dielectric`,
     :func:`free_partial_metal`); ``fix``: the user's."""
     full = complete_fix(source.model, qty.material_values(source), target, fix)
@@ -151,12 +150,3 @@ def fit_verdict(r: Any, thresholds: Thresholds) -> Verdict:
     src = src * r.irradiance_scale
     tgt = render_images(get_renderer(r.target_renderer), [r.target], scene)[0]
     return Verdict(checks + image_checks([("probe render", src, tgt)], scene.mask(), thresholds))
-
-
-def anisotropic_scene(scene: Scene | None, source_model: str, target: str, free: Sequence[str] = ()) -> Scene | None:
-    """``scene``, or where none was given and the fit sees two roughnesses (:func:`anisotropic_lights`) the probe
-    of :data:`ANISOTROPIC_PROBE_LIGHTS`."""
-    if scene is not None:
-        return scene
-    lights = anisotropic_lights(source_model, target, free)
-    return Scene.probe(lights) if lights is not None else None

@@ -157,7 +157,7 @@ def cmd_fit(args: argparse.Namespace) -> int:
     def note(line: str) -> None:
         print(f"matremap: note: {line}", file=sys.stderr)
 
-    held = uniform_remap.held_values(source, spec.id, fix, note)
+    held = uniform_remap.choose_held(source, spec.id, fix, note)
     chosen = {k: v for k, v in held.fix.items() if k not in fix and k not in args.free}
     if chosen:
         note(
