@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from matremap import __version__
+from matremap import __version__, uniform_remap
 from matremap.core.atomic import staged_folder
 from matremap.core.envmap import resolve as resolve_envmap
 from matremap.core.imageio import write_image, write_text
@@ -86,8 +86,9 @@ from matremap.svbrdf.mixed import (
     through_levels,
     transmission_parameter,
 )
-from matremap.svbrdf.quality import Check, Thresholds, Verdict, image_checks, map_checks, sample
+from matremap.svbrdf.quality import Check, Thresholds, Verdict, map_checks, sample
 from matremap.svbrdf.textures import MapSet, load_map_set, map_values, read_image, texel_limit
+from matremap.uniform_remap import ANISOTROPIC_PROBE_LIGHTS, complete_fix, glass_is_dielectric, partial_metal
 
 #: grid points along the roughness and the specular axes of the sweep, and the diffuse levels
 ROUGHNESS_POINTS, SPECULAR_POINTS, DIFFUSE_ONLY_POINTS = 10, 6, 8
@@ -189,7 +190,7 @@ def sweep_grid(map_set: MapSet, summary: MapSummary, held: Mapping[str, float] |
         # start at the next point, leaving the darkest texels outside it); so too under a partial metal, whose base
         # colour is its metal's F0 as well (usd-wg RoughnessTest: its darkest level, fitted poorly, was left out,
         # and with two levels nothing was learned of the colour)
-        partial = _partial_metal(spec.id, {**map_set.constants, **(held or {})}) is not None
+        partial = partial_metal(spec.id, {**map_set.constants, **(held or {})}) is not None
         two = axes and not partial
         axes.append(f"{dp.name}=0.0;{hi!r}" if two else f"{dp.name}={lo!r}:{hi!r}:{DIFFUSE_ONLY_POINTS}")
     if not axes:
@@ -287,70 +288,12 @@ def held_values(map_set: MapSet, summary: MapSummary, target: str) -> dict[str, 
     return held
 
 
-def complete_fix(source_model: str, values: Mapping[str, Any], target: str, fix: Mapping[str, Any]) -> dict[str, Any]:
-    """The user's target fixes, plus a choice for each target parameter that decides what the
-    target's parameters mean and that the user left open: a glTF ``metallic`` is 1 for a source
-    without a diffuse part (a metal), else 0 (a uniform partial metal: :func:`hold_partial_metal`)."""
-    out = dict(fix)
-    for name, value, _ in get_model(target).specialisations:
-        if name not in out:
-            out[name] = value if _no_diffuse(source_model, values) else 0.0
-    return out
-
-
-def glass_is_dielectric(source: Material, target: str, fix: dict[str, Any], held: Mapping[str, Any]) -> dict[str, Any]:
-    """``fix`` with the target's metalness at 0 where the source lets light through: :func:`complete_fix` takes a
-    source without a diffuse part for a metal, and a Mitsuba 3 glass has none (bk7 onto glTF: 0.73 held a metal,
-    0.023 a dielectric). The user's ``--fix`` (``held``) stays."""
-    from matremap.renderers.embedded.transmission import transmits
-
-    if not transmits(source):
-        return fix
-    return {**fix, **{name: 0.0 for name, _, _ in get_model(target).specialisations if name not in held}}
-
-
 def free_partial_metal(
     source: Material, job: RemapJob, fix: dict[str, Any], log: Callable[[str], None]
 ) -> tuple[RemapJob, dict[str, Any], dict[str, float]]:
-    """A uniform source that is a partial metal (its own glTF ``metallic``, OpenPBR ``base_metalness``, Cycles
-    ``Metallic``, ... strictly between 0 and 1): the target's metalness, where the user left it open, is freed and
-    started at the source's (returned: name -> start), and fitted with the ``simple`` strategy: its base colour is
-    both its diffuse and its metal's colour, which the staged strategies' diffuse-only and specular-only parts
-    split apart. Held at 0 and fitted in stages, 58 of the 98 MetalRoughSpheresNoTextures spheres failed the gate
-    onto UsdPreviewSurface (sphere mat_36, metallic 0.83: 0.98; freed: 0.0001). The models mix their metal in
-    differently (UsdPreviewSurface's Storm whitens a partial metal's highlight), so the value is fitted, not
-    copied."""
-    partial = _partial_metal(source.model, qty.material_values(source))
-    names = [name for name, _, _ in get_model(job.target).specialisations if name not in job.fix]
-    if partial is None or not names:
-        return job, fix, {}
-    log(f"partial metal: {', '.join(names)} freed from the source's {partial:.3g}, fitted with the simple strategy")
-    return (
-        replace(job, strategy="simple"),
-        {k: v for k, v in fix.items() if k not in names},
-        dict.fromkeys(names, partial),
-    )
-
-
-def _partial_metal(model: str, values: Mapping[str, Any]) -> float | None:
-    """The source's own metalness where it is one uniform value strictly between 0 and 1, else None."""
-    for name, _, _ in get_model(model).specialisations:
-        v = values.get(name)
-        if v is None or isinstance(v, (tuple, str)):
-            continue
-        a = np.asarray(v, dtype=float).reshape(-1)
-        if a.size == 1 and 0.0 < a[0] < 1.0:
-            return float(a[0])
-    return None
-
-
-def _no_diffuse(model: str, values: Mapping[str, Any]) -> bool:
-    spec = get_model(model)
-    dp = qty.diffuse_param(spec)
-    if dp is None or spec.specialise(values).diffuse_only is None:
-        return True
-    v = values.get(dp.name, spec.param(dp.name).default)
-    return float(np.max(np.asarray(v, dtype=float))) <= 0.0
+    """:func:`matremap.uniform_remap.free_partial_metal` on a job: ``simple`` where a metalness is freed."""
+    fix, start = uniform_remap.free_partial_metal(source, job.target, job.fix, fix, log)
+    return (replace(job, strategy="simple") if start else job), fix, start
 
 
 #: a library route is used when at most this fraction of the texels lie outside its training domain
@@ -1607,16 +1550,10 @@ def keep_normal(material: Material, asset: Any, folder: Path, written: bool, log
     return MapSet(material.model, {}, folder, normal=normal, constants=material.to_dict()["params"])
 
 
-#: the probe's lights for an anisotropic source: the headlight alone sees the lobe only across the
-#: sphere's tangent (the half vector has no component along it), so an isotropic fit could trade the
-#: other roughness for a darker F0 at zero error; a light 45 degrees off the view axis shows both
-ANISOTROPIC_PROBE_LIGHTS = (0.0, 45.0)
-
-
 def anisotropic_probe(job: RemapJob, model: str, log: Callable[[str], None]) -> RemapJob:
-    """``job`` with the probe of :data:`ANISOTROPIC_PROBE_LIGHTS` when ``model`` is anisotropic (two fitted
-    roughness parameters: a coat's roughness, held, is a layer's) and no probe was given."""
-    if job.scene is not None or sum(p.role == "roughness" and p.fit for p in get_model(model).params) < 2:
+    """``job`` with the probe of :data:`~matremap.uniform_remap.ANISOTROPIC_PROBE_LIGHTS` when a fit from ``model``
+    sees two roughnesses (:func:`~matremap.uniform_remap.anisotropic_lights`) and no probe was given."""
+    if job.scene is not None or uniform_remap.anisotropic_lights(model, job.target) is None:
         return job
     log(f"note: {model} is anisotropic: fitted under lights at {ANISOTROPIC_PROBE_LIGHTS} degrees (both roughnesses)")
     return replace(job, scene=Scene.probe(ANISOTROPIC_PROBE_LIGHTS))
@@ -1778,9 +1715,7 @@ def _remap_uniform(
     """A uniform material: copied when the remap is the identity, else fitted; the gate measures the fit
     (its relative error, and colour and energy of the probe renders); ``material.json`` and
     ``compare.png`` (source | target | difference x10 on the probe) are written into ``stage``."""
-    from matremap.core.fit import FULL, FitResult, part
-    from matremap.renderers import get_renderer
-    from matremap.renderers.base import render_images
+    from matremap.core.fit import FitResult
     from matremap.uniform import comparison_strip
 
     target = job.target
@@ -1796,30 +1731,13 @@ def _remap_uniform(
         )
         write_image(stage / "compare.png", comparison_strip(same), force=True)
         return copied
-    full_fix = complete_fix(source.model, qty.material_values(source), target, job.fix)
-    full_fix = glass_is_dielectric(source, target, full_fix, job.fix)
-    job, full_fix, metal = free_partial_metal(source, job, full_fix, log)
-    r, job = _fit_uniform(source, job, full_fix, log, metal)
+    held = uniform_remap.choose_held(source, target, job.fix, log)
+    r, job = _fit_uniform(source, replace(job, strategy=held.strategy or job.strategy), held.fix, log, held.start)
     for w in r.warnings:
         log(f"warning: {w}")
     measure = "relative L2 error" if r.objective == "l2" else f"{r.objective} loss"
     log(f"fit: {target} {json.dumps(r.target.to_dict()['params'])}; {measure} {r.loss:.4f}")
-    where = "relative RMSE" if r.objective == "l2" else f"{r.objective} loss"
-    checks = [Check("fit_error", r.loss, job.thresholds.fit_error, f"{where} on the {r.scene.kind} probe")]
-    if any("narrower than the probe resolves" in w for w in r.warnings):
-        # the probe cannot show the source's lobe (a mirror): the fit error, measured at the narrowest
-        # resolvable width, is the measure; images of the invisible lobe would compare nothing
-        checks.append(
-            Check("image_checks", 0.0, 0.0, "skipped: the source's highlight is below the probe's resolution")
-        )
-    else:
-        scene = r.scene
-        fitted = r.source  # the source as fitted: itself, or a glass widened to the target's narrowest lobe
-        src = render_images(get_renderer(r.source_renderer), [part(fitted, FULL) or fitted], scene)[0]
-        src = src * r.irradiance_scale
-        tgt = render_images(get_renderer(r.target_renderer), [r.target], scene)[0]
-        checks += image_checks([("probe render", src, tgt)], scene.mask(), job.thresholds)
-    result.material, result.loss, result.verdict = r.target, r.loss, Verdict(checks)
+    result.material, result.loss, result.verdict = r.target, r.loss, uniform_remap.fit_verdict(r, job.thresholds)
     write_text(stage / "material.json", json.dumps(r.target.to_dict(), indent=1) + "\n")
     write_image(stage / "compare.png", comparison_strip(r), force=True)
     log("wrote compare.png (source | target | difference x10 on the probe)")

@@ -29,7 +29,7 @@ from matremap.cli.common import (
 from matremap.core.material import Material
 from matremap.core.scene import Scene
 from matremap.dialects import get_model
-from matremap.errors import MatremapError
+from matremap.errors import MatremapError, QualityGateFailed
 
 RENDER_EXAMPLES = """examples:
   matremap render 'mitsuba06:ward,alpha=0.2,specularReflectance=0.1' -o ward.exr
@@ -113,6 +113,14 @@ def add_fit(subparsers: Subparsers) -> None:
     add_strategy_option(p)
     add_objective_option(p)
     add_renderer_options(p)
+    p.add_argument(
+        "--max-error",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a quality-gate threshold (repeatable): fit_error, luminance_error, delta_e, delta_e_fraction "
+        "(the measures of a uniform remap); see docs/quality.md",
+    )
     p.add_argument("--json", action="store_true", help="print the result as one JSON object on stdout")
     p.add_argument("-o", "--output", metavar="FILE.json", help="also save the result as JSON")
     p.add_argument(
@@ -127,8 +135,13 @@ def add_fit(subparsers: Subparsers) -> None:
 
 
 def cmd_fit(args: argparse.Namespace) -> int:
-    """Fit the target model to the source material; print (or save) the result, write the comparison."""
+    """Fit the target model to the source material as a uniform remap does (:mod:`matremap.uniform_remap`: the
+    same held values, the anisotropic probe, the same verdict); print (or save) the result, write the comparison;
+    exit 3 when the fit fails the quality gate (the result is printed and written all the same)."""
+    from matremap import uniform_remap
     from matremap.core.imageio import check_output
+    from matremap.dialects.mtlx import freed_layers
+    from matremap.svbrdf.quality import Thresholds
     from matremap.uniform import fit
 
     source = load_material(args.source)
@@ -137,20 +150,43 @@ def cmd_fit(args: argparse.Namespace) -> int:
     for name in fix:
         if name not in spec.param_names and name not in spec.option_names:
             spec.param(name)  # raises with the list of valid names
+    thresholds = Thresholds.parse(args.max_error)
     out = check_output(args.output, args.force, (".json",)) if args.output else None
     compare = check_output(args.compare, args.force, COMPARE_SUFFIXES) if args.compare else None
+
+    def note(line: str) -> None:
+        print(f"matremap: note: {line}", file=sys.stderr)
+
+    held = uniform_remap.choose_held(source, spec.id, fix, note)
+    chosen = {k: v for k, v in held.fix.items() if k not in fix and k not in args.free}
+    if chosen:
+        note(
+            "held for this source: "
+            + ", ".join(f"{k} = {v:g}" for k, v in chosen.items())
+            + " (as remap holds them; --fix NAME=VALUE to choose)"
+        )
+    layers, start = freed_layers(source.model, source.values, spec, held=fix)
+    free = list(dict.fromkeys([*args.free, *layers, *held.start]))
+    scene = make_scene(args)
+    if not args.light and args.probe == "point":
+        lights = uniform_remap.anisotropic_lights(source.model, spec.id, args.free)
+        if lights is not None:
+            note(f"two roughnesses are fitted: under lights at {lights} degrees (--light to choose)")
+            scene = Scene.probe(lights, args.size or scene.resolution)
     result = fit(
         source,
         spec,
-        strategy=args.strategy,
-        scene=make_scene(args),
+        strategy=held.strategy or args.strategy,
+        scene=scene,
         source_renderer=args.source_renderer,
         target_renderer=args.target_renderer,
-        fix=fix,
-        free=args.free,
+        fix={**fix, **chosen},
+        free=free,
+        start={**start, **held.start} or None,
         objective=args.objective,
     )
-    record = result.to_dict()
+    verdict = uniform_remap.fit_verdict(result, thresholds)
+    record = {**result.to_dict(), "verdict": verdict.to_dict()}
     for w in result.warnings:
         print(f"matremap: warning: {w}", file=sys.stderr)
     if compare is not None:
@@ -168,6 +204,8 @@ def cmd_fit(args: argparse.Namespace) -> int:
         print(json.dumps(record))
     else:
         print_fit(record)
+    if not verdict.passed:
+        raise QualityGateFailed(verdict.line())
     return 0
 
 
@@ -194,6 +232,8 @@ def print_fit(r: dict[str, Any]) -> None:
     )
     for s in r["stages"]:
         print(f"  stage {s['name']}: loss {s['loss']:.4g}, {s['renders']} renders, {s['message']}")
+    if "verdict" in r:
+        print(r["verdict"]["line"])
 
 
 def add_apply(subparsers: Subparsers) -> None:

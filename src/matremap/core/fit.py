@@ -33,7 +33,7 @@ the headlight probe (:func:`_fit_body` says why). The loss is then the objective
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, cast
 
@@ -233,7 +233,9 @@ class _Problem:
         values = dict(self.template.values)
         for p, s in zip(self.free, self.slices, strict=True):
             v = np.exp(x[s]) if p.log else x[s]
-            values[p.name] = np.broadcast_to(np.clip(v, *p.bounds), (p.channels,)).copy()
+            v = np.broadcast_to(np.clip(v, *p.bounds), (p.channels,))
+            for name in (p.name, *p.tied):
+                values[name] = v.copy()
         return Material(self.template.model, values, self.template.options)
 
     def _pixels(self, xs: Sequence[np.ndarray]) -> Steps[np.ndarray]:
@@ -585,15 +587,31 @@ def _values_dict(m: Material, names: Sequence[str]) -> dict[str, Any]:
     return {n: d[n] for n in names}
 
 
-def target_template(spec: ModelSpec, fix: Mapping[str, Any] | None) -> tuple[Material, list[ParamSpec]]:
+def target_template(
+    spec: ModelSpec, fix: Mapping[str, Any] | None, untied: Collection[str] = ()
+) -> tuple[Material, list[ParamSpec]]:
     """Target material to start from (defaults, ``fit_value`` for held parameters, then ``fix``)
-    and the parameters a fit adjusts."""
+    and the parameters a fit adjusts. Each follower of :attr:`~ModelSpec.isotropic` that is neither fixed nor
+    in ``untied`` is tied to its leader: not a parameter of its own, it takes the leader's value (the leader's
+    fixed value when the leader is fixed), so the target stays isotropic."""
     held = {p.name: p.fit_value for p in spec.params if not p.fit and p.fit_value is not None}
     template = Material.create(spec.id).with_params(held).with_params(dict(fix or {}))
     spec = spec.specialise(template.values)  # e.g. a metal's base colour is its specular colour
     fixed = set(fix or {})
     free = [p for p in spec.params if p.fit and p.name not in fixed]
+    for follower, leader in spec.isotropic:
+        if follower in fixed or follower in untied:
+            continue
+        template = template.with_params({follower: template.values[leader]})
+        free = [replace(p, tied=(*p.tied, follower)) if p.name == leader else p for p in free if p.name != follower]
     return template, free
+
+
+def tie(m: Material, params: Sequence[ParamSpec]) -> Material:
+    """``m`` with each parameter tied to one of ``params`` (:attr:`~matremap.core.models.ParamSpec.tied`) set to
+    that one's value."""
+    tied = {name: m.values[p.name] for p in params for name in p.tied}
+    return m.with_params(tied) if tied else m
 
 
 def fit(
@@ -671,7 +689,9 @@ def fit_steps(
         if not r.can_render(model):
             raise MatremapError(f"renderer {r.name!r} cannot render model {model}")
         check_probe(r, scene)
-    spec, template, free_params = _fit_setup(spec, fix, free, start)
+    # an isotropic source stays isotropic: the target's anisotropy is freed by an anisotropic source or by the user
+    anisotropic = source.spec.anisotropic(source.values)
+    spec, template, free_params = _fit_setup(spec, fix, free, start, anisotropic)
     if coarse is None:
         coarse = not start
     return (
@@ -803,7 +823,7 @@ AROUND = 2.0
 
 def _clip_to(m: Material, params: Sequence[ParamSpec]) -> Material:
     """``m`` with the values of ``params`` clipped into their (narrowed) bounds."""
-    return m.with_params({p.name: np.clip(m.values[p.name], *p.bounds) for p in params})
+    return tie(m.with_params({p.name: np.clip(m.values[p.name], *p.bounds) for p in params}), params)
 
 
 def _around(fitted: Material, params: Sequence[ParamSpec]) -> list[ParamSpec]:
@@ -855,19 +875,26 @@ def _resolved_goals(
 
 
 def _fit_setup(
-    spec: ModelSpec, fix: Mapping[str, Any] | None, free: Sequence[str], start: Mapping[str, Any] | None
+    spec: ModelSpec,
+    fix: Mapping[str, Any] | None,
+    free: Sequence[str],
+    start: Mapping[str, Any] | None,
+    anisotropic: bool = False,
 ) -> tuple[ModelSpec, Material, list[ParamSpec]]:
-    """The target spec as the fit sees it, the material to start from and the parameters to fit."""
-    template, free_params = target_template(spec, fix)
+    """The target spec as the fit sees it, the material to start from and the parameters to fit (an anisotropic
+    target's pairs tied unless ``anisotropic``: the source is, or ``free`` names a follower)."""
+    untied = [f for f, _ in spec.isotropic] if anisotropic else free
+    template, free_params = target_template(spec, fix, untied)
     spec = spec.specialise(template.values)
     for name in free:
         p = spec.param(name)
         if p.name in (fix or {}):
             raise MatremapError(f"{name} is both fixed and freed; drop one of --fix {name}=... / --free {name}")
-        if p not in free_params:
+        if all(q.name != p.name for q in free_params):
             free_params.append(p)
     if start:
         template = template.with_params({k: v for k, v in start.items() if k not in (fix or {})})
+        template = tie(template, free_params)
     if not free_params:
         raise MatremapError(f"nothing to fit: every parameter of {spec.id} is fixed")
     return spec, template, free_params
@@ -1107,7 +1134,7 @@ def _towards_mirror(
     lo, hi = rp_t.bounds
     value = target_width**-2 if rp_t.log and target_width > 0 else (hi if rp_t.log else target_width)
     value = float(np.clip(value, lo, hi))
-    return fitted.with_params({rp_t.name: [value] * 3 if rp_t.channels == 3 else value})
+    return tie(fitted.with_params({rp_t.name: [value] * 3 if rp_t.channels == 3 else value}), free_params)
 
 
 def _sharpened_note(source: Material, sharpened: tuple[Material, float], scene: Scene) -> str:

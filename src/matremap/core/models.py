@@ -35,6 +35,8 @@ class ParamSpec:
     ``fit_value`` (or ``default`` when that is None) unless the user fixes it.
     ``log`` asks the fitter to work on log(value) (for exponents spanning decades).
     ``linear`` marks a parameter the image scales with (see :attr:`scales_image`).
+    ``tied`` names the parameters a fit sets to this one's value (an anisotropic roughness held isotropic:
+    :attr:`ModelSpec.isotropic`); a fit fills it, a model's own spec leaves it empty.
     """
 
     name: str
@@ -47,6 +49,7 @@ class ParamSpec:
     log: bool = False
     linear: bool | None = None
     doc: str = ""
+    tied: tuple[str, ...] = ()
 
     @property
     def scales_image(self) -> bool:
@@ -127,6 +130,19 @@ class ModelSpec:
     #: Appendix B, UsdPreviewSurface, OpenPBR 1.1, Standard Surface 1.0.1, Mitsuba 3's principled); a model with a
     #: ``distribution`` option says it there (:func:`microfacet_of`)
     microfacet: str | None = None
+    #: ``(follower, leader)`` pairs of parameters that are equal where the model is isotropic (Mitsuba 3's
+    #: anisotropic conductor: alpha_v and alpha_u). A fit onto the model ties each follower to its leader unless
+    #: the user fixes or frees it or the source is anisotropic itself (:meth:`anisotropic`): an isotropic source
+    #: stays isotropic (:func:`matremap.core.fit.target_template`)
+    isotropic: tuple[tuple[str, str], ...] = ()
+
+    def anisotropic(self, values: Mapping[str, Any]) -> bool:
+        """Whether a material of this model with ``values`` is anisotropic: a pair of :attr:`isotropic` differs."""
+        return any(
+            not np.array_equal(np.asarray(values[f], dtype=float), np.asarray(values[lead], dtype=float))
+            for f, lead in self.isotropic
+            if f in values and lead in values
+        )
 
     def specialise(self, values: Mapping[str, Any]) -> ModelSpec:
         """The spec as a fit sees it when parameters are held at given values.

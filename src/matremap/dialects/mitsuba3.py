@@ -211,6 +211,8 @@ ROUGHCONDUCTOR_ANISOTROPIC = ModelSpec(
     diffuse_only=None,
     specular_only={},
     reflectance=Conductor("eta", "k"),
+    # fitted from an isotropic source, alpha_v follows alpha_u (--free alpha_v unties it)
+    isotropic=(("alpha_v", "alpha_u"),),
 )
 
 ROUGHPLASTIC = ModelSpec(

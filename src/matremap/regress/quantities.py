@@ -181,7 +181,9 @@ def write(
     renderer accepts; ``clipped`` (parameter -> count) adds up the values that moved by more than
     :data:`CLIP_TOLERANCE` of the range (a regression asking for more than the target can give), or by
     more than ``slack`` (quantity -> the regression's own held-out error) where that is larger: a mapping
-    that overshoots a bound it was trained at by less than its error asks for nothing the target lacks."""
+    that overshoots a bound it was trained at by less than its error asks for nothing the target lacks.
+    The roughness is one quantity: each follower of an isotropic pair (:attr:`~ModelSpec.isotropic`) takes its
+    leader's value."""
     slack = slack or {}
     name0 = next(iter(quantities))
     shape = np.shape(quantities[name0]) if is_scalar(name0) else np.shape(quantities[name0])[:-1]
@@ -225,6 +227,9 @@ def write(
         if not a.flags.writeable or not a.flags.owndata:
             a = np.array(a)
         out[name] = np.clip(a, *bounds[name], out=a)
+    for follower, leader in spec.isotropic:  # one roughness quantity: an anisotropic model written isotropic
+        if leader in driven:
+            out[follower] = out[leader] if uniform(out[leader]) else out[leader].copy()
     return out
 
 

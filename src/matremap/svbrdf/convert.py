@@ -522,11 +522,15 @@ def _manifest(
     final_normal: Path | None,
     outside: int,
 ) -> dict[str, Any]:
-    """``material.json``: the driven maps, every other target parameter as a constant, provenance."""
+    """``material.json``: the driven maps (an isotropic pair's follower reads its leader's), every other target
+    parameter as a constant, provenance."""
     tgt = get_model(t.target)
     last = t.steps[-1] if t.method == "chain" else t
     constants: dict[str, Any] = dict(last.target_options)
     maps = {o.param: o.path for o in outputs if o.param}
+    for follower, leader in tgt.isotropic:  # the one roughness map drives both of an isotropic pair
+        if leader in maps:
+            maps.setdefault(follower, maps[leader])
     for p in tgt.params:
         if p.name not in maps:
             v = first.get(p.name, last.template.get(p.name))
