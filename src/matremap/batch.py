@@ -319,10 +319,11 @@ def _scanned(files: list[Path], skipped: list[Path] | None) -> list[Path]:
 MAX_SLUG = 96
 
 
-def _slug(text: str) -> str:
-    """A folder name for ``text``: its letters, digits and ``._-``; a longer one cut to :data:`MAX_SLUG`
-    characters, ending in a digest of the whole text (two long names that begin alike stay apart)."""
-    slug = re.sub(r"[^A-Za-z0-9._-]+", "_", text).strip("._") or "material"
+def _slug(text: str, prefix: str = "") -> str:
+    """A folder name for ``text``: ``prefix``, then its letters, digits and ``._-``; a longer one cut to
+    :data:`MAX_SLUG` characters, ending in a digest of the whole text (two long names that begin alike stay
+    apart)."""
+    slug = prefix + (re.sub(r"[^A-Za-z0-9._-]+", "_", text).strip("._") or "material")
     if len(slug) <= MAX_SLUG:
         return slug
     digest = hashlib.sha256(text.encode("utf-8", "surrogatepass")).hexdigest()[:10]
@@ -348,7 +349,7 @@ def plan(files: Sequence[Path], material: str | None = None, unread: dict[Path, 
             unread[f] = str(e)
             continue
         mine = [
-            Item(f, i, name, f"{folder}/{i:03d}-{_slug(name)}" if len(names) > 1 else f"{folder}/{_slug(name)}")
+            Item(f, i, name, f"{folder}/{_slug(name, f'{i:03d}-' if len(names) > 1 else '')}")
             for i, name in enumerate(names)
             if material is None or material in (name, str(i))
         ]
@@ -370,7 +371,7 @@ def file_folders(files: Sequence[Path]) -> dict[Path, str]:
     for f in files:
         stem = _slug(f.name)
         stems[stem] = stems.get(stem, 0) + 1
-        out[f] = stem if stems[stem] == 1 else f"{stem}-{stems[stem]}"
+        out[f] = stem if stems[stem] == 1 else _slug(f"{f.name}-{stems[stem]}")
     return out
 
 
@@ -462,11 +463,15 @@ class References:
         return self._trees[root]
 
     def _confined(self, path: Path, roots: Sequence[Path]) -> Path | None:
-        """``path``'s real path when it lies inside one of ``roots`` and outside the excluded folders."""
+        """``path``'s real path when it is a regular file inside one of ``roots``, outside the excluded folders."""
         real = Path(os.path.realpath(path))
         inside = any(real == r or r in real.parents for r in roots)
         fenced = any(real == e or e in real.parents for e in self.exclude)
-        return real if inside and not fenced else None
+        try:
+            regular = stat.S_ISREG(os.stat(real).st_mode)
+        except OSError:
+            regular = False
+        return real if inside and not fenced and regular else None
 
     def files(self, file: Path) -> list[Path]:
         """``file`` first, then every file it references (see the class), in a fixed order."""
@@ -547,6 +552,7 @@ def run_batch(
     from matremap.dialects import get_model
 
     target = get_model(target).id
+    log = _printable_log(log)
     if workers is not None and workers < 1:
         raise MatremapError(f"--workers must be at least 1, got {workers}")
     out = Path(out)
@@ -645,6 +651,11 @@ def _run(
             rows[i].whole_file = whole
     write_summary(result)
     return result
+
+
+def _printable_log(log: Callable[[str], None]) -> Callable[[str], None]:
+    """``log`` given each line as valid Unicode (:func:`printable`): file and material names may not be."""
+    return lambda line: log(printable(line))
 
 
 def _fences(out: Path, options: Mapping[str, Any]) -> list[Path]:
