@@ -567,20 +567,7 @@ def run_batch(
     unread: dict[Path, str] = {}
     items = plan(files, material, unread)
     keys = {item: item_key(item, target, options, references) for item in items}
-    for f, why in unread.items():
-        log(f"refused  {f.name}: {why}")
-    if skipped:
-        log(
-            f"note: {len(skipped)} .xml file(s) left out (not Mitsuba scenes, or parts another scene includes): "
-            + ", ".join(map(str, skipped[:3]))
-            + (" ..." if len(skipped) > 3 else "")
-        )
-    if written:
-        log(
-            f"note: {len(written)} folder(s) matremap wrote left out: "
-            + ", ".join(map(str, written[:3]))
-            + (" ..." if len(written) > 3 else "")
-        )
+    _notes(log, unread, skipped, written)
     out.mkdir(parents=True, exist_ok=True)
     with batch_lock(out, log):
         clean_leftovers(out, items)
@@ -606,6 +593,21 @@ def run_batch(
             log,
             progress,
         )
+
+
+def _notes(
+    log: Callable[[str], None], unread: Mapping[Path, str], skipped: Sequence[Path], written: Sequence[Path]
+) -> None:
+    """The lines saying what the batch leaves out: unreadable files, foreign XML, folders matremap wrote."""
+    for f, why in unread.items():
+        log(f"refused  {f.name}: {why}")
+    for what, found in (
+        (".xml file(s) left out (not Mitsuba scenes, or parts another scene includes)", skipped),
+        ("folder(s) matremap wrote left out", written),
+    ):
+        if found:
+            tail = ", ".join(map(str, found[:3])) + (" ..." if len(found) > 3 else "")
+            log(f"note: {len(found)} {what}: {tail}")
 
 
 def _run(
