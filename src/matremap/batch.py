@@ -12,6 +12,11 @@ material, models, route (identity, library, cached or new sweep, fit), the quali
 the verdict (passed, failed, refused, error) and seconds; the page shows each item's source and target
 renders and sorts by any column. The exit status is 0 only when every item passed; otherwise the worst
 one's (:mod:`matremap.errors`).
+
+OUT is the batch's alone: it may not hold an input, a file an input names or the cache, nor files a batch
+did not write (:func:`check_out`); a search of the inputs does not enter it; one batch at a time writes it
+(:func:`batch_lock`); and what a killed batch or worker left there is removed by the next one
+(:func:`clean_leftovers`). SECURITY.md ("Batches") states each rule and the test that holds it.
 """
 
 from __future__ import annotations
@@ -688,7 +693,9 @@ def check_out(out: Path, files: Sequence[Path], references: References, caches: 
             raise MatremapError(f"{out} is or holds the input {f}; choose an output folder outside the inputs")
     for cache in caches:
         if _inside(cache, real) or _inside(real, cache):
-            raise MatremapError(f"{out} and the cache folder {cache} overlap; choose an output folder outside it")
+            raise MatremapError(
+                f"{out} is, holds or lies in the cache folder {cache}; choose an output folder outside it"
+            )
     if out.exists() and not out.is_dir():
         raise MatremapError(f"{out} exists and is not a folder; choose an output folder")
     if not out.is_dir():
