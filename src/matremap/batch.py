@@ -162,12 +162,13 @@ def expand_inputs(
     from matremap.formats import is_material_file
 
     fences = [Path(os.path.realpath(e)) for e in exclude]
+    marks: dict[Path, bool] = {}  # folder -> whether matremap wrote it, each looked at once
     found: list[Path] = []
     for raw in paths:
         text = str(raw)
         if any(ch in text for ch in "*?["):
             matches = [Path(m) for m in sorted(glob.glob(text, recursive=True))]
-            kept = [m for m in matches if not _fenced(m, _glob_base(text), fences, written)]
+            kept = [m for m in matches if not _fenced(m, _glob_base(text), fences, written, marks)]
             files = _scanned([m for m in kept if m.is_file() and is_material_file(m)], skipped)
             if not files:
                 raise MatremapError(f"{text}: the pattern matches no material file ({SUFFIXES})")
@@ -220,8 +221,11 @@ def _json_keys(path: Path) -> set[str]:
     return set(doc) if isinstance(doc, dict) else set()
 
 
-def _fenced(path: Path, base: Path, fences: Sequence[Path], written: list[Path] | None) -> bool:
-    """Whether ``path``, found under ``base``, lies in a folder a search does not enter (see :func:`expand_inputs`)."""
+def _fenced(
+    path: Path, base: Path, fences: Sequence[Path], written: list[Path] | None, marks: dict[Path, bool]
+) -> bool:
+    """Whether ``path``, found under ``base``, lies in a folder a search does not enter (see :func:`expand_inputs`);
+    ``marks``: the folders looked at so far."""
     real = Path(os.path.realpath(path))
     if any(real == f or f in real.parents for f in fences):
         return True
@@ -230,7 +234,9 @@ def _fenced(path: Path, base: Path, fences: Sequence[Path], written: list[Path] 
         return True
     for depth in range(1, len(inner)):
         folder = base.joinpath(*inner[:depth])
-        if written_by_matremap(folder):
+        if folder not in marks:
+            marks[folder] = written_by_matremap(folder)
+        if marks[folder]:
             if written is not None and folder not in written:
                 written.append(folder)
             return True
@@ -457,6 +463,7 @@ class References:
         self.allow = [Path(a).resolve() for a in allow]
         self.exclude = [Path(os.path.realpath(e)) for e in exclude]
         self._trees: dict[Path, dict[str, list[Path]]] = {}
+        self._files: dict[Path, list[Path]] = {}
         self._digests: dict[Path, str] = {}
 
     def _tree(self, root: Path) -> dict[str, list[Path]]:
@@ -480,6 +487,11 @@ class References:
 
     def files(self, file: Path) -> list[Path]:
         """``file`` first, then every file it references (see the class), in a fixed order."""
+        if file not in self._files:
+            self._files[file] = self._search(file)
+        return self._files[file]
+
+    def _search(self, file: Path) -> list[Path]:
         from matremap.formats import READERS
 
         roots = list(dict.fromkeys([file.parent.resolve(), *self.allow]))
