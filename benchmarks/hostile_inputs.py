@@ -1003,6 +1003,307 @@ def two_remaps_one_cache(tmp: Path) -> str:
     return "handled" if swept == 1 else f"SWEPT TWICE ({swept} sweeps)"
 
 
+# -- second round: batches (change detection, their own folders, concurrent runs, orphans, leftovers) ------------
+
+BATCH_SCENE = (
+    '<scene version="3.0.0">\n'
+    '  <bsdf type="diffuse" id="wall"><rgb name="reflectance" value="0.6, 0.5, 0.4"/></bsdf>\n'
+    '  <bsdf type="roughconductor" id="steel"><string name="material" value="Cr"/>'
+    '<float name="alpha" value="0.2"/></bsdf>\n'
+    "</scene>\n"
+)
+
+
+def limited_memory() -> None:
+    """In a batch's process: at most 4 GB of address space (an unbounded read fails, not the machine)."""
+    import resource
+
+    resource.setrlimit(resource.RLIMIT_AS, (4 << 30, 4 << 30))
+
+
+def batch_run(args: list[str], cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess[str] | str:
+    """A batch (``matremap remap ARGS FAST``) in ``cwd``, its memory bounded; "HANGS" when it outlives ``timeout``."""
+    env = {**os.environ, "MATREMAP_CACHE": str(cwd / "cache")}
+    try:
+        p = subprocess.run(
+            [sys.executable, "-m", MODULE, *spelled([*args, *FAST])],
+            cwd=cwd,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+            preexec_fn=limited_memory,
+        )
+    except subprocess.TimeoutExpired:
+        return f"HANGS (> {timeout:.0f} s)"
+    LAST[0] = (p.stderr.strip().splitlines() or [""])[-1].replace(str(cwd), "T")
+    return p
+
+
+def batch_gltf(folder: Path, names: list[str], uris: tuple[str, ...] = ()) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    pbr = {"baseColorFactor": [0.8, 0.1, 0.1, 1], "metallicFactor": 0.0, "roughnessFactor": 0.5}
+    doc = {
+        "asset": {"version": "2.0"},
+        "images": [{"uri": u} for u in uris],
+        "materials": [{"name": n, "pbrMetallicRoughness": pbr} for n in names],
+    }
+    (folder / "m.gltf").write_text(json.dumps(doc))
+    return folder / "m.gltf"
+
+
+def batch_done(p: subprocess.CompletedProcess[str] | str, unchanged: int | None = None) -> str:
+    """``handled`` for a batch that converted (exit 0 or 3) with a summary (and ``unchanged`` items skipped)."""
+    if isinstance(p, str):
+        return p
+    if "Traceback" in p.stderr:
+        return "TRACEBACK"
+    if p.returncode not in (0, 3):
+        return f"exit {p.returncode}"
+    if unchanged is not None and f"({unchanged} unchanged, not redone)" not in p.stdout:
+        return "REDONE (" + (p.stdout.strip().splitlines() or [""])[-1].split("(")[-1][:40]
+    return "handled"
+
+
+def batch_fifo(tmp: Path) -> str:
+    """A FIFO named like a word of the material file (its image) in the batch's folder: the key opened it."""
+    batch_gltf(tmp / "in", ["a", "b"], ("base.png",))
+    os.mkfifo(tmp / "in" / "base.png")
+    return batch_done(batch_run(["remap", "in", "--to", "mitsuba06:ward", "-o", "out"], tmp, timeout=120))
+
+
+def batch_dev_zero(tmp: Path) -> str:
+    """A link to /dev/zero named by the material: the key read it without end (5.4 GB in 4 s)."""
+    batch_gltf(tmp / "in", ["a", "b"], ("base.png",))
+    (tmp / "in" / "base.png").symlink_to("/dev/zero")
+    return batch_done(batch_run(["remap", "in", "--to", "mitsuba06:ward", "-o", "out"], tmp, timeout=120))
+
+
+def batch_link_outside(tmp: Path) -> str:
+    """A link out of the asset folder named by the material: its target (outside) decided the key."""
+    (tmp / "secret.png").write_bytes(SECRET)
+    batch_gltf(tmp / "in", ["a", "b"], ("base.png",))
+    (tmp / "in" / "base.png").symlink_to(tmp / "secret.png")
+    args = ["remap", "in", "--to", "mitsuba06:ward", "-o", "out"]
+    if (first := batch_done(batch_run(args, tmp))) != "handled":
+        return first
+    (tmp / "secret.png").write_bytes(SECRET + b"edited")
+    outcome = batch_done(batch_run(args, tmp), unchanged=2)
+    return "READ OUTSIDE (" + outcome + ")" if outcome.startswith("REDONE") else outcome
+
+
+def batch_non_utf8_name(tmp: Path) -> str:
+    (tmp / "in").mkdir()
+    (Path(os.fsdecode(os.fsencode(tmp / "in") + b"/sc\xe9ne.xml"))).write_text(BATCH_SCENE)
+    p = batch_run(["remap", "in", "--to", "mitsuba06:ward", "-o", "out"], tmp)
+    outcome = batch_done(p)
+    if outcome == "handled" and not (tmp / "out" / "summary.csv").is_file():
+        return "no summary"
+    return outcome
+
+
+def batch_invalid_escape(tmp: Path) -> str:
+    (tmp / "in").mkdir()
+    pbr = '"pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.1, 0.1, 1], "metallicFactor": 0.0}'
+    (tmp / "in" / "m.gltf").write_text(
+        '{"asset": {"version": "2.0"}, "materials": [{"name": "bad \\ud800", '
+        + pbr
+        + '}, {"name": "ok", '
+        + pbr
+        + "}]}"
+    )
+    outcome = batch_done(batch_run(["remap", "in", "--to", "mitsuba06:ward", "-o", "out"], tmp))
+    missing = [n for n in ("summary.csv", "summary.json", "index.html") if not (tmp / "out" / n).is_file()]
+    return f"no {', '.join(missing)} ({outcome})" if missing else outcome
+
+
+def batch_long_name(tmp: Path) -> str:
+    """A 300-character material name: 'File name too long', no item record, retried by every rerun."""
+    batch_gltf(tmp / "in", ["x" * 300, "short"])
+    args = ["remap", "in", "--to", "mitsuba06:ward", "-o", "out"]
+    p = batch_run(args, tmp)
+    if not isinstance(p, str) and "File name too long" in p.stdout + p.stderr:
+        return "File name too long"
+    if (first := batch_done(p)) != "handled":
+        return first
+    return batch_done(batch_run(args, tmp), unchanged=2)
+
+
+def batch_into_its_input(tmp: Path) -> str:
+    """``remap in -o in/out`` three times: its own outputs were converted on every rerun (1, 3, 7 materials)."""
+    batch_gltf(tmp / "in", ["red"])
+    batch_gltf(tmp / "in" / "b", ["dark"])
+    counts = []
+    for _ in range(3):
+        p = batch_run(["remap", "in", "--to", "gltf:metal-rough", "-o", "in/out", "--json"], tmp)
+        if isinstance(p, str) or p.returncode not in (0, 3):
+            return batch_done(p)
+        counts.append(len(json.loads(p.stdout)["items"]))
+    return "handled" if counts == [2, 2, 2] else f"CONVERTS ITS OUTPUTS ({', '.join(map(str, counts))} materials)"
+
+
+def batch_refused_out(tmp: Path, args: list[str], watched: Path) -> str:
+    """``refused`` when a batch exits 2 with one line and leaves ``watched`` as it was."""
+
+    def state() -> dict[str, bytes | None]:
+        return {str(p): p.read_bytes() if p.is_file() else None for p in sorted(watched.rglob("*"))}
+
+    before = state()
+    p = batch_run(args, tmp)
+    if isinstance(p, str):
+        return p
+    if "Traceback" in p.stderr:
+        return "TRACEBACK"
+    changed = state() != before
+    if p.returncode == 2 and p.stderr.count("\n") == 1 and not changed:
+        return "refused"
+    return f"exit {p.returncode}" + (" (WROTE INTO IT)" if changed else "")
+
+
+def batch_out_holds_input(tmp: Path) -> str:
+    (tmp / "in" / "sub").mkdir(parents=True)
+    (tmp / "in" / "a.xml").write_text(BATCH_SCENE)
+    (tmp / "in" / "sub" / "b.xml").write_text(BATCH_SCENE)
+    return batch_refused_out(
+        tmp, ["remap", "in/a.xml", "in/sub/b.xml", "--to", "mitsuba06:ward", "-o", "in"], tmp / "in"
+    )
+
+
+def batch_out_holds_texture(tmp: Path) -> str:
+    (tmp / "in" / "tex").mkdir(parents=True)
+    png(tmp / "in" / "tex" / "base.png", gradient())
+    batch_gltf(tmp / "in", ["a", "b"], ("tex/base.png",))
+    return batch_refused_out(tmp, ["remap", "in/m.gltf", "--to", "mitsuba06:ward", "-o", "in/tex"], tmp / "in")
+
+
+def batch_out_is_cache(tmp: Path) -> str:
+    (tmp / "in").mkdir()
+    (tmp / "in" / "a.xml").write_text(BATCH_SCENE)
+    (tmp / "cache").mkdir()
+    (tmp / "cache" / "table.npz").write_bytes(b"cached")
+    return batch_refused_out(tmp, ["remap", "in", "--to", "mitsuba06:ward", "-o", "cache"], tmp / "cache")
+
+
+def batch_out_users_summary(tmp: Path) -> str:
+    (tmp / "in").mkdir()
+    (tmp / "in" / "a.xml").write_text(BATCH_SCENE)
+    (tmp / "out").mkdir()
+    (tmp / "out" / "summary.csv").write_text("the user's own table\n")
+    return batch_refused_out(tmp, ["remap", "in", "--to", "mitsuba06:ward", "-o", "out"], tmp / "out")
+
+
+def batch_out_users_slot(tmp: Path) -> str:
+    (tmp / "in").mkdir()
+    (tmp / "in" / "a.xml").write_text(BATCH_SCENE)
+    (tmp / "out" / "a.xml" / "000-wall").mkdir(parents=True)
+    (tmp / "out" / "a.xml" / "000-wall" / "notes.txt").write_text("mine\n")
+    return batch_refused_out(tmp, ["remap", "in", "--to", "mitsuba06:ward", "-o", "out"], tmp / "out")
+
+
+def two_batches_one_out(tmp: Path) -> str:
+    """Two batches started at once into one OUT: both converted everything (no lock)."""
+    for i in range(2):
+        (tmp / "in" / f"s{i}").mkdir(parents=True)
+        (tmp / "in" / f"s{i}" / "scene.xml").write_text(BATCH_SCENE)
+    args = ["remap", "in", "--to", "mitsuba06:ward", "-o", "out", "--workers", "1", *FAST]
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-m", MODULE, *spelled(args)],
+            cwd=tmp,
+            env={**os.environ, "MATREMAP_CACHE": str(tmp / f"cache{i}")},
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for i in range(2)
+    ]
+    errs = [proc.communicate(timeout=600)[1] for proc in procs]
+    if any("Traceback" in e for e in errs):
+        return "TRACEBACK"
+    if any(proc.returncode != 0 for proc in procs):
+        return "exit " + ", ".join(str(proc.returncode) for proc in procs)
+    done = [int(m.group(1)) for e in errs if (m := re.search(r"unchanged, (\d+) to do", e))]
+    return "handled" if sum(done) == 4 else f"REDONE ({sum(done)} conversions of 4 materials)"
+
+
+def batch_children(pid: int) -> set[int]:
+    found = set()
+    for stat_file in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            text = stat_file.read_text()
+        except OSError:
+            continue
+        if int(text[text.rfind(")") + 2 :].split()[1]) == pid:
+            found.add(int(stat_file.parent.name))
+    return found
+
+
+def batch_alive(pids: set[int]) -> set[int]:
+    alive = set()
+    for pid in pids:
+        try:
+            if Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z":
+                alive.add(pid)
+        except OSError:
+            continue
+    return alive
+
+
+def batch_stopped(tmp: Path, sig: int) -> str:
+    """A batch of textured materials stopped by ``sig`` while items are being converted; then the same command:
+    ``handled`` when no worker outlived it by 10 s, the rerun exits 0 and no marked name is left in OUT."""
+    for i in range(4):
+        shutil.copytree(ROOT / "examples" / "brass-gltf", tmp / "in" / f"brass{i}")
+    args = ["remap", "in", "--to", "mitsuba06:ward", "-o", "out", "--workers", "2", *FAST]
+    env = {**os.environ, "MATREMAP_CACHE": str(tmp / "cache")}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", MODULE, *spelled(args)],
+        cwd=tmp,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),  # a background shell ignores SIGINT
+    )
+    deadline = time.time() + 240
+    while proc.poll() is None and time.time() < deadline and not list((tmp / "out").glob("*/.matremap-*")):
+        time.sleep(0.02)
+    workers = batch_children(proc.pid)
+    if proc.poll() is not None:
+        return "finished before the signal"
+    os.killpg(proc.pid, sig) if sig == signal.SIGINT else proc.send_signal(sig)
+    proc.wait(timeout=120)
+    deadline = time.time() + 10
+    while batch_alive(workers) and time.time() < deadline:
+        time.sleep(0.1)
+    orphans = batch_alive(workers)
+    for pid in orphans:
+        os.kill(pid, signal.SIGKILL)
+    left = sorted({p.name.split("-")[1] for p in (tmp / "out").rglob(".matremap-*")})
+    again = batch_run(args[: -len(FAST)], tmp)
+    if orphans:
+        return f"ORPHANS ({len(orphans)} worker(s) outlived the batch)"
+    if sig == signal.SIGINT and left:
+        return f"LEFTOVER after SIGINT (.matremap-{left[0]}-...)"
+    if isinstance(again, str) or again.returncode != 0:
+        return "rerun " + batch_done(again)
+    if list((tmp / "out").rglob(".matremap-*")):
+        return "LEFTOVER after the rerun"
+    return "handled"
+
+
+def batch_killed(tmp: Path) -> str:
+    return batch_stopped(tmp, signal.SIGKILL)
+
+
+def batch_terminated(tmp: Path) -> str:
+    return batch_stopped(tmp, signal.SIGTERM)
+
+
+def batch_sigint(tmp: Path) -> str:
+    return batch_stopped(tmp, signal.SIGINT)
+
+
 CASES: list[tuple[str, str, Callable[[Path], str]]] = [
     ("glTF image uri, absolute path elsewhere", "1 confinement", gltf_absolute_uri),
     ("glTF image uri ../", "1 confinement", gltf_parent_uri),
@@ -1070,6 +1371,22 @@ CASES: list[tuple[str, str, Callable[[Path], str]]] = [
     #
     #
     # second round: a batch's change detection, its own folders, concurrent runs
+    ("batch killed (SIGKILL): workers, rerun", "3 orphans", batch_killed),
+    ("batch terminated (SIGTERM): workers, rerun", "3 orphans", batch_terminated),
+    ("batch interrupted (SIGINT): leftovers, rerun", "3 leftovers", batch_sigint),
+    ("batch: a FIFO named by the material", "4 change detection", batch_fifo),
+    ("batch: a link to /dev/zero named by it", "4 change detection", batch_dev_zero),
+    ("batch: a link out of the folder, edited", "4 change detection", batch_link_outside),
+    ("batch: a file name that is not UTF-8", "7 names", batch_non_utf8_name),
+    ("batch: a material name with a bad \\u escape", "7 names", batch_invalid_escape),
+    ("batch: a 300-character material name, rerun", "8 own folders", batch_long_name),
+    ("batch into its own input folder, 3 runs", "8 own folders", batch_into_its_input),
+    ("batch: OUT holds an input", "data loss", batch_out_holds_input),
+    ("batch: OUT holds a texture an input names", "data loss", batch_out_holds_texture),
+    ("batch: OUT is the cache folder", "data loss", batch_out_is_cache),
+    ("batch: OUT holds the user's summary.csv", "data loss", batch_out_users_summary),
+    ("batch: OUT holds a folder named like an item", "data loss", batch_out_users_slot),
+    ("two batches into one OUT at once", "9 concurrent runs", two_batches_one_out),
     #
     #
     # second round: memory per reader

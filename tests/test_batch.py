@@ -223,7 +223,7 @@ def test_ctrl_c_stops_the_workers_keeps_what_finished_and_a_rerun_does_the_rest(
     assert 1 <= len(done) < 4, stderr
     for folder in done:  # what finished is whole: its material file, maps and verdict
         assert (folder / "verdict.json").is_file() and (folder / "maps" / "material.json").is_file()
-    assert not [p for p in out.rglob("*") if ".partial-" in p.name]  # nothing half-written left behind
+    assert not [p for p in out.rglob("*") if p.name.startswith(".matremap-")]  # nothing half-written left behind
     summary = json.loads((out / "summary.json").read_text())
     assert summary["interrupted"] == 4 - len(done) and summary["exit_code"] == 130
     assert len(summary["items"]) == len(done)

@@ -12,6 +12,11 @@ material, models, route (identity, library, cached or new sweep, fit), the quali
 the verdict (passed, failed, refused, error) and seconds; the page shows each item's source and target
 renders and sorts by any column. The exit status is 0 only when every item passed; otherwise the worst
 one's (:mod:`matremap.errors`).
+
+OUT is the batch's alone: it may not hold an input, a file an input names or the cache, nor files a batch
+did not write (:func:`check_out`); a search of the inputs does not enter it; one batch at a time writes it
+(:func:`batch_lock`); and what a killed batch or worker left there is removed by the next one
+(:func:`clean_leftovers`). SECURITY.md ("Batches") states each rule and the test that holds it.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ import json
 import os
 import re
 import signal
+import stat
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
@@ -35,7 +41,7 @@ from pathlib import Path
 from typing import Any
 
 from matremap import __version__
-from matremap.core.atomic import record_written
+from matremap.core.atomic import MARK, OUTPUT_RECORD, clean_stale, record_written
 from matremap.core.imageio import write_text
 from matremap.errors import EXIT_INTERRUPTED, EXIT_QUALITY, MatremapError
 
@@ -58,6 +64,21 @@ class Item:
     slot: str
 
 
+_SURROGATE = re.compile("[\ud800-\udfff]")
+
+
+def printable(text: str) -> str:
+    """``text`` as valid Unicode, for the summary, the page and the terminal: a byte of a file name that is not
+    UTF-8 (held by Python as a lone surrogate) shown as ``\\xNN``, any other lone surrogate (a material name
+    written with an invalid ``\\u`` escape) as ``\\uXXXX``."""
+
+    def shown(m: re.Match[str]) -> str:
+        code = ord(m.group())
+        return f"\\x{code - 0xDC00:02x}" if 0xDC80 <= code <= 0xDCFF else f"\\u{code:04x}"
+
+    return _SURROGATE.sub(shown, text) if isinstance(text, str) else text
+
+
 @dataclass
 class Row:
     """One line of the summary."""
@@ -77,6 +98,10 @@ class Row:
     thumbnails: dict[str, str] = field(default_factory=dict)
     #: the file holding every converted material of the input (relative to OUT), when one was written
     whole_file: str = ""
+
+    def __post_init__(self) -> None:
+        for name in ("file", "material", "slot", "source_model", "target_model", "route", "reason", "output"):
+            setattr(self, name, printable(getattr(self, name)))
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -121,24 +146,35 @@ class BatchResult:
         )
 
 
-def expand_inputs(paths: Sequence[str | os.PathLike], skipped: list[Path] | None = None) -> list[Path]:
+def expand_inputs(
+    paths: Sequence[str | os.PathLike],
+    skipped: list[Path] | None = None,
+    exclude: Sequence[Path] = (),
+    written: list[Path] | None = None,
+) -> list[Path]:
     """Material files named by ``paths``: files as given, folders searched recursively, glob patterns
     expanded; each file once, in the order found. A path that names nothing is an error. An ``.xml`` file a
     folder or a pattern finds is taken only when it looks like a Mitsuba scene (:func:`looks_like_scene`) and
     no other scene found there includes it (:func:`included_files`): asset folders hold other XML (metadata,
-    licences, exports) and scene parts; those are appended to ``skipped``."""
+    licences, exports) and scene parts; those are appended to ``skipped``. A search never enters the folders
+    ``exclude`` (the batch's OUT, the cache), a folder matremap wrote (:func:`written_by_matremap`; appended to
+    ``written``) or one of matremap's temporary names."""
     from matremap.formats import is_material_file
 
+    fences = [Path(os.path.realpath(e)) for e in exclude]
+    marks: dict[Path, bool] = {}  # folder -> whether matremap wrote it, each looked at once
     found: list[Path] = []
     for raw in paths:
         text = str(raw)
         if any(ch in text for ch in "*?["):
             matches = [Path(m) for m in sorted(glob.glob(text, recursive=True))]
-            files = _scanned([m for m in matches if m.is_file() and is_material_file(m)], skipped)
+            kept = [m for m in matches if not _fenced(m, _glob_base(text), fences, written, marks)]
+            files = _scanned([m for m in kept if m.is_file() and is_material_file(m)], skipped)
             if not files:
                 raise MatremapError(f"{text}: the pattern matches no material file ({SUFFIXES})")
         elif Path(text).is_dir():
-            files = _scanned(sorted(p for p in Path(text).rglob("*") if p.is_file() and is_material_file(p)), skipped)
+            tree = walk_files(Path(text), fences, written)
+            files = _scanned(sorted(p for p in tree if p.is_file() and is_material_file(p)), skipped)
             if not files:
                 raise MatremapError(f"{text}: the folder holds no material file ({SUFFIXES})")
         elif Path(text).is_file():
@@ -147,6 +183,88 @@ def expand_inputs(paths: Sequence[str | os.PathLike], skipped: list[Path] | None
             raise MatremapError(f"{text} not found")
         found += [f for f in files if f.resolve() not in {g.resolve() for g in found}]
     return found
+
+
+#: what a batch keeps in OUT while it runs: locked for the batch's duration (:func:`batch_lock`), and the mark
+#: of a folder a batch wrote
+LOCK_FILE = ".matremap.lock"
+#: the bytes of a file read to decide whether matremap wrote it (a verdict, a summary)
+_SMALL = 1 << 20
+
+
+def written_by_matremap(folder: Path, names: Iterable[str] | None = None) -> bool:
+    """Whether ``folder`` is one matremap wrote: one carrying its output record, a batch's OUT (its lock file, or a
+    batch's ``summary.json``),
+    a batch item's folder (``item.json``) or a remap's output folder (its ``verdict.json``). ``names``: the
+    names of the files in it, when the caller listed them already."""
+    if names is None:
+        try:
+            names = [e.name for e in os.scandir(folder)]
+        except OSError:
+            return False
+    names = set(names)
+    if LOCK_FILE in names or OUTPUT_RECORD in names:
+        return True
+    if ITEM_FILE in names and _json_keys(folder / ITEM_FILE) >= {"key", "row"}:
+        return True
+    if "summary.json" in names and _json_keys(folder / "summary.json") >= {"counts", "items", "exit_code"}:
+        return True
+    return "verdict.json" in names and _json_keys(folder / "verdict.json") >= {"passed", "checks"}
+
+
+def _json_keys(path: Path) -> set[str]:
+    """The keys of the JSON object in a small regular file, else an empty set."""
+    data = read_bounded(path, _SMALL)
+    try:
+        doc = json.loads(data) if data is not None and len(data) < _SMALL else None
+    except ValueError:
+        return set()
+    return set(doc) if isinstance(doc, dict) else set()
+
+
+def _fenced(
+    path: Path, base: Path, fences: Sequence[Path], written: list[Path] | None, marks: dict[Path, bool]
+) -> bool:
+    """Whether ``path``, found under ``base``, lies in a folder a search does not enter (see :func:`expand_inputs`);
+    ``marks``: the folders looked at so far."""
+    real = Path(os.path.realpath(path))
+    if any(real == f or f in real.parents for f in fences):
+        return True
+    inner = path.relative_to(base).parts if path.is_relative_to(base) else ()
+    if any(part.startswith(MARK) for part in inner):
+        return True
+    for depth in range(1, len(inner)):
+        folder = base.joinpath(*inner[:depth])
+        if folder not in marks:
+            marks[folder] = written_by_matremap(folder)
+        if marks[folder]:
+            if written is not None and folder not in written:
+                written.append(folder)
+            return True
+    return False
+
+
+def _glob_base(pattern: str) -> Path:
+    """The folder a glob pattern searches from: its parts before the first one with a wildcard."""
+    parts = Path(pattern).parts
+    fixed = list(itertools.takewhile(lambda part: not any(ch in part for ch in "*?["), parts))
+    return Path(*fixed) if fixed else Path()
+
+
+def walk_files(root: Path, fences: Sequence[Path], written: list[Path] | None = None) -> Iterator[Path]:
+    """The files under ``root`` (folder links not followed), without the folders ``fences`` and, below
+    ``root``, the folders matremap wrote (appended to ``written``) and matremap's temporary names."""
+    for folder, dirs, names in os.walk(root):
+        here = Path(folder)
+        if here != root and written_by_matremap(here, names):
+            dirs.clear()
+            if written is not None:
+                written.append(here)
+            continue
+        dirs[:] = [
+            d for d in dirs if not d.startswith(MARK) and not any(Path(os.path.realpath(here / d)) == f for f in fences)
+        ]
+        yield from (here / n for n in names if not n.startswith(MARK))
 
 
 #: the suffixes a folder or a pattern is searched for, as messages name them
@@ -208,8 +326,20 @@ def _scanned(files: list[Path], skipped: list[Path] | None) -> list[Path]:
     return kept
 
 
-def _slug(text: str) -> str:
-    return re.sub(r"[^A-Za-z0-9._-]+", "_", text).strip("._") or "material"
+#: the longest name of a folder a batch makes (a file's, an item's): with the staging mark
+#: (:func:`matremap.core.atomic.temp_prefix`) in front, well under the 255 bytes file systems allow
+MAX_SLUG = 96
+
+
+def _slug(text: str, prefix: str = "") -> str:
+    """A folder name for ``text``: ``prefix``, then its letters, digits and ``._-``; a longer one cut to
+    :data:`MAX_SLUG` characters, ending in a digest of the whole text (two long names that begin alike stay
+    apart)."""
+    slug = prefix + (re.sub(r"[^A-Za-z0-9._-]+", "_", text).strip("._") or "material")
+    if len(slug) <= MAX_SLUG:
+        return slug
+    digest = hashlib.sha256(text.encode("utf-8", "surrogatepass")).hexdigest()[:10]
+    return f"{slug[: MAX_SLUG - 11]}-{digest}"
 
 
 def plan(files: Sequence[Path], material: str | None = None, unread: dict[Path, str] | None = None) -> list[Item]:
@@ -231,7 +361,7 @@ def plan(files: Sequence[Path], material: str | None = None, unread: dict[Path, 
             unread[f] = str(e)
             continue
         mine = [
-            Item(f, i, name, f"{folder}/{i:03d}-{_slug(name)}" if len(names) > 1 else f"{folder}/{_slug(name)}")
+            Item(f, i, name, f"{folder}/{_slug(name, f'{i:03d}-' if len(names) > 1 else '')}")
             for i, name in enumerate(names)
             if material is None or material in (name, str(i))
         ]
@@ -253,7 +383,7 @@ def file_folders(files: Sequence[Path]) -> dict[Path, str]:
     for f in files:
         stem = _slug(f.name)
         stems[stem] = stems.get(stem, 0) + 1
-        out[f] = stem if stems[stem] == 1 else f"{stem}-{stems[stem]}"
+        out[f] = stem if stems[stem] == 1 else _slug(f"{f.name}-{stems[stem]}")
     return out
 
 
@@ -275,42 +405,108 @@ def _names_in(data: bytes) -> set[str]:
     return names
 
 
+#: the bytes of one file change detection reads: a file larger than this is keyed by its size and
+#: modification time instead of its content, and only its first bytes are searched for file names
+MAX_READ = 256 << 20
+
+
+def read_bounded(path: Path, limit: int) -> bytes | None:
+    """The first ``limit`` + 1 bytes of ``path`` when it is a regular file (a FIFO, a device or a socket is
+    never opened for a blocking read), else None."""
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+    except (OSError, ValueError):
+        return None
+    with os.fdopen(fd, "rb") as f:
+        try:
+            if not stat.S_ISREG(os.fstat(fd).st_mode):
+                return None
+            return f.read(limit + 1)
+        except OSError:
+            return None
+
+
+def _file_digest(h: Any, path: Path) -> None:
+    """Feed ``path``'s content to ``h`` (streamed, at most :data:`MAX_READ` bytes), or its size and modification
+    time when it is larger; what is not a regular file feeds a word saying so."""
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+    except (OSError, ValueError):
+        h.update(b"unreadable")
+        return
+    with os.fdopen(fd, "rb") as f:
+        try:
+            st = os.fstat(fd)
+            if not stat.S_ISREG(st.st_mode):
+                h.update(b"not a regular file")
+            elif st.st_size > MAX_READ:
+                h.update(f"size {st.st_size} modified {st.st_mtime_ns}".encode())
+            else:
+                left = MAX_READ
+                while left > 0 and (chunk := f.read(min(1 << 20, left))):
+                    h.update(chunk)
+                    left -= len(chunk)
+        except OSError:
+            h.update(b"unreadable")
+
+
 class References:
     """The files a material file references, for the key a rerun compares: found by name under the file's own
     folder and the allowed folders (``--allow-path``), and through the material files among them (a Mitsuba
     ``<include>``, a USD sublayer), so that a texture named only in an included file counts. Over-inclusion (a
-    file of the same name that is not used) only makes a rerun redo more. Each folder is listed once."""
+    file of the same name that is not used) only makes a rerun redo more. Each folder is listed once.
 
-    def __init__(self, allow: Sequence[str | os.PathLike] = ()) -> None:
+    Only regular files whose real path (links followed) lies inside those folders count, each read at most
+    :data:`MAX_READ` bytes; the folders ``exclude`` (the batch's OUT, the cache) and folders matremap wrote
+    are not searched."""
+
+    def __init__(self, allow: Sequence[str | os.PathLike] = (), exclude: Sequence[str | os.PathLike] = ()) -> None:
         self.allow = [Path(a).resolve() for a in allow]
+        self.exclude = [Path(os.path.realpath(e)) for e in exclude]
         self._trees: dict[Path, dict[str, list[Path]]] = {}
+        self._files: dict[Path, list[Path]] = {}
         self._digests: dict[Path, str] = {}
 
     def _tree(self, root: Path) -> dict[str, list[Path]]:
         if root not in self._trees:
             index: dict[str, list[Path]] = {}
-            for folder, _, names in os.walk(root):
-                for name in names:
-                    index.setdefault(name, []).append(Path(folder) / name)
+            for path in walk_files(root, self.exclude):
+                index.setdefault(path.name, []).append(path)
             self._trees[root] = index
         return self._trees[root]
 
+    def _confined(self, path: Path, roots: Sequence[Path]) -> Path | None:
+        """``path``'s real path when it is a regular file inside one of ``roots``, outside the excluded folders."""
+        real = Path(os.path.realpath(path))
+        inside = any(real == r or r in real.parents for r in roots)
+        fenced = any(real == e or e in real.parents for e in self.exclude)
+        try:
+            regular = stat.S_ISREG(os.stat(real).st_mode)
+        except OSError:
+            regular = False
+        return real if inside and not fenced and regular else None
+
     def files(self, file: Path) -> list[Path]:
         """``file`` first, then every file it references (see the class), in a fixed order."""
+        if file not in self._files:
+            self._files[file] = self._search(file)
+        return self._files[file]
+
+    def _search(self, file: Path) -> list[Path]:
         from matremap.formats import READERS
 
         roots = list(dict.fromkeys([file.parent.resolve(), *self.allow]))
         seen = {file.resolve(): file}
         queue = [file]
         while queue:
-            try:
-                data = queue.pop(0).read_bytes()
-            except OSError:
+            data = read_bounded(queue.pop(0), MAX_READ)
+            if data is None:
                 continue
             for name in sorted(_names_in(data)):
                 for p in (p for root in roots for p in self._tree(root).get(name, ())):
-                    if p.resolve() not in seen:
-                        seen[p.resolve()] = p
+                    real = self._confined(p, roots)
+                    if real is not None and real not in seen:
+                        seen[real] = p
                         if p.suffix.lower() in READERS:
                             queue.append(p)
         return [file, *sorted(p for p in seen.values() if p != file)]
@@ -320,11 +516,8 @@ class References:
         if file not in self._digests:
             h = hashlib.sha256()
             for p in self.files(file):
-                h.update(p.name.encode())
-                try:
-                    h.update(p.read_bytes())
-                except OSError:
-                    h.update(b"unreadable")
+                h.update(os.fsencode(p.name))
+                _file_digest(h, p)
             self._digests[file] = h.hexdigest()
         return self._digests[file]
 
@@ -369,37 +562,88 @@ def run_batch(
     on Dask instead. ``allow_paths``: folders outside each file's own that its references may point into
     (``--allow-path``). Ctrl-C stops the workers: finished items are kept, the others leave nothing behind
     and are redone by a rerun; the result then says how many were left (``interrupted``, exit status 130)
-    and no whole-file outputs are assembled."""
+    and no whole-file outputs are assembled.
+
+    Before anything is written, OUT is refused (:func:`check_out`) when it is, or holds, an input, a file
+    an input names or the cache, or when it is a folder of other files than a batch's. OUT is locked while
+    the batch runs (:func:`batch_lock`): a second batch into it waits, then redoes nothing the first did."""
     from matremap.dialects import get_model
 
     target = get_model(target).id
+    log = _printable_log(log)
+    if workers is not None and workers < 1:
+        raise MatremapError(f"--workers must be at least 1, got {workers}")
     out = Path(out)
     options = dict(options or {})
     allow = [str(p) for p in allow_paths or ()]
+    fences = _fences(out, options)
     skipped: list[Path] = []
-    files = expand_inputs(paths, skipped)
+    written: list[Path] = []
+    files = expand_inputs(paths, skipped, fences, written)
+    references = References(allow, fences)
+    check_out(out, files, references, fences[1:])
     unread: dict[Path, str] = {}
     items = plan(files, material, unread)
+    keys = {item: item_key(item, target, options, references) for item in items}
+    _notes(log, unread, skipped, written)
     out.mkdir(parents=True, exist_ok=True)
-    rows: dict[Item, Row] = {}
-    todo: list[tuple[Item, str]] = []
-    references = References(allow)
-    for item in items:
-        key = item_key(item, target, options, references)
-        done = _finished(out, item, key)
-        if done is not None:
-            rows[item] = done
-        else:
-            todo.append((item, key))
+    with batch_lock(out, log):
+        clean_leftovers(out, items)
+        rows: dict[Item, Row] = {}
+        todo: list[tuple[Item, str]] = []
+        for item in items:
+            done = _finished(out, item, keys[item])
+            if done is not None:
+                rows[item] = done
+            else:
+                todo.append((item, keys[item]))
+        return _run(
+            out,
+            files,
+            items,
+            unread,
+            rows,
+            todo,
+            target,
+            options,
+            allow,
+            (workers, scheduler, dask_local),
+            log,
+            progress,
+        )
+
+
+def _notes(
+    log: Callable[[str], None], unread: Mapping[Path, str], skipped: Sequence[Path], written: Sequence[Path]
+) -> None:
+    """The lines saying what the batch leaves out: unreadable files, foreign XML, folders matremap wrote."""
     for f, why in unread.items():
         log(f"refused  {f.name}: {why}")
-    if skipped:
-        log(
-            f"note: {len(skipped)} .xml file(s) left out (not Mitsuba scenes, or parts another scene includes): "
-            + ", ".join(map(str, skipped[:3]))
-            + (" ..." if len(skipped) > 3 else "")
-        )
-    with item_executor(workers, scheduler, dask_local, len(todo)) as (executor, desc):
+    for what, found in (
+        (".xml file(s) left out (not Mitsuba scenes, or parts another scene includes)", skipped),
+        ("folder(s) matremap wrote left out", written),
+    ):
+        if found:
+            tail = ", ".join(map(str, found[:3])) + (" ..." if len(found) > 3 else "")
+            log(f"note: {len(found)} {what}: {tail}")
+
+
+def _run(
+    out: Path,
+    files: Sequence[Path],
+    items: Sequence[Item],
+    unread: Mapping[Path, str],
+    rows: dict[Item, Row],
+    todo: Sequence[tuple[Item, str]],
+    target: str,
+    options: Mapping[str, Any],
+    allow: Sequence[str],
+    where: tuple[int | None, str | None, int | None],
+    log: Callable[[str], None],
+    progress: bool,
+) -> BatchResult:
+    """The items of :func:`run_batch` still to do, run; the summary written (OUT locked)."""
+    with item_executor(*where, len(todo)) as (executor, desc):
         log(
             f"batch: {len(items)} material(s) in {len(files) - len(unread)} file(s); {len(rows)} unchanged, "
             f"{len(todo)} to do on {desc}"
@@ -429,6 +673,133 @@ def run_batch(
     return result
 
 
+def _printable_log(log: Callable[[str], None]) -> Callable[[str], None]:
+    """``log`` given each line as valid Unicode (:func:`printable`): file and material names may not be."""
+    return lambda line: log(printable(line))
+
+
+def _fences(out: Path, options: Mapping[str, Any]) -> list[Path]:
+    """The folders no search of a batch enters: OUT first, then the cache folders."""
+    from matremap.core.diskcache import cache_dir
+
+    found = [out, cache_dir()] + ([Path(options["cache"])] if options.get("cache") else [])
+    return [Path(os.path.realpath(f)) for f in found]
+
+
+def _inside(path: Path, folder: Path) -> bool:
+    """Whether the real path of ``path`` is ``folder`` (a real path) or lies in it."""
+    real = Path(os.path.realpath(path))
+    return real == folder or folder in real.parents
+
+
+def check_out(out: Path, files: Sequence[Path], references: References, caches: Sequence[Path] = ()) -> None:
+    """Refuse OUT (one line) before anything is written, when:
+
+    * it is, or holds, an input file, or a file an input names by its path (a texture, an included scene);
+    * it is, holds, or lies in a cache folder (``caches``);
+    * it exists and is not a folder;
+    * it is a folder that holds files and was not written by a batch (:func:`is_batch_out`): a batch writes
+      ``summary.csv`` and a folder per file, which would replace the user's files of those names."""
+    real = Path(os.path.realpath(out))
+    for f in files:
+        if _inside(f, real):
+            raise MatremapError(f"{out} is or holds the input {f}; choose an output folder outside the inputs")
+    for cache in caches:
+        if _inside(cache, real) or _inside(real, cache):
+            raise MatremapError(
+                f"{out} is, holds or lies in the cache folder {cache}; choose an output folder outside it"
+            )
+    if out.exists() and not out.is_dir():
+        raise MatremapError(f"{out} exists and is not a folder; choose an output folder")
+    if not out.is_dir():
+        return
+    held = {name for _, _, names in os.walk(out) for name in names}
+    for doc in [g for f in files for g in references.files(f) if g.suffix.lower() in _readers()]:
+        for named in _named_inside(doc, real, held):
+            raise MatremapError(f"{out} holds {named}, which {doc} names; choose an output folder outside the inputs")
+    with os.scandir(out) as entries:
+        holds = any(entries)
+    if holds and not is_batch_out(out):
+        raise MatremapError(
+            f"{out} holds other files than a matremap batch's output (a batch writes summary.csv and a folder "
+            "per file there); choose a new or empty output folder"
+        )
+
+
+def _readers() -> Mapping[str, Any]:
+    from matremap.formats import READERS
+
+    return READERS
+
+
+def is_batch_out(out: Path) -> bool:
+    """Whether the folder ``out`` is a batch's output: it holds the batch's lock file (:data:`LOCK_FILE`,
+    made before anything else) or a batch's ``summary.json``."""
+    return (out / LOCK_FILE).is_file() or _json_keys(out / "summary.json") >= {"counts", "items", "exit_code"}
+
+
+#: what separates a path from the text around it (as :data:`_NAME_DELIMITERS`, path separators aside)
+_PATH_DELIMITERS = re.compile(rb"[\x00-\x1f\"'<>@=,;()\[\]{}|*?]+")
+
+
+def _named_inside(file: Path, folder: Path, held: set[str]) -> Iterator[Path]:
+    """The files inside ``folder`` (a real path) that ``file`` names by a path, relative to its own folder or
+    absolute; ``held``: the names of the files ``folder`` holds (only those names are looked at)."""
+    from urllib.parse import unquote
+
+    data = read_bounded(file, MAX_READ) or b""
+    for token in _PATH_DELIMITERS.split(data):
+        text = unquote(token.strip().decode("utf-8", "replace")).removeprefix("file://")
+        name = text.replace("\\", "/").rsplit("/", 1)[-1]
+        if not text or len(text) > 4096 or name not in held:
+            continue
+        path = Path(text) if os.path.isabs(text) else file.parent / text
+        if path.is_file() and _inside(path, folder):
+            yield path
+
+
+@contextmanager
+def batch_lock(out: Path, log: Callable[[str], None]) -> Iterator[None]:
+    """OUT locked for the block (``flock`` of :data:`LOCK_FILE` in it, released by the system however the
+    process ends). A second batch into the same OUT waits for the first (one line says so; Ctrl-C stops
+    the wait), then finds the first one's items done and redoes none of them: waiting, not refusing, so that
+    both runs end with the whole result and its exit status. Without ``fcntl`` (Windows) nothing is locked."""
+    try:
+        import fcntl
+    except ImportError:
+        yield
+        return
+    path = out / LOCK_FILE
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0), 0o644)
+    except OSError as e:
+        raise MatremapError(f"cannot lock {out} ({path}: {e.strerror or e}); choose another output folder") from None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 32, 0).decode("ascii", "replace").strip() or "?"
+            log(f"waiting: another batch (process {holder}) is writing {out}; this one continues when it ends")
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        yield
+    finally:
+        os.close(fd)
+
+
+def clean_leftovers(out: Path, items: Iterable[Item]) -> None:
+    """Put right what dead runs left in OUT and in the folders of ``items`` (their staging and temporary
+    names; :func:`matremap.core.atomic.clean_stale`): a batch whose process or workers were killed."""
+    folders = [Path()]
+    for item in items:
+        slot = Path(item.slot)
+        folders += [*reversed(slot.parents[:-1]), slot]
+    for folder in dict.fromkeys(out / f for f in folders):
+        if folder.is_dir():
+            clean_stale(folder)
+
+
 def _in_order(
     files: Sequence[Path], items: Sequence[Item], rows: Mapping[Item, Row], unread: Mapping[Path, str]
 ) -> list[Row]:
@@ -456,15 +827,17 @@ class _NotATerminal:
         return getattr(self._stream, name)
 
 
-def _worker_init() -> None:
-    """A local worker leaves Ctrl-C to the batch, which stops the workers itself, and draws no progress
-    bars of its own (the batch's is the one on the terminal)."""
+def _worker_init(parent: int) -> None:
+    """A local worker leaves Ctrl-C to the batch, which stops the workers itself, dies with the batch's
+    process ``parent`` however that ends (:func:`matremap.sweep.executors.die_with_parent`), and draws no
+    progress bars of its own (the batch's is the one on the terminal)."""
     import sys
 
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    sys.stderr = _NotATerminal(sys.stderr)
-    from matremap.sweep.executors import quiet_progress_lock
+    from matremap.sweep.executors import die_with_parent, quiet_progress_lock
 
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    die_with_parent(parent)
+    sys.stderr = _NotATerminal(sys.stderr)
     quiet_progress_lock()
 
 
@@ -486,7 +859,7 @@ def item_executor(
     n = max(1, min(workers or os.cpu_count() or 1, todo or 1))
     from matremap.sweep.executors import process_pool
 
-    pool = process_pool(n, _worker_init)
+    pool = process_pool(n, _worker_init, (os.getpid(),))
     pool.slots = n  # type: ignore[attr-defined]
     try:
         yield pool, f"{n} local worker process{'es' if n > 1 else ''}"
@@ -560,23 +933,25 @@ def stop_local_workers(executor: Executor) -> None:
     closing their client and cluster.)"""
     import multiprocessing
 
-    for child in multiprocessing.active_children():
+    children = multiprocessing.active_children()
+    for child in children:
         if child.pid:
             try:
                 os.kill(child.pid, signal.SIGKILL)
             except OSError:
                 continue
+    for child in children:  # reaped: a process that is gone no longer owns its staging folders
+        child.join(timeout=5)
 
 
 def discard_partial(out: Path, items: Iterable[Item]) -> None:
-    """Remove what stopped items left: the staging folders (``.<slot>.partial-*``, and ``.<slot>.old-*`` of a
-    replacement cut short, see :func:`matremap.core.atomic.staged_folder`) of workers that were killed."""
-    import shutil
-
+    """Remove what stopped items left once their workers are gone: every staging folder, partial folder and
+    temporary file of a dead matremap process in their folders (:func:`clean_leftovers`), and a file's folder
+    made for them alone and left empty."""
+    items = list(items)
+    clean_leftovers(out, items)
     for item in items:
         folder = out / item.slot
-        for stage in [*folder.parent.glob(f".{folder.name}.partial-*"), *folder.parent.glob(f".{folder.name}.old-*")]:
-            shutil.rmtree(stage, ignore_errors=True)
         if folder.parent != out and folder.parent.is_dir() and not any(folder.parent.iterdir()):
             folder.parent.rmdir()  # the file's folder, made for this item alone
 

@@ -51,18 +51,41 @@ class InlineExecutor(Executor):
 
 
 def _ignore_sigint(parent: int | None = None) -> None:
-    """Pool workers leave Ctrl-C to the parent, which stops the sweep cleanly, and die with it (Linux:
-    PR_SET_PDEATHSIG; a SIGKILLed sweep's workers otherwise waited for work for ever)."""
+    """Pool workers leave Ctrl-C to the parent, which stops the sweep cleanly, and die with it
+    (:func:`die_with_parent`; a SIGKILLed sweep's workers otherwise waited for work for ever)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     quiet_progress_lock()
-    if parent is not None and sys.platform.startswith("linux"):
+    if parent is not None:
+        die_with_parent(parent)
+
+
+#: how often a worker looks whether its parent is still there (where the system cannot tell it)
+PARENT_POLL_SECONDS = 1.0
+
+
+def die_with_parent(parent: int) -> None:
+    """End this worker process when ``parent`` (the process that started it) ends, however it ends (SIGKILL,
+    SIGTERM, a crash): on Linux the kernel sends SIGKILL at once (``PR_SET_PDEATHSIG``); everywhere a daemon
+    thread checks every :data:`PARENT_POLL_SECONDS` whether the parent is still this process's parent (an
+    orphan is adopted by another process) and ends the process if not, even in the middle of a task."""
+    import threading
+    import time
+
+    if sys.platform.startswith("linux"):
         import ctypes
 
         with contextlib.suppress(OSError, AttributeError):
             ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # 1: PR_SET_PDEATHSIG
-        if os.getppid() != parent:  # the parent died before that took effect
-            os._exit(1)
+    if os.getppid() != parent:  # the parent died before that took effect
+        os._exit(1)
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(PARENT_POLL_SECONDS)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="matremap-parent-watch", daemon=True).start()
 
 
 @contextmanager
