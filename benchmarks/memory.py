@@ -15,7 +15,7 @@ reported: ``tree`` is the sum of the resident sets of the command and its worker
 psutil every 20 ms; ``main`` is the maximum resident set of the command's own process (``time -v``).
 
     python benchmarks/memory.py --sizes 2048 4096 8192 16384
-    python benchmarks/memory.py --src /work/main/src --sizes 2048 4096 8192 16384   # another checkout
+    python benchmarks/memory.py --src OTHER/src --sizes 2048 4096 8192 16384   # another checkout
 
 Exit codes are shown when not 0 (3 is a remap whose quality gate failed: files written).
 """

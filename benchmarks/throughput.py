@@ -1,10 +1,11 @@
-"""Throughput before and after (issue 17), measured side by side in one run.
+"""Throughput before and after, measured side by side in one run.
 
-Every measurement runs in a fresh process, once with the "before" sources (default: the main checkout,
-``/work/main/src``) and once with this checkout's, interleaved (before, after, before, after, ...) so that
-both see the same machine load; the table shows medians over ``--repeat`` runs.
+Every measurement runs in a fresh process, once with the "before" sources (``--before``: another checkout's
+``src`` folder, e.g. one made with ``git worktree add``; default: this checkout's own, which measures the noise)
+and once with this checkout's, interleaved (before, after, before, after, ...) so that both see the same
+machine load; the table shows medians over ``--repeat`` runs.
 
-    python benchmarks/throughput.py [--before /work/main/src] [--repeat 3] [--jobs fit grid ...]
+    python benchmarks/throughput.py [--before OTHER/src] [--repeat 3] [--jobs fit grid ...]
         [--mitsuba-points 1000] [--cycles-points 24]
 
 Jobs (each prints one JSON line when run as ``--job NAME``):
@@ -338,7 +339,11 @@ def table(results: dict[str, dict[str, list[dict[str, Any]]]]) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--before", default="/work/main/src", help="the sources to compare with")
+    ap.add_argument(
+        "--before",
+        default=str(Path(__file__).resolve().parents[1] / "src"),
+        help="the sources to compare with (default: this checkout's own)",
+    )
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--jobs", nargs="+", choices=JOBS, default=list(JOBS))
     ap.add_argument("--mitsuba-points", type=int, default=1000)
