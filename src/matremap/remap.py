@@ -489,6 +489,14 @@ class RemapJob:
     within: Any = None
 
 
+def checked_job(job: RemapJob) -> RemapJob:
+    """``job`` once its user-given values are known good for its target (each ``fix`` a parameter or option
+    of the target, in its bounds or among its choices): refused here, before any fit, rather than by every
+    fit of a sweep."""
+    Material.create(job.target).with_params(job.fix)
+    return job
+
+
 def sweep_probe(job: RemapJob) -> tuple[Scene | None, str]:
     """The probe (None: the paper's default point probe) and objective a sweep for ``job`` fits under:
     ``auto`` sweeps under the point probe (an environment sweep costs about ten times as much); the
@@ -549,6 +557,7 @@ def remap(
     :func:`matremap.svbrdf.convert.convert`): memory does not grow with the map size. The result carries
     the gate's verdict; it is not raised here."""
     job = RemapJob(get_model(target_model).id, **{k: v for k, v in options.items() if v is not None or k == "scene"})
+    checked_job(job)
     if write is not None:
         check_material_file_name(write, job.target)
     with texel_limit(job.max_texels):
@@ -1336,7 +1345,9 @@ def _remap_file(
     if out.resolve() == p.resolve().parent:
         raise MatremapError(f"{out} is the input file's folder; choose another output folder")
     name = _output_name(p, target, asset.format, write, out, log)
-    job = RemapJob(target, dict(fix or {}), **{k: v for k, v in options.items() if v is not None or k == "scene"})
+    job = checked_job(
+        RemapJob(target, dict(fix or {}), **{k: v for k, v in options.items() if v is not None or k == "scene"})
+    )
     job = anisotropic_probe(job, asset.model, log)
     job = same_distribution(job, asset.model, asset.constants, log)
     kept = asset.format in ("gltf", "mitsuba-xml") and target == asset.model
