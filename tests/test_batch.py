@@ -458,6 +458,9 @@ def test_a_folder_of_public_assets_converts_in_one_command(tmp_path, capsys, mon
 
     pytest.importorskip("pygltflib", reason="pip install pygltflib")
     pytest.importorskip("MaterialX", reason="pip install materialx")
+    pytest.importorskip(
+        "mitsuba", reason="a Mitsuba 3 roughplastic source is drawn by Mitsuba 3: pip install -e '.[mitsuba]'"
+    )
     monkeypatch.setenv("MATREMAP_CACHE", str(tmp_path / "cache"))
     src = tmp_path / "assets"
     for name in PUBLIC:
