@@ -431,6 +431,11 @@ def cmd_remap(args: argparse.Namespace) -> int:
         user_map_set(args.maps, args.source, args.allow_path)  # its files lie where it may name them
     if args.write is not None:
         output_inside(args.output, args.write)
+        if Path(args.write).parent != Path("."):
+            raise MatremapError(
+                f"--write {args.write}: the material file is written in OUT itself, not in a folder of it; give a "
+                f"file name (--write {Path(args.write).name})"
+            )
     options = remap_options(args)
     options.update(workers=args.workers, force=args.force, log=lambda m: print(m, file=sys.stderr))
     if material_file:

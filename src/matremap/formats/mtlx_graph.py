@@ -38,14 +38,16 @@ name and the shader input it feeds.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NoReturn
 
 import numpy as np
 
-from matremap.errors import MatremapError
+from matremap.errors import MatremapError, not_a_file, shorten
 from matremap.formats.bake import MAX_SIDE, sample, texel_grid
 
 #: channels of the MaterialX data types the evaluator handles
@@ -54,8 +56,11 @@ CHANNELS = {"float": 1, "integer": 1, "boolean": 1, "vector2": 2, "vector3": 3, 
 PROBE = 16
 #: the side of a map baked from a graph that varies over UV without reading any image
 PROCEDURAL_SIDE = 1024
-#: how deep node connections may nest before the graph is refused (a cycle, or a hostile document)
-MAX_DEPTH = 200
+#: how deep connections (to a node, a nodegraph or an interface input) may nest before the graph is refused
+#: (a cycle, or a hostile document); evaluation recurses, with the room this depth needs
+MAX_DEPTH = 1000
+#: the most Python frames one connection takes while evaluating (port, input, a node and its inputs)
+FRAMES_PER_HOP = 12
 #: MaterialX address mode -> :mod:`matremap.formats.bake` wrap mode
 WRAP = {"periodic": "repeat", "clamp": "clamp", "mirror": "mirror", "constant": "border"}
 SRGB = ("srgb_texture",)
@@ -211,7 +216,7 @@ class GraphEvaluator:
         """Probe ``root`` (a function evaluating the input in the current pass): its constant value, or the
         images it reads and the size to bake it at. Raises MatremapError naming any unsupported node."""
         self._start(_Pass((PROBE, PROBE), True), feeding)
-        with np.errstate(all="ignore"):
+        with np.errstate(all="ignore"), deep_stack():
             value = self._array(root(), feeding)
         uses = self._pass.uses
         if value.ndim == 1:
@@ -226,7 +231,7 @@ class GraphEvaluator:
     def bake(self, root: Callable[[], Value], feeding: str, size: tuple[int, int]) -> np.ndarray:
         """``root`` evaluated on a map of ``size`` (height, width): linear float32 [H, W, C]."""
         self._start(_Pass(size, False), feeding)
-        with np.errstate(all="ignore"):
+        with np.errstate(all="ignore"), deep_stack():
             value = self._array(root(), feeding)
         return np.ascontiguousarray(np.broadcast_to(value, (*size, value.shape[-1])), dtype=np.float32)
 
@@ -242,7 +247,19 @@ class GraphEvaluator:
 
     def port(self, el: Any, typ: str, scope: Scope) -> Value:
         """The value of an input or output element ``el`` in ``scope``: its interface input, the node or
-        nodegraph output it connects to, or its own value."""
+        nodegraph output it connects to, or its own value. Refused past :data:`MAX_DEPTH` nested connections."""
+        if self._pass.depth >= MAX_DEPTH:
+            raise MatremapError(
+                f"{self.path}: the graph feeding {self._feeding} nests connections deeper than {MAX_DEPTH} (or "
+                f"loops); matremap evaluates graphs up to {MAX_DEPTH} connections deep"
+            )
+        self._pass.depth += 1
+        try:
+            return self._port(el, typ, scope)
+        finally:
+            self._pass.depth -= 1
+
+    def _port(self, el: Any, typ: str, scope: Scope) -> Value:
         iface = el.getAttribute("interfacename")
         if iface:
             if scope.interface is None:
@@ -334,16 +351,8 @@ class GraphEvaluator:
         key = (id(scope), node.getNamePath(), output or "")
         if key in self._pass.memo:
             return self._pass.memo[key]
-        if self._pass.depth >= MAX_DEPTH:
-            raise MatremapError(
-                f"{self.path}: the graph feeding {self._feeding} nests deeper than {MAX_DEPTH} nodes (or loops)"
-            )
-        self._pass.depth += 1
-        try:
-            primitive = PRIMITIVES.get(node.getCategory())
-            value = primitive(self, node, output, scope) if primitive else self._expand(node, output, scope)
-        finally:
-            self._pass.depth -= 1
+        primitive = PRIMITIVES.get(node.getCategory())
+        value = primitive(self, node, output, scope) if primitive else self._expand(node, output, scope)
         self._pass.memo[key] = value
         return value
 
@@ -416,6 +425,10 @@ class GraphEvaluator:
         """The image file ``el`` reads as it is stored, when it does: an ``image``, ``tiledimage`` or
         ``gltf_image`` node at UV0 with no transform (tiling 1, offset 0, ...), optionally behind an
         ``extract`` or ``separate`` node that picks one channel; None for anything else."""
+        with deep_stack():
+            return self._plain_image(el, feeding)
+
+    def _plain_image(self, el: Any, feeding: str) -> PlainImage | None:
         self._start(_Pass((PROBE, PROBE), True), feeding)
         found = self.upstream(el, self.doc_scope)
         if found is None:
@@ -476,6 +489,10 @@ class GraphEvaluator:
         through a ``normalmap`` node (or a library node built on one, ``gltf_normalmap``): a function
         evaluating it (``scale`` applied to x and y, Standard Nodes 1.39 §normalmap) and, when the
         map is an image file used as it is, that image. None when nothing is connected."""
+        with deep_stack():
+            return self._normal_map(el, feeding)
+
+    def _normal_map(self, el: Any, feeding: str) -> tuple[Callable[[], Value], PlainImage | None] | None:
         self._start(_Pass((PROBE, PROBE), True), feeding)
         found = self.upstream(el, self.doc_scope)
         for _ in range(MAX_DEPTH):
@@ -556,10 +573,12 @@ class GraphEvaluator:
         that keeps each of its texels (its size times the UV derivatives of the lookup)."""
         from matremap.svbrdf.textures import image_info
 
+        if not f.path.is_file() and f.path.exists():
+            raise MatremapError(f"{self.path}: {not_a_file(f.path, f'texture {shorten(f.text)} for {self._feeding}')}")
         if not f.path.is_file():
             raise MatremapError(
-                f"{self.path}: texture {f.text} for {self._feeding} not found at {f.path}; put it beside the "
-                f"document or fix its file input"
+                f"{self.path}: texture {shorten(f.text)} for {self._feeding} not found at {f.path}; put it beside "
+                f"the document or fix its file input"
             )
         self.colorspace(f, node.getType(), node.getName())
         info = image_info(f.path, "linear", colour=False)
@@ -603,6 +622,23 @@ class GraphEvaluator:
         img = self._images[key]
         n = CHANNELS[typ]
         return img if img.shape[-1] == n else fit_image(img, n)
+
+
+@contextmanager
+def deep_stack() -> Iterator[None]:
+    """Room on Python's stack for an evaluation :data:`MAX_DEPTH` connections deep (the interpreter's
+    recursion limit raised for the moment, never lowered; evaluation is plain Python calls, which take
+    no C stack)."""
+    depth = 0
+    frame: Any = sys._getframe()
+    while frame is not None and depth < 100_000:
+        frame, depth = frame.f_back, depth + 1
+    before = sys.getrecursionlimit()
+    sys.setrecursionlimit(max(before, depth + MAX_DEPTH * FRAMES_PER_HOP + 200))
+    try:
+        yield
+    finally:
+        sys.setrecursionlimit(before)
 
 
 def fit_image(img: np.ndarray, n: int) -> np.ndarray:
