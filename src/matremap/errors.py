@@ -207,8 +207,7 @@ def no_space(e: BaseException, writes: Sequence[str | os.PathLike[str]] = ()) ->
     where = f"the disk (or your quota) holding {named} is full" if folders else "the disk is full"
     reason = "database or disk is full" if full_db else (getattr(e, "strerror", None) or str(e))
     return NoSpace(
-        f"{where} ({reason}); free space there, or write elsewhere (-o, --db, MATREMAP_CACHE for the cache), "
-        "then rerun"
+        f"{where} ({reason}); free space there, or write elsewhere (-o, --db, MATREMAP_CACHE for the cache), then rerun"
     )
 
 

@@ -160,11 +160,11 @@ def parse_value(text: str, typ: str, where: str) -> Value:
     try:
         nums = [float(x) for x in text.replace(",", " ").split()]
     except ValueError:
-        raise MatremapError(f"{where}: value {text!r} is not a {typ}") from None
+        raise MatremapError(f"{where}: value {shorten(text)!r} is not a {typ}") from None
     if len(nums) == 1 and n > 1:
         nums = nums * n
     if len(nums) != n or not all(math.isfinite(x) for x in nums):
-        raise MatremapError(f"{where}: value {text!r} is not a {typ} ({n} finite number(s))")
+        raise MatremapError(f"{where}: value {shorten(text)!r} is not a {typ} ({n} finite number(s))")
     return np.array(nums, dtype=np.float64)
 
 
