@@ -136,6 +136,10 @@ class Scope:
     interface: Callable[[str, str], Value] | None
     label: str
     owner: tuple[Any, Scope] | None = None  # for a library definition: the node it implements, and its scope
+    #: interface values already evaluated (name, type) -> value, while the scope is being evaluated
+    given: dict[tuple[str, str], Value] = field(default_factory=dict)
+    #: (node name, output) -> how many connections in the graph read it; None until counted
+    readers: dict[tuple[str, str], int] | None = None
 
 
 @dataclass
@@ -143,6 +147,8 @@ class _Pass:
     size: tuple[int, int]
     probe: bool
     memo: dict[tuple[int, str, str], Value] = field(default_factory=dict)
+    #: memo key -> how many more reads of it are expected (it is dropped after the last)
+    left: dict[tuple[int, str, str], int] = field(default_factory=dict)
     uses: list[ImageUse] = field(default_factory=list)
     scopes: list[Scope] = field(default_factory=list)
     depth: int = 0
@@ -286,13 +292,17 @@ class GraphEvaluator:
         out = graph.getOutput(output) if output else (graph.getOutputs() or [None])[0]
         if out is None:
             raise MatremapError(f"{self.path}: nodegraph {graph.getName()!r} has no output {output!r}")
-        return self.port(out, typ or out.getType(), self.graph_scope(graph))
+        scope = self.graph_scope(graph)
+        try:
+            return self.port(out, typ or out.getType(), scope)
+        finally:
+            scope.given.clear()  # its interface values are not read again
 
     def graph_scope(self, graph: Any) -> Scope:
         """The scope of a document-level nodegraph: its nodes, and its own inputs as its interface."""
 
         def interface(name: str, typ: str) -> Value:
-            return self._graph_interface(graph, name, typ)
+            return self._given(scope, name, typ, lambda: self._graph_interface(graph, name, typ))
 
         scope = Scope(graph, interface, f"nodegraph {graph.getName()!r}")
         self._pass.scopes.append(scope)
@@ -348,13 +358,44 @@ class GraphEvaluator:
 
     def node_output(self, node: Any, output: str, scope: Scope) -> Value:
         """Output ``output`` of ``node`` (its only output when empty), memoised per pass."""
+        memo, left = self._pass.memo, self._pass.left
         key = (id(scope), node.getNamePath(), output or "")
-        if key in self._pass.memo:
-            return self._pass.memo[key]
+        if key in memo:
+            value = memo[key]
+            left[key] -= 1
+            if left[key] <= 0:  # its last reader: a texture is not held longer than it is needed
+                del memo[key], left[key]
+            return value
         primitive = PRIMITIVES.get(node.getCategory())
         value = primitive(self, node, output, scope) if primitive else self._expand(node, output, scope)
-        self._pass.memo[key] = value
+        readers = self._readers(scope).get((node.getName(), output or ""), 1)
+        if readers > 1:
+            memo[key], left[key] = value, readers - 1
         return value
+
+    def _readers(self, scope: Scope) -> dict[tuple[str, str], int]:
+        """How many connections of ``scope``'s graph read each (node, output): a value read once is not
+        kept (a long chain holds one texture at a time), one read more often is kept until its last read."""
+        if scope.readers is None:
+            counts: dict[tuple[str, str], int] = {}
+            graph = scope.graph
+            ports = [p for n in graph.getNodes() for p in n.getInputs()] + list(graph.getOutputs())
+            if graph is self.doc:
+                ports += [p for g in graph.getNodeGraphs() for p in g.getInputs()]
+            for p in ports:
+                name = p.getAttribute("nodename")
+                if name:
+                    k = (name, p.getAttribute("output"))
+                    counts[k] = counts.get(k, 0) + 1
+            scope.readers = counts
+        return scope.readers
+
+    def _given(self, scope: Scope, name: str, typ: str, evaluate: Callable[[], Value]) -> Value:
+        """Interface input ``name`` of ``scope``, evaluated once while the scope is evaluated."""
+        key = (name, typ)
+        if key not in scope.given:
+            scope.given[key] = evaluate()
+        return scope.given[key]
 
     def _expand(self, node: Any, output: str, scope: Scope) -> Value:
         """A node that MaterialX's library implements as a node graph, evaluated through that graph."""
@@ -367,15 +408,22 @@ class GraphEvaluator:
         out = impl.getOutput(output) if output else (impl.getOutputs() or [None])[0]
         if out is None:
             raise MatremapError(f"{self.path}: node {node.getName()!r} has no output {output!r}")
-        inner = Scope(impl, self._instance(node, scope), "its library definition", (node, scope))
+        inner = Scope(impl, None, "its library definition", (node, scope))
+        inner.interface = self._instance(node, scope, inner)
         self._pass.scopes.append(inner)
-        return self.port(out, out.getType(), inner)
+        try:
+            return self.port(out, out.getType(), inner)
+        finally:
+            inner.given.clear()  # its interface values are not read again
 
-    def _instance(self, node: Any, scope: Scope) -> Callable[[str, str], Value]:
-        """The interface of a library node's implementation graph: the instance node's inputs."""
+    def _instance(self, node: Any, scope: Scope, inner: Scope | None = None) -> Callable[[str, str], Value]:
+        """The interface of a library node's implementation graph ``inner``: the instance node's inputs
+        (evaluated once while ``inner`` is, when given)."""
 
         def interface(name: str, typ: str) -> Value:
-            return self.input(node, name, typ, scope)
+            if inner is None:
+                return self.input(node, name, typ, scope)
+            return self._given(inner, name, typ, lambda: self.input(node, name, typ, scope))
 
         return interface
 
