@@ -347,3 +347,16 @@ def test_one_line_is_short_printable_and_keeps_the_fix():
     hidden = "cannot write /t/.matremap-partial-123x456-out-ab_d5fgh/a/c.gltf and /t/.matremap-tmp-1-m-abcdefgh.png"
     assert one_line(hidden) == "cannot write /t/out/a/c.gltf and /t/m.png"
     assert shorten("y" * 1000).count("y") < 100
+
+
+def test_gltf_fifo_image_is_named_a_fifo(tmp_path):
+    sys.path.insert(0, str(TESTS.parent / "benchmarks"))
+    try:
+        from hostile_inputs import textured_gltf
+    finally:
+        sys.path.pop(0)
+    src = textured_gltf(tmp_path / "asset", "base.png")
+    (tmp_path / "asset" / "base.png").unlink()
+    os.mkfifo(tmp_path / "asset" / "base.png")
+    with pytest.raises(MatremapError, match="is a FIFO"):
+        read_asset(src)

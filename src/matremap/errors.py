@@ -188,7 +188,8 @@ def system_error(e: BaseException, writes: Sequence[str | os.PathLike[str]] = ()
         reason = e.strerror or str(e)
         hidden = any(part.startswith(_MARK) for part in path.parts)
         if hidden or _under(path, writes):
-            return MatremapError(f"cannot write {shown(visible_folder(path) if hidden else path)}: {reason}")
+            where = shown(visible_folder(path) if hidden else path)
+            return MatremapError(f"cannot write {where}: {reason}; write into a folder you may write (-o)")
         return MatremapError(f"cannot read {shown(path)}: {reason}")
     return None
 
