@@ -12,9 +12,11 @@ code  meaning
 3     converted, but the result failed the quality gate (:class:`QualityGateFailed`): the files are in
       the output folder and its report says FAILED and why
 4     a renderer or the environment failed (:class:`RendererUnavailable`): not installed, crashed,
-      timed out; nothing was written and nothing was cached, so a retry after the fix starts afresh
+      timed out; or the disk or quota is full (:class:`NoSpace`); nothing was written and nothing was
+      cached, so a retry after the fix starts afresh
 70    an internal error (a bug, not the input): one line naming the exception; ``matremap --debug ...``
-      shows the traceback
+      shows the traceback (what the system raised -- a refused file, a full disk, memory -- is mapped
+      by :func:`system_error` instead)
 130   interrupted
 ====  ========================================================================================
 """
