@@ -233,6 +233,192 @@ def mitsuba_external_entity(tmp: Path) -> str:
     return classify(cli(["remap", "s.xml", "--to", "mitsuba06:diffuse", "-o", "out"], tmp), tmp / "out")
 
 
+# -- second round: expansion bounds, clean lines instead of exit 70, messages ------------------------------
+
+
+def refused_with(p: subprocess.CompletedProcess[str], out: Path, says: str = "", expect: str = "refused") -> str:
+    """:func:`classify`, then the line itself: one line on stderr after any progress, at most 700
+    characters, no hidden temporary name, and saying ``says``."""
+    outcome = classify(p, out, expect)
+    if outcome not in ("refused", "handled"):
+        return outcome
+    line = (p.stderr.strip().splitlines() or [""])[-1]
+    if len(line) > 700:
+        return f"{outcome}, but a {len(line):,}-character line"
+    if ".matremap-" in line:
+        return f"{outcome}, but the line names a hidden temporary folder"
+    if says and says not in line:
+        return f"{outcome}, but the line does not say {says!r}"
+    return outcome
+
+
+def cli_patched(setup: str, args: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
+    """The command line in a fresh process after ``setup`` (Python) ran in it: a fault injected where no
+    real one can be made here (a full disk, a folder the system refuses to root)."""
+    env = {**os.environ, "MATREMAP_CACHE_DIR": str(cwd / "cache"), "MATREMAP_CACHE": str(cwd / "cache")}
+    code = f"{setup}\nimport sys\nfrom matremap.cli import main\nsys.exit(main({args!r}))\n"
+    p = subprocess.run([sys.executable, "-c", code], cwd=cwd, env=env, capture_output=True, text=True, timeout=300)
+    LAST[0] = (p.stderr.strip().splitlines() or [""])[-1].replace(str(cwd), "T")
+    return p
+
+
+def mtlx_chain(length: int, value: str = "0.0001, 0.0001, 0.0001") -> str:
+    """A MaterialX document whose base colour is a chain of ``length`` nodes: a constant, then adds."""
+    nodes = ['<constant name="n0" type="color3"><input name="value" type="color3" value="0.2, 0.3, 0.4"/></constant>']
+    nodes += [
+        f'<add name="n{i}" type="color3"><input name="in1" type="color3" nodename="n{i - 1}"/>'
+        f'<input name="in2" type="color3" value="{value}"/></add>'
+        for i in range(1, length)
+    ]
+    return (
+        '<?xml version="1.0"?>\n<materialx version="1.39">' + "".join(nodes) + '<standard_surface name="s" '
+        f'type="surfaceshader"><input name="base_color" type="color3" nodename="n{length - 1}"/></standard_surface>'
+        '<surfacematerial name="mat" type="material"><input name="surfaceshader" type="surfaceshader" nodename="s"/>'
+        "</surfacematerial></materialx>\n"
+    )
+
+
+def remap_mtlx(tmp: Path, data: bytes | str, expect: str = "refused", says: str = "", extra: tuple = ()) -> str:
+    (tmp / "m.mtlx").write_bytes(data.encode() if isinstance(data, str) else data)
+    p = cli(["remap", "m.mtlx", "--to", "gltf:metal-rough", "-o", "out", *extra], tmp)
+    return refused_with(p, tmp / "out", says, expect)
+
+
+def mitsuba_default_bomb(tmp: Path) -> str:
+    defaults = '<default name="d0" value="xxxxxxxx"/>' + "".join(
+        f'<default name="d{i}" value="$d{i - 1}$d{i - 1}"/>' for i in range(1, 30)
+    )
+    (tmp / "s.xml").write_text(
+        f'<scene version="3.0.0">{defaults}<bsdf type="diffuse" id="x"><rgb name="reflectance" value="$d29"/>'
+        "</bsdf></scene>"
+    )
+    p = cli(["remap", "s.xml", "--to", "mitsuba06:diffuse", "-o", "out"], tmp, timeout=200)
+    return refused_with(p, tmp / "out", "characters")
+
+
+def mitsuba_include_fan_out(tmp: Path) -> str:
+    for level in range(7):
+        inner = "".join(f'<include filename="f{level + 1}.xml"/>' for _ in range(8))
+        (tmp / f"f{level}.xml").write_text(f'<scene version="3.0.0">{inner}</scene>')
+    (tmp / "f7.xml").write_text('<scene version="3.0.0"><default name="z" value="1"/></scene>')
+    (tmp / "s.xml").write_text('<scene version="3.0.0"><include filename="f0.xml"/><bsdf type="diffuse"/></scene>')
+    p = cli(["remap", "s.xml", "--to", "mitsuba06:diffuse", "-o", "out"], tmp, timeout=200)
+    return refused_with(p, tmp / "out", "<include>")
+
+
+def mtlx_chain_200(tmp: Path) -> str:
+    return remap_mtlx(tmp, mtlx_chain(200), expect="0")
+
+
+def mtlx_chain_5000(tmp: Path) -> str:
+    return remap_mtlx(tmp, mtlx_chain(5000), says="deeper than")
+
+
+def mtlx_utf8_bom(tmp: Path) -> str:
+    return remap_mtlx(tmp, b"\xef\xbb\xbf" + mtlx_chain(2).encode(), expect="0")
+
+
+def mtlx_utf16(tmp: Path) -> str:
+    return remap_mtlx(tmp, mtlx_chain(2).replace("?>", ' encoding="UTF-16"?>', 1).encode("utf-16"), expect="0")
+
+
+def mtlx_huge_value(tmp: Path) -> str:
+    return remap_mtlx(tmp, mtlx_chain(2, "9" * 1_000_000 + "x"), says="characters cut")
+
+
+def mtlx_write_subfolder(tmp: Path) -> str:
+    """Refused before any work: the refusal is the only line (no fit ran first)."""
+    (tmp / "m.mtlx").write_text(mtlx_chain(2))
+    p = cli(["remap", "m.mtlx", "--to", "gltf:metal-rough", "-o", "out", "--write", "a/b/c.gltf"], tmp)
+    outcome = refused_with(p, tmp / "out", "--write c.gltf")
+    return outcome if len(p.stderr.strip().splitlines()) <= 1 else f"{outcome}, but only after the work"
+
+
+def fifo_texture(tmp: Path) -> str:
+    os.mkfifo(tmp / "tex.png")
+    doc = mtlx_chain(2).replace(
+        '<constant name="n0" type="color3"><input name="value" type="color3" value="0.2, 0.3, 0.4"/></constant>',
+        '<image name="n0" type="color3"><input name="file" type="filename" value="tex.png"/></image>',
+    )
+    return remap_mtlx(tmp, doc, says="FIFO")
+
+
+def non_utf8_folder(tmp: Path) -> str:
+    textured_gltf(tmp / "asset", "base.png")
+    folder = os.fsencode(tmp) + b"/a\xff"
+    os.rename(tmp / "asset", folder)
+    p = cli(["remap", os.fsdecode(b"a\xff/m.gltf"), "--to", "mitsuba06:ward", "-o", "out"], tmp)
+    return refused_with(p, tmp / "out", "UTF-8")
+
+
+def non_utf8_output(tmp: Path) -> str:
+    (tmp / "s.xml").write_text('<scene version="3.0.0"><bsdf type="diffuse"/></scene>')
+    out = os.fsdecode(b"out\xfe")
+    p = cli(["remap", "s.xml", "--to", "mitsuba06:diffuse", "-o", out], tmp)
+    return refused_with(p, tmp / out, "UTF-8")
+
+
+#: a render whose image write finds the disk full (after writing part of the file)
+FULL_DISK = """
+import errno, os
+from pathlib import Path
+import matremap.core.imageio as imageio
+def full(path, data):
+    Path(path).write_bytes(b"half")
+    raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+imageio._oiio_write = full
+"""
+
+
+def disk_full(tmp: Path) -> str:
+    (tmp / "out").mkdir()
+    p = cli_patched(FULL_DISK, ["render", "mitsuba06:diffuse,reflectance=0.5", "--size", "16", "-o", "out/p.png"], tmp)
+    outcome = refused_with(p, tmp / "nothing", "is full", expect="4")
+    return outcome if not any((tmp / "out").iterdir()) else "LEFTOVER"
+
+
+#: a sweep database that SQLite finds full after a few pages
+FULL_DATABASE = """
+from matremap.sweep import store
+connect = store.SweepStore._connect
+def small(p):
+    conn = connect(p)
+    conn.execute(f"PRAGMA max_page_count={conn.execute('PRAGMA page_count').fetchone()[0] + 8}")
+    return conn
+store.SweepStore._connect = staticmethod(small)
+"""
+
+
+def sqlite_full(tmp: Path) -> str:
+    args = ["sweep", "--source", "mitsuba06:ward,variant=ward,diffuseReflectance=0", "--to", "mitsuba06:pbr"]
+    args += ["--fix", "distribution=as", "--size", "48", "--no-progress", "--workers", "1", "--db", "s.sqlite"]
+    args += ["--grid", "alpha=0.05:0.8:4,specularReflectance=0.02:0.2:3"]
+    return refused_with(cli_patched(FULL_DATABASE, args, tmp), tmp / "nothing", "database or disk is full", "4")
+
+
+#: the system refusing to create a file in the folder "ro" (what a read-only folder does to anyone but root)
+READ_ONLY = """
+import errno, os, tempfile
+from pathlib import Path
+mkstemp, mkdtemp = tempfile.mkstemp, tempfile.mkdtemp
+def refused(make):
+    def call(suffix=None, prefix=None, dir=None, *rest):
+        if dir is not None and Path(dir).resolve() == Path("ro").resolve():
+            name = os.path.join(dir, f"{prefix}abcdefgh{suffix or ''}")
+            raise PermissionError(errno.EACCES, "Permission denied", name)
+        return make(suffix, prefix, dir, *rest)
+    return call
+tempfile.mkstemp, tempfile.mkdtemp = refused(mkstemp), refused(mkdtemp)
+"""
+
+
+def read_only_out_parent(tmp: Path) -> str:
+    (tmp / "ro").mkdir()
+    (tmp / "s.xml").write_text('<scene version="3.0.0"><bsdf type="diffuse"/></scene>')
+    p = cli_patched(READ_ONLY, ["remap", "s.xml", "--to", "mitsuba3:diffuse", "-o", "ro/out"], tmp)
+    return refused_with(p, tmp / "ro" / "out", "cannot write")
+
+
 def transform_with_nan(tmp: Path) -> str:
     doc = json.loads((ROOT / "src" / "matremap" / "regress" / "transforms" / "ward-as.json").read_text())
     doc["mappings"]["roughness"]["coef"] = [float("nan")] * len(doc["mappings"]["roughness"]["coef"])
@@ -1393,8 +1579,20 @@ CASES: list[tuple[str, str, Callable[[Path], str]]] = [
     #
     #
     # second round: expansion bounds, clean lines instead of exit 70, messages
-    #
-    #
+    ("Mitsuba <default> doubling 29 deep", "6 expansion", mitsuba_default_bomb),
+    ("Mitsuba <include> fan-out 8 x 7", "6 expansion", mitsuba_include_fan_out),
+    ("MaterialX chain of 200 nodes", "7 exit 70", mtlx_chain_200),
+    ("MaterialX chain of 5000 nodes", "7 exit 70", mtlx_chain_5000),
+    ("asset folder name with a non-UTF-8 byte", "7 exit 70", non_utf8_folder),
+    ("-o name with a non-UTF-8 byte", "7 exit 70", non_utf8_output),
+    ("disk full (ENOSPC) writing an image", "7 exit 70", disk_full),
+    ("SQLite 'database or disk is full'", "7 exit 70", sqlite_full),
+    ("error quoting a 1 MB value", "7 messages", mtlx_huge_value),
+    ("read-only OUT parent", "9 messages", read_only_out_parent),
+    ("MaterialX starting with a UTF-8 BOM", "9 messages", mtlx_utf8_bom),
+    ("MaterialX in UTF-16", "9 messages", mtlx_utf16),
+    ("FIFO given as a texture", "9 messages", fifo_texture),
+    ("--write a/b/c.gltf", "9 messages", mtlx_write_subfolder),
 ]
 
 

@@ -2,9 +2,11 @@
 
 Subcommands are verbs: ``models`` lists the reflectance models, ``render`` draws a material on
 the probe sphere, ``fit`` remaps a uniform material onto another model. Errors print one line on
-stderr and exit with status 2; nothing is written when a command fails. An exception no command
-expected is one line too (``internal error: Type: message``, exit 70); ``matremap --debug COMMAND``
-prints its traceback.
+stderr and exit with status 2; nothing is written when a command fails. What the system refuses is one
+line too: a full disk or quota exit 4 naming the folder, a file it will not let matremap read or write
+exit 2. An exception no command expected is one line (``internal error: Type: message``, exit 70);
+``matremap --debug COMMAND`` prints its traceback. Every line is printable whatever bytes a file name
+holds, and at most :data:`~matremap.errors.MAX_LINE` characters.
 
 Each command group is a module that adds its commands' parsers and holds their handlers:
 :mod:`.inspect` (models, renderers, transforms), :mod:`.fit` (render, fit, apply), :mod:`.sweep`
@@ -16,6 +18,7 @@ parser and runs a command.
 from __future__ import annotations
 
 import argparse
+import codecs
 import os
 import sys
 import traceback
@@ -25,7 +28,15 @@ from typing import NoReturn
 from matremap import __version__
 from matremap.cli import doctor, fit, inspect, learn, maps, sweep
 from matremap.cli.common import Subparsers
-from matremap.errors import EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_QUALITY, MatremapError
+from matremap.errors import (
+    EXIT_INTERNAL,
+    EXIT_INTERRUPTED,
+    EXIT_QUALITY,
+    MatremapError,
+    encode_paths,
+    one_line,
+    system_error,
+)
 
 #: every command, as ``matremap --help`` lists them: what is there, then the workflow's order
 COMMANDS = (
@@ -58,6 +69,8 @@ PARSERS: dict[str, Callable[[Subparsers], None]] = {
 
 #: where an internal error is to be reported (the project has no public tracker address)
 REPORT_TO = "to the maintainers"
+#: the commands that write images (through OpenImageIO, which takes UTF-8 file names only) under -o
+IMAGE_WRITERS = ("render", "fit", "convert", "evaluate", "remap")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -82,19 +95,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; the exit status (see :mod:`matremap.errors`): 0, 2 on bad input, 3 when a result
     failed the quality gate, 4 when a renderer or the environment failed (one line on stderr), 70 on an
     internal error (one line; ``--debug`` shows the traceback), 130 when interrupted."""
+    printable_paths()
     parser = build_parser()
     args = parser.parse_args(argv)
     from matremap.sweep.executors import limit_blas_threads
 
     limit_blas_threads()
     try:
+        if args.command in IMAGE_WRITERS:
+            check_output_names(args)
         return args.func(args)
     except MatremapError as e:
-        text = str(e)
-        kind = "FAILED" if e.exit_code == EXIT_QUALITY else "error"
-        # a verdict line already starts with its word ("FAILED: clamped ..."): not said twice
-        print(f"matremap: {text}" if text.startswith(f"{kind}:") else f"matremap: {kind}: {text}", file=sys.stderr)
-        return e.exit_code
+        return _refused(e)
     except KeyboardInterrupt:
         print("matremap: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
@@ -102,28 +114,61 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     except Exception as e:  # not the input's fault as far as the code knows: one line, not a traceback
+        known = system_error(e, written_folders(args))
+        if known is not None:
+            return _refused(known)
         if args.debug:
             traceback.print_exc()
         print(f"matremap: {describe_unexpected(e)}", file=sys.stderr)
-        return EXIT_INTERNAL if _internal(e) else 2
+        return EXIT_INTERNAL
 
 
-def _internal(e: BaseException) -> bool:
-    """Whether an exception that escaped a command is a bug (exit 70) rather than a file the system
-    refused or memory the input needed (exit 2)."""
-    return not ((isinstance(e, OSError) and e.filename is not None) or isinstance(e, MemoryError))
+def printable_paths() -> None:
+    """Let stdout and stderr print any file name: the bytes of a name that are not UTF-8 are written
+    back as they were (:func:`matremap.errors.encode_paths`), never an encoding error."""
+    codecs.register_error("matremap-paths", encode_paths)
+    for stream in (sys.stdout, sys.stderr):
+        reconfigure = getattr(stream, "reconfigure", None)
+        if reconfigure is not None:
+            reconfigure(errors="matremap-paths")
+
+
+def check_output_names(args: argparse.Namespace) -> None:
+    """Refuse, before any work, an output name (``-o``, ``--write``) that images cannot be written under."""
+    from matremap.core.imageio import oiio_name
+
+    for option, name in (("-o", getattr(args, "output", None)), ("--write", getattr(args, "write", None))):
+        if isinstance(name, str):
+            try:
+                oiio_name(os.path.abspath(name))
+            except MatremapError as e:
+                raise MatremapError(f"{option} {e}") from None
+
+
+def _refused(e: MatremapError) -> int:
+    """Print a refusal's one line; its exit status."""
+    text = one_line(str(e))
+    kind = "FAILED" if e.exit_code == EXIT_QUALITY else "error"
+    # a verdict line already starts with its word ("FAILED: clamped ..."): not said twice
+    print(f"matremap: {text}" if text.startswith(f"{kind}:") else f"matremap: {kind}: {text}", file=sys.stderr)
+    return e.exit_code
+
+
+def written_folders(args: argparse.Namespace) -> list[str]:
+    """The files and folders a command writes: its ``-o``, its ``--db``, and the cache."""
+    from matremap.core.diskcache import cache_dir
+
+    named = [getattr(args, k, None) for k in ("output", "db")]
+    return [os.fspath(p) for p in named if isinstance(p, (str, os.PathLike))] + [os.fspath(cache_dir())]
 
 
 def describe_unexpected(e: BaseException) -> str:
-    """The one line for an exception no command turned into a MatremapError: a file the system refused
-    (``cannot read X: reason``), memory, or an internal error with where to report it."""
-    if isinstance(e, OSError) and e.filename is not None:
-        return f"error: cannot read {e.filename}: {e.strerror or e}"
-    if isinstance(e, MemoryError):
-        return "error: not enough memory for this input; use smaller maps or free memory, then retry"
-    message = " ".join(str(e).split()) or "(no message)"
-    if len(message) > 300:
-        message = message[:297] + "..."
+    """The one line for an exception no command turned into a MatremapError and the system did not
+    raise (:func:`matremap.errors.system_error`): an internal error, with where to report it."""
+    known = system_error(e)
+    if known is not None:
+        return f"error: {one_line(str(known))}"
+    message = one_line(str(e), 300)
     return (
         f"internal error: {type(e).__name__}: {message} \N{EM DASH} please report it {REPORT_TO}; "
         "rerun with --debug for the traceback"

@@ -431,6 +431,14 @@ def cmd_remap(args: argparse.Namespace) -> int:
         user_map_set(args.maps, args.source, args.allow_path)  # its files lie where it may name them
     if args.write is not None:
         output_inside(args.output, args.write)
+        folder = Path(args.write).parts[0] if Path(args.write).parent != Path(".") else None
+        if folder in ("maps", "report", "source"):
+            raise MatremapError(f"--write {args.write}: OUT/{folder}/ holds the remap's own files; choose another name")
+        if folder is not None:
+            raise MatremapError(
+                f"--write {args.write}: the material file is written in OUT itself, not in a folder of it; give a "
+                f"file name (--write {Path(args.write).name})"
+            )
     options = remap_options(args)
     options.update(workers=args.workers, force=args.force, log=lambda m: print(m, file=sys.stderr))
     if material_file:

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from matremap.core.imageio import oiio_name
 from matremap.errors import MatremapError
 
 #: a direction or an RGB colour, as the built-in map's lights are written
@@ -206,7 +207,7 @@ def load(path: str | os.PathLike) -> EnvMap:
         import OpenImageIO as oiio
     except ImportError:  # pragma: no cover - it is a dependency
         raise MatremapError("reading EXR/HDR environment maps needs OpenImageIO: pip install openimageio") from None
-    buf = oiio.ImageBuf(str(p))
+    buf = oiio.ImageBuf(oiio_name(p))
     if buf.has_error:
         raise MatremapError(f"cannot read environment map {p}: {buf.geterror()}")
     pixels = buf.get_pixels(oiio.FLOAT)

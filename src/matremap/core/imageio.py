@@ -15,9 +15,24 @@ from pathlib import Path
 
 import numpy as np
 
-from matremap.errors import MatremapError
+from matremap.errors import MatremapError, shown
 
 IMAGE_SUFFIXES = (".exr", ".png", ".npy", ".tif", ".tiff", ".hdr")
+
+
+def oiio_name(path: str | os.PathLike[str]) -> str:
+    """The name OpenImageIO is given for file ``path``: its text, refused in one line when the name holds
+    bytes that are not UTF-8 (OpenImageIO takes UTF-8 names only; Python keeps such bytes as surrogates)."""
+    name = os.fspath(path)
+    name = os.fsdecode(name) if isinstance(name, bytes) else name
+    try:
+        name.encode("utf-8")
+    except UnicodeEncodeError:
+        raise MatremapError(
+            f"{shown(name)}: this name is not UTF-8 text, and OpenImageIO reads and writes images by UTF-8 names "
+            "only; use a UTF-8 name (rename the file or its folder, e.g. convmv -f latin1 -t utf8)"
+        ) from None
+    return name
 
 
 def srgb_to_linear(v: np.ndarray) -> np.ndarray:
@@ -106,7 +121,7 @@ def _oiio_write(path: str, data: np.ndarray) -> None:
     h, w, c = data.shape
     spec = oiio.ImageSpec(w, h, c, oiio.UINT8 if data.dtype == np.uint8 else oiio.FLOAT)
     spec.attribute("oiio:UnassociatedAlpha", 1)
-    out = oiio.ImageOutput.create(path)
+    out = oiio.ImageOutput.create(oiio_name(path))
     if out is None or not out.open(path, spec):
         raise MatremapError(f"cannot write {path}: {oiio.geterror().strip()}")
     ok = out.write_image(data)

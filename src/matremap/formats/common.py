@@ -61,6 +61,12 @@ def parse_untrusted_xml(path: Path, expected: str, data: bytes | None = None) ->
         ) from None
     except ET.ParseError as e:
         raise MatremapError(f"{path} is not valid XML ({e}); give {expected}") from None
+    except MatremapError:
+        raise
+    except (LookupError, ValueError) as e:  # expat: an encoding Python does not know, or a multi-byte one
+        raise MatremapError(
+            f"{path}: its XML declaration names an encoding matremap cannot read ({e}); save it as UTF-8"
+        ) from None
     except OSError as e:
         raise MatremapError(f"cannot read {path}: {e}") from None
     return root

@@ -31,7 +31,7 @@ from typing import Any
 from urllib.parse import unquote, unquote_to_bytes
 
 from matremap.core.imageio import atomic_output
-from matremap.errors import MatremapError
+from matremap.errors import MatremapError, not_a_file
 from matremap.formats.confine import Confinement, resolve_reference
 
 #: GLB (§4.4): magic "glTF", chunk types "JSON" and "BIN\0"
@@ -259,6 +259,8 @@ class FileReader:
             data = data_uri(self.path, uri, f"buffers[{index}]")[1]
         else:
             f = self.external(uri, f"buffer {index} uri")
+            if not f.is_file() and f.exists():
+                raise MatremapError(f"{self.path}: {not_a_file(f, f'buffer file {uri!r}')}")
             if not f.is_file():
                 raise MatremapError(
                     f"{self.path}: buffer file {uri!r} not found at {f}; put it beside {self.path.name} or fix its uri"
@@ -305,6 +307,8 @@ class FileReader:
             raise MatremapError(f"{self.path}: images[{index}].uri is not a string; the file is broken, re-export it")
         if uri is not None and not uri.startswith("data:"):
             f = self.external(uri, f"image {index} uri")
+            if not f.is_file() and f.exists():
+                raise MatremapError(f"{self.path}: {not_a_file(f, f'image {uri!r} ({where})')}")
             if not f.is_file():
                 raise MatremapError(
                     f"{self.path}: image {uri!r} ({where}) not found at {f}; put it beside "

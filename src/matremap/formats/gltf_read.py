@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from matremap.core.atomic import temp_prefix
+from matremap.core.imageio import oiio_name
 from matremap.core.material import Material
 from matremap.errors import MatremapError
 from matremap.formats.asset import CarriedInput, MaterialAsset, TextureRef
@@ -96,7 +97,7 @@ def without_alpha(path: Path) -> Path:
             return f
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)
-    inp = oiio.ImageInput.open(str(path), config)
+    inp = oiio.ImageInput.open(oiio_name(path), config)
     if inp is None:
         raise MatremapError(f"cannot read {path}: {oiio.geterror().strip()}; re-export it as PNG or JPEG")
     spec = inp.spec()
@@ -109,7 +110,7 @@ def without_alpha(path: Path) -> Path:
     fd, tmp = tempfile.mkstemp(prefix=temp_prefix("tmp", "rgb"), suffix=".png", dir=folder)  # marked: see clean_stale
     os.close(fd)
     try:
-        o = oiio.ImageOutput.create(tmp)
+        o = oiio.ImageOutput.create(oiio_name(tmp))
         if o is None or not o.open(tmp, oiio.ImageSpec(spec.width, spec.height, colour.shape[-1], fmt)):
             raise MatremapError(f"cannot write an alpha-free copy of {path} in {folder}: {oiio.geterror().strip()}")
         o.write_image(colour)

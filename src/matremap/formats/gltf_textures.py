@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from matremap.core.imageio import srgb_to_linear
+from matremap.core.imageio import oiio_name, srgb_to_linear
 from matremap.errors import MatremapError
 from matremap.formats.bake import UVTransform, bake_image, rotate, scale, texels_needed, translate
 from matremap.formats.gltf_container import is_index
@@ -141,7 +141,7 @@ def read_code_values(path: Path) -> np.ndarray:
 
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)
-    inp = oiio.ImageInput.open(str(path), config)
+    inp = oiio.ImageInput.open(oiio_name(path), config)
     if inp is None:
         raise MatremapError(f"cannot read {path}: {oiio.geterror().strip()}; re-export it as PNG or JPEG")
     try:

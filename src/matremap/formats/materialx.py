@@ -67,7 +67,7 @@ import numpy as np
 
 from matremap.core.material import Material
 from matremap.dialects import get_model
-from matremap.errors import MatremapError
+from matremap.errors import MatremapError, not_a_file
 from matremap.formats.asset import CarriedInput, MaterialAsset, TextureRef
 from matremap.formats.common import pick_material
 from matremap.formats.confine import Confinement, resolve_reference
@@ -741,7 +741,7 @@ def material_names(path: str | Path) -> list[str]:
 def _materials(p: Path, notes: list[str]) -> tuple[Any, list[tuple[str, Any]]]:
     """The validated document and its materials as (name, surface shader or None)."""
     if not p.is_file():
-        raise MatremapError(f"{p} not found")
+        raise MatremapError(not_a_file(p, "MaterialX document"))
     doc = valid_document(p)
     mx = materialx_module()
     found: list[tuple[str, Any]] = []

@@ -17,6 +17,13 @@ checked against Mitsuba 3.9.1 (tests/test_mitsuba_scene.py).
   undefined parameter; ``\\$`` is a literal dollar.
 * ids are one namespace across all files; a duplicate is an error, as in Mitsuba.
 
+Expansion is bounded as XML parsers bound entity expansion: the ``$name`` substitutions of a scene may
+produce at most :data:`MAX_EXPANDED` characters in all (a ``<default>`` whose value repeats an earlier
+one twice doubles at each level), a scene may follow at most :data:`MAX_INCLUDES` ``<include>`` elements
+(counting each one: a fan-out of files each including the next several times multiplies) and parse at
+most :data:`MAX_SCENE_BYTES` bytes of XML across its files. Past a bound the scene is refused in one line
+naming it, before the work it would cost.
+
 Every file, include and search folder must lie in the main scene's folder or a folder the user
 allowed (:mod:`matremap.formats.confine`). :class:`MitsubaScene` keeps each file's tree as written
 (for writers that copy the scene) and the merged, substituted tree readers work on; both carry the
@@ -31,12 +38,19 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from matremap.errors import MatremapError
+from matremap.errors import MatremapError, not_a_file, shorten
 from matremap.formats.common import parse_untrusted_xml
 from matremap.formats.confine import Confinement, resolve_reference
 
 #: Mitsuba 3's ``ParserConfig::max_include_depth``
 MAX_INCLUDE_DEPTH = 15
+#: the most characters the ``$name`` substitutions of one scene may produce, all values together (a real
+#: scene's produce a few hundred)
+MAX_EXPANDED = 1 << 24
+#: the most ``<include>`` elements one scene may follow, each counted (a real scene follows a few)
+MAX_INCLUDES = 1000
+#: the most bytes of XML one scene may parse, its own and its included files' together
+MAX_SCENE_BYTES = 1 << 28
 #: attribute matremap adds to every element: "<file index>:<element number in that file>"
 ORIGIN = "{matremap}origin"
 #: tags whose ``id`` Mitsuba registers (objects)
@@ -82,6 +96,12 @@ class MitsubaScene:
     search: list[Path] = field(default_factory=list)
     _defaults: dict[str, str] = field(default_factory=dict)
     _by_origin: dict[str, ET.Element] = field(default_factory=dict)
+    #: the defaults' names, longest first (the order substitution tries them in); None when one was added
+    _order: list[str] | None = None
+    #: characters produced by substitution so far, <include>s followed, bytes of XML parsed
+    _expanded: int = 0
+    _included: int = 0
+    _parsed: int = 0
 
     @property
     def folder(self) -> Path:
@@ -105,6 +125,9 @@ class MitsubaScene:
         search folders holding it (all confined). ``what`` names the reference in errors."""
         found = self.first(name, self.search, what, Path.is_file)
         if found is None and must_exist:
+            special = self.first(name, self.search, what, Path.exists)
+            if special is not None:
+                raise MatremapError(f"{what} {shorten(name)!r}: {not_a_file(special, 'the file')}")
             where = ", ".join(str(f) for f in self.search)
             raise MatremapError(f"{what} {name!r} not found in {where}; put it there or fix its file name")
         return found or self.confine(name, self.search[-1], what)
@@ -133,7 +156,7 @@ class MitsubaScene:
     def load(self) -> MitsubaScene:
         p = self.path
         if not p.is_file():
-            raise MatremapError(f"{p} not found")
+            raise MatremapError(not_a_file(p, "Mitsuba scene"))
         self.search = [self.folder]
         raw = self._parse(p, 0)
         if raw.tag not in ("scene", "bsdf"):
@@ -144,7 +167,18 @@ class MitsubaScene:
 
     def _parse(self, path: Path, depth: int) -> ET.Element:
         """Parse file ``path`` as file number ``len(self.files)`` and tag its elements."""
-        root = parse_untrusted_xml(path, "a Mitsuba 3 scene file")
+        try:
+            data = path.read_bytes()
+        except OSError as e:
+            raise MatremapError(f"cannot read {path}: {e.strerror or e}") from None
+        self._parsed += len(data)
+        if self._parsed > MAX_SCENE_BYTES:
+            raise self.fail(
+                None,
+                f"the scene and its included files hold more than {MAX_SCENE_BYTES:,} bytes of XML; matremap stops "
+                "there (a real scene is far smaller: are files included many times over?)",
+            )
+        root = parse_untrusted_xml(path, "a Mitsuba 3 scene file", data)
         index = len(self.files)
         for serial, el in enumerate(root.iter()):
             el.set(ORIGIN, f"{index}:{serial}")
@@ -171,16 +205,29 @@ class MitsubaScene:
         return out
 
     def _substitute(self, el: ET.Element, value: str) -> str:
-        """``value`` with ``$name`` replaced as Mitsuba does (longest names first, ``\\$`` kept)."""
-        for key in sorted(self._defaults, key=len, reverse=True):
-            replacement = self._defaults[key].replace("\\", "\\\\")  # a literal in re.sub's template
-            value = re.sub(r"(?<!\\)\$" + re.escape(key), replacement, value)
+        """``value`` with ``$name`` replaced as Mitsuba does (longest names first, ``\\$`` kept), refused
+        once the scene's substitutions would produce more than :data:`MAX_EXPANDED` characters."""
+        if self._order is None:
+            self._order = sorted(self._defaults, key=len, reverse=True)
+        for key in self._order:
+            if "$" + key not in value:
+                continue
+            replacement = self._defaults[key]
+            pattern = re.compile(r"(?<!\\)\$" + re.escape(key))
+            count = sum(1 for _ in pattern.finditer(value))
+            if self._expanded + len(value) + count * (len(replacement) - len(key) - 1) > MAX_EXPANDED:
+                raise self.fail(
+                    el,
+                    f"substituting ${shorten(key)} would expand the scene's parameters past {MAX_EXPANDED:,} "
+                    "characters (a <default> repeating another grows exponentially); matremap stops there",
+                )
+            value = pattern.sub(replacement.replace("\\", "\\\\"), value)  # a literal in the template
+        self._expanded += len(value)
         left = re.search(r"(?<!\\)\$(\w*)", value)
         if left:
+            name = shorten(left.group(1))
             raise self.fail(
-                el,
-                f'${left.group(1)} is used but no <default name="{left.group(1)}" value=...> before it gives it '
-                f"a value; add one",
+                el, f'${name} is used but no <default name="{name}" value=...> before it gives it a value; add one'
             )
         return value.replace("\\$", "$")
 
@@ -210,7 +257,9 @@ class MitsubaScene:
             raise self.fail(el, "a <default> needs a name and a value attribute")
         if "$" in value:
             value = self._substitute(el, value)
-        self._defaults.setdefault(name, value)  # the first definition wins, as in Mitsuba
+        if name not in self._defaults:  # the first definition wins, as in Mitsuba
+            self._defaults[name] = value
+            self._order = None
 
     def _search_folder(self, el: ET.Element, file_index: int, resolver: list[Path]) -> Path:
         value = el.get("value")
@@ -238,6 +287,9 @@ class MitsubaScene:
         inner = [here, *resolver]  # Mitsuba clones the resolver and puts the including file's folder first
         what = f"{self.files[file_index].path}: <include>"
         target = self.first(name, inner, what, Path.is_file)
+        special = self.first(name, inner, what, Path.exists) if target is None else None
+        if special is not None:
+            raise self.fail(el, f"included file {shorten(name)!r}: {not_a_file(special, 'the file')}")
         if target is None:
             raise self.fail(el, f"included file {name!r} not found (looked in {here}); fix its filename")
         if target in chain:
@@ -245,6 +297,13 @@ class MitsubaScene:
             raise self.fail(el, f"<include> cycle ({cycle}); a file cannot include itself")
         if len(chain) > MAX_INCLUDE_DEPTH - 1:
             raise self.fail(el, f"includes nest deeper than {MAX_INCLUDE_DEPTH} files (Mitsuba's limit)")
+        self._included += 1
+        if self._included > MAX_INCLUDES:
+            raise self.fail(
+                el,
+                f"the scene follows more than {MAX_INCLUDES} <include>s (each counted; files including others several "
+                "times multiply); matremap stops there",
+            )
         index = len(self.files)
         self.files[file_index].includes[int(el.get(ORIGIN, "0:0").split(":")[1])] = index
         raw = self._parse(target, len(chain))
@@ -271,4 +330,14 @@ def strip_origin(el: ET.Element) -> ET.Element:
     return el
 
 
-__all__ = ["MAX_INCLUDE_DEPTH", "ORIGIN", "MitsubaScene", "SceneFile", "load_scene", "strip_origin"]
+__all__ = [
+    "MAX_EXPANDED",
+    "MAX_INCLUDES",
+    "MAX_INCLUDE_DEPTH",
+    "MAX_SCENE_BYTES",
+    "ORIGIN",
+    "MitsubaScene",
+    "SceneFile",
+    "load_scene",
+    "strip_origin",
+]

@@ -12,16 +12,21 @@ since the validator cannot see the node's definition; with them, a valid documen
 The bytes are untrusted: before MaterialX's parser sees them they are parsed with
 :func:`~matremap.formats.common.parse_untrusted_xml` (entity declarations and nesting past
 :data:`~matremap.formats.common.MAX_XML_DEPTH` refused), ``xi:include`` is refused (MaterialX would read
-the included file from anywhere), and MaterialX then reads the very bytes that were checked.
+the included file from anywhere), and MaterialX then reads the very bytes that were checked, decoded
+as XML 1.0 (Appendix F, "Autodetection of Character Encodings") says: a byte order mark (UTF-8, UTF-16,
+UTF-32), else UTF-16 recognised by its zero bytes, else the ``encoding`` of the XML declaration, else
+UTF-8. MaterialX is given the text without its declaration (it would read the declared encoding again).
 """
 
 from __future__ import annotations
 
+import codecs
+import re
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-from matremap.errors import MatremapError
+from matremap.errors import MatremapError, not_a_file, shorten
 from matremap.formats.common import parse_untrusted_xml
 
 FORMAT = "mtlx"
@@ -70,11 +75,18 @@ def parse_document(p: Path) -> Any:
     """The MaterialX document of file ``p`` (its bytes checked as untrusted XML first), with the
     standard libraries as its data library, upgraded to 1.39 by MaterialX's reader."""
     m = mx()
+    if not p.is_file():
+        raise MatremapError(not_a_file(p, "MaterialX document"))
     try:
         data = p.read_bytes()
     except OSError as e:
-        raise MatremapError(f"cannot read {p}: {e}") from None
-    if not data[:4096].lstrip().startswith(b"<"):
+        raise MatremapError(f"cannot read {p}: {e.strerror or e}") from None
+    encoding = xml_encoding(data)
+    try:
+        head = codecs.getincrementaldecoder(encoding)(errors="replace").decode(data[:4096])
+    except LookupError:
+        raise MatremapError(f"{p}: its XML declaration names the unknown encoding {shorten(encoding)!r}") from None
+    if not head.lstrip("\ufeff \t\r\n").startswith("<"):
         raise MatremapError(f"{p} is not a MaterialX document (not XML)")
     root = parse_untrusted_xml(p, "a MaterialX document", data)
     if root.tag != "materialx":
@@ -85,13 +97,46 @@ def parse_document(p: Path) -> Any:
     options = m.XmlReadOptions()
     options.readXIncludeFunction = None  # refused above already; never let MaterialX follow one
     try:
-        m.readFromXmlString(doc, data.decode("utf-8-sig"), m.FileSearchPath(), options)
+        text = data.decode(encoding)
     except UnicodeDecodeError:
-        raise MatremapError(f"{p} is not a MaterialX document: it is not UTF-8 text") from None
+        raise MatremapError(f"{p} is not a MaterialX document: it is not {encoding.upper()} text") from None
+    text = _DECLARATION.sub("", text.lstrip("\ufeff"), count=1)
+    try:
+        m.readFromXmlString(doc, text, m.FileSearchPath(), options)
     except Exception as e:  # noqa: BLE001 - MaterialX raises its own ExceptionParseError and others
         raise MatremapError(f"{p} is not a MaterialX document ({str(e).strip() or type(e).__name__})") from None
     doc.setDataLibrary(library())
     return doc
+
+
+#: byte order marks (longest first) -> the codec that decodes such a file (its mark dropped)
+_BOMS = (
+    (codecs.BOM_UTF32_LE, "utf-32"),
+    (codecs.BOM_UTF32_BE, "utf-32"),
+    (codecs.BOM_UTF8, "utf-8-sig"),
+    (codecs.BOM_UTF16_LE, "utf-16"),
+    (codecs.BOM_UTF16_BE, "utf-16"),
+)
+#: an XML declaration at the start of a text, and the encoding one names (in ASCII-compatible bytes)
+_DECLARATION = re.compile(r"\A\s*<\?xml\b[^>]*\?>")
+_DECLARED = re.compile(rb"\A\s*<\?xml\b[^>]*?\bencoding\s*=\s*[\"']([A-Za-z][A-Za-z0-9._-]*)[\"']")
+
+
+def xml_encoding(data: bytes) -> str:
+    """The codec of an XML document's bytes (XML 1.0 Appendix F): its byte order mark, else UTF-16 told
+    by its zero bytes around the first ``<``, else its declaration's ``encoding``, else UTF-8."""
+    for bom, codec in _BOMS:
+        if data.startswith(bom):
+            return codec
+    if data[:2] == b"<\x00":
+        return "utf-16-le"
+    if data[:2] == b"\x00<":
+        return "utf-16-be"
+    declared = _DECLARED.match(data[:1024])
+    if declared is None:
+        return "utf-8-sig"
+    name = declared.group(1).decode("ascii").lower()
+    return "utf-8-sig" if name.replace("-", "").replace("_", "") == "utf8" else name
 
 
 def valid_document(p: Path) -> Any:

@@ -38,14 +38,16 @@ name and the shader input it feeds.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NoReturn
 
 import numpy as np
 
-from matremap.errors import MatremapError
+from matremap.errors import MatremapError, not_a_file, shorten
 from matremap.formats.bake import MAX_SIDE, sample, texel_grid
 
 #: channels of the MaterialX data types the evaluator handles
@@ -54,8 +56,11 @@ CHANNELS = {"float": 1, "integer": 1, "boolean": 1, "vector2": 2, "vector3": 3, 
 PROBE = 16
 #: the side of a map baked from a graph that varies over UV without reading any image
 PROCEDURAL_SIDE = 1024
-#: how deep node connections may nest before the graph is refused (a cycle, or a hostile document)
-MAX_DEPTH = 200
+#: how deep connections (to a node, a nodegraph or an interface input) may nest before the graph is refused
+#: (a cycle, or a hostile document); evaluation recurses, with the room this depth needs
+MAX_DEPTH = 1000
+#: the most Python frames one connection takes while evaluating (port, input, a node and its inputs)
+FRAMES_PER_HOP = 12
 #: MaterialX address mode -> :mod:`matremap.formats.bake` wrap mode
 WRAP = {"periodic": "repeat", "clamp": "clamp", "mirror": "mirror", "constant": "border"}
 SRGB = ("srgb_texture",)
@@ -131,6 +136,10 @@ class Scope:
     interface: Callable[[str, str], Value] | None
     label: str
     owner: tuple[Any, Scope] | None = None  # for a library definition: the node it implements, and its scope
+    #: interface values already evaluated (name, type) -> value, while the scope is being evaluated
+    given: dict[tuple[str, str], Value] = field(default_factory=dict)
+    #: (node name, output) -> how many connections in the graph read it; None until counted
+    readers: dict[tuple[str, str], int] | None = None
 
 
 @dataclass
@@ -138,6 +147,8 @@ class _Pass:
     size: tuple[int, int]
     probe: bool
     memo: dict[tuple[int, str, str], Value] = field(default_factory=dict)
+    #: memo key -> how many more reads of it are expected (it is dropped after the last)
+    left: dict[tuple[int, str, str], int] = field(default_factory=dict)
     uses: list[ImageUse] = field(default_factory=list)
     scopes: list[Scope] = field(default_factory=list)
     depth: int = 0
@@ -155,11 +166,11 @@ def parse_value(text: str, typ: str, where: str) -> Value:
     try:
         nums = [float(x) for x in text.replace(",", " ").split()]
     except ValueError:
-        raise MatremapError(f"{where}: value {text!r} is not a {typ}") from None
+        raise MatremapError(f"{where}: value {shorten(text)!r} is not a {typ}") from None
     if len(nums) == 1 and n > 1:
         nums = nums * n
     if len(nums) != n or not all(math.isfinite(x) for x in nums):
-        raise MatremapError(f"{where}: value {text!r} is not a {typ} ({n} finite number(s))")
+        raise MatremapError(f"{where}: value {shorten(text)!r} is not a {typ} ({n} finite number(s))")
     return np.array(nums, dtype=np.float64)
 
 
@@ -211,7 +222,7 @@ class GraphEvaluator:
         """Probe ``root`` (a function evaluating the input in the current pass): its constant value, or the
         images it reads and the size to bake it at. Raises MatremapError naming any unsupported node."""
         self._start(_Pass((PROBE, PROBE), True), feeding)
-        with np.errstate(all="ignore"):
+        with np.errstate(all="ignore"), deep_stack():
             value = self._array(root(), feeding)
         uses = self._pass.uses
         if value.ndim == 1:
@@ -226,7 +237,7 @@ class GraphEvaluator:
     def bake(self, root: Callable[[], Value], feeding: str, size: tuple[int, int]) -> np.ndarray:
         """``root`` evaluated on a map of ``size`` (height, width): linear float32 [H, W, C]."""
         self._start(_Pass(size, False), feeding)
-        with np.errstate(all="ignore"):
+        with np.errstate(all="ignore"), deep_stack():
             value = self._array(root(), feeding)
         return np.ascontiguousarray(np.broadcast_to(value, (*size, value.shape[-1])), dtype=np.float32)
 
@@ -242,7 +253,19 @@ class GraphEvaluator:
 
     def port(self, el: Any, typ: str, scope: Scope) -> Value:
         """The value of an input or output element ``el`` in ``scope``: its interface input, the node or
-        nodegraph output it connects to, or its own value."""
+        nodegraph output it connects to, or its own value. Refused past :data:`MAX_DEPTH` nested connections."""
+        if self._pass.depth >= MAX_DEPTH:
+            raise MatremapError(
+                f"{self.path}: the graph feeding {self._feeding} nests connections deeper than {MAX_DEPTH} (or "
+                f"loops); matremap evaluates graphs up to {MAX_DEPTH} connections deep"
+            )
+        self._pass.depth += 1
+        try:
+            return self._port(el, typ, scope)
+        finally:
+            self._pass.depth -= 1
+
+    def _port(self, el: Any, typ: str, scope: Scope) -> Value:
         iface = el.getAttribute("interfacename")
         if iface:
             if scope.interface is None:
@@ -269,13 +292,17 @@ class GraphEvaluator:
         out = graph.getOutput(output) if output else (graph.getOutputs() or [None])[0]
         if out is None:
             raise MatremapError(f"{self.path}: nodegraph {graph.getName()!r} has no output {output!r}")
-        return self.port(out, typ or out.getType(), self.graph_scope(graph))
+        scope = self.graph_scope(graph)
+        try:
+            return self.port(out, typ or out.getType(), scope)
+        finally:
+            scope.given.clear()  # its interface values are not read again
 
     def graph_scope(self, graph: Any) -> Scope:
         """The scope of a document-level nodegraph: its nodes, and its own inputs as its interface."""
 
         def interface(name: str, typ: str) -> Value:
-            return self._graph_interface(graph, name, typ)
+            return self._given(scope, name, typ, lambda: self._graph_interface(graph, name, typ))
 
         scope = Scope(graph, interface, f"nodegraph {graph.getName()!r}")
         self._pass.scopes.append(scope)
@@ -331,21 +358,44 @@ class GraphEvaluator:
 
     def node_output(self, node: Any, output: str, scope: Scope) -> Value:
         """Output ``output`` of ``node`` (its only output when empty), memoised per pass."""
+        memo, left = self._pass.memo, self._pass.left
         key = (id(scope), node.getNamePath(), output or "")
-        if key in self._pass.memo:
-            return self._pass.memo[key]
-        if self._pass.depth >= MAX_DEPTH:
-            raise MatremapError(
-                f"{self.path}: the graph feeding {self._feeding} nests deeper than {MAX_DEPTH} nodes (or loops)"
-            )
-        self._pass.depth += 1
-        try:
-            primitive = PRIMITIVES.get(node.getCategory())
-            value = primitive(self, node, output, scope) if primitive else self._expand(node, output, scope)
-        finally:
-            self._pass.depth -= 1
-        self._pass.memo[key] = value
+        if key in memo:
+            value = memo[key]
+            left[key] -= 1
+            if left[key] <= 0:  # its last reader: a texture is not held longer than it is needed
+                del memo[key], left[key]
+            return value
+        primitive = PRIMITIVES.get(node.getCategory())
+        value = primitive(self, node, output, scope) if primitive else self._expand(node, output, scope)
+        readers = self._readers(scope).get((node.getName(), output or ""), 1)
+        if readers > 1:
+            memo[key], left[key] = value, readers - 1
         return value
+
+    def _readers(self, scope: Scope) -> dict[tuple[str, str], int]:
+        """How many connections of ``scope``'s graph read each (node, output): a value read once is not
+        kept (a long chain holds one texture at a time), one read more often is kept until its last read."""
+        if scope.readers is None:
+            counts: dict[tuple[str, str], int] = {}
+            graph = scope.graph
+            ports = [p for n in graph.getNodes() for p in n.getInputs()] + list(graph.getOutputs())
+            if graph is self.doc:
+                ports += [p for g in graph.getNodeGraphs() for p in g.getInputs()]
+            for p in ports:
+                name = p.getAttribute("nodename")
+                if name:
+                    k = (name, p.getAttribute("output"))
+                    counts[k] = counts.get(k, 0) + 1
+            scope.readers = counts
+        return scope.readers
+
+    def _given(self, scope: Scope, name: str, typ: str, evaluate: Callable[[], Value]) -> Value:
+        """Interface input ``name`` of ``scope``, evaluated once while the scope is evaluated."""
+        key = (name, typ)
+        if key not in scope.given:
+            scope.given[key] = evaluate()
+        return scope.given[key]
 
     def _expand(self, node: Any, output: str, scope: Scope) -> Value:
         """A node that MaterialX's library implements as a node graph, evaluated through that graph."""
@@ -358,15 +408,22 @@ class GraphEvaluator:
         out = impl.getOutput(output) if output else (impl.getOutputs() or [None])[0]
         if out is None:
             raise MatremapError(f"{self.path}: node {node.getName()!r} has no output {output!r}")
-        inner = Scope(impl, self._instance(node, scope), "its library definition", (node, scope))
+        inner = Scope(impl, None, "its library definition", (node, scope))
+        inner.interface = self._instance(node, scope, inner)
         self._pass.scopes.append(inner)
-        return self.port(out, out.getType(), inner)
+        try:
+            return self.port(out, out.getType(), inner)
+        finally:
+            inner.given.clear()  # its interface values are not read again
 
-    def _instance(self, node: Any, scope: Scope) -> Callable[[str, str], Value]:
-        """The interface of a library node's implementation graph: the instance node's inputs."""
+    def _instance(self, node: Any, scope: Scope, inner: Scope | None = None) -> Callable[[str, str], Value]:
+        """The interface of a library node's implementation graph ``inner``: the instance node's inputs
+        (evaluated once while ``inner`` is, when given)."""
 
         def interface(name: str, typ: str) -> Value:
-            return self.input(node, name, typ, scope)
+            if inner is None:
+                return self.input(node, name, typ, scope)
+            return self._given(inner, name, typ, lambda: self.input(node, name, typ, scope))
 
         return interface
 
@@ -416,6 +473,10 @@ class GraphEvaluator:
         """The image file ``el`` reads as it is stored, when it does: an ``image``, ``tiledimage`` or
         ``gltf_image`` node at UV0 with no transform (tiling 1, offset 0, ...), optionally behind an
         ``extract`` or ``separate`` node that picks one channel; None for anything else."""
+        with deep_stack():
+            return self._plain_image(el, feeding)
+
+    def _plain_image(self, el: Any, feeding: str) -> PlainImage | None:
         self._start(_Pass((PROBE, PROBE), True), feeding)
         found = self.upstream(el, self.doc_scope)
         if found is None:
@@ -476,6 +537,10 @@ class GraphEvaluator:
         through a ``normalmap`` node (or a library node built on one, ``gltf_normalmap``): a function
         evaluating it (``scale`` applied to x and y, Standard Nodes 1.39 §normalmap) and, when the
         map is an image file used as it is, that image. None when nothing is connected."""
+        with deep_stack():
+            return self._normal_map(el, feeding)
+
+    def _normal_map(self, el: Any, feeding: str) -> tuple[Callable[[], Value], PlainImage | None] | None:
         self._start(_Pass((PROBE, PROBE), True), feeding)
         found = self.upstream(el, self.doc_scope)
         for _ in range(MAX_DEPTH):
@@ -556,10 +621,12 @@ class GraphEvaluator:
         that keeps each of its texels (its size times the UV derivatives of the lookup)."""
         from matremap.svbrdf.textures import image_info
 
+        if not f.path.is_file() and f.path.exists():
+            raise MatremapError(f"{self.path}: {not_a_file(f.path, f'texture {shorten(f.text)} for {self._feeding}')}")
         if not f.path.is_file():
             raise MatremapError(
-                f"{self.path}: texture {f.text} for {self._feeding} not found at {f.path}; put it beside the "
-                f"document or fix its file input"
+                f"{self.path}: texture {shorten(f.text)} for {self._feeding} not found at {f.path}; put it beside "
+                f"the document or fix its file input"
             )
         self.colorspace(f, node.getType(), node.getName())
         info = image_info(f.path, "linear", colour=False)
@@ -603,6 +670,23 @@ class GraphEvaluator:
         img = self._images[key]
         n = CHANNELS[typ]
         return img if img.shape[-1] == n else fit_image(img, n)
+
+
+@contextmanager
+def deep_stack() -> Iterator[None]:
+    """Room on Python's stack for an evaluation :data:`MAX_DEPTH` connections deep (the interpreter's
+    recursion limit raised for the moment, never lowered; evaluation is plain Python calls, which take
+    no C stack)."""
+    depth = 0
+    frame: Any = sys._getframe()
+    while frame is not None and depth < 100_000:
+        frame, depth = frame.f_back, depth + 1
+    before = sys.getrecursionlimit()
+    sys.setrecursionlimit(max(before, depth + MAX_DEPTH * FRAMES_PER_HOP + 200))
+    try:
+        yield
+    finally:
+        sys.setrecursionlimit(before)
 
 
 def fit_image(img: np.ndarray, n: int) -> np.ndarray:

@@ -67,7 +67,7 @@ from matremap.core.imageio import check_output
 from matremap.core.material import Material
 from matremap.dialects import get_model
 from matremap.dialects.usd import specular_workflow
-from matremap.errors import MatremapError
+from matremap.errors import MatremapError, not_a_file
 from matremap.formats.asset import CarriedInput, MaterialAsset, TextureRef
 from matremap.formats.bake import (
     UVTransform,
@@ -415,6 +415,8 @@ def _texture_file(ctx: _Ctx, node: Any) -> tuple[Path, bool, str]:
         return _extract(Path(package), member), True, written
     anchor = Path(real).parent
     f = resolve_reference(written, anchor, f"{ctx.path}: texture file", ctx.confinement)
+    if not f.is_file() and f.exists():
+        raise MatremapError(ctx.where(not_a_file(f, f"texture {written!r}")))
     if not f.is_file():
         raise MatremapError(ctx.where(f"texture {written!r} not found at {f}; put it beside the layer"))
     return f, False, written

@@ -45,10 +45,10 @@ from typing import Any
 
 import numpy as np
 
-from matremap.core.imageio import atomic_output, check_output, linear_to_srgb, srgb_to_linear
+from matremap.core.imageio import atomic_output, check_output, linear_to_srgb, oiio_name, srgb_to_linear
 from matremap.core.models import ModelSpec
 from matremap.dialects import get_model
-from matremap.errors import MatremapError
+from matremap.errors import MatremapError, not_a_file
 
 COLORSPACES = ("srgb", "linear")
 _CS_ALIASES = {
@@ -201,10 +201,10 @@ def _open_input(path: str | os.PathLike):
     oiio = _oiio()
     p = Path(path)
     if not p.is_file():
-        raise MatremapError(f"map {p} not found; check the file name")
+        raise MatremapError(not_a_file(p, "map"))
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)  # maps are data: colour must not be multiplied by alpha
-    inp = oiio.ImageInput.open(str(p), config)
+    inp = oiio.ImageInput.open(oiio_name(p), config)
     if inp is None:
         msg = oiio.geterror().strip().splitlines()
         raise MatremapError(
@@ -329,7 +329,7 @@ class MapWriter:
         if info.format == "png" and info.colorspace == "srgb":
             spec.attribute("oiio:ColorSpace", "sRGB")
         spec.attribute("oiio:UnassociatedAlpha", 1)  # write colour as given, not divided by alpha
-        self._out = oiio.ImageOutput.create(self.path)
+        self._out = oiio.ImageOutput.create(oiio_name(self.path))
         if self._out is None or not self._out.open(self.path, spec):
             raise MatremapError(f"cannot write {path}: {oiio.geterror().strip()}")
         self._next = 0

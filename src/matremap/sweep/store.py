@@ -17,7 +17,7 @@ from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
-from matremap.errors import MatremapError
+from matremap.errors import MatremapError, no_space
 
 SCHEMA_VERSION = 1
 #: seconds a connection waits for another process's write lock
@@ -148,7 +148,7 @@ class SweepStore:
             conn.commit()
         except sqlite3.DatabaseError as e:
             conn.close()
-            raise MatremapError(f"cannot use {p} as a sweep database: {e}") from None
+            raise no_space(e, [p]) or MatremapError(f"cannot use {p} as a sweep database: {e}") from None
         except BaseException:
             conn.close()
             raise
@@ -182,7 +182,7 @@ class SweepStore:
                     time.sleep(0.02)
             conn.execute("PRAGMA synchronous=NORMAL")
         except sqlite3.Error as e:
-            raise MatremapError(f"cannot open database {p}: {e}") from None
+            raise no_space(e, [p]) or MatremapError(f"cannot open database {p}: {e}") from None
         return conn
 
     def close(self) -> None:
