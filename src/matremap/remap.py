@@ -127,7 +127,7 @@ class RemapResult:
 
 def cache_folders(job: RemapJob) -> list[Path]:
     """The cache folders a run reads and writes (matremap's cache, and the job's transform cache when it
-    names its own): no output folder may be, hold or lie inside one."""
+    names its own): no output folder may be or hold one."""
     from matremap.core.diskcache import cache_dir
 
     return [cache_dir(), *([job.cache] if job.cache is not None else [])]
@@ -564,7 +564,8 @@ def remap(
         map_set = load_map_set(maps, source_model)
         job = same_distribution(job, map_set.model, map_set.options, log)
         out = Path(out)
-        with staged_folder(out, force, protected=[map_set.root, *map_set.files, *cache_folders(job)]) as stage:
+        protected = [map_set.root, *map_set.files, *cache_folders(job)]
+        with staged_folder(out, force, protected=protected, enclosing=[map_set.root]) as stage:
             result = remap_into(stage, map_set, job, log, title=f"{map_set.model} -> {job.target}: {Path(maps).name}")
             if write is not None:
                 from matremap.formats import write_asset

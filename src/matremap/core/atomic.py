@@ -477,23 +477,30 @@ def _contains(folder: Path, path: Path) -> bool:
     return path == folder or folder in path.parents
 
 
-def check_output_folder(out: Path, protected: Iterable[str | os.PathLike[str]] = ()) -> None:
-    """Refuse ``out`` as an output folder when it is, or holds, one of the ``protected`` paths (the
-    inputs, the files they reference, the cache), or lies inside a protected folder: replacing ``out``
-    would remove them. Paths are compared resolved (links followed)."""
+def check_output_folder(
+    out: Path, protected: Iterable[str | os.PathLike[str]] = (), enclosing: Iterable[str | os.PathLike[str]] = ()
+) -> None:
+    """Refuse ``out`` as an output folder when it is, or holds, one of the ``protected`` paths (the inputs,
+    the files they reference, the cache): replacing ``out`` would remove them; or when it lies inside one of
+    the ``enclosing`` folders (a map set's folder, whose files a later run would read as maps). Paths are
+    compared resolved (links followed)."""
     target = out.resolve()
     for p in protected:
         q = Path(p).resolve()
         if _contains(target, q):
             what = "is a folder" if q == target else f"holds {q.relative_to(target)},"
             raise MatremapError(f"{out} {what} which the run reads; choose an output folder apart from the inputs")
-        if q.is_dir() and _contains(q, target):
+    for p in enclosing:
+        if _contains(Path(p).resolve(), target):
             raise MatremapError(f"{out} lies inside {p}, which the run reads; choose an output folder apart from it")
 
 
 @contextmanager
 def staged_folder(
-    out: str | os.PathLike[str], force: bool = False, protected: Iterable[str | os.PathLike[str]] = ()
+    out: str | os.PathLike[str],
+    force: bool = False,
+    protected: Iterable[str | os.PathLike[str]] = (),
+    enclosing: Iterable[str | os.PathLike[str]] = (),
 ) -> Iterator[Path]:
     """A whole output folder written all or nothing: the block writes into a hidden folder beside
     ``out`` (``.matremap-partial-<owner>-<name>-*``), which replaces ``out`` when the block ends without
@@ -501,12 +508,12 @@ def staged_folder(
     ``--force``. The published folder carries an output record (:data:`OUTPUT_RECORD`) of every path in
     it. An existing ``out`` that is not empty is replaced only with ``force``, and only when everything in
     it is listed in its record (a folder matremap wrote); anything else in it is refused, force or not, so
-    ``--force`` never removes a file matremap did not write. ``out`` may not be, hold or lie inside a
-    ``protected`` path (:func:`check_output_folder`). The replaced folder is moved aside into
+    ``--force`` never removes a file matremap did not write. ``out`` may not be or hold a ``protected``
+    path, nor lie inside an ``enclosing`` folder (:func:`check_output_folder`). The replaced folder is moved aside into
     ``.matremap-old-*`` for the moment of the swap. What dead runs left beside ``out`` is put right first
     (:func:`clean_stale`). Only ``out``'s parent folders may be created (they are left in place)."""
     out = Path(out)
-    check_output_folder(out, protected)
+    check_output_folder(out, protected, enclosing)
     if out.parent.is_dir():
         clean_stale(out.parent)
     if out.exists() and not out.is_dir():
