@@ -247,7 +247,8 @@ def _sample_reader(
     out = np.zeros((n, len(picked)), np.float32)
     rows = max(1, BAND_TEXELS // max(w, 1))
     if rows >= h:  # the whole image is one band
-        band = reader.read_codes(0, h)[..., picked]
+        band = reader.read_codes(0, h)
+        band = band if channels is None else band[..., picked]
         for d in (0, 1):
             weight = taps.fy[:, None] if d else 1.0 - taps.fy[:, None]
             out += _tap_row(taps, d, slice(None), band, 0, reader.decode, border) * weight
@@ -260,12 +261,14 @@ def _sample_reader(
         del row
     for y_first in range(0, h, rows):
         y_last = min(h, y_first + rows)
-        band = reader.read_codes(y_first, y_last)[..., picked]
+        band = reader.read_codes(y_first, y_last)
+        band = band if channels is None else band[..., picked]
         for d in (0, 1):
             idx = orders[d][starts[d][y_first] : starts[d][y_last]]
             if idx.size:
                 weight = taps.fy[idx][:, None] if d else 1.0 - taps.fy[idx][:, None]
                 out[idx] += _tap_row(taps, d, idx, band, y_first, reader.decode, border) * weight
+        del band  # before the next band is read
     return out
 
 
