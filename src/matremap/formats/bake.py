@@ -228,6 +228,23 @@ def _tap_row(
     return values[0] * (1.0 - fx) + values[1] * fx
 
 
+def _blend(
+    out: np.ndarray,
+    taps: _Taps,
+    idx: np.ndarray | slice,
+    band: np.ndarray,
+    y_first: int,
+    decode: Callable[[np.ndarray], np.ndarray],
+    border: float,
+    rows: tuple[int, ...] = (0, 1),
+) -> None:
+    """Add to ``out[idx]`` the tap rows ``rows`` (0: the top one, weighted ``1 - fy``; 1: the bottom one, ``fy``)
+    of lookups ``idx``, from ``band``."""
+    for d in rows:
+        weight = taps.fy[idx][:, None] if d else 1.0 - taps.fy[idx][:, None]
+        out[idx] += _tap_row(taps, d, idx, band, y_first, decode, border) * weight
+
+
 def _sample_reader(
     reader: Any,
     n: int,
@@ -249,9 +266,8 @@ def _sample_reader(
     if rows >= h:  # the whole image is one band
         band = reader.read_codes(0, h)
         band = band if channels is None else band[..., picked]
-        for d in (0, 1):
-            weight = taps.fy[:, None] if d else 1.0 - taps.fy[:, None]
-            out += _tap_row(taps, d, slice(None), band, 0, reader.decode, border) * weight
+        for a in range(0, n, _CHUNK):
+            _blend(out, taps, slice(a, min(n, a + _CHUNK)), band, 0, reader.decode, border)
         return out
     orders, starts = [], []
     for d in (0, 1):
@@ -264,10 +280,9 @@ def _sample_reader(
         band = reader.read_codes(y_first, y_last)
         band = band if channels is None else band[..., picked]
         for d in (0, 1):
-            idx = orders[d][starts[d][y_first] : starts[d][y_last]]
-            if idx.size:
-                weight = taps.fy[idx][:, None] if d else 1.0 - taps.fy[idx][:, None]
-                out[idx] += _tap_row(taps, d, idx, band, y_first, reader.decode, border) * weight
+            held = orders[d][starts[d][y_first] : starts[d][y_last]]
+            for a in range(0, held.size, _CHUNK):  # a chunk of lookups at a time: the temporaries stay small
+                _blend(out, taps, held[a : a + _CHUNK], band, y_first, reader.decode, border, (d,))
         del band  # before the next band is read
     return out
 
