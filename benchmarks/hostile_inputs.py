@@ -1576,6 +1576,7 @@ CASES: list[tuple[str, str, Callable[[Path], str]]] = [
     #
     #
     # second round: memory per reader
+    *importlib.import_module("memory").HOSTILE_CASES,  # benchmarks/memory.py: each reader's peak, measured
     #
     #
     # second round: expansion bounds, clean lines instead of exit 70, messages

@@ -14,7 +14,8 @@ named by their content's digest and checked against it when reused, so that ever
 The file is untrusted: external URIs must resolve inside the file's folder or a folder the user allowed
 (:mod:`matremap.formats.confine`), a GLB's chunks and buffer views must lie inside the file and their
 offsets be non-negative integers, ``data:`` URIs must be valid base64, and the JSON may nest at most
-:data:`MAX_JSON_DEPTH` levels; anything else is refused with one line.
+:data:`MAX_JSON_DEPTH` levels and hold at most :data:`MAX_JSON_VALUES` values (its memory); anything else is refused
+with one line.
 """
 
 from __future__ import annotations
@@ -40,6 +41,11 @@ CHUNK_JSON = 0x4E4F534A
 CHUNK_BIN = 0x004E4942
 #: the deepest JSON nesting read (glTF files nest about ten levels; deeper is an attack or a broken file)
 MAX_JSON_DEPTH = 100
+#: the most JSON values a glTF's JSON may hold, counted from its text before it is parsed (its commas and opening
+#: brackets: an upper bound). Parsed, a value takes 30 to 120 bytes (a number in an array, an object of one
+#: member), so this bounds the document's memory to about a gigabyte; a glTF keeps its bulk in binary buffers
+#: (200,000 nodes are about 4 million values)
+MAX_JSON_VALUES = 1 << 23
 MIME_SUFFIX = {"image/png": ".png", "image/jpeg": ".jpg", "image/webp": ".webp", "image/ktx2": ".ktx2"}
 
 
@@ -73,6 +79,12 @@ def parse_container(path: Path, data: bytes) -> tuple[dict[str, Any], bytes | No
         text, bin_chunk = data, None
     else:
         raise MatremapError(f"{path}: a glTF file ends in .gltf or .glb, not {suffix or 'nothing'}")
+    values = text.count(b",") + text.count(b"[") + text.count(b"{")
+    if values > MAX_JSON_VALUES:
+        raise MatremapError(
+            f"{path}: its JSON holds about {values:,} values, more than the {MAX_JSON_VALUES:,} matremap reads; "
+            f"a glTF keeps its bulk in binary buffers: move large data (extras) out of the JSON or into a buffer"
+        )
     try:
         obj = json.loads(text.decode("utf-8-sig"))
     except UnicodeDecodeError:
@@ -152,17 +164,25 @@ def glb_chunks(path: Path, data: bytes) -> tuple[bytes, bytes | None]:
     return chunks[0][1], (chunks[1][1] if len(chunks) > 1 and chunks[1][0] == CHUNK_BIN else None)
 
 
-def cache_dir(data: bytes) -> Path:
+def cache_dir(data: bytes | Path) -> Path:
     """The folder of a file's extracted images in matremap's private cache (created 0700, refused when
-    another user owns it or others may write to it), never in a shared temporary folder."""
+    another user owns it or others may write to it), never in a shared temporary folder; ``data`` is the file's
+    content, or the file (hashed in blocks)."""
     from matremap.core.diskcache import private_cache_dir
 
-    return private_cache_dir("gltf-images", hashlib.sha256(data).hexdigest()[:20])
+    digest = file_digest(data) if isinstance(data, Path) else hashlib.sha256(data).hexdigest()
+    return private_cache_dir("gltf-images", digest[:20])
+
+
+def file_digest(f: Path) -> str:
+    """The SHA-256 of a file's content (hex), read in blocks: memory does not grow with the file."""
+    with open(f, "rb") as data:
+        return hashlib.file_digest(data, "sha256").hexdigest()
 
 
 def digest_matches(f: Path, digest: str) -> bool:
     """Whether cache file ``f`` is a regular file whose content has ``digest`` (a prefix of its SHA-256)."""
-    return f.is_file() and not f.is_symlink() and hashlib.sha256(f.read_bytes()).hexdigest()[: len(digest)] == digest
+    return f.is_file() and not f.is_symlink() and file_digest(f)[: len(digest)] == digest
 
 
 def cached_copy(folder: Path, stem: str, suffix: str, data: bytes) -> Path:

@@ -14,7 +14,6 @@ bytes move only as a whole view, so accessors read the same values.
 
 from __future__ import annotations
 
-import copy
 import json
 import os
 import struct
@@ -91,7 +90,7 @@ class Target:
     @classmethod
     def copy_of(cls, path: Path, gdoc: GltfDocument, inputs: list[Path]) -> Target:
         """A copy of the document ``gdoc`` read from ``path``."""
-        doc = copy.deepcopy(gdoc.json)
+        doc = editable_copy(gdoc.json)
         files = [path, *inputs]
         for key in ("buffers", "images"):
             for item in doc.get(key) or []:
@@ -107,14 +106,30 @@ class Target:
         return cls(doc, data, None, [])
 
 
+def editable_copy(node: Any) -> Any:
+    """A copy of JSON value ``node`` the writer may edit, sharing what it never edits: every ``extras`` value
+    (application data, glTF §3.12: carried as it is, never looked into) and every non-empty array of plain values
+    (numbers, strings: the writer replaces such arrays, never changes them). A document's size in memory is then held
+    once however large its extras or its accessors' arrays."""
+    if isinstance(node, dict):
+        return {k: (v if k == "extras" else editable_copy(v)) for k, v in node.items()}
+    if isinstance(node, list):
+        if node and not any(isinstance(v, dict | list) for v in node):
+            return node
+        return [editable_copy(v) for v in node]
+    return node
+
+
 def texture_infos(node: Any, key: str = "") -> Iterator[dict[str, Any]]:
     """Every textureInfo under ``node``: an object with an ``index`` held under a key ending in
-    ``Texture`` (the core's and every KHR material extension's naming)."""
+    ``Texture`` (the core's and every KHR material extension's naming); ``extras`` (application data) are not
+    glTF's references and are not looked into."""
     if isinstance(node, dict):
         if key.endswith(("Texture", "texture")) and "index" in node:
             yield node
         for k, v in node.items():
-            yield from texture_infos(v, k)
+            if k != "extras":
+                yield from texture_infos(v, k)
     elif isinstance(node, list):
         for v in node:
             yield from texture_infos(v, key)
@@ -298,7 +313,7 @@ def _view_refs(node: Any) -> Iterator[Any]:
         for k, v in node.items():
             if k == "bufferView":
                 yield v
-            else:
+            elif k != "extras":
                 yield from _view_refs(v)
     elif isinstance(node, list):
         for v in node:
@@ -310,7 +325,7 @@ def _set_view_refs(node: Any, vmap: dict[int, int]) -> None:
         for k, v in node.items():
             if k == "bufferView" and is_index(v) and v in vmap:
                 node[k] = vmap[v]
-            else:
+            elif k != "extras":
                 _set_view_refs(v, vmap)
     elif isinstance(node, list):
         for v in node:
@@ -353,7 +368,7 @@ def extension_names(node: Any) -> set[str]:
         item = stack.pop()
         if isinstance(item, dict):
             found |= {k for k in as_dict(item.get("extensions")) if isinstance(k, str)}
-            stack += [v for k, v in item.items() if k not in ("extensionsUsed", "extensionsRequired")]
+            stack += [v for k, v in item.items() if k not in ("extensionsUsed", "extensionsRequired", "extras")]
         elif isinstance(item, list):
             stack += item
     return found
@@ -377,6 +392,19 @@ def update_extension_lists(doc: dict[str, Any]) -> None:
             doc.pop("extensionsRequired")
 
 
+#: a written .gltf's JSON is indented when it is shorter than this (compact, it takes as many bytes as it holds)
+INDENTED_BYTES = 1 << 20
+
+
+def json_bytes(doc: dict[str, Any]) -> bytes:
+    """A .gltf's JSON text: compact (as a GLB's), indented when that is short (:data:`INDENTED_BYTES`), so that a
+    large document is written about its own size, once, by the json module's C encoder."""
+    text = json.dumps(doc, separators=(",", ":"))
+    if len(text) < INDENTED_BYTES:
+        text = json.dumps(doc, indent=1)
+    return (text + "\n").encode("utf-8")
+
+
 def glb_bytes(doc: dict[str, Any], bin_data: bytes | None) -> bytes:
     """GLB bytes (§4.4): header, JSON chunk padded with spaces, BIN chunk padded with zeros."""
     text = json.dumps(doc, separators=(",", ":")).encode("utf-8")
@@ -396,8 +424,10 @@ __all__ = [
     "add_images",
     "check_writable_source",
     "drop_unused",
+    "editable_copy",
     "extension_names",
     "glb_bytes",
+    "json_bytes",
     "material_textures",
     "confine_uris",
     "rebase_uris",

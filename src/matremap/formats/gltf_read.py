@@ -25,6 +25,7 @@ the writer unchanged, which writes them where its format has a slot.
 from __future__ import annotations
 
 import os
+import tempfile
 from glob import escape as glob_escape
 from pathlib import Path
 from typing import Any
@@ -42,8 +43,8 @@ from matremap.formats.gltf_container import (
     FileReader,
     GltfDocument,
     cache_dir,
-    cached_copy,
     digest_matches,
+    file_digest,
     parse_container,
 )
 from matremap.formats.gltf_coverage import material_coverage
@@ -85,13 +86,12 @@ def without_alpha(path: Path) -> Path:
 
     PNG stores colour unassociated with alpha (§3.8.2 images are PNG or JPEG); OpenImageIO
     premultiplies colour by alpha on read unless told otherwise, which would darken base colours
-    and packed channels wherever alpha < 1. The copy keeps the stored colour values. It lives in the
-    folder of the image's own content and carries its digest in its name, checked when reused."""
-    import tempfile
-
+    and packed channels wherever alpha < 1. The copy keeps the stored colour values; it is made band by
+    band (memory does not grow with the image). It lives in the folder of the image's own content and
+    carries its digest in its name, checked when reused."""
     import OpenImageIO as oiio
 
-    folder = cache_dir(path.read_bytes())
+    folder = cache_dir(path)
     for f in sorted(folder.glob(f"{glob_escape(path.stem)}-rgb-*.png")):
         if digest_matches(f, f.stem.rsplit("-", 1)[-1]):
             return f
@@ -100,25 +100,49 @@ def without_alpha(path: Path) -> Path:
     inp = oiio.ImageInput.open(oiio_name(path), config)
     if inp is None:
         raise MatremapError(f"cannot read {path}: {oiio.geterror().strip()}; re-export it as PNG or JPEG")
+    try:
+        tmp = _colour_copy(path, inp, folder)
+    finally:
+        inp.close()
+    try:
+        final = folder / f"{path.stem}-rgb-{file_digest(tmp)[:16]}.png"
+        if not digest_matches(final, final.stem.rsplit("-", 1)[-1]):
+            os.replace(tmp, final)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return final
+
+
+def _colour_copy(path: Path, inp: Any, folder: Path) -> Path:
+    """The colour channels of the open image ``inp`` (of ``path``) written as a PNG under a marked temporary
+    name in ``folder`` (see clean_stale), rows in bands of about a million texels."""
+    import OpenImageIO as oiio
+
     spec = inp.spec()
     fmt = oiio.UINT16 if str(spec.format) == "uint16" else oiio.UINT8
-    pixels = inp.read_image(0, 0, 0, spec.nchannels, fmt)
-    inp.close()
-    if pixels is None:
-        raise MatremapError(f"cannot read {path}: the image is corrupt; re-export it")
-    colour = np.ascontiguousarray(pixels[..., :3] if spec.nchannels == 4 else pixels[..., :1])
-    fd, tmp = tempfile.mkstemp(prefix=temp_prefix("tmp", "rgb"), suffix=".png", dir=folder)  # marked: see clean_stale
+    keep = 3 if spec.nchannels == 4 else 1
+    fd, name = tempfile.mkstemp(prefix=temp_prefix("tmp", "rgb"), suffix=".png", dir=folder)
     os.close(fd)
+    tmp = Path(name)
     try:
-        o = oiio.ImageOutput.create(oiio_name(tmp))
-        if o is None or not o.open(tmp, oiio.ImageSpec(spec.width, spec.height, colour.shape[-1], fmt)):
+        out = oiio.ImageOutput.create(oiio_name(name))
+        if out is None or not out.open(oiio_name(name), oiio.ImageSpec(spec.width, spec.height, keep, fmt)):
             raise MatremapError(f"cannot write an alpha-free copy of {path} in {folder}: {oiio.geterror().strip()}")
-        o.write_image(colour)
-        o.close()
-        data = Path(tmp).read_bytes()
-    finally:
-        os.unlink(tmp)
-    return cached_copy(folder, f"{path.stem}-rgb", ".png", data)
+        rows = max(1, (1 << 20) // max(spec.width, 1))
+        try:
+            for y0 in range(0, spec.height, rows):
+                y1 = min(spec.height, y0 + rows)
+                pixels = inp.read_scanlines(0, 0, y0, y1, 0, 0, keep, fmt)
+                if pixels is None or not isinstance(pixels, np.ndarray):
+                    raise MatremapError(f"cannot read {path}: the image is corrupt; re-export it")
+                out.write_scanlines(y0, y1, 0, np.ascontiguousarray(pixels.reshape(y1 - y0, spec.width, keep)))
+        finally:
+            out.close()
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return tmp
 
 
 def select(path: Path, materials: list[Any], material: str | int | None) -> int:

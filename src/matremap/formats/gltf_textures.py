@@ -39,7 +39,7 @@ import numpy as np
 
 from matremap.core.imageio import oiio_name, srgb_to_linear
 from matremap.errors import MatremapError
-from matremap.formats.bake import UVTransform, bake_image, rotate, scale, texels_needed, translate
+from matremap.formats.bake import UVTransform, bake_file, rotate, scale, texels_needed, translate
 from matremap.formats.gltf_container import is_index
 
 TRANSFORM = "KHR_texture_transform"
@@ -170,10 +170,12 @@ def linear_values(path: Path, srgb: bool) -> np.ndarray:
 
 def baked(tex: SlotTexture, srgb: bool, size: tuple[int, int] | None = None) -> Callable[[], np.ndarray]:
     """A bake callable: the image of ``tex`` (linear) as its transform and sampler show it on [0, 1]^2
-    of its UV set, at ``size`` (the image's own by default), sampled bilinearly as glTF's linear filter does."""
+    of its UV set, at ``size`` (the image's own by default), sampled bilinearly as glTF's linear filter does; the
+    file is read in bands (:func:`~matremap.formats.bake.bake_file`), so memory is the map's, not the image's. The
+    colour channels are what it is for when ``srgb`` (an alpha channel is decoded with them and not used)."""
 
     def bake() -> np.ndarray:
-        return bake_image(linear_values(tex.path, srgb), tex.uv_transform, size)
+        return bake_file(tex.path, "srgb" if srgb else "linear", tex.uv_transform, size)
 
     return bake
 
@@ -193,7 +195,7 @@ def baked_normal(tex: SlotTexture, size: tuple[int, int] | None = None) -> Calla
     (see :func:`normal_frame`), renormalised."""
 
     def bake() -> np.ndarray:
-        codes = bake_image(read_code_values(tex.path)[..., :3], tex.uv_transform, size)
+        codes = bake_file(tex.path, "linear", tex.uv_transform, size)[..., :3]
         if codes.shape[-1] < 3:
             raise MatremapError(f"{tex.path}: a normal map needs 3 channels, it has {codes.shape[-1]}")
         n = codes.astype(np.float64) * 2.0 - 1.0

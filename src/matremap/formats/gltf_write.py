@@ -18,7 +18,6 @@ keeps its own emission and occlusion as they are and gives a new base colour tex
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 from typing import Any
@@ -44,6 +43,7 @@ from matremap.formats.gltf_edit import (
     confine_uris,
     drop_unused,
     glb_bytes,
+    json_bytes,
     material_textures,
     rebase_uris,
     refuse_overwrites,
@@ -393,7 +393,7 @@ def commit(out: Path, target: Target, reps: list[Replacement], inputs: list[Path
         if kind == ".glb":
             files.write_bytes(out, glb_bytes(doc, bytes(blob) if target.bin is not None and blob is not None else None))
         else:
-            files.write_bytes(out, (json.dumps(doc, indent=1) + "\n").encode("utf-8"))
+            files.write_bytes(out, json_bytes(doc))
     return out
 
 

@@ -48,6 +48,7 @@ import numpy as np
 from matremap.core.material import Material
 from matremap.errors import MatremapError
 from matremap.formats.asset import CarriedInput, MaterialAsset
+from matremap.formats.bake import MAX_SIDE
 from matremap.formats.mitsuba_blend import blend_parts
 from matremap.formats.mitsuba_params import BsdfValues
 from matremap.formats.mitsuba_plugins import (
@@ -422,13 +423,17 @@ def _is_raw(src: TextureSource) -> bool:
 
 
 def bake_size(parts: Parts) -> tuple[tuple[int, int], bool]:
-    """The size every map of a material is made at: the largest of its images (by texel count), or
+    """The size every map of a material is made at: the largest of its images (by texel count), capped at
+    :data:`~matremap.formats.bake.MAX_SIDE` per side when one of them is baked (a baked map is held whole), or
     :data:`DEFAULT_BAKE_SIZE` when only procedural textures drive it; and whether that default was used."""
     sources = [*parts.textures.values(), parts.normal, parts.opacity[1] if parts.opacity else None]
     sizes = [s.size for s in sources if s is not None and s.size is not None]
     if not sizes:
         return DEFAULT_BAKE_SIZE, True
-    return max(sizes, key=lambda hw: (hw[0] * hw[1], hw)), False
+    h, w = max(sizes, key=lambda hw: (hw[0] * hw[1], hw))
+    if any(s is not None and s.plain is None for s in sources):
+        return (min(h, MAX_SIDE), min(w, MAX_SIDE)), False
+    return (h, w), False
 
 
 def finish(scene: MitsubaScene, parts: Parts, index: int) -> MaterialAsset:

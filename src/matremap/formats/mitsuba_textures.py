@@ -43,7 +43,7 @@ import numpy as np
 
 from matremap.errors import MatremapError
 from matremap.formats.asset import TextureRef
-from matremap.formats.bake import UVTransform, bake_image, texel_grid
+from matremap.formats.bake import UVTransform, bake_file, texel_grid
 
 #: Rec. 709 luminance, Mitsuba's ``luminance()`` of an RGB colour
 LUMINANCE = np.array([0.212671, 0.715160, 0.072169])
@@ -154,15 +154,15 @@ def uv_matrix(el: ET.Element, what: str) -> np.ndarray:
 
 
 def _bitmap_sample(path: Path, colorspace: str, luminance: bool, uv: UVTransform, size: tuple[int, int]) -> np.ndarray:
-    from matremap.svbrdf.textures import read_image
+    """The bitmap's colour (its luminance when ``luminance``) as ``uv`` shows it on a map of ``size``, the file read
+    in bands (:func:`~matremap.formats.bake.bake_file`: memory is the map's, not the image's)."""
+    from matremap.svbrdf.textures import image_info
 
-    image, _ = read_image(path, colorspace)
-    image = np.atleast_3d(image)
-    if image.shape[-1] >= 3:
-        image = image[..., :3]
-        if luminance:
-            image = (image @ LUMINANCE.astype(np.float32))[..., None]
-    return bake_image(image, uv, size)
+    channels = [0, 1, 2] if image_info(path, colorspace).channels >= 3 else None
+    image = bake_file(path, colorspace, uv, size, channels=channels)
+    if channels is not None and luminance:  # linear in the channels: the same before or after the lookup
+        image = (image @ LUMINANCE.astype(np.float32))[..., None]
+    return image
 
 
 def bitmap_source(

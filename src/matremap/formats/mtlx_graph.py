@@ -48,7 +48,7 @@ from typing import Any, NoReturn
 import numpy as np
 
 from matremap.errors import MatremapError, not_a_file, shorten
-from matremap.formats.bake import MAX_SIDE, sample, texel_grid
+from matremap.formats.bake import MAX_SIDE, border_cover, sample_file, texel_grid
 
 #: channels of the MaterialX data types the evaluator handles
 CHANNELS = {"float": 1, "integer": 1, "boolean": 1, "vector2": 2, "vector3": 3, "color3": 3, "vector4": 4, "color4": 4}
@@ -207,12 +207,11 @@ class GraphEvaluator:
 
     ``doc``: the document with MaterialX's standard library set as its data library; ``resolve``
     (text, what) -> the confined path of a file a ``file`` input names; ``notes``: where decisions go.
-    Decoded images are cached for the evaluator's lifetime (a material's inputs share them)."""
+    Image files are read in bands each time a bake samples them (:func:`~matremap.formats.bake.sample_file`)."""
 
     def __init__(self, doc: Any, path: Path, resolve: Callable[[str, str], Path], notes: list[str]) -> None:
         self.doc, self.path, self.resolve, self.notes = doc, path, resolve, notes
         self.doc_scope = Scope(doc, None, "the document")
-        self._images: dict[tuple[Path, str], np.ndarray] = {}
         self._pass = _Pass((PROBE, PROBE), True)
         self._feeding = ""
 
@@ -605,14 +604,25 @@ class GraphEvaluator:
         filt = self.string(node, "filtertype", scope) or "linear"
         if self._pass.probe:
             return self._probe_image(f, node, n, s, t)
-        img = self.load(f, typ, node.getName())
-        h, w = img.shape[:2]
+        from matremap.svbrdf.textures import image_info
+
+        cs = self.colorspace(f, typ, node.getName())
+        info = image_info(f.path, cs, colour=cs == "srgb")
+        h, w = info.height, info.width
         if filt == "closest":  # the centre of the texel each lookup falls in
             s, t = (np.floor(s * w) + 0.5) / w, (np.floor(t * h) + 0.5) / h
         wrap = (WRAP[modes[0]], WRAP[modes[1]])
-        out = sample(img, s, t, wrap, 0.0).astype(np.float64)
-        if "border" in wrap:  # outside [0, 1] the node's default, blended as the bilinear taps fall
-            cover = sample(np.ones((h, w, 1), np.float32), s, t, wrap, 0.0)
+        # the file read in bands (memory: the map's, not the image's), its channels fitted to the node's type
+        # (fit_image) after sampling: a padded 0 samples to 0, a padded 1 to the weight of the taps inside
+        out = sample_file(f.path, cs, s, t, wrap, 0.0, channels=list(range(min(n, info.channels))))
+        cover = border_cover((h, w), s, t, wrap) if "border" in wrap or n == 4 > info.channels else None
+        if n > info.channels:
+            pad = np.zeros((*out.shape[:-1], n - info.channels), np.float32)
+            if n == 4:
+                pad[..., -1:] = cover
+            out = np.concatenate([out, pad], axis=-1)
+        out = out.astype(np.float64)
+        if cover is not None and "border" in wrap:  # outside [0, 1] the default, blended as the bilinear taps fall
             out = out + (1.0 - cover) * default
         return out
 
@@ -658,18 +668,6 @@ class GraphEvaluator:
                 self.notes.append(note)
             return "linear"
         return "srgb" if cs in SRGB else "linear"
-
-    def load(self, f: FileRef, typ: str, node_name: str) -> np.ndarray:
-        """The file of ``f`` decoded to linear float32 [H, W, C], C fitted to ``typ`` by the image node's rule."""
-        from matremap.svbrdf.textures import read_image
-
-        cs = self.colorspace(f, typ, node_name)
-        key = (f.path, cs)
-        if key not in self._images:
-            self._images[key] = np.atleast_3d(read_image(f.path, cs, colour=cs == "srgb")[0]).astype(np.float32)
-        img = self._images[key]
-        n = CHANNELS[typ]
-        return img if img.shape[-1] == n else fit_image(img, n)
 
 
 @contextmanager

@@ -70,8 +70,9 @@ from matremap.dialects.usd import specular_workflow
 from matremap.errors import MatremapError, not_a_file
 from matremap.formats.asset import CarriedInput, MaterialAsset, TextureRef
 from matremap.formats.bake import (
+    BAND_TEXELS,
     UVTransform,
-    bake_image,
+    bake_file,
     resampled_note,
     rotate,
     scale,
@@ -546,13 +547,20 @@ def _baker(
     texels; the image's own size by default), x scale + bias."""
 
     def bake() -> np.ndarray:
-        from matremap.svbrdf.textures import read_image
+        from matremap.svbrdf.textures import MapReader
 
-        image, _ = read_image(f, colorspace)
-        image = np.atleast_3d(image)[..., list(picked)]
-        if not transform.identity or (size is not None and size != image.shape[:2]):
-            image = bake_image(image, transform, size)
-        return (image * sc.astype(np.float32) + bias.astype(np.float32)).astype(np.float32)
+        with MapReader(f, colorspace) as r:  # the file read in bands: memory is the map's, not the image's
+            h, w = r.info.height, r.info.width
+            if transform.identity and size in (None, (h, w)):
+                image = np.empty((h, w, len(picked)), np.float32)
+                rows = max(1, BAND_TEXELS // w)
+                for y0 in range(0, h, rows):
+                    image[y0 : y0 + rows] = r.read_rows(y0, min(h, y0 + rows))[..., list(picked)]
+            else:
+                image = bake_file(f, colorspace, transform, size, channels=list(picked))
+        image *= sc.astype(np.float32)
+        image += bias.astype(np.float32)
+        return image
 
     return bake
 
@@ -628,9 +636,12 @@ def _at_one_size(ctx: _Ctx, textures: dict[str, TextureRef], read: Mapping[str, 
     a note. USD gives each texture its own image (usd-wg's RoughnessTest: a 1280x1024 colour beside a 256x256
     Targa roughness)."""
     needs = [t.size for t in read.values() if t.size is not None]
-    if len(set(needs)) <= 1:
+    if not needs:
         return textures
     size = shared_size(needs)
+    baked = any(ref.bake is not None for ref in textures.values())
+    if len(set(needs)) == 1 and not (baked and size != needs[0]):  # a baked map is at most MAX_SIDE a side
+        return textures
     out = dict(textures)
     resampled = []
     for name, tex in read.items():

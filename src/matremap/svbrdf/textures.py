@@ -251,6 +251,11 @@ class MapReader:
         self.check_finite = check_finite
 
     def read_rows(self, y0: int, y1: int) -> np.ndarray:
+        return self.decode(self.read_codes(y0, y1))
+
+    def read_codes(self, y0: int, y1: int) -> np.ndarray:
+        """Rows ``y0:y1`` as stored, ``[rows, W, C]``: uint8 or uint16 code values, float32 for float files
+        (refused when not finite, if :attr:`check_finite`); :meth:`decode` makes them linear values."""
         oiio = _oiio()
         info = self.info
         if not 0 <= y0 < y1 <= info.height:
@@ -265,7 +270,7 @@ class MapReader:
             )
         raw = raw.reshape(y1 - y0, info.width, info.channels)
         if info.integer:
-            return _decode_lut(info.pixel_type, info.colorspace)[raw]
+            return raw
         out = np.asarray(raw, dtype=np.float32)
         if self.check_finite and not np.isfinite(out.sum(dtype=np.float64)):
             bad = ~np.isfinite(out).all(axis=(1, 2))
@@ -275,6 +280,14 @@ class MapReader:
                     f"{self.path} holds NaN or infinite texels (first in row {row}); "
                     f"replace them with finite values before converting"
                 )
+        return out
+
+    def decode(self, codes: np.ndarray) -> np.ndarray:
+        """Values of :meth:`read_codes` (any shape, any selection of them) as linear float32."""
+        info = self.info
+        if info.integer:
+            return _decode_lut(info.pixel_type, info.colorspace)[codes]
+        out = np.asarray(codes, dtype=np.float32)
         if info.colorspace == "srgb":
             out = srgb_to_linear(np.clip(out, 0.0, 1.0))
         return out
