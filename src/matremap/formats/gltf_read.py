@@ -55,6 +55,7 @@ from matremap.formats.gltf_extensions import (
     SCHEMAS,
     SHEEN,
     SHEEN_MAPS,
+    SPEC_GLOSS,
     SPECULAR,
     TRANSMISSION,
     TRANSMISSION_MAP,
@@ -63,6 +64,7 @@ from matremap.formats.gltf_extensions import (
     layer_values,
     lost_look,
     read_extensions,
+    spec_gloss_values,
 )
 from matremap.formats.gltf_textures import (
     TRANSFORM,
@@ -201,11 +203,22 @@ def read(
     n_textures = len(obj["textures"]) if isinstance(obj.get("textures"), list) else 0
     found = read_extensions(p, where, ext, n_textures)
     doc.extensions = found
-    constants = read_factors(p, where, pbr, found)
+    sg = found.get(SPEC_GLOSS)
+    if sg is not None:  # the extension's material is the one drawn: converted, its fallback beside it not read
+        pbr = {"baseColorFactor": sg["diffuseFactor"]} | (
+            {"baseColorTexture": sg["diffuseTexture"]} if "diffuseTexture" in sg else {}
+        )
+        constants = read_factors(p, where, {}, {}) | spec_gloss_values(sg)
+        notes.append(spec_gloss_note(sg, found))
+    else:
+        constants = read_factors(p, where, pbr, found)
     reader = FileReader(p, doc, data, confinement)
     textures = MaterialTextures(reader, where, notes)
     layers = layer_values(found)
-    maps = textures.read_maps(pbr, found.get(SPECULAR, {}), constants)
+    if sg is not None:
+        maps = textures.read_spec_gloss_maps(sg, constants)
+    else:
+        maps = textures.read_maps(pbr, found.get(SPECULAR, {}), constants)
     maps |= textures.read_layer_maps(found, layers)
     normal = textures.read_normal(m)
     maps, normal = textures.at_one_size(maps, normal)
@@ -251,16 +264,28 @@ def read(
     )
 
 
-#: material extensions that replace the metallic-roughness workflow -> what that means for a conversion: the
-#: material's look is in them, and reading the metallic-roughness defaults beside them gave a grey metal (a red
-#: specular-glossiness material onto OpenPBR: base_color 0.52 grey, metalness 1, PASSED, exit 0)
+#: material extensions that replace the lit metallic-roughness workflow -> what that means for a conversion
 WORKFLOWS = {
-    "KHR_materials_pbrSpecularGlossiness": (
-        "the archived specular-glossiness workflow carries its colours; convert the file to metallic-roughness "
-        "first, e.g. gltf-transform metalrough IN OUT"
-    ),
     "KHR_materials_unlit": "an unlit material: no lit model draws it; use its base colour as an emission instead",
 }
+
+
+def spec_gloss_note(sg: dict[str, Any], found: dict[str, dict[str, Any]]) -> str:
+    """The note of a KHR_materials_pbrSpecularGlossiness material converted to metallic-roughness."""
+    v = spec_gloss_values(sg)
+    tex = [k for k in ("diffuseTexture", "specularGlossinessTexture") if k in sg]
+    replaced = [e for e in (IOR, SPECULAR) if e in found]
+    return (
+        f"{SPEC_GLOSS} converted by its README's formulas: diffuse -> baseColor "
+        f"{[round(x, 4) for x in v['baseColor']]}, "
+        f"specular {[round(x, 4) for x in sg['specularFactor']]} -> F0 (metallic 0, ior 1.5, specularColor = "
+        f"specular / 0.04), roughness = 1 - glossiness = {v['roughness']:.4g}"
+        + (f"; {' and '.join(tex)} converted per texel" if tex else "")
+        + (f"; {', '.join(replaced)} beside it replaced" if replaced else "")
+        + "; a glTF output gets the metallic-roughness material without the extension"
+    )
+
+
 UNLIT = "KHR_materials_unlit"
 
 #: material extensions that change the look and that no model here converts -> the property that turns each on
@@ -331,6 +356,8 @@ class MaterialTextures:
         self.uv_sets: dict[str, int] = {}
         #: the textures each TextureRef made here was read from, with whether it was decoded from sRGB
         self.sources: list[tuple[TextureRef, SlotTexture, bool]] = []
+        #: the roughness maps read from a glossiness (id of the TextureRef -> its glossinessFactor)
+        self.glossiness: dict[int, float] = {}
 
     @property
     def uv_set(self) -> int:
@@ -422,6 +449,38 @@ class MaterialTextures:
             )
         return textures
 
+    def read_spec_gloss_maps(self, sg: dict[str, Any], constants: dict[str, Any]) -> dict[str, TextureRef]:
+        """KHR_materials_pbrSpecularGlossiness's textures as gltf:metal-rough maps, per texel as
+        :func:`~matremap.formats.gltf_extensions.spec_gloss_values` converts its factors: ``baseColor`` the sRGB RGB
+        of diffuseTexture times diffuseFactor, ``specularColor`` the sRGB RGB of specularGlossinessTexture times
+        specularFactor / 0.04, ``roughness`` 1 - glossinessFactor times its linear alpha (an image without alpha
+        has glossiness 1 there: the factor alone, noted)."""
+        maps: dict[str, TextureRef] = {}
+        if "diffuseTexture" in sg:
+            tex = self.remapped(sg["diffuseTexture"], f"{SPEC_GLOSS}.diffuseTexture")
+            rgb = tuple(channel(c, tex.channels) for c in range(3))
+            maps["baseColor"] = self.ref(tex, rgb, True, tuple(constants["baseColor"]))
+        if "specularGlossinessTexture" in sg:
+            slot = f"{SPEC_GLOSS}.specularGlossinessTexture"
+            tex = self.remapped(sg["specularGlossinessTexture"], slot)
+            rgb = tuple(channel(c, tex.channels) for c in range(3))
+            maps["specularColor"] = self.ref(tex, rgb, True, tuple(constants["specularColor"]))
+            a = alpha_channel(tex.channels)
+            if a is None:
+                self.notes.append(
+                    "specularGlossinessTexture has no alpha channel, so its glossiness is 1 everywhere; using "
+                    "glossinessFactor alone"
+                )
+            else:
+                gloss = float(sg["glossinessFactor"])
+                ref = TextureRef(
+                    tex.path, (a,), "linear", 1.0, tex.extracted, bake=roughness_from_glossiness(tex, gloss)
+                )
+                self.sources.append((ref, tex, False))
+                self.glossiness[id(ref)] = gloss
+                maps["roughness"] = ref
+        return maps
+
     def read_layer_map(self, info: dict[str, Any], slot: str, c: int, factor: float) -> TextureRef:
         """A layer extension's texture (KHR_materials_clearcoat: ``clearcoatTexture`` R, the coat's weight;
         ``clearcoatRoughnessTexture`` G, its roughness), channel ``c`` times its factor."""
@@ -502,7 +561,10 @@ class MaterialTextures:
             tex, srgb = slots[id(ref)]
             if tex.size == size:
                 return ref
-            bake = baked_normal(tex, size) if ref is normal else baked(tex, srgb, size)
+            if id(ref) in self.glossiness:
+                bake = roughness_from_glossiness(tex, self.glossiness[id(ref)], size)
+            else:
+                bake = baked_normal(tex, size) if ref is normal else baked(tex, srgb, size)
             return TextureRef(tex.path, ref.channels, ref.colorspace, ref.scale, tex.extracted, bake=bake)
 
         resampled = sorted({tex.slot for tex, _ in slots.values() if tex.size != size})
@@ -600,6 +662,17 @@ class MaterialTextures:
         return CarriedInput(alpha, texture, settings)
 
 
+def roughness_from_glossiness(tex: SlotTexture, gloss: float, size: tuple[int, int] | None = None) -> Any:
+    """A bake callable: 1 - ``gloss`` x the texture's linear values as its transform and sampler show them (the
+    roughness of a specularGlossinessTexture, whose alpha is the glossiness)."""
+    inner = baked(tex, False, size)
+
+    def bake() -> np.ndarray:
+        return (1.0 - gloss * np.asarray(inner(), dtype=np.float32)).astype(np.float32)
+
+    return bake
+
+
 def note_unknown(ext: dict[str, Any], obj: dict[str, Any], notes: list[str]) -> None:
     """Note the material extensions matremap does not read (a written copy keeps them) and the
     extensions the file requires."""
@@ -609,7 +682,7 @@ def note_unknown(ext: dict[str, Any], obj: dict[str, Any], notes: list[str]) -> 
         )
     listed = obj.get("extensionsRequired")
     required = {e for e in (listed if isinstance(listed, list) else []) if isinstance(e, str)}
-    required -= {IOR, SPECULAR, TRANSFORM}
+    required -= {IOR, SPECULAR, TRANSFORM, SPEC_GLOSS}
     if required:
         notes.append(f"the file requires {', '.join(sorted(required))}; matremap ignores them")
 
