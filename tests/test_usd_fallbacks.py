@@ -145,3 +145,31 @@ def test_usd_wg_teapot_ceramic_is_its_display_color(tmp_path, capsys):
     assert lum == pytest.approx(np.dot([0.2126, 0.7152, 0.0722], src_rgb), rel=0.15)
     assert pbr.get("metallicFactor", 1.0) < 0.05
     assert pbr.get("roughnessFactor", 1.0) == pytest.approx(0.125, abs=0.1)
+
+
+def test_a_stage_without_materials_is_its_gprims_display_colour(tmp_path, capsys):
+    """Before: refused ('holds no UsdShade Material'). A gprim without a material is drawn by the renderer's fallback
+    surface with its displayColor; one that varies is not listed."""
+    f = tmp_path / "plain.usda"
+    quad = MESH.replace("    rel material:binding = </Looks/M>\n", "")
+    f.write_text(
+        "#usda 1.0\n"
+        + quad.format(colour="[(0.8, 0.3, 0.1)]", interp="constant")
+        + quad.replace('"Quad"', '"Ramp"').format(
+            colour="[(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 1)]", interp="vertex"
+        )
+    )
+    assert usd.material_names(f) == ["/Quad"]
+    a = usd.read(f)
+    np.testing.assert_allclose(a.constants["diffuseColor"], [0.8, 0.3, 0.1], atol=1e-6)
+    assert a.model == "usd:preview_surface" and "roughness" not in a.constants  # the spec's default 0.5
+    out = tmp_path / "out"
+    assert main(["remap", str(f), "--to", "usd:preview_surface", "-o", str(out)]) == 0, capsys.readouterr().err
+    back = usd.read(next(out.glob("*.usd*")))
+    np.testing.assert_allclose(back.constants["diffuseColor"], [0.8, 0.3, 0.1], atol=1e-4)
+    empty = tmp_path / "empty.usda"
+    empty.write_text(
+        "#usda 1.0\n" + quad.format(colour="[(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 1)]", interp="vertex")
+    )
+    with pytest.raises(MatremapError, match="no UsdShade Material and no gprim with a uniform displayColor"):
+        usd.read(empty)

@@ -268,10 +268,55 @@ def _materials(pxr: Any, stage: Any) -> list[Any]:
 
 
 def material_names(path: str | os.PathLike) -> list[str]:
-    """The prim paths of a stage's materials, in the order :func:`read` indexes them."""
+    """The prim paths of a stage's materials, in the order :func:`read` indexes them (a stage without materials:
+    its gprims drawn by their displayColor, :func:`_display_colour_prims`)."""
     pxr = _pxr()
     stage = _open_stage(Path(path), None)
-    return [str(m.GetPath()) for m in _materials(pxr, stage)]
+    found = _materials(pxr, stage)
+    if not found:
+        return [str(prim.GetPath()) for prim, _ in _display_colour_prims(pxr, stage)]
+    return [str(m.GetPath()) for m in found]
+
+
+def _display_colour_prims(pxr: Any, stage: Any) -> list[tuple[Any, list[float]]]:
+    """The gprims of a stage without materials whose ``primvars:displayColor`` is one colour (``constant``, or every
+    element equal), with that colour. UsdGeomGprim's ``displayColor`` is "the color to use for display ... even in
+    the absence of any specified shader": renderers draw such a gprim with their fallback surface, a
+    UsdPreviewSurface at its defaults whose diffuseColor is the displayColor (usdImaging's fallback material)."""
+    out = []
+    for prim in stage.Traverse():
+        if not prim.IsA(pxr.UsdGeom.Gprim):
+            continue
+        pv = pxr.UsdGeom.Gprim(prim).GetDisplayColorPrimvar()
+        if not pv or not pv.HasValue():
+            continue
+        flat = np.asarray(pv.ComputeFlattened(), dtype=np.float64).reshape(-1, 3)
+        if flat.size and np.all(np.isfinite(flat)) and np.ptp(flat, axis=0).max() <= 1e-6:
+            out.append((prim, [float(x) for x in flat[0]]))
+    return out
+
+
+def _display_colour_asset(pxr: Any, p: Path, stage: Any, material: str | int | None) -> MaterialAsset:
+    """The material a renderer draws a stage without materials with (:func:`_display_colour_prims`)."""
+    found = _display_colour_prims(pxr, stage)
+    if not found:
+        raise MatremapError(
+            f"{p} holds no UsdShade Material and no gprim with a uniform displayColor; matremap reads "
+            "UsdPreviewSurface materials"
+        )
+    names = [str(prim.GetPath()) for prim, _ in found]
+    index = _pick(p, names, material)
+    colour = found[index][1]
+    notes = [
+        f"{names[index]} has no material: read as the renderer's fallback surface, a UsdPreviewSurface at its "
+        f"defaults with diffuseColor = its displayColor {[round(c, 4) for c in colour]}"
+    ]
+    spec = get_model(MODEL)
+    constants: dict[str, Any] = {"diffuseColor": colour, "useSpecularWorkflow": "0"}
+    _clamp(_Ctx(pxr, p, names[index], None, notes), spec, constants)
+    asset = MaterialAsset(path=p, format=FORMAT, name=names[index], model=MODEL, constants=constants, notes=notes)
+    asset.index = index  # no material prim to replace: a USD output is a new stage
+    return asset
 
 
 def _pick(p: Path, names: list[str], material: str | int | None) -> int:
@@ -303,7 +348,7 @@ def read(
     stage = _open_stage(p, confinement)
     found = _materials(pxr, stage)
     if not found:
-        raise MatremapError(f"{p} holds no UsdShade Material; matremap reads UsdPreviewSurface materials")
+        return _display_colour_asset(pxr, p, stage, material)
     names = [str(m.GetPath()) for m in found]
     index = _pick(p, names, material)
     shader = _surface(pxr, found[index])
