@@ -159,3 +159,28 @@ def test_spec_gloss_onto_openpbr_is_a_red_dielectric(tmp_path, capsys):
     rgb = [float(x) for x in colour.group(1).split(",")]
     assert hue(rgb) == pytest.approx(hue(RED["diffuseFactor"][:3]), abs=0.03)
     assert metal is None or float(metal.group(1)) < 0.05
+
+
+def test_extensions_no_model_converts_are_named_in_one_note_with_their_values(tmp_path):
+    """Before: one generic 'is not remapped' line each, saying nothing of what each draws or where it is lost."""
+    ext = {
+        "KHR_materials_iridescence": {"iridescenceFactor": 1.0},
+        "KHR_materials_anisotropy": {"anisotropyStrength": 0.5},
+        "KHR_materials_dispersion": {"dispersion": 0.3},
+        "KHR_materials_diffuse_transmission": {"diffuseTransmissionFactor": 0.4},
+    }
+    asset = read(make_file(tmp_path, "m.gltf", [{"name": "x", "extensions": ext}]))
+    named = [n for n in asset.notes if "not converted" in n]
+    assert len(named) == 1
+    for name, value in (
+        ("KHR_materials_iridescence", "iridescenceFactor 1"),
+        ("KHR_materials_anisotropy", "anisotropyStrength 0.5"),
+        ("KHR_materials_dispersion", "dispersion 0.3"),
+        ("KHR_materials_diffuse_transmission", "diffuseTransmissionFactor 0.4"),
+    ):
+        assert f"{name} (" in named[0] and value in named[0]
+        assert not any(n.startswith(name) for n in asset.notes)  # not a second, generic line
+    assert "other targets leave them out" in named[0]
+    assert sorted(d.split()[0] for d in asset.dropped) == sorted(
+        ["KHR_materials_anisotropy", "KHR_materials_iridescence", "KHR_materials_diffuse_transmission"]
+    )

@@ -288,14 +288,19 @@ def spec_gloss_note(sg: dict[str, Any], found: dict[str, dict[str, Any]]) -> str
 
 UNLIT = "KHR_materials_unlit"
 
-#: material extensions that change the look and that no model here converts -> the property that turns each on
-#: (its default 0, per its ratified README). Not a dispersion (KHR_materials_dispersion, OpenPBR's
-#: transmission_dispersion_*): colour fringes at a glass's edges, noted, as OpenPBR's glass example's Abbe 64 is
-DROPPED = {
-    "KHR_materials_anisotropy": "anisotropyStrength",
-    "KHR_materials_iridescence": "iridescenceFactor",
-    "KHR_materials_diffuse_transmission": "diffuseTransmissionFactor",
+#: the material extensions that change the look and that no model here converts -> the property that turns each on
+#: (default 0 in each ratified README) and what it draws; a dispersion shows only through a refracting transmission
+LOOKS = {
+    "KHR_materials_anisotropy": ("anisotropyStrength", "an anisotropic highlight"),
+    "KHR_materials_iridescence": ("iridescenceFactor", "a thin-film iridescence"),
+    "KHR_materials_diffuse_transmission": ("diffuseTransmissionFactor", "light diffused through a thin surface"),
+    "KHR_materials_dispersion": ("dispersion", "a glass's colour fringes"),
 }
+
+#: the extensions of :data:`LOOKS` the gate's ``dropped`` check counts (on: their factor above 0). Not a dispersion
+#: (OpenPBR's transmission_dispersion_*): colour fringes at a glass's edges, noted, as OpenPBR's glass example's
+#: Abbe 64 is
+DROPPED = {name: factor for name, (factor, _) in LOOKS.items() if name != "KHR_materials_dispersion"}
 
 
 def dropped_extensions(ext: dict[str, Any]) -> list[str]:
@@ -675,8 +680,21 @@ def roughness_from_glossiness(tex: SlotTexture, gloss: float, size: tuple[int, i
 
 def note_unknown(ext: dict[str, Any], obj: dict[str, Any], notes: list[str]) -> None:
     """Note the material extensions matremap does not read (a written copy keeps them) and the
-    extensions the file requires."""
-    for name in sorted(set(ext) - set(SCHEMAS)):
+    extensions the file requires. The ones of :data:`LOOKS` are named together in one note, with the value that
+    turns each on."""
+    looks = []
+    for name, (factor, what) in LOOKS.items():
+        e = ext.get(name)
+        if isinstance(e, dict):
+            v = e.get(factor, 0.0)
+            value = f"{v:g}" if isinstance(v, (int, float)) and not isinstance(v, bool) else repr(v)
+            looks.append(f"{name} ({what}; {factor} {value})")
+    if looks:
+        notes.append(
+            f"not converted, no model here has them: {'; '.join(looks)}; a glTF output keeps them, other targets "
+            "leave them out"
+        )
+    for name in sorted(set(ext) - set(SCHEMAS) - set(LOOKS)):
         notes.append(
             f"{name} is not remapped (matremap fits the base metallic-roughness layer); a written copy keeps it"
         )
