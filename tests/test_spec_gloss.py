@@ -184,3 +184,36 @@ def test_extensions_no_model_converts_are_named_in_one_note_with_their_values(tm
     assert sorted(d.split()[0] for d in asset.dropped) == sorted(
         ["KHR_materials_anisotropy", "KHR_materials_iridescence", "KHR_materials_diffuse_transmission"]
     )
+
+
+def test_textured_spec_gloss_onto_usd_keeps_its_roughness_and_colour_per_texel(tmp_path, capsys):
+    """A grey specular (as most spec-gloss textures hold) over a coloured diffuse, converted per texel and swept
+    onto UsdPreviewSurface: the written maps, read back, have the source's glossiness as roughness and its diffuse
+    hue."""
+    pytest.importorskip("pxr")
+    from matremap.formats import usd
+
+    images = gloss_images()
+    sg = images["specgloss"]
+    sg[..., 1] = sg[..., 0]
+    sg[..., 2] = sg[..., 0]
+    images = {k: np.repeat(np.repeat(v, 4, 0), 4, 1) for k, v in images.items()}
+    ext = {"diffuseTexture": {"index": 0}, "specularGlossinessTexture": {"index": 1}, "glossinessFactor": 0.8}
+    src = make_file(tmp_path / "in", "t.gltf", [{"name": "t", "extensions": {SG: ext}}], images)
+    out = tmp_path / "out"
+    code = main(["remap", str(src), "--to", "usd:preview_surface", "-o", str(out), *FAST])
+    assert code == 0, capsys.readouterr().err
+    back = usd.read(next(out.glob("*.usda")))
+    rough = texture_values(back.textures["roughness"])[..., 0]
+    want = 1 - 0.8 * images["specgloss"][..., 3] / 255.0
+    assert float(np.mean(np.abs(rough - want))) < 0.05
+    colour = texture_values(back.textures["diffuseColor"])
+    diffuse = srgb_to_linear(images["diffuse"] / 255.0)
+    bright = diffuse.max(axis=-1) > 0.2
+    hues = np.array([[hue(c), hue(d)] for c, d in zip(colour[bright], diffuse[bright], strict=True)])
+    shift = np.abs(hues[:, 0] - hues[:, 1])
+    assert float(np.median(np.minimum(shift, 1 - shift))) < 0.03
+    if "metallic" in back.textures:
+        assert float(np.max(texture_values(back.textures["metallic"]))) < 0.05
+    else:
+        assert float(np.reshape(back.constants.get("metallic", 0.0), -1)[0]) < 0.05
