@@ -10,7 +10,10 @@ References are to the glTF 2.0 specification (Khronos, version 2.0.1, 2021):
 * §3.9.4 "Alpha Coverage": ``alphaMode`` OPAQUE (alpha ignored, the default), MASK (``alphaCutoff``,
   default 0.5) or BLEND; alpha is ``baseColorFactor[3]`` times the base colour texture's alpha;
 * the material extensions of :mod:`matremap.formats.gltf_extensions` (ior and specular drive the model,
-  emissive strength multiplies the emission, the layers are recorded and reported).
+  emissive strength multiplies the emission, the layers are recorded and reported; a
+  KHR_materials_pbrSpecularGlossiness material is converted to metallic-roughness by the extension's formulas,
+  :func:`~matremap.formats.gltf_extensions.spec_gloss_values`, its textures per texel, and read in place of the
+  metallic-roughness fallback beside it, which its README says a client supporting it does not draw).
 
 Textures are resolved by :mod:`matremap.formats.gltf_textures` (samplers, KHR_texture_transform, UV sets):
 a transformed texture is baked onto the map set's UVs. A map set has one UV set, so the remapped textures

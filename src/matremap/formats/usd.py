@@ -30,6 +30,11 @@ its value, a two-channel one puts its second in a), ``scale`` / ``bias`` (output
 ``st`` from a ``UsdPrimvarReader_float2`` through any chain of ``UsdTransform2d`` (in x scale x rotate +
 translation, rotation in degrees), baked with :mod:`matremap.formats.bake` in USD's lower-left ``st`` origin
 with ``wrapS`` / ``wrapT`` (``black`` is a border of 0; ``useMetadata`` falls back to black, as the spec says).
+A ``UsdUVTexture`` whose ``st`` is not connected reads its image at its ``st`` value (the spec's fallback (0, 0))
+everywhere: a uniform value. A ``UsdPrimvarReader_float`` / ``_float3`` (a ``displayColor`` read into diffuseColor)
+gives the primvar's value on the geometry bound to the material when it is one value there, else its ``fallback``.
+A stage without materials lists its gprims whose ``displayColor`` is one colour, each read as the renderer's
+fallback surface (a UsdPreviewSurface at its defaults with that diffuseColor).
 
 The file is untrusted: before USD composes it, every layer it names (sublayers, references, payloads) is
 checked recursively to lie in its folder or an allowed one and to exist there (so USD's search paths never
