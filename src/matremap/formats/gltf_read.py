@@ -206,22 +206,11 @@ def read(
     n_textures = len(obj["textures"]) if isinstance(obj.get("textures"), list) else 0
     found = read_extensions(p, where, ext, n_textures)
     doc.extensions = found
-    sg = found.get(SPEC_GLOSS)
-    if sg is not None:  # the extension's material is the one drawn: converted, its fallback beside it not read
-        pbr = {"baseColorFactor": sg["diffuseFactor"]} | (
-            {"baseColorTexture": sg["diffuseTexture"]} if "diffuseTexture" in sg else {}
-        )
-        constants = read_factors(p, where, {}, {}) | spec_gloss_values(sg)
-        notes.append(spec_gloss_note(sg, found))
-    else:
-        constants = read_factors(p, where, pbr, found)
+    pbr, constants = base_values(p, where, pbr, found, notes)
     reader = FileReader(p, doc, data, confinement)
     textures = MaterialTextures(reader, where, notes)
     layers = layer_values(found)
-    if sg is not None:
-        maps = textures.read_spec_gloss_maps(sg, constants)
-    else:
-        maps = textures.read_maps(pbr, found.get(SPECULAR, {}), constants)
+    maps = textures.read_base_maps(pbr, found, constants)
     maps |= textures.read_layer_maps(found, layers)
     normal = textures.read_normal(m)
     maps, normal = textures.at_one_size(maps, normal)
@@ -242,13 +231,7 @@ def read(
         constants |= layers
         lost = [w for w in lost if not w.startswith(SHEEN)]
         lost = [w for w in lost if "transmission" not in layers or not w.startswith(TRANSMISSION)]
-    # another workflow carries the look, unless the file gives a metallic-roughness fallback beside it (as the
-    # specular-glossiness extension asked writers to)
-    lost += [
-        f"{workflow} ({why})"
-        for workflow, why in WORKFLOWS.items()
-        if workflow in ext and (workflow == UNLIT or "pbrMetallicRoughness" not in m)
-    ]
+    lost += [f"{workflow} ({why})" for workflow, why in WORKFLOWS.items() if workflow in ext]
     return MaterialAsset(
         path=p,
         format="gltf",
@@ -267,10 +250,27 @@ def read(
     )
 
 
-#: material extensions that replace the lit metallic-roughness workflow -> what that means for a conversion
+#: material extensions that replace the lit metallic-roughness workflow -> what that means for a conversion (the
+#: material is lost: copied onto its own model, refused for others)
 WORKFLOWS = {
     "KHR_materials_unlit": "an unlit material: no lit model draws it; use its base colour as an emission instead",
 }
+
+
+def base_values(
+    path: Path, where: str, pbr: dict[str, Any], found: dict[str, dict[str, Any]], notes: list[str]
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The material's pbrMetallicRoughness (its base colour and alpha) and uniform values: a
+    KHR_materials_pbrSpecularGlossiness material's conversion (the extension's material is the one drawn; the
+    fallback beside it is not read), else :func:`read_factors`."""
+    sg = found.get(SPEC_GLOSS)
+    if sg is None:
+        return pbr, read_factors(path, where, pbr, found)
+    base = {"baseColorFactor": sg["diffuseFactor"]}
+    if "diffuseTexture" in sg:
+        base["baseColorTexture"] = sg["diffuseTexture"]
+    notes.append(spec_gloss_note(sg, found))
+    return base, read_factors(path, where, {}, {}) | spec_gloss_values(sg)
 
 
 def spec_gloss_note(sg: dict[str, Any], found: dict[str, dict[str, Any]]) -> str:
@@ -288,8 +288,6 @@ def spec_gloss_note(sg: dict[str, Any], found: dict[str, dict[str, Any]]) -> str
         + "; a glTF output gets the metallic-roughness material without the extension"
     )
 
-
-UNLIT = "KHR_materials_unlit"
 
 #: the material extensions that change the look and that no model here converts -> the property that turns each on
 #: (default 0 in each ratified README) and what it draws; a dispersion shows only through a refracting transmission
@@ -456,6 +454,15 @@ class MaterialTextures:
                 f"the textures use TEXCOORD_{self.uv_set}: the maps are laid on that UV set (a glTF output keeps it)"
             )
         return textures
+
+    def read_base_maps(
+        self, pbr: dict[str, Any], found: dict[str, dict[str, Any]], constants: dict[str, Any]
+    ) -> dict[str, TextureRef]:
+        """The base's maps: :meth:`read_spec_gloss_maps` of a KHR_materials_pbrSpecularGlossiness material, else
+        :meth:`read_maps`."""
+        if SPEC_GLOSS in found:
+            return self.read_spec_gloss_maps(found[SPEC_GLOSS], constants)
+        return self.read_maps(pbr, found.get(SPECULAR, {}), constants)
 
     def read_spec_gloss_maps(self, sg: dict[str, Any], constants: dict[str, Any]) -> dict[str, TextureRef]:
         """KHR_materials_pbrSpecularGlossiness's textures as gltf:metal-rough maps, per texel as
