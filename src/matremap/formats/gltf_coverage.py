@@ -102,6 +102,7 @@ def _accessor(reader: FileReader, index: Any, where: str, uv: bool) -> np.ndarra
     if "sparse" in acc or "bufferView" not in acc:
         raise MatremapError(f"{reader.path}: accessors[{index}] is sparse or has no bufferView")
     ctype, count, kind = acc.get("componentType"), acc.get("count"), acc.get("type")
+    ctype = ctype if isinstance(ctype, int) else None  # a malformed one (a list, ...) is refused below
     norm: float | None = None
     dtype: np.dtype[Any]
     if uv:
