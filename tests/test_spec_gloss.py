@@ -220,3 +220,42 @@ def test_textured_spec_gloss_onto_usd_keeps_its_roughness_and_colour_per_texel(t
         assert float(np.max(texture_values(back.textures["metallic"]))) < 0.05
     else:
         assert float(np.reshape(back.constants.get("metallic", 0.0), -1)[0]) < 0.05
+
+
+GOLD = {"diffuseFactor": [0.0, 0.0, 0.0, 1.0], "specularFactor": [1.0, 0.766, 0.336], "glossinessFactor": 0.9}
+WHITE_SPECULAR = {"diffuseFactor": [0.8, 0.1, 0.1, 1.0], "glossinessFactor": 0.6}  # specular 1 by default
+
+
+@pytest.mark.parametrize("sg", [RED, GOLD, WHITE_SPECULAR], ids=["dielectric", "readme-gold", "default-specular"])
+def test_the_converted_brdf_inputs_are_the_readmes(tmp_path, sg):
+    """c_diff = diffuse (1 - max specular), F0 = specular (the README), from gltf:metal-rough's values: a metal's
+    F0 is its baseColor and its c_diff 0; a dielectric's F0 is :func:`f0` and its c_diff baseColor (1 - max F0).
+    Before, the gold example read as a white rough metal (glTF's defaults)."""
+    m = read(make_file(tmp_path, "m.gltf", [{"name": "x", "extensions": {SG: sg}}])).material().values
+    diffuse = np.array(sg["diffuseFactor"][:3])
+    specular = np.array(sg.get("specularFactor", [1.0] * 3))
+    base = np.reshape(m["baseColor"], -1)
+    if float(np.reshape(m["metallic"], -1)[0]) == 1.0:
+        got_f0, got_cdiff = base, np.zeros(3)
+    else:
+        got_f0 = f0(m)
+        got_cdiff = base * (1 - got_f0.max())
+    np.testing.assert_allclose(got_f0, specular, atol=1e-6)
+    np.testing.assert_allclose(got_cdiff, diffuse * (1 - specular.max()), atol=1e-6)
+    assert float(np.reshape(m["roughness"], -1)[0]) == pytest.approx(1 - sg["glossinessFactor"])
+
+
+def test_a_spec_gloss_whose_light_all_goes_to_specular_is_a_metal_on_openpbr(tmp_path, capsys):
+    """The default specular (1) leaves nothing to the diffuse: a white mirror-like metal at roughness 0.4. Read as a
+    dielectric of specularColor 25 it failed the gate onto OpenPBR (fit_error 0.42, exit 3)."""
+    src = make_file(tmp_path / "in", "m.gltf", [{"name": "w", "extensions": {SG: WHITE_SPECULAR}}])
+    out = tmp_path / "out"
+    code = main(["remap", str(src), "--to", "mtlx:open_pbr_surface", "-o", str(out), *FAST])
+    assert code == 0, capsys.readouterr().err
+    text = next(out.glob("*.mtlx")).read_text()
+    import re
+
+    metal = re.search(r'name="base_metalness"[^>]*value="([^"]+)"', text)
+    colour = re.search(r'name="base_color"[^>]*value="([^"]+)"', text)
+    assert metal is not None and float(metal.group(1)) > 0.95
+    assert colour is not None and min(float(x) for x in colour.group(1).split(",")) > 0.9

@@ -215,8 +215,12 @@ def spec_gloss_values(sg: dict[str, Any]) -> dict[str, Any]:
     specularColor's range [0, 25]). glTF-Transform's ``metalRough`` converts the same way (diffuse -> base colour,
     metallic 0, roughness = 1 - glossiness, the specular colour into KHR_materials_specular's
     specularColorFactor), with a large ior in place of the factor 25 that gltf:metal-rough's ior range
-    [1, 5] does not allow. Textures convert per texel the same way (:mod:`matremap.formats.gltf_read`)."""
-    return {
+    [1, 5] does not allow. Textures convert per texel the same way (:mod:`matremap.formats.gltf_read`).
+
+    A material without textures whose c_diff is 0 (a diffuse of 0, or a specular reaching 1 in a channel, which
+    leaves no light to the diffuse: the extension's gold example) is the metal of baseColor = specular instead:
+    gltf:metal-rough's metal_brdf F(baseColor, 1) D V is then the same BRDF, and other models see the metal."""
+    out = {
         "baseColor": list(sg["diffuseFactor"][:3]),
         "metallic": 0.0,
         "roughness": 1.0 - sg["glossinessFactor"],
@@ -224,6 +228,10 @@ def spec_gloss_values(sg: dict[str, Any]) -> dict[str, Any]:
         "specular": 1.0,
         "specularColor": [v / F0_IOR_15 for v in sg["specularFactor"]],
     }
+    no_diffuse = max(sg["diffuseFactor"][:3]) <= 0.0 or max(sg["specularFactor"]) >= 1.0
+    if no_diffuse and not any(k.endswith("Texture") for k in sg):
+        out |= {"baseColor": list(sg["specularFactor"]), "metallic": 1.0, "specularColor": [1.0, 1.0, 1.0]}
+    return out
 
 
 def lost_look(found: dict[str, dict[str, Any]]) -> list[str]:

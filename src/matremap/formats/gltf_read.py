@@ -278,6 +278,13 @@ def spec_gloss_note(sg: dict[str, Any], found: dict[str, dict[str, Any]]) -> str
     v = spec_gloss_values(sg)
     tex = [k for k in ("diffuseTexture", "specularGlossinessTexture") if k in sg]
     replaced = [e for e in (IOR, SPECULAR) if e in found]
+    if v["metallic"] == 1.0:
+        return (
+            f"{SPEC_GLOSS} converted by its README's formulas: no light reaches its diffuse (c_diff = diffuse (1 - "
+            f"max specular) = 0), so it is the metal of baseColor = specular {[round(x, 4) for x in v['baseColor']]}, "
+            f"roughness = 1 - glossiness = {v['roughness']:.4g}; a glTF output gets the metallic-roughness material "
+            "without the extension"
+        )
     return (
         f"{SPEC_GLOSS} converted by its README's formulas: diffuse -> baseColor "
         f"{[round(x, 4) for x in v['baseColor']]}, "
