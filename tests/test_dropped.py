@@ -108,12 +108,24 @@ def test_a_blend_principleds_subsurface_and_anisotropy_are_dropped_its_diffuse_r
     "ext, fallback, refused",
     [
         (
-            {"KHR_materials_pbrSpecularGlossiness": {"diffuseFactor": [0.8, 0.1, 0.1, 1], "glossinessFactor": 0.6}},
+            {
+                "KHR_materials_pbrSpecularGlossiness": {
+                    "diffuseFactor": [0.8, 0.1, 0.1, 1],
+                    "specularFactor": [0.04, 0.04, 0.04],
+                    "glossinessFactor": 0.6,
+                }
+            },
             False,
-            True,
+            False,
         ),
         (
-            {"KHR_materials_pbrSpecularGlossiness": {"diffuseFactor": [0.8, 0.1, 0.1, 1], "glossinessFactor": 0.6}},
+            {
+                "KHR_materials_pbrSpecularGlossiness": {
+                    "diffuseFactor": [0.8, 0.1, 0.1, 1],
+                    "specularFactor": [0.04, 0.04, 0.04],
+                    "glossinessFactor": 0.6,
+                }
+            },
             True,
             False,
         ),
@@ -123,9 +135,9 @@ def test_a_blend_principleds_subsurface_and_anisotropy_are_dropped_its_diffuse_r
 )
 def test_another_workflows_material_is_refused_not_read_as_the_defaults(tmp_path, capsys, ext, fallback, refused):
     """A red specular-glossiness material (no metallic-roughness beside it) was read as glTF's defaults, a white
-    rough metal, and went onto OpenPBR as a grey metal, PASSED, exit 0. Now refused in one line naming the extension
-    and the way out, nothing written; with a metallic-roughness fallback beside it (as the extension asked writers
-    to give) the fallback is read. An unlit material is refused: no lit model draws it."""
+    rough metal, and went onto OpenPBR as a grey metal, PASSED, exit 0. Now converted to metallic-roughness by the
+    extension's formulas (tests/test_spec_gloss.py checks the values), with or without a fallback beside it. An
+    unlit material is refused: no lit model draws it."""
     material: dict = {"name": "red", "extensions": ext}
     if fallback:
         material["pbrMetallicRoughness"] = {"baseColorFactor": [0.8, 0.1, 0.1, 1], "metallicFactor": 0.0}

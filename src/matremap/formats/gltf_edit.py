@@ -30,12 +30,12 @@ from matremap.core.imageio import check_output
 from matremap.errors import MatremapError
 from matremap.formats.asset import CarriedInput, TextureRef
 from matremap.formats.gltf_container import CHUNK_BIN, CHUNK_JSON, GLB_MAGIC, GltfDocument, is_index
-from matremap.formats.gltf_extensions import EMISSIVE_STRENGTH, IOR, SPECULAR
+from matremap.formats.gltf_extensions import EMISSIVE_STRENGTH, IOR, SPEC_GLOSS, SPECULAR
 from matremap.formats.gltf_mesh import spheres_document
 from matremap.formats.gltf_textures import TRANSFORM, as_dict
 
 #: the extensions the writer adds or removes (the others are kept as the source lists them)
-MANAGED = (IOR, SPECULAR, EMISSIVE_STRENGTH, TRANSFORM)
+MANAGED = (IOR, SPECULAR, EMISSIVE_STRENGTH, TRANSFORM, SPEC_GLOSS)
 
 
 @dataclass

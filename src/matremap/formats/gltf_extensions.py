@@ -15,6 +15,11 @@ extension registry, ratified versions):
 * KHR_materials_volume: ``thicknessFactor`` >= 0 (default 0) x G of ``thicknessTexture``,
   ``attenuationDistance`` > 0 (default infinity), ``attenuationColor`` RGB in [0, 1] (default 1).
 
+* KHR_materials_pbrSpecularGlossiness (archived, ratified; its README): ``diffuseFactor`` RGBA in [0, 1] (default 1)
+  x ``diffuseTexture`` (sRGB RGB, linear alpha), ``specularFactor`` RGB in [0, 1] (default 1) x sRGB RGB of
+  ``specularGlossinessTexture``, ``glossinessFactor`` in [0, 1] (default 1) x its linear alpha; converted to
+  metallic-roughness by :func:`spec_gloss_values`.
+
 ``ior`` and ``specular`` drive ``gltf:metal-rough``; emissive strength goes into the carried emission
 (:mod:`matremap.formats.gltf_read`). The layers: a glTF written over its source keeps them as they are (the
 copy leaves them alone). A material without textures whose look a layer carries (a clear coat above 0.5, a
@@ -47,6 +52,7 @@ CLEARCOAT = "KHR_materials_clearcoat"
 SHEEN = "KHR_materials_sheen"
 TRANSMISSION = "KHR_materials_transmission"
 VOLUME = "KHR_materials_volume"
+SPEC_GLOSS = "KHR_materials_pbrSpecularGlossiness"
 
 
 @dataclass(frozen=True)
@@ -88,6 +94,13 @@ SCHEMAS: dict[str, dict[str, Field]] = {
         "attenuationDistance": Field("positive", math.inf),
         "attenuationColor": Field("rgb_unit", [1.0, 1.0, 1.0]),
     },
+    SPEC_GLOSS: {
+        "diffuseFactor": Field("rgba_unit", [1.0, 1.0, 1.0, 1.0]),
+        "diffuseTexture": TEXTURE,
+        "specularFactor": Field("rgb_unit", [1.0, 1.0, 1.0]),
+        "glossinessFactor": Field("unit", 1.0),
+        "specularGlossinessTexture": TEXTURE,
+    },
 }
 _RANGES = {
     "unit": "a number in [0, 1]",
@@ -95,18 +108,20 @@ _RANGES = {
     "positive": "a number > 0",
     "ior": "a number >= 1 (or 0)",
     "rgb_unit": "3 numbers in [0, 1]",
+    "rgba_unit": "4 numbers in [0, 1]",
     "rgb_nonneg": "3 numbers >= 0",
 }
 
 
 def _valid(kind: str, value: Any) -> Any:
     """``value`` as a float (or 3 floats) when it fits ``kind``, else None."""
-    vals = finite_numbers(value, 3 if kind.startswith("rgb") else 1)
+    vals = finite_numbers(value, 4 if kind.startswith("rgba") else 3 if kind.startswith("rgb") else 1)
     if vals is None:
         return None
     low_ok = {
         "unit": lambda v: 0.0 <= v <= 1.0,
         "rgb_unit": lambda v: 0.0 <= v <= 1.0,
+        "rgba_unit": lambda v: 0.0 <= v <= 1.0,
         "nonneg": lambda v: v >= 0.0,
         "rgb_nonneg": lambda v: v >= 0.0,
         "positive": lambda v: v > 0.0,
@@ -184,6 +199,39 @@ def _value_textures(values: dict[str, Any]) -> list[str]:
 
 
 LEFT_BEHIND = "a glTF output keeps it as it is; other targets leave it out"
+
+#: the dielectric F0 of gltf:metal-rough's default ior 1.5, ((1.5 - 1) / (1.5 + 1))^2
+F0_IOR_15 = 0.04
+
+
+def spec_gloss_values(sg: dict[str, Any]) -> dict[str, Any]:
+    """The ``gltf:metal-rough`` values of a KHR_materials_pbrSpecularGlossiness material's factors.
+
+    The extension's README ("Specular - Glossiness") gives the BRDF inputs c_diff = diffuse.rgb (1 -
+    max(specular)), F0 = specular, alpha = (1 - glossiness)^2. gltf:metal-rough's dielectric (metallic 0) with
+    KHR_materials_specular has c_diff = baseColor (1 - specular max(F0)), F0 = min(((ior - 1)/(ior + 1))^2
+    specularColor, 1) specular and alpha = roughness^2, so: baseColor = diffuse, roughness = 1 - glossiness,
+    metallic 0, specular 1, ior 1.5 and specularColor = specular / 0.04 (the extension's F0 exactly, within
+    specularColor's range [0, 25]). glTF-Transform's ``metalRough`` converts the same way (diffuse -> base colour,
+    metallic 0, roughness = 1 - glossiness, the specular colour into KHR_materials_specular's
+    specularColorFactor), with a large ior in place of the factor 25 that gltf:metal-rough's ior range
+    [1, 5] does not allow. Textures convert per texel the same way (:mod:`matremap.formats.gltf_read`).
+
+    A material without textures whose c_diff is 0 (a diffuse of 0, or a specular reaching 1 in a channel, which
+    leaves no light to the diffuse: the extension's gold example) is the metal of baseColor = specular instead:
+    gltf:metal-rough's metal_brdf F(baseColor, 1) D V is then the same BRDF, and other models see the metal."""
+    out = {
+        "baseColor": list(sg["diffuseFactor"][:3]),
+        "metallic": 0.0,
+        "roughness": 1.0 - sg["glossinessFactor"],
+        "ior": 1.5,
+        "specular": 1.0,
+        "specularColor": [v / F0_IOR_15 for v in sg["specularFactor"]],
+    }
+    no_diffuse = max(sg["diffuseFactor"][:3]) <= 0.0 or max(sg["specularFactor"]) >= 1.0
+    if no_diffuse and not any(k.endswith("Texture") for k in sg):
+        out |= {"baseColor": list(sg["specularFactor"]), "metallic": 1.0, "specularColor": [1.0, 1.0, 1.0]}
+    return out
 
 
 def lost_look(found: dict[str, dict[str, Any]]) -> list[str]:
@@ -374,6 +422,7 @@ __all__ = [
     "COAT_MAPS",
     "SHEEN_LOOK",
     "SHEEN_MAPS",
+    "SPEC_GLOSS",
     "EMISSIVE_STRENGTH",
     "IOR",
     "LAYERED_MODEL",
@@ -388,4 +437,5 @@ __all__ = [
     "layer_values",
     "lost_look",
     "read_extensions",
+    "spec_gloss_values",
 ]

@@ -10,7 +10,10 @@ References are to the glTF 2.0 specification (Khronos, version 2.0.1, 2021):
 * §3.9.4 "Alpha Coverage": ``alphaMode`` OPAQUE (alpha ignored, the default), MASK (``alphaCutoff``,
   default 0.5) or BLEND; alpha is ``baseColorFactor[3]`` times the base colour texture's alpha;
 * the material extensions of :mod:`matremap.formats.gltf_extensions` (ior and specular drive the model,
-  emissive strength multiplies the emission, the layers are recorded and reported).
+  emissive strength multiplies the emission, the layers are recorded and reported; a
+  KHR_materials_pbrSpecularGlossiness material is converted to metallic-roughness by the extension's formulas,
+  :func:`~matremap.formats.gltf_extensions.spec_gloss_values`, its textures per texel, and read in place of the
+  metallic-roughness fallback beside it, which its README says a client supporting it does not draw).
 
 Textures are resolved by :mod:`matremap.formats.gltf_textures` (samplers, KHR_texture_transform, UV sets):
 a transformed texture is baked onto the map set's UVs. A map set has one UV set, so the remapped textures
@@ -57,6 +60,7 @@ from matremap.formats.gltf_extensions import (
     SCHEMAS,
     SHEEN,
     SHEEN_MAPS,
+    SPEC_GLOSS,
     SPECULAR,
     TRANSMISSION,
     TRANSMISSION_MAP,
@@ -65,6 +69,7 @@ from matremap.formats.gltf_extensions import (
     layer_values,
     lost_look,
     read_extensions,
+    spec_gloss_values,
 )
 from matremap.formats.gltf_textures import (
     TRANSFORM,
@@ -226,11 +231,11 @@ def read(
     n_textures = len(obj["textures"]) if isinstance(obj.get("textures"), list) else 0
     found = read_extensions(p, where, ext, n_textures)
     doc.extensions = found
-    constants = read_factors(p, where, pbr, found)
+    pbr, constants = base_values(p, where, pbr, found, notes)
     reader = FileReader(p, doc, data, confinement)
     textures = MaterialTextures(reader, where, notes)
     layers = layer_values(found)
-    maps = textures.read_maps(pbr, found.get(SPECULAR, {}), constants)
+    maps = textures.read_base_maps(pbr, found, constants)
     maps |= textures.read_layer_maps(found, layers)
     normal = textures.read_normal(m)
     maps, normal = textures.at_one_size(maps, normal)
@@ -251,13 +256,7 @@ def read(
         constants |= layers
         lost = [w for w in lost if not w.startswith(SHEEN)]
         lost = [w for w in lost if "transmission" not in layers or not w.startswith(TRANSMISSION)]
-    # another workflow carries the look, unless the file gives a metallic-roughness fallback beside it (as the
-    # specular-glossiness extension asked writers to)
-    lost += [
-        f"{workflow} ({why})"
-        for workflow, why in WORKFLOWS.items()
-        if workflow in ext and (workflow == UNLIT or "pbrMetallicRoughness" not in m)
-    ]
+    lost += [f"{workflow} ({why})" for workflow, why in WORKFLOWS.items() if workflow in ext]
     return MaterialAsset(
         path=p,
         format="gltf",
@@ -276,26 +275,65 @@ def read(
     )
 
 
-#: material extensions that replace the metallic-roughness workflow -> what that means for a conversion: the
-#: material's look is in them, and reading the metallic-roughness defaults beside them gave a grey metal (a red
-#: specular-glossiness material onto OpenPBR: base_color 0.52 grey, metalness 1, PASSED, exit 0)
+#: material extensions that replace the lit metallic-roughness workflow -> what that means for a conversion (the
+#: material is lost: copied onto its own model, refused for others)
 WORKFLOWS = {
-    "KHR_materials_pbrSpecularGlossiness": (
-        "the archived specular-glossiness workflow carries its colours; convert the file to metallic-roughness "
-        "first, e.g. gltf-transform metalrough IN OUT"
-    ),
     "KHR_materials_unlit": "an unlit material: no lit model draws it; use its base colour as an emission instead",
 }
-UNLIT = "KHR_materials_unlit"
 
-#: material extensions that change the look and that no model here converts -> the property that turns each on
-#: (its default 0, per its ratified README). Not a dispersion (KHR_materials_dispersion, OpenPBR's
-#: transmission_dispersion_*): colour fringes at a glass's edges, noted, as OpenPBR's glass example's Abbe 64 is
-DROPPED = {
-    "KHR_materials_anisotropy": "anisotropyStrength",
-    "KHR_materials_iridescence": "iridescenceFactor",
-    "KHR_materials_diffuse_transmission": "diffuseTransmissionFactor",
+
+def base_values(
+    path: Path, where: str, pbr: dict[str, Any], found: dict[str, dict[str, Any]], notes: list[str]
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The material's pbrMetallicRoughness (its base colour and alpha) and uniform values: a
+    KHR_materials_pbrSpecularGlossiness material's conversion (the extension's material is the one drawn; the
+    fallback beside it is not read), else :func:`read_factors`."""
+    sg = found.get(SPEC_GLOSS)
+    if sg is None:
+        return pbr, read_factors(path, where, pbr, found)
+    base = {"baseColorFactor": sg["diffuseFactor"]}
+    if "diffuseTexture" in sg:
+        base["baseColorTexture"] = sg["diffuseTexture"]
+    notes.append(spec_gloss_note(sg, found))
+    return base, read_factors(path, where, {}, {}) | spec_gloss_values(sg)
+
+
+def spec_gloss_note(sg: dict[str, Any], found: dict[str, dict[str, Any]]) -> str:
+    """The note of a KHR_materials_pbrSpecularGlossiness material converted to metallic-roughness."""
+    v = spec_gloss_values(sg)
+    tex = [k for k in ("diffuseTexture", "specularGlossinessTexture") if k in sg]
+    replaced = [e for e in (IOR, SPECULAR) if e in found]
+    if v["metallic"] == 1.0:
+        return (
+            f"{SPEC_GLOSS} converted by its README's formulas: no light reaches its diffuse (c_diff = diffuse (1 - "
+            f"max specular) = 0), so it is the metal of baseColor = specular {[round(x, 4) for x in v['baseColor']]}, "
+            f"roughness = 1 - glossiness = {v['roughness']:.4g}; a glTF output gets the metallic-roughness material "
+            "without the extension"
+        )
+    return (
+        f"{SPEC_GLOSS} converted by its README's formulas: diffuse -> baseColor "
+        f"{[round(x, 4) for x in v['baseColor']]}, "
+        f"specular {[round(x, 4) for x in sg['specularFactor']]} -> F0 (metallic 0, ior 1.5, specularColor = "
+        f"specular / 0.04), roughness = 1 - glossiness = {v['roughness']:.4g}"
+        + (f"; {' and '.join(tex)} converted per texel" if tex else "")
+        + (f"; {', '.join(replaced)} beside it replaced" if replaced else "")
+        + "; a glTF output gets the metallic-roughness material without the extension"
+    )
+
+
+#: the material extensions that change the look and that no model here converts -> the property that turns each on
+#: (default 0 in each ratified README) and what it draws; a dispersion shows only through a refracting transmission
+LOOKS = {
+    "KHR_materials_anisotropy": ("anisotropyStrength", "an anisotropic highlight"),
+    "KHR_materials_iridescence": ("iridescenceFactor", "a thin-film iridescence"),
+    "KHR_materials_diffuse_transmission": ("diffuseTransmissionFactor", "light diffused through a thin surface"),
+    "KHR_materials_dispersion": ("dispersion", "a glass's colour fringes"),
 }
+
+#: the extensions of :data:`LOOKS` the gate's ``dropped`` check counts (on: their factor above 0). Not a dispersion
+#: (OpenPBR's transmission_dispersion_*): colour fringes at a glass's edges, noted, as OpenPBR's glass example's
+#: Abbe 64 is
+DROPPED = {name: factor for name, (factor, _) in LOOKS.items() if name != "KHR_materials_dispersion"}
 
 
 def dropped_extensions(ext: dict[str, Any]) -> list[str]:
@@ -356,6 +394,8 @@ class MaterialTextures:
         self.uv_sets: dict[str, int] = {}
         #: the textures each TextureRef made here was read from, with whether it was decoded from sRGB
         self.sources: list[tuple[TextureRef, SlotTexture, bool]] = []
+        #: the roughness maps read from a glossiness (id of the TextureRef -> its glossinessFactor)
+        self.glossiness: dict[int, float] = {}
 
     @property
     def uv_set(self) -> int:
@@ -447,6 +487,47 @@ class MaterialTextures:
             )
         return textures
 
+    def read_base_maps(
+        self, pbr: dict[str, Any], found: dict[str, dict[str, Any]], constants: dict[str, Any]
+    ) -> dict[str, TextureRef]:
+        """The base's maps: :meth:`read_spec_gloss_maps` of a KHR_materials_pbrSpecularGlossiness material, else
+        :meth:`read_maps`."""
+        if SPEC_GLOSS in found:
+            return self.read_spec_gloss_maps(found[SPEC_GLOSS], constants)
+        return self.read_maps(pbr, found.get(SPECULAR, {}), constants)
+
+    def read_spec_gloss_maps(self, sg: dict[str, Any], constants: dict[str, Any]) -> dict[str, TextureRef]:
+        """KHR_materials_pbrSpecularGlossiness's textures as gltf:metal-rough maps, per texel as
+        :func:`~matremap.formats.gltf_extensions.spec_gloss_values` converts its factors: ``baseColor`` the sRGB RGB
+        of diffuseTexture times diffuseFactor, ``specularColor`` the sRGB RGB of specularGlossinessTexture times
+        specularFactor / 0.04, ``roughness`` 1 - glossinessFactor times its linear alpha (an image without alpha
+        has glossiness 1 there: the factor alone, noted)."""
+        maps: dict[str, TextureRef] = {}
+        if "diffuseTexture" in sg:
+            tex = self.remapped(sg["diffuseTexture"], f"{SPEC_GLOSS}.diffuseTexture")
+            rgb = tuple(channel(c, tex.channels) for c in range(3))
+            maps["baseColor"] = self.ref(tex, rgb, True, tuple(constants["baseColor"]))
+        if "specularGlossinessTexture" in sg:
+            slot = f"{SPEC_GLOSS}.specularGlossinessTexture"
+            tex = self.remapped(sg["specularGlossinessTexture"], slot)
+            rgb = tuple(channel(c, tex.channels) for c in range(3))
+            maps["specularColor"] = self.ref(tex, rgb, True, tuple(constants["specularColor"]))
+            a = alpha_channel(tex.channels)
+            if a is None:
+                self.notes.append(
+                    "specularGlossinessTexture has no alpha channel, so its glossiness is 1 everywhere; using "
+                    "glossinessFactor alone"
+                )
+            else:
+                gloss = float(sg["glossinessFactor"])
+                ref = TextureRef(
+                    tex.path, (a,), "linear", 1.0, tex.extracted, bake=roughness_from_glossiness(tex, gloss)
+                )
+                self.sources.append((ref, tex, False))
+                self.glossiness[id(ref)] = gloss
+                maps["roughness"] = ref
+        return maps
+
     def read_layer_map(self, info: dict[str, Any], slot: str, c: int, factor: float) -> TextureRef:
         """A layer extension's texture (KHR_materials_clearcoat: ``clearcoatTexture`` R, the coat's weight;
         ``clearcoatRoughnessTexture`` G, its roughness), channel ``c`` times its factor."""
@@ -527,7 +608,10 @@ class MaterialTextures:
             tex, srgb = slots[id(ref)]
             if tex.size == size:
                 return ref
-            bake = baked_normal(tex, size) if ref is normal else baked(tex, srgb, size)
+            if id(ref) in self.glossiness:
+                bake = roughness_from_glossiness(tex, self.glossiness[id(ref)], size)
+            else:
+                bake = baked_normal(tex, size) if ref is normal else baked(tex, srgb, size)
             return TextureRef(tex.path, ref.channels, ref.colorspace, ref.scale, tex.extracted, bake=bake)
 
         resampled = sorted({tex.slot for tex, _ in slots.values() if tex.size != size})
@@ -625,16 +709,40 @@ class MaterialTextures:
         return CarriedInput(alpha, texture, settings)
 
 
+def roughness_from_glossiness(tex: SlotTexture, gloss: float, size: tuple[int, int] | None = None) -> Any:
+    """A bake callable: 1 - ``gloss`` x the texture's linear values as its transform and sampler show them (the
+    roughness of a specularGlossinessTexture, whose alpha is the glossiness)."""
+    inner = baked(tex, False, size)
+
+    def bake() -> np.ndarray:
+        return (1.0 - gloss * np.asarray(inner(), dtype=np.float32)).astype(np.float32)
+
+    return bake
+
+
 def note_unknown(ext: dict[str, Any], obj: dict[str, Any], notes: list[str]) -> None:
     """Note the material extensions matremap does not read (a written copy keeps them) and the
-    extensions the file requires."""
-    for name in sorted(set(ext) - set(SCHEMAS)):
+    extensions the file requires. The ones of :data:`LOOKS` are named together in one note, with the value that
+    turns each on."""
+    looks = []
+    for name, (factor, what) in LOOKS.items():
+        e = ext.get(name)
+        if isinstance(e, dict):
+            v = e.get(factor, 0.0)
+            value = f"{v:g}" if isinstance(v, (int, float)) and not isinstance(v, bool) else repr(v)
+            looks.append(f"{name} ({what}; {factor} {value})")
+    if looks:
+        notes.append(
+            f"not converted, no model here has them: {'; '.join(looks)}; a glTF output keeps them, other targets "
+            "leave them out"
+        )
+    for name in sorted(set(ext) - set(SCHEMAS) - set(LOOKS)):
         notes.append(
             f"{name} is not remapped (matremap fits the base metallic-roughness layer); a written copy keeps it"
         )
     listed = obj.get("extensionsRequired")
     required = {e for e in (listed if isinstance(listed, list) else []) if isinstance(e, str)}
-    required -= {IOR, SPECULAR, TRANSFORM}
+    required -= {IOR, SPECULAR, TRANSFORM, SPEC_GLOSS}
     if required:
         notes.append(f"the file requires {', '.join(sorted(required))}; matremap ignores them")
 

@@ -57,6 +57,7 @@ from matremap.formats.gltf_extensions import (
     LAYERED_MODEL,
     SHEEN,
     SHEEN_MAPS,
+    SPEC_GLOSS,
     SPECULAR,
     TRANSMISSION,
     TRANSMISSION_MAP,
@@ -461,6 +462,7 @@ def finish_material(doc: dict[str, Any], rep: Replacement, infos: dict[str, dict
     elif rep.source_layered:
         for name in (CLEARCOAT, SHEEN):
             exts.pop(name, None)
+    exts.pop(SPEC_GLOSS, None)  # the result is its metallic-roughness conversion (formats/gltf_read.py)
     if not exts:
         mat.pop("extensions")
     if not pbr:

@@ -30,6 +30,11 @@ its value, a two-channel one puts its second in a), ``scale`` / ``bias`` (output
 ``st`` from a ``UsdPrimvarReader_float2`` through any chain of ``UsdTransform2d`` (in x scale x rotate +
 translation, rotation in degrees), baked with :mod:`matremap.formats.bake` in USD's lower-left ``st`` origin
 with ``wrapS`` / ``wrapT`` (``black`` is a border of 0; ``useMetadata`` falls back to black, as the spec says).
+A ``UsdUVTexture`` whose ``st`` is not connected reads its image at its ``st`` value (the spec's fallback (0, 0))
+everywhere: a uniform value. A ``UsdPrimvarReader_float`` / ``_float3`` (a ``displayColor`` read into diffuseColor)
+gives the primvar's value on the geometry bound to the material when it is one value there, else its ``fallback``.
+A stage without materials lists its gprims whose ``displayColor`` is one colour, each read as the renderer's
+fallback surface (a UsdPreviewSurface at its defaults with that diffuseColor).
 
 The file is untrusted: before USD composes it, every layer it names (sublayers, references, payloads) is
 checked recursively to lie in its folder or an allowed one and to exist there (so USD's search paths never
@@ -269,10 +274,55 @@ def _materials(pxr: Any, stage: Any) -> list[Any]:
 
 
 def material_names(path: str | os.PathLike) -> list[str]:
-    """The prim paths of a stage's materials, in the order :func:`read` indexes them."""
+    """The prim paths of a stage's materials, in the order :func:`read` indexes them (a stage without materials:
+    its gprims drawn by their displayColor, :func:`_display_colour_prims`)."""
     pxr = _pxr()
     stage = _open_stage(Path(path), None)
-    return [str(m.GetPath()) for m in _materials(pxr, stage)]
+    found = _materials(pxr, stage)
+    if not found:
+        return [str(prim.GetPath()) for prim, _ in _display_colour_prims(pxr, stage)]
+    return [str(m.GetPath()) for m in found]
+
+
+def _display_colour_prims(pxr: Any, stage: Any) -> list[tuple[Any, list[float]]]:
+    """The gprims of a stage without materials whose ``primvars:displayColor`` is one colour (``constant``, or every
+    element equal), with that colour. UsdGeomGprim's ``displayColor`` is "the color to use for display ... even in
+    the absence of any specified shader": renderers draw such a gprim with their fallback surface, a
+    UsdPreviewSurface at its defaults whose diffuseColor is the displayColor (usdImaging's fallback material)."""
+    out = []
+    for prim in stage.Traverse():
+        if not prim.IsA(pxr.UsdGeom.Gprim):
+            continue
+        pv = pxr.UsdGeom.Gprim(prim).GetDisplayColorPrimvar()
+        if not pv or not pv.HasValue():
+            continue
+        flat = np.asarray(pv.ComputeFlattened(), dtype=np.float64).reshape(-1, 3)
+        if flat.size and np.all(np.isfinite(flat)) and np.ptp(flat, axis=0).max() <= 1e-6:
+            out.append((prim, [float(x) for x in flat[0]]))
+    return out
+
+
+def _display_colour_asset(pxr: Any, p: Path, stage: Any, material: str | int | None) -> MaterialAsset:
+    """The material a renderer draws a stage without materials with (:func:`_display_colour_prims`)."""
+    found = _display_colour_prims(pxr, stage)
+    if not found:
+        raise MatremapError(
+            f"{p} holds no UsdShade Material and no gprim with a uniform displayColor; matremap reads "
+            "UsdPreviewSurface materials"
+        )
+    names = [str(prim.GetPath()) for prim, _ in found]
+    index = _pick(p, names, material)
+    colour = found[index][1]
+    notes = [
+        f"{names[index]} has no material: read as the renderer's fallback surface, a UsdPreviewSurface at its "
+        f"defaults with diffuseColor = its displayColor {[round(c, 4) for c in colour]}"
+    ]
+    spec = get_model(MODEL)
+    constants: dict[str, Any] = {"diffuseColor": colour, "useSpecularWorkflow": "0"}
+    _clamp(_Ctx(pxr, p, names[index], None, notes), spec, constants)
+    asset = MaterialAsset(path=p, format=FORMAT, name=names[index], model=MODEL, constants=constants, notes=notes)
+    asset.index = index  # no material prim to replace: a USD output is a new stage
+    return asset
 
 
 def _pick(p: Path, names: list[str], material: str | int | None) -> int:
@@ -304,13 +354,13 @@ def read(
     stage = _open_stage(p, confinement)
     found = _materials(pxr, stage)
     if not found:
-        raise MatremapError(f"{p} holds no UsdShade Material; matremap reads UsdPreviewSurface materials")
+        return _display_colour_asset(pxr, p, stage, material)
     names = [str(m.GetPath()) for m in found]
     index = _pick(p, names, material)
     shader = _surface(pxr, found[index])
     if shader is None:
         raise MatremapError(f"{p}: material {names[index]} has no surface shader connected to outputs:surface")
-    ctx = _Ctx(pxr, p, names[index], confinement)
+    ctx = _Ctx(pxr, p, names[index], confinement, stage=stage, material=found[index])
     shader_id = str(shader.GetIdAttr().Get() or "")
     if shader_id == PREVIEW:
         asset = _preview_asset(ctx, shader)
@@ -346,6 +396,8 @@ class _Ctx:
     confinement: Confinement | None
     notes: list[str] = field(default_factory=list)
     primvars: set[str] = field(default_factory=set)
+    stage: Any = None
+    material: Any = None
 
     def where(self, what: str) -> str:
         return f"{self.path}: material {self.name}: {what}"
@@ -505,8 +557,12 @@ def _uv_texture(ctx: _Ctx, node: Any, output: str, param: str) -> _Texture:
         raise MatremapError(ctx.where(f"{param} takes output {output!r} of {node.GetPath()}; use r, g, b, a or rgb"))
     sc = np.array(_numbers(ctx, _value_source(ctx, node, "scale")[0] or (1.0,) * 4, "scale", 4))[comps]
     bias = np.array(_numbers(ctx, _value_source(ctx, node, "bias")[0] or (0.0,) * 4, "bias", 4))[comps]
-    matrix, primvar = _st_transform(ctx, node)
-    ctx.primvars.add(primvar)
+    st, st_conn = _value_source(ctx, node, "st")
+    if st_conn is None:
+        matrix, primvar = np.eye(3), ""
+    else:
+        matrix, primvar = _st_transform(ctx, node)
+        ctx.primvars.add(primvar)
     if output == "a" and channels not in (2, 4):  # the spec's a = 1 of images without alpha
         return _Texture(constant=[float(sc[0] + bias[0])], primvar=primvar)
     picked = tuple(c if channels >= 3 else (1 if c == 3 else 0) for c in comps)
@@ -519,6 +575,15 @@ def _uv_texture(ctx: _Ctx, node: Any, output: str, param: str) -> _Texture:
                 f"{node.GetPath()} has a wrap mode USD does not define (black, clamp, repeat, mirror, useMetadata)"
             )
         )
+    if st_conn is None:
+        at = _numbers(ctx, st if st is not None else (0.0, 0.0), "st", 2)
+        value = _texel_at(f, colorspace, picked, at, (wrap[0], wrap[1])) * sc + bias
+        ctx.notes.append(
+            f"{param}: {node.GetPath()}.st is not connected, so every point reads the texture at its st "
+            f"({at[0]:g}, {at[1]:g}) (the spec's fallback (0, 0) unless authored): the uniform value "
+            f"{', '.join(f'{v:.4g}' for v in value)}"
+        )
+        return _Texture(constant=[float(v) for v in value])
     transform = UVTransform(matrix, "bottom-left", (wrap[0], wrap[1]), 0.0)
     size = texels_needed((header.height, header.width), matrix) if not transform.identity else None
     size = size or (header.height, header.width)
@@ -532,6 +597,18 @@ def _uv_texture(ctx: _Ctx, node: Any, output: str, param: str) -> _Texture:
             TextureRef(f, picked, colorspace, factor, extracted), primvar=primvar, size=size, at_size=at_size
         )
     return _Texture(at_size(size), primvar=primvar, size=size, at_size=at_size)
+
+
+def _texel_at(f: Path, colorspace: str, picked: tuple[int, ...], st: list[float], wrap: tuple[str, str]) -> np.ndarray:
+    """The ``picked`` channels of image ``f`` (decoded to linear) at the one texture coordinate ``st``: USD's
+    ``st`` has its origin at the image's lower left, sampled bilinearly with the wrap modes (UsdUVTexture)."""
+    from matremap.formats.bake import sample
+    from matremap.svbrdf.textures import read_image
+
+    image, _ = read_image(f, colorspace)
+    image = np.atleast_3d(image)[..., list(picked)]
+    value = sample(image, np.array([st[0]]), np.array([1.0 - st[1]]), wrap)
+    return np.asarray(value, dtype=np.float64).reshape(-1)
 
 
 def _baker(
@@ -570,12 +647,75 @@ def _connected_texture(ctx: _Ctx, conn: tuple[Any, str], param: str) -> _Texture
     node_id = str(node.GetIdAttr().Get() or "")
     if node_id == "UsdUVTexture":
         return _uv_texture(ctx, node, output, param)
+    if node_id in PRIMVAR_READERS:
+        return _Texture(constant=_primvar_constant(ctx, node, PRIMVAR_READERS[node_id], param))
     raise MatremapError(
         ctx.where(
             f"{param} is driven by a {node_id or 'node without info:id'} ({node.GetPath()}); matremap reads "
             "UsdUVTexture textures there (bake the network into an image)"
         )
     )
+
+
+#: UsdPrimvarReader node ids whose primvar is read as a uniform value -> its number of components
+PRIMVAR_READERS = {"UsdPrimvarReader_float": 1, "UsdPrimvarReader_float3": 3}
+
+
+def _bound_prims(ctx: _Ctx) -> list[Any]:
+    """The geometry (gprims, geom subsets) whose bound material (full purpose) is the one read; a subset's
+    primvars are its mesh's."""
+    pxr, target = ctx.pxr, ctx.material.GetPath()
+    found = []
+    for prim in ctx.stage.Traverse():
+        if not (prim.IsA(pxr.UsdGeom.Gprim) or prim.IsA(pxr.UsdGeom.Subset)):
+            continue
+        bound, _ = pxr.UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
+        if bound and bound.GetPath() == target:
+            found.append(prim if prim.IsA(pxr.UsdGeom.Gprim) else prim.GetParent())
+    return found
+
+
+def _primvar_constant(ctx: _Ctx, node: Any, size: int, param: str) -> list[float]:
+    """The value a ``UsdPrimvarReader_float`` / ``_float3`` gives ``param``: its ``varname`` primvar on the
+    geometry bound to the material, when it is one value there (``constant`` interpolation, or every element
+    equal: a ``displayColor`` colouring a whole mesh); its ``fallback`` input (default 0, UsdPreviewSurface
+    spec, "Primvar Reader") when no bound geometry has the primvar. A primvar that varies over the surface, or
+    differs between the bound meshes, is refused (bake it into a texture)."""
+    varname = _token(ctx, node, "varname", "")
+    if not varname:
+        raise MatremapError(ctx.where(f"{node.GetPath()} has no varname; name the primvar it reads"))
+    values: dict[tuple[float, ...], str] = {}
+    for prim in _bound_prims(ctx):
+        pv = ctx.pxr.UsdGeom.PrimvarsAPI(prim).FindPrimvarWithInheritance(varname)
+        if not pv or not pv.HasValue():
+            continue
+        flat = np.asarray(pv.ComputeFlattened(), dtype=np.float64).reshape(-1, size)
+        if flat.size == 0 or not np.all(np.isfinite(flat)):
+            continue
+        if np.ptp(flat, axis=0).max() > 1e-6:
+            raise MatremapError(
+                ctx.where(
+                    f"{param} reads primvar {varname!r}, which varies over {prim.GetPath()} ({pv.GetInterpolation()} "
+                    "interpolation); matremap reads a uniform one: bake it into a texture"
+                )
+            )
+        values.setdefault(tuple(float(x) for x in flat[0]), str(prim.GetPath()))
+    if len(values) > 1:
+        where = ", ".join(f"{m} {list(v)}" for v, m in values.items())
+        raise MatremapError(
+            ctx.where(
+                f"{param} reads primvar {varname!r}, which differs between the bound meshes ({where}); "
+                "give each colour its own material"
+            )
+        )
+    if values:
+        ((value, mesh),) = values.items()
+        ctx.notes.append(f"{param}: primvar {varname!r} of {mesh} is uniform there: read as {list(value)}")
+        return list(value)
+    fallback = _value_source(ctx, node, "fallback")[0]
+    nums = _numbers(ctx, fallback, "fallback", size) if fallback is not None else [0.0] * size
+    ctx.notes.append(f"{param}: no geometry bound to the material has primvar {varname!r}: its fallback {nums}")
+    return nums
 
 
 # ---------------------------------------------------------------------------------------------
@@ -595,7 +735,9 @@ def _preview_asset(ctx: _Ctx, shader: Any) -> MaterialAsset:
             if tex.ref is not None:
                 textures[name], read[name] = tex.ref, tex
             else:
-                constants[name] = (tex.constant or [0.0]) * (3 if size == 3 else 1)
+                nums = tex.constant or [0.0]
+                nums = nums * size if len(nums) == 1 else nums[:size]
+                constants[name] = nums if size == 3 else nums[0]
         elif value is not None:
             nums = _numbers(ctx, value, name, size)
             constants[name] = nums if size == 3 else nums[0]
@@ -712,7 +854,7 @@ def _carried(ctx: _Ctx, shader: Any) -> dict[str, CarriedInput]:
             if tex.ref is not None:
                 out[key] = CarriedInput(1.0 if size == 1 else (1.0,) * 3, tex.ref, settings if key == "opacity" else {})
                 continue
-            value = tex.constant[0] if tex.constant else None
+            value = tex.constant[:size] if tex.constant else None
         if value is None:
             continue
         nums = _numbers(ctx, value, name, size)
@@ -759,7 +901,10 @@ def _gltf_pbr_asset(ctx: _Ctx, shader: Any) -> MaterialAsset:
         if conn is not None:
             tex = _connected_texture(ctx, conn, name)
             if tex.ref is None:
-                raise MatremapError(ctx.where(f"{name} takes the alpha of an image without one"))
+                nums = tex.constant or [0.0]
+                nums = nums * size if len(nums) == 1 else nums[:size]
+                constants[param] = nums if size == 3 else nums[0]
+                continue
             textures[param] = tex.ref
         elif value is not None:
             nums = _numbers(ctx, value, name, size)
