@@ -733,7 +733,7 @@ def _fit_body(
     if sharpened is None and (yield from _matte(source, goals, src_r, first)):
         template, free_params = _lobe_off(template, free_params, stages)
     current = yield from _strategy_stages(strategy, template, free_params, goals, tgt_r, first, stages, coarse)
-    if not headlight and objective == "l2" and sharpened is None and scene.transmission is None:
+    if scene.environment is None and scene.transmission is None and objective == "l2" and sharpened is None:
         current = yield from _unresolved_lobe(
             source, current, template, free_params, goals[FULL], scale, src_r, tgt_r, first, stages, warnings
         )
