@@ -51,7 +51,7 @@ from matremap.core.objective import measure
 from matremap.core.scene import Scene
 from matremap.dialects import get_model
 from matremap.errors import MatremapError
-from matremap.renderers.base import Renderer, check_probe
+from matremap.renderers.base import Renderer, check_probe, probe_support
 
 STRATEGIES = ("simple", "two-stage", "three-stage", "separable")
 DIFFUSE, SPECULAR, FULL = "diffuse", "specular", "full"
@@ -902,13 +902,19 @@ def _unresolved_lobe(
     share = np.maximum(with_lobe - without, 0.0)
     if float(np.sum(share**2)) <= ABSENT * float(np.sum(goal**2)) or highlight_pixels(share) >= MIN_HIGHLIGHT_PIXELS:
         return fitted
+    views = _Counter(parse_probe(CHECK_PROBE))
+    why = probe_support(src_r, views.scene) or probe_support(tgt_r, views.scene)
+    if why is not None:  # no environment to judge under: the fit stands, said so
+        warnings.append(
+            f"the fitted lobe covers {highlight_pixels(share)} pixel(s) of the point probe: unchecked ({why})"
+        )
+        return fitted
     found: list[StageReport] = []
     none = yield from _run_stage(FULL, rest, off, goal, 1.0, tgt_r, counter, found, name="check: no lobe")
     held = [p for p in free_params if p.role != "roughness"]
     rough = fitted.with_params({p.name: template.values[p.name] for p in lobe if p.role == "roughness"})
     at_start = yield from _run_stage(FULL, held, rough, goal, 1.0, tgt_r, counter, found, name="check: start roughness")
     candidates = [fitted, none, at_start]
-    views = _Counter(parse_probe(CHECK_PROBE))
     env_scale = yield from _irradiance(source, fitted.spec, src_r, tgt_r, views)
     seen = (yield from views.pixels(src_r, [source]))[0] * env_scale
     images = yield from views.pixels(tgt_r, candidates)
