@@ -730,12 +730,13 @@ def _fit_body(
     scale = yield from _irradiance(source, spec, src_r, tgt_r, first)
     goals, sharpened, warnings = yield from _resolved_goals(source, strategy, scale, src_r, first)
     stages: list[StageReport] = []
-    if sharpened is None and (yield from _matte(source, goals, src_r, first)):
+    lobe = (yield from _source_lobe(source, goals, src_r, first)) if sharpened is None else None
+    if _matte(lobe, goals):
         template, free_params = _lobe_off(template, free_params, stages)
     current = yield from _strategy_stages(strategy, template, free_params, goals, tgt_r, first, stages, coarse)
     if scene.environment is None and scene.transmission is None and objective == "l2" and sharpened is None:
         current = yield from _unresolved_lobe(
-            source, current, template, free_params, goals[FULL], scale, src_r, tgt_r, first, stages, warnings
+            source, current, template, free_params, goals[FULL], lobe, src_r, tgt_r, first, stages, warnings
         )
     if headlight:
         for stage in stages:
@@ -804,23 +805,29 @@ def _fit_body(
     )
 
 
-def _matte(source: Material, goals: Mapping[str, np.ndarray], renderer: Renderer, counter: _Counter) -> Steps[bool]:
-    """Whether the source has no specular part: its model is all diffuse (its diffuse-only render is itself),
-    or its specular part (the staged goal; else rendered alone, or full minus diffuse where only the diffuse
-    part can be drawn) holds no energy (:data:`ABSENT`)."""
-    total = float(np.sum(goals[FULL] ** 2))
+def _source_lobe(
+    source: Material, goals: Mapping[str, np.ndarray], renderer: Renderer, counter: _Counter
+) -> Steps[np.ndarray | None]:
+    """The source's specular part on the probe: the staged goal; else rendered alone, or full minus diffuse where
+    only the diffuse part can be drawn; black for a model that is all diffuse (its diffuse-only render is itself);
+    None where neither part can be drawn."""
     if SPECULAR in goals:
-        return float(np.sum(goals[SPECULAR] ** 2)) <= ABSENT * total
+        return goals[SPECULAR]
     spec = source.spec.specialise(source.values)
     if spec.diffuse_only is not None and not spec.part_overrides(DIFFUSE, source.values):
-        return True
+        return np.zeros_like(goals[FULL])
     specular, diffuse = part(source, SPECULAR), part(source, DIFFUSE)
-    if specular is None and diffuse is None:
-        return False
-    drawn = [source, specular if specular is not None else diffuse]
-    full, other = yield from counter.pixels(renderer, [m for m in drawn if m is not None])
-    seen = other if specular is not None else np.maximum(full - other, 0.0)
-    return float(np.sum(seen**2)) <= ABSENT * float(np.sum(full**2))
+    if specular is not None:
+        return (yield from counter.pixels(renderer, [specular]))[0]
+    if diffuse is None:
+        return None
+    full, other = yield from counter.pixels(renderer, [source, diffuse])
+    return np.maximum(full - other, 0.0)
+
+
+def _matte(lobe: np.ndarray | None, goals: Mapping[str, np.ndarray]) -> bool:
+    """Whether the source has no specular part: its lobe (:func:`_source_lobe`) holds no energy (:data:`ABSENT`)."""
+    return lobe is not None and float(np.sum(lobe**2)) <= ABSENT * float(np.sum(goals[FULL] ** 2))
 
 
 def _lobe_values(template: Material, params: Sequence[ParamSpec]) -> dict[str, Any]:
@@ -866,6 +873,8 @@ def _lobe_off(
 
 #: environment views (their resolution) that judge a lobe the point probe does not resolve
 CHECK_PROBE = "env"
+#: a fitted lobe is hidden when its highlight covers this many times fewer pixels than the source's (twice narrower)
+NARROWER = 4
 
 
 def _unresolved_lobe(
@@ -874,7 +883,7 @@ def _unresolved_lobe(
     template: Material,
     free_params: list[ParamSpec],
     goal: np.ndarray,
-    scale: float,
+    source_lobe: np.ndarray | None,
     src_r: Renderer,
     tgt_r: Renderer,
     counter: _Counter,
@@ -884,7 +893,8 @@ def _unresolved_lobe(
     """Long: the check, its candidates and its cost are read best together.
 
     A fitted lobe the point probe does not resolve (its share of the render, fitted minus lobe off, covers fewer
-    than :data:`MIN_HIGHLIGHT_PIXELS`) while the source's is resolved: the probe cannot tell it from none, and
+    than :data:`MIN_HIGHLIGHT_PIXELS`, and :data:`NARROWER` times fewer than the source's lobe, which the probe
+    resolves): the probe cannot tell it from none, and
     the fit may have put any weight on it (a glTF grey at roughness 1 onto Mitsuba 3's principled: specular 0.78
     at roughness 0.03, near-mirror under any light but the headlight). The choice is then made under the
     environment views (:data:`CHECK_PROBE`), which show a lobe of any width: among the fit, the lobe off with
@@ -900,14 +910,15 @@ def _unresolved_lobe(
     off = fitted.with_params(_lobe_values(template, lobe))
     with_lobe, without = yield from counter.pixels(tgt_r, [fitted, off])
     share = np.maximum(with_lobe - without, 0.0)
-    if float(np.sum(share**2)) <= ABSENT * float(np.sum(goal**2)) or highlight_pixels(share) >= MIN_HIGHLIGHT_PIXELS:
+    covered = highlight_pixels(share)
+    if float(np.sum(share**2)) <= ABSENT * float(np.sum(goal**2)) or covered >= MIN_HIGHLIGHT_PIXELS:
         return fitted
+    if source_lobe is not None and covered * NARROWER > highlight_pixels(source_lobe):
+        return fitted  # as narrow as the source's own, which the probe resolves: a fit of it, not a hidden lobe
     views = _Counter(parse_probe(CHECK_PROBE))
     why = probe_support(src_r, views.scene) or probe_support(tgt_r, views.scene)
     if why is not None:  # no environment to judge under: the fit stands, said so
-        warnings.append(
-            f"the fitted lobe covers {highlight_pixels(share)} pixel(s) of the point probe: unchecked ({why})"
-        )
+        warnings.append(f"the fitted lobe covers {covered} pixel(s) of the point probe: unchecked ({why})")
         return fitted
     found: list[StageReport] = []
     none = yield from _run_stage(FULL, rest, off, goal, 1.0, tgt_r, counter, found, name="check: no lobe")
@@ -928,7 +939,7 @@ def _unresolved_lobe(
     )
     counter.images += views.images
     warnings.append(
-        f"the fitted lobe covers {highlight_pixels(share)} pixel(s) of the point probe, too few to resolve it: "
+        f"the fitted lobe covers {covered} pixel(s) of the point probe, too few to resolve it: "
         f"chosen under the environment views ({names[best]}, relative RMSE {errors[best]:.4g} against the fit's "
         f"{errors[0]:.4g})"
     )
