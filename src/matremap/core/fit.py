@@ -51,7 +51,7 @@ from matremap.core.objective import measure
 from matremap.core.scene import Scene
 from matremap.dialects import get_model
 from matremap.errors import MatremapError
-from matremap.renderers.base import Renderer, check_probe
+from matremap.renderers.base import Renderer, check_probe, probe_support
 
 STRATEGIES = ("simple", "two-stage", "three-stage", "separable")
 DIFFUSE, SPECULAR, FULL = "diffuse", "specular", "full"
@@ -730,7 +730,14 @@ def _fit_body(
     scale = yield from _irradiance(source, spec, src_r, tgt_r, first)
     goals, sharpened, warnings = yield from _resolved_goals(source, strategy, scale, src_r, first)
     stages: list[StageReport] = []
+    lobe = (yield from _source_lobe(source, goals, src_r, first)) if sharpened is None else None
+    if _matte(lobe, goals):
+        template, free_params = _lobe_off(template, free_params, stages)
     current = yield from _strategy_stages(strategy, template, free_params, goals, tgt_r, first, stages, coarse)
+    if scene.environment is None and scene.transmission is None and objective == "l2" and sharpened is None:
+        current = yield from _unresolved_lobe(
+            source, current, template, free_params, goals[FULL], lobe, src_r, tgt_r, first, stages, warnings
+        )
     if headlight:
         for stage in stages:
             stage.name = f"headlight {stage.name}"
@@ -796,6 +803,147 @@ def _fit_body(
         objective=objective,
         relative_rmse=rmse,
     )
+
+
+def _source_lobe(
+    source: Material, goals: Mapping[str, np.ndarray], renderer: Renderer, counter: _Counter
+) -> Steps[np.ndarray | None]:
+    """The source's specular part on the probe: the staged goal; else rendered alone, or full minus diffuse where
+    only the diffuse part can be drawn; black for a model that is all diffuse (its diffuse-only render is itself);
+    None where neither part can be drawn."""
+    if SPECULAR in goals:
+        return goals[SPECULAR]
+    spec = source.spec.specialise(source.values)
+    if spec.diffuse_only is not None and not spec.part_overrides(DIFFUSE, source.values):
+        return np.zeros_like(goals[FULL])
+    specular, diffuse = part(source, SPECULAR), part(source, DIFFUSE)
+    if specular is not None:
+        return (yield from counter.pixels(renderer, [specular]))[0]
+    if diffuse is None:
+        return None
+    full, other = yield from counter.pixels(renderer, [source, diffuse])
+    return np.maximum(full - other, 0.0)
+
+
+def _matte(lobe: np.ndarray | None, goals: Mapping[str, np.ndarray]) -> bool:
+    """Whether the source has no specular part: its lobe (:func:`_source_lobe`) holds no energy (:data:`ABSENT`)."""
+    return lobe is not None and float(np.sum(lobe**2)) <= ABSENT * float(np.sum(goals[FULL] ** 2))
+
+
+def _lobe_values(template: Material, params: Sequence[ParamSpec]) -> dict[str, Any]:
+    """The target's specular lobe switched off: its weights and Fresnel at their lowest (a dielectric's IOR at 1
+    reflects nothing) and its roughness, which then draws nothing, at its value in ``template`` (the target's
+    default, a held value or the start's)."""
+    return {
+        p.name: p.bounds[0] if p.role in ("specular", "fresnel") else template.values[p.name]
+        for p in params
+        if p.role in SPECULAR_ROLES
+    }
+
+
+def _lobe_off(
+    template: Material, free_params: list[ParamSpec], stages: list[StageReport]
+) -> tuple[Material, list[ParamSpec]]:
+    """A matte source gives a target without a lobe, whatever the strategy: the lobe's parameters are set off
+    (:func:`_lobe_values`) and not fitted. Fitted jointly, a lobe the probe cannot tell from none goes anywhere
+    (a Lambertian onto Mitsuba 3's principled: specular 0.45 at roughness 0.03, its highlight a dot the
+    headlight's 128 pixels miss)."""
+    lobe = [p for p in free_params if p.role in SPECULAR_ROLES]
+    rest = [p for p in free_params if p.role not in SPECULAR_ROLES]
+    if not lobe or not rest:
+        return template, free_params
+    off = _lobe_values(template, lobe)
+    result = template.with_params(off)
+    names = [p.name for p in lobe]
+    stages.append(
+        StageReport(
+            "no lobe",
+            names,
+            _values_dict(template, names),
+            _values_dict(result, names),
+            0.0,
+            0,
+            0,
+            0.0,
+            "the source has no specular part; the target's lobe set off",
+        )
+    )
+    return result, rest
+
+
+#: environment views (their resolution) that judge a lobe the point probe does not resolve
+CHECK_PROBE = "env"
+#: a fitted lobe is hidden when its highlight covers this many times fewer pixels than the source's (twice narrower)
+NARROWER = 4
+
+
+def _unresolved_lobe(
+    source: Material,
+    fitted: Material,
+    template: Material,
+    free_params: list[ParamSpec],
+    goal: np.ndarray,
+    source_lobe: np.ndarray | None,
+    src_r: Renderer,
+    tgt_r: Renderer,
+    counter: _Counter,
+    stages: list[StageReport],
+    warnings: list[str],
+) -> Steps[Material]:
+    """Long: the check, its candidates and its cost are read best together.
+
+    A fitted lobe the point probe does not resolve (its share of the render, fitted minus lobe off, covers fewer
+    than :data:`MIN_HIGHLIGHT_PIXELS`, and :data:`NARROWER` times fewer than the source's lobe, which the probe
+    resolves): the probe cannot tell it from none, and
+    the fit may have put any weight on it (a glTF grey at roughness 1 onto Mitsuba 3's principled: specular 0.78
+    at roughness 0.03, near-mirror under any light but the headlight). The choice is then made under the
+    environment views (:data:`CHECK_PROBE`), which show a lobe of any width: among the fit, the lobe off with
+    the rest refitted, and the lobe's weight refitted at the starting roughness, the closest to the source there
+    (relative RMSE) is kept. Cost: two more point-probe fits and one environment render per candidate and of the
+    source, only where the check fires."""
+    from matremap.core.scene import parse_probe
+
+    lobe = [p for p in free_params if p.role in SPECULAR_ROLES]
+    rest = [p for p in free_params if p.role not in SPECULAR_ROLES]
+    if not lobe or not rest or not any(p.role in ("specular", "fresnel") for p in lobe):
+        return fitted
+    off = fitted.with_params(_lobe_values(template, lobe))
+    with_lobe, without = yield from counter.pixels(tgt_r, [fitted, off])
+    share = np.maximum(with_lobe - without, 0.0)
+    covered = highlight_pixels(share)
+    if float(np.sum(share**2)) <= ABSENT * float(np.sum(goal**2)) or covered >= MIN_HIGHLIGHT_PIXELS:
+        return fitted
+    if source_lobe is not None and covered * NARROWER > highlight_pixels(source_lobe):
+        return fitted  # as narrow as the source's own, which the probe resolves: a fit of it, not a hidden lobe
+    views = _Counter(parse_probe(CHECK_PROBE))
+    why = probe_support(src_r, views.scene) or probe_support(tgt_r, views.scene)
+    if why is not None:  # no environment to judge under: the fit stands, said so
+        warnings.append(f"the fitted lobe covers {covered} pixel(s) of the point probe: unchecked ({why})")
+        return fitted
+    found: list[StageReport] = []
+    none = yield from _run_stage(FULL, rest, off, goal, 1.0, tgt_r, counter, found, name="check: no lobe")
+    held = [p for p in free_params if p.role != "roughness"]
+    rough = fitted.with_params({p.name: template.values[p.name] for p in lobe if p.role == "roughness"})
+    at_start = yield from _run_stage(FULL, held, rough, goal, 1.0, tgt_r, counter, found, name="check: start roughness")
+    candidates = [fitted, none, at_start]
+    env_scale = yield from _irradiance(source, fitted.spec, src_r, tgt_r, views)
+    seen = (yield from views.pixels(src_r, [source]))[0] * env_scale
+    images = yield from views.pixels(tgt_r, candidates)
+    norm = float(np.linalg.norm(seen)) or 1.0
+    errors = [float(np.linalg.norm(image - seen)) / norm for image in images]
+    best = int(np.argmin(errors))
+    names = ("the fit", "no lobe", "the starting roughness")
+    stages += found
+    stages[-1].message += "; under the environment: " + ", ".join(
+        f"{n} {e:.4g}" for n, e in zip(names, errors, strict=True)
+    )
+    counter.images += views.images
+    warnings.append(
+        f"the fitted lobe covers {covered} pixel(s) of the point probe, too few to resolve it: "
+        f"chosen under the environment views ({names[best]}, relative RMSE {errors[best]:.4g} against the fit's "
+        f"{errors[0]:.4g})"
+    )
+    return candidates[best]
 
 
 def headlight_probe(scene: Scene) -> Scene:

@@ -338,7 +338,8 @@ def learn(data: TrainingData, holdout: float = 0.2, seed: int = 0) -> dict[str, 
             seen = lobe_drawn(y)
             mappings["roughness"] = fit_roughness(x["roughness"][seen], y["roughness"][seen], holdout, seed)
         else:
-            mappings["roughness"] = {"kind": "constant", "value": float(np.median(y["roughness"]))}
+            # the rows that draw a lobe; where none does, the fits left the roughness where they started it
+            mappings["roughness"] = {"kind": "constant", "value": float(np.median(y["roughness"][lobe_drawn(y)]))}
     if "reflectance" in y:
         if fitted("reflectance"):
             alpha = x["roughness"] if ("roughness" in x and data.varies("roughness")) else None
