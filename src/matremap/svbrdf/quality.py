@@ -72,6 +72,14 @@ class Thresholds:
     fit_error: float = 0.25
     #: inputs of the source that change its look and that no model here converts (an anisotropy, a subsurface)
     dropped: float = 0.0
+    #: the highlight's light and peakedness against the source's, |log ratio|, median over the views
+    #: (:mod:`matremap.svbrdf.gloss`)
+    highlight_energy: float = 1.0
+    highlight_sharpness: float = 1.0
+    #: mean HDR-FLIP error of the full renders
+    flip: float = 1.0
+    #: |log ratio| of the mean diffuse albedo (luminance) of the maps, target over source
+    albedo_error: float = 1.0
 
     @classmethod
     def parse(cls, items: Sequence[str]) -> Thresholds:
@@ -311,6 +319,13 @@ def map_checks(
         if varies(s) and (_spread(yt) <= FLAT_RATIO * _spread(ys) or not np.any(yt > 0)):
             flat.append(q)
     out.append(Check("hue_shift", worst_hue, thresholds.hue_shift, hue_where))
+    if "diffuse" in source and "diffuse" in target:
+        s = np.asarray(source["diffuse"], dtype=np.float64).reshape(-1, 3)
+        t = np.broadcast_to(np.asarray(target["diffuse"], dtype=np.float64), np.shape(source["diffuse"]))
+        ys, yt = float(luminance(s).mean()), float(luminance(t.reshape(-1, 3)).mean())
+        error = abs(float(np.log(yt / ys))) if ys > DARK and yt > DARK else (0.0 if max(ys, yt) <= DARK else np.inf)
+        where = f"mean diffuse albedo {yt:.3g} against the source's {ys:.3g}"
+        out.append(Check("albedo_error", error, thresholds.albedo_error, where))
     out.append(
         Check("flat", float(len(flat)), thresholds.flat, f"{', '.join(flat)} map constant where the source varies")
         if flat
