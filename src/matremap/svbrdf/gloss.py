@@ -30,6 +30,8 @@ from matremap.svbrdf.quality import Check, Thresholds
 
 #: the percentile of the highlight image's luminance read as its peak
 PEAK_PERCENTILE = 99.5
+#: the share of the object's inset (its radius, on a sphere) left out at its outline by :func:`facing`
+RIM = 0.2
 #: a highlight image whose mean luminance is below this fraction of the full render's shows no highlight
 #: (its energy is compared, its sharpness is not: the peak of nothing is noise)
 NO_HIGHLIGHT = 1e-3
@@ -48,9 +50,22 @@ class Highlight:
         return bool(self.energy > NO_HIGHLIGHT * max(self.full, 1e-12))
 
 
+def facing(mask: np.ndarray) -> np.ndarray:
+    """The pixels of ``mask`` at least :data:`RIM` of the object's largest inset from its outline: on a sphere, those
+    whose normal is within about 53 degrees of the view (sin 53 = 0.8), away from the grazing rim where two models'
+    Fresnel terms differ most (Schlick's brightens it, Ward's has none) and which is not the lobe's width."""
+    from scipy.ndimage import distance_transform_edt
+
+    m = np.asarray(mask, dtype=bool)
+    if not m.any():
+        return m
+    d = distance_transform_edt(np.pad(m, 1))[1:-1, 1:-1]
+    return np.asarray(d > RIM * float(d.max()))
+
+
 def highlight(gloss: np.ndarray, full: np.ndarray, mask: np.ndarray) -> Highlight:
     """The highlight statistics of one view: ``gloss`` the highlight image, ``full`` the full render (linear RGB,
-    [H, W, 3]), over the ``mask`` pixels."""
+    [H, W, 3]), over the ``mask`` pixels (callers pass :func:`facing` of the object's)."""
     from matremap.svbrdf.quality import luminance
 
     y = np.maximum(luminance(np.asarray(gloss)[mask]), 0.0)
@@ -82,7 +97,7 @@ def flip_error(source: np.ndarray, target: np.ndarray, mask: np.ndarray) -> floa
     """Mean HDR-FLIP error of ``target`` against the reference ``source`` (linear RGB, [H, W, 3]) over the ``mask``
     pixels (``flip-evaluator``, its default exposures and ACES tone mapper)."""
     try:
-        import flip_evaluator
+        import flip_evaluator  # type: ignore[import-untyped]
     except ImportError:  # pragma: no cover - a dependency of the package
         raise MatremapError("the quality gate needs flip-evaluator: pip install flip-evaluator") from None
     s = np.ascontiguousarray(np.maximum(np.asarray(source, dtype=np.float32), 0.0))
@@ -134,9 +149,10 @@ def gloss_checks(views: Sequence[View], mask: np.ndarray, thresholds: Thresholds
         return []
     names = [v.where for v in views]
     energy, sharp, flip = [], [], []
+    front = facing(mask)
     for v in views:
-        hs = highlight(v.source_highlight, v.source, mask)
-        ht = highlight(v.target_highlight, v.target, mask)
+        hs = highlight(v.source_highlight, v.source, front)
+        ht = highlight(v.target_highlight, v.target, front)
         energy.append(energy_error(hs, ht))
         sharp.append(sharpness_error(hs, ht))
         flip.append(flip_error(v.source, v.target, mask))
@@ -154,9 +170,11 @@ def gloss_checks(views: Sequence[View], mask: np.ndarray, thresholds: Thresholds
 __all__ = [
     "NO_HIGHLIGHT",
     "PEAK_PERCENTILE",
+    "RIM",
     "Highlight",
     "energy_error",
     "View",
+    "facing",
     "flip_error",
     "gloss_checks",
     "highlight",

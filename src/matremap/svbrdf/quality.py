@@ -289,6 +289,17 @@ def hue_shift(source: np.ndarray, target: np.ndarray) -> float:
     return float(d.mean())
 
 
+def albedo_error(source: np.ndarray, target: np.ndarray) -> tuple[float, float, float]:
+    """|log(mean Y_t / mean Y_s)| of two albedo maps [..., 3] (the target broadcast to the source's shape), with the
+    two means; 0 when both are black (below :data:`DARK`), inf when one is."""
+    s = np.asarray(source, dtype=np.float64)
+    t = np.broadcast_to(np.asarray(target, dtype=np.float64), s.shape)
+    ys, yt = float(luminance(s.reshape(-1, 3)).mean()), float(luminance(t.reshape(-1, 3)).mean())
+    if ys > DARK and yt > DARK:
+        return abs(float(np.log(yt / ys))), ys, yt
+    return (0.0 if max(ys, yt) <= DARK else float("inf")), ys, yt
+
+
 def _spread(a: np.ndarray) -> float:
     return float(np.percentile(a, 95) - np.percentile(a, 5)) if a.size else 0.0
 
@@ -320,11 +331,8 @@ def map_checks(
             flat.append(q)
     out.append(Check("hue_shift", worst_hue, thresholds.hue_shift, hue_where))
     if "diffuse" in source and "diffuse" in target:
-        s = np.asarray(source["diffuse"], dtype=np.float64).reshape(-1, 3)
-        t = np.broadcast_to(np.asarray(target["diffuse"], dtype=np.float64), np.shape(source["diffuse"]))
-        ys, yt = float(luminance(s).mean()), float(luminance(t.reshape(-1, 3)).mean())
-        error = abs(float(np.log(yt / ys))) if ys > DARK and yt > DARK else (0.0 if max(ys, yt) <= DARK else np.inf)
-        where = f"mean diffuse albedo {yt:.3g} against the source's {ys:.3g}"
+        error, mean_s, mean_t = albedo_error(source["diffuse"], target["diffuse"])
+        where = f"mean diffuse albedo {mean_t:.3g} against the source's {mean_s:.3g}"
         out.append(Check("albedo_error", error, thresholds.albedo_error, where))
     out.append(
         Check("flat", float(len(flat)), thresholds.flat, f"{', '.join(flat)} map constant where the source varies")
@@ -345,6 +353,7 @@ def sample(a: Any, limit: int = 512) -> Any:
 
 __all__ = [
     "DELTA_E_TOLERANCE",
+    "albedo_error",
     "VARIES",
     "Check",
     "Thresholds",
