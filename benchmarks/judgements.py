@@ -146,12 +146,13 @@ def _cases_for(source: str, model: str, extra: list[tuple[str, str, Callable[[Pa
 #: uniform glTF materials (KHR_materials_clearcoat and _sheen as the corpus' ClearCoatTest and the Standard Surface
 #: velvet use them), each its own correct conversion
 GLTF: dict[str, Params] = {
-    "red plastic": {"baseColor": [0.6, 0.08, 0.05], "metallic": 0.0, "roughness": 0.35},
-    "gold": {"baseColor": [1.0, 0.78, 0.34], "metallic": 1.0, "roughness": 0.3},
+    "red plastic": {"baseColor": [0.6, 0.08, 0.05], "metallic": 0.0, "roughness": 0.35, "specular": 1.0},
+    "gold": {"baseColor": [1.0, 0.78, 0.34], "metallic": 1.0, "roughness": 0.3, "specular": 1.0},
     "coated blue": {
         "baseColor": [0.05, 0.15, 0.5],
         "metallic": 0.0,
         "roughness": 0.6,
+        "specular": 1.0,
         "clearcoat": 1.0,
         "clearcoatRoughness": 0.05,
     },
@@ -159,6 +160,7 @@ GLTF: dict[str, Params] = {
         "baseColor": [0.15, 0.3, 0.08],
         "metallic": 0.0,
         "roughness": 0.8,
+        "specular": 1.0,
         "sheenColor": [0.8, 0.8, 0.8],
         "sheenRoughness": 0.3,
     },
@@ -235,10 +237,11 @@ def measure(
     keep: Callable[[dict[str, Any]], None] = lambda e: None,
     only: tuple[str, ...] = (),
     kinds: tuple[str, ...] = (),
+    done: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Every case's checks (name, value, where) under the default thresholds, with its label and kind; ``keep`` is
     given the entries measured so far after each case; ``only``, ``kinds``: only these sources' cases of these
-    kinds."""
+    kinds; ``done``: cases measured before (kept, not measured again)."""
     env = resolve("builtin")
     light = EnvironmentLight(env, LIGHTS)
     rotations = parse_rotations(ROTATIONS)
@@ -246,11 +249,12 @@ def measure(
     limits = Thresholds()
     rendered: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
     out: dict[str, Any] = {}
+    done = done or {}
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         pairs: dict[str, tuple[SVMaterial, SVMaterial, Any, Any]] = {}
         for ex in EXAMPLES:
-            if not only or ex in only:
+            if (not only or ex in only) and any(c.source == ex and c.name not in done for c in cases()):
                 pairs[ex] = _example(ex, work)
         for name, values in GLTF.items():
             m = SVMaterial("gltf:pbr", {k: np.asarray(v, dtype=np.float64) for k, v in values.items()}, {}, None)
@@ -264,6 +268,9 @@ def measure(
 
         for case in cases():
             if only and (case.source not in only or (kinds and case.kind not in kinds)):
+                continue
+            if case.name in done:
+                out[case.name] = done[case.name]
                 continue
             t0 = time.perf_counter()
             source, correct, src_set, tgt_set = pairs[case.source]
@@ -344,10 +351,39 @@ def measure_table(entries: dict[str, Any]) -> str:
     return "\n".join(rows)
 
 
+#: the kinds of rejected change each measure is there for (its threshold is chosen between them and the acceptable)
+FOR: dict[str, tuple[str, ...]] = {
+    "highlight_sharpness": ("alpha x1.5", "alpha /1.5", "alpha x4", "roughness 0.3"),
+    "highlight_energy": ("highlights removed", "coat lost", "coat invented"),
+    "albedo_error": ("diffuse x1.25", "diffuse x0.75"),
+    "hue_shift": ("hue +12", "hue -12"),
+    "flip": ("metal", "sheen"),
+}
+
+
+def _value(entry: dict[str, Any], name: str) -> float:
+    return float(next(c["value"] for c in entry["checks"] if c["name"] == name))
+
+
+def choose(entries: dict[str, Any]) -> dict[str, tuple[float, float, float]]:
+    """Per measure of :data:`FOR`: the largest value over the acceptable cases, the smallest over the rejected cases
+    of its kinds, and the threshold halfway between them."""
+    out = {}
+    for name, kinds in FOR.items():
+        ok = max(_value(e, name) for e in entries.values() if e["label"] == "acceptable")
+        bad = [
+            _value(e, name) for e in entries.values() if e["label"] == "rejected" and any(k in e["kind"] for k in kinds)
+        ]
+        low = min(bad) if bad else float("inf")
+        out[name] = (ok, low, (ok + low) / 2.0 if np.isfinite(low) else ok)
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--tables", action="store_true", help="print the matrices from the stored measures")
     parser.add_argument("--only", nargs="+", default=[], help="measure only these sources' cases; print, store nothing")
+    parser.add_argument("--resume", action="store_true", help="keep the cases already in the stored measures")
     parser.add_argument("--kinds", nargs="+", default=[], help="with --only, only the cases of these kinds")
     args = parser.parse_args()
     if args.only:
@@ -356,7 +392,8 @@ def main() -> None:
         return
     if not args.tables:
         DATA.mkdir(parents=True, exist_ok=True)
-        measure(keep=lambda e: MEASURES.write_text(json.dumps(e, indent=1) + "\n"))
+        done = json.loads(MEASURES.read_text()) if args.resume and MEASURES.is_file() else {}
+        measure(keep=lambda e: MEASURES.write_text(json.dumps(e, indent=1) + "\n"), done=done)
     entries = json.loads(MEASURES.read_text())
     held = held_out(list(entries))
     limits = Thresholds()
@@ -368,6 +405,11 @@ def main() -> None:
     print(table("all", entries, limits))
     print()
     print(measure_table(entries))
+    print()
+    print("| measure | worst acceptable | least rejected of its kinds | halfway |")
+    print("|---|---|---|---|")
+    for name, (ok, low, mid) in choose(chosen).items():
+        print(f"| {name} | {ok:.4g} | {low:.4g} | {mid:.4g} |")
 
 
 if __name__ == "__main__":

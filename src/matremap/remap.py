@@ -83,7 +83,7 @@ from matremap.svbrdf.mixed import (
     through_levels,
     transmission_parameter,
 )
-from matremap.svbrdf.quality import Check, Thresholds, Verdict, image_checks, map_checks, sample
+from matremap.svbrdf.quality import Check, Thresholds, Verdict, image_checks, layer_checks, map_checks, sample
 from matremap.svbrdf.textures import MapSet, load_map_set, map_values, read_image, texel_limit
 
 #: grid points along the roughness and the specular axes of the sweep, and the diffuse levels
@@ -1289,7 +1289,10 @@ def map_quality(
         if opaque is not None and "diffuse" in q:  # a glass's base colour is its tint, no diffuse one sees
             q["diffuse"] = q["diffuse"] * (opaque[..., None] if opaque.ndim else opaque)
         sides.append(q)
-    return map_checks(sides[0], sides[1], limits)
+    layers = layer_checks(
+        source.spec, {**source.constants, **source_params}, target.spec, {**target.constants, **target_params}, limits
+    )
+    return map_checks(sides[0], sides[1], limits) + layers
 
 
 # ---------------------------------------------------------------------------------------------

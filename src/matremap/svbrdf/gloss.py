@@ -5,17 +5,18 @@ pixels: a lobe 1.5 times sharper or duller, or a highlight removed, moves them l
 between two models already does. Here each view's **highlight image** -- the specular-only render, or, for a model
 without one (Mitsuba 3's ``principled``: its metallic lobe takes the base colour), the full render less the
 diffuse-only render, or the full render of a model that is all specular -- is reduced to two statistics of its
-luminance Y over the object's pixels:
+luminance Y over the pixels that face the camera (:func:`facing`: the grazing rim, where Schlick's Fresnel
+brightens one model and not another, is not the lobe's width):
 
 * ``energy``: mean Y, the light the lobe reflects;
 * ``sharpness``: the 99.5th percentile of Y over the mean Y: a narrower lobe concentrates the same energy
   into fewer, brighter pixels (the peak-to-mean ratio of a reflected light grows as 1/alpha^2 for small alpha).
 
-Each is compared with the source's as |log(target / source)|, per view; the gate takes the median over the
-views (the turn of the environment), so that one grazing view where two models' Fresnel terms differ does not
-decide it, and names the worst view. ``flip``: the mean HDR-FLIP error (Andersson et al., "FLIP: A Difference
-Evaluator for Alternating Images", HPG 2020, and its HDR extension 2021; NVIDIA's ``flip-evaluator``) over the
-object's pixels, averaged over the views.
+Each is compared with the source's as log(target / source) per view; the gate takes |median| over the views (the
+turn of the environment: a change the same way in most views), and names the view furthest that way. A highlight
+that shows on one side only is infinitely off. ``flip``: the mean HDR-FLIP error (Andersson et al., "FLIP: A
+Difference Evaluator for Alternating Images", HPG 2020, and its HDR extension 2021; NVIDIA's ``flip-evaluator``)
+of the full renders over the object's pixels, averaged over the views.
 """
 
 from __future__ import annotations
