@@ -69,7 +69,7 @@ class Thresholds:
     delta_e: float = 12.0
     delta_e_fraction: float = 0.5
     dssim: float = 0.4
-    hue_shift: float = 6.0
+    hue_shift: float = 5.0
     flat: float = 0.0
     outside: float = 0.05
     clamped: float = 0.01
@@ -78,7 +78,7 @@ class Thresholds:
     dropped: float = 0.0
     #: the highlight's light and peakedness against the source's, |log ratio|, median over the views
     #: (:mod:`matremap.svbrdf.gloss`)
-    highlight_energy: float = 0.5
+    highlight_energy: float = 0.21
     highlight_sharpness: float = 0.13
     #: mean HDR-FLIP error of the full renders
     flip: float = 0.5
