@@ -86,7 +86,7 @@ from matremap.svbrdf.mixed import (
     through_levels,
     transmission_parameter,
 )
-from matremap.svbrdf.quality import Check, Thresholds, Verdict, map_checks, sample
+from matremap.svbrdf.quality import Check, Thresholds, Verdict, layer_checks, map_checks, sample
 from matremap.svbrdf.textures import MapSet, load_map_set, map_values, read_image, texel_limit
 from matremap.uniform_remap import ANISOTROPIC_PROBE_LIGHTS, complete_fix, glass_is_dielectric, partial_metal
 
@@ -1264,7 +1264,10 @@ def map_quality(
         if opaque is not None and "diffuse" in q:  # a glass's base colour is its tint, no diffuse one sees
             q["diffuse"] = q["diffuse"] * (opaque[..., None] if opaque.ndim else opaque)
         sides.append(q)
-    return map_checks(sides[0], sides[1], limits)
+    layers = layer_checks(
+        source.spec, {**source.constants, **source_params}, target.spec, {**target.constants, **target_params}, limits
+    )
+    return map_checks(sides[0], sides[1], limits) + layers
 
 
 # ---------------------------------------------------------------------------------------------

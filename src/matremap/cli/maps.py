@@ -263,7 +263,7 @@ def _max_error(p: argparse.ArgumentParser) -> None:
         default=[],
         metavar="NAME=VALUE",
         help="a quality-gate threshold (repeatable): luminance_error, delta_e, delta_e_fraction, dssim, hue_shift, "
-        "flat, outside, clamped, fit_error; see docs/quality.md",
+        "flat, outside, clamped, fit_error, highlight_energy, highlight_sharpness, flip; see docs/quality.md",
     )
 
 
@@ -277,7 +277,7 @@ def _verdict(verdict: Any) -> int:
 def cmd_evaluate(args: argparse.Namespace) -> int:
     """Render both map sets under the environment at each rotation; write the SSIM report."""
     from matremap.core.envmap import resolve
-    from matremap.remap import load_arrays
+    from matremap.remap import load_arrays, map_quality
     from matremap.svbrdf.evaluate import evaluate, parse_rotations
 
     rotations = parse_rotations(args.rotations)
@@ -290,6 +290,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     for ms in sets:
         params, normal = load_arrays(ms)
         materials.append((ms.model, params, ms.options, normal))
+    thresholds = Thresholds.parse(args.max_error)
+    checks = map_quality(sets[0], materials[0][1], sets[1], materials[1][1], thresholds)
     result = evaluate(
         materials[0],
         materials[1],
@@ -300,7 +302,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         resolution=args.size,
         lights=args.env_lights,
         force=args.force,
-        thresholds=Thresholds.parse(args.max_error),
+        thresholds=thresholds,
+        checks=checks,
     )
     print(
         f"mean 1-SSIM {result.mean_full:.4f} (specular only {result.mean_specular:.4f}) over "

@@ -33,6 +33,7 @@ from matremap.errors import MatremapError
 from matremap.renderers.base import EnvironmentLight, EnvironmentRender, check_environment_args
 from matremap.renderers.registry import environment_renderer_for
 from matremap.renderers.textured import object_mask
+from matremap.svbrdf.gloss import View, gloss_checks
 from matremap.svbrdf.quality import Check, Thresholds, Verdict, image_checks
 
 PARTS = ("full", "specular")
@@ -237,6 +238,25 @@ def prepare(
     return renderer.prepare_environment(material, light, geometry, resolution, part)
 
 
+def highlight_part(material: SVMaterial) -> str:
+    """The render a material's highlight image is made from (:mod:`matremap.svbrdf.gloss`): its specular-only part;
+    for a model without one, its diffuse-only part (taken from the full render); the full render of a model
+    without a diffuse part."""
+    model = get_model(material.model)
+    if model.part_overrides("specular", material.params) is not None:
+        return "specular"
+    if model.part_overrides("diffuse", material.params) is not None:
+        return "diffuse"
+    return "full"
+
+
+def highlight_image(full: np.ndarray, part: np.ndarray, kind: str) -> np.ndarray:
+    """The highlight image of a view from its full render and the ``kind`` of part :func:`highlight_part` chose."""
+    if kind == "diffuse":
+        return np.maximum(np.asarray(full, dtype=np.float32) - np.asarray(part, dtype=np.float32), 0.0)
+    return np.asarray(part)
+
+
 def irradiance_scale_under(light: EnvironmentLight, source_model: str, target_model: str) -> float:
     """Scale that brings source renders to the target's irradiance units under ``light`` (1 when they
     share a renderer family, :func:`~matremap.core.calibrate.same_units`): least-squares ratio of the
@@ -295,27 +315,22 @@ def evaluate(
     light = EnvironmentLight(env, lights)
     # prepare everything (validates both materials) before writing anything
     materials = {"source": src, "target": tgt}
-    prepared = {
-        (who, part): prepare(m, light, geometry, resolution, part) for who, m in materials.items() for part in PARTS
-    }
+    kinds = {who: highlight_part(m) for who, m in materials.items()}
+    needed = {(who, part) for who in materials for part in ("full", kinds[who])}
+    prepared = {key: prepare(materials[key[0]], light, geometry, resolution, key[1]) for key in sorted(needed)}
     scale = irradiance_scale_under(light, src.model, tgt.model) if match_irradiance else 1.0
     mask = object_mask(geometry, resolution)
     images = _ReportImages(out / "images")
     comparison = _Comparison(mask, scale)
-    # a part whose overrides change nothing (a conductor's specular part) is the full render: reuse it
-    same_as_full = {who: get_model(m.model).part_overrides("specular", m.params) == {} for who, m in materials.items()}
     from tqdm import tqdm  # a real renderer takes seconds per view: say how far it is (on a terminal)
 
     views = tqdm(rotations, desc="evaluate", unit="rotation", disable=None, leave=False)
     for k, rot in enumerate(views):
-        drawn: dict[tuple[str, str], np.ndarray] = {}
-        for part in PARTS:
-            for who in materials:
-                key = (who, "full" if part == "specular" and same_as_full[who] else part)
-                if key not in drawn:
-                    drawn[key] = prepared[key].render(rot)
-                drawn[(who, part)] = drawn[key]
-            comparison.add(k, part, drawn[("source", part)], drawn[("target", part)], images)
+        drawn = {key: prepared[key].render(rot) for key in sorted(needed)}
+        full = {who: drawn[(who, "full")] for who in materials}
+        shown = {who: highlight_image(full[who], drawn[(who, kinds[who])], kinds[who]) for who in materials}
+        comparison.add(k, "full", full["source"], full["target"], images)
+        comparison.add(k, "specular", shown["source"], shown["target"], images)
     images.emit("dssim_vs_rotation.png", _plot(rotations, comparison.dssim["full"], comparison.dssim["specular"]))
     verdict = comparison.verdict(checks, thresholds or Thresholds())
     images.emit("colorbar.png", _colorbar())
@@ -404,11 +419,21 @@ class _Comparison:
         self.exposure: dict[str, float] = {}
         #: (where, source, target) of the full renders, for the colour and energy measures
         self.full_pairs: list[tuple[str, np.ndarray, np.ndarray]] = []
+        #: the highlight images of each view (:func:`highlight_image`), source and target
+        self.highlights: list[tuple[np.ndarray, np.ndarray]] = []
 
     def verdict(self, checks: Sequence[Check], limits: Thresholds) -> Verdict:
-        """The gate: the caller's checks, the full renders' colour and energy, and the mean 1 - SSIM."""
+        """The gate: the caller's checks, the full renders' colour and energy, the highlights and HDR-FLIP, and the
+        mean 1 - SSIM."""
+        return Verdict([*checks, *self.checks(limits)])
+
+    def checks(self, limits: Thresholds) -> list[Check]:
+        """The image measures of the gate (without the caller's)."""
         dssim = Check("dssim", float(np.mean(self.dssim["full"])), limits.dssim, "mean over rotations")
-        return Verdict([*checks, *image_checks(self.full_pairs, self.mask, limits), dssim])
+        views = [
+            View(where, s, t, hs, ht) for (where, s, t), (hs, ht) in zip(self.full_pairs, self.highlights, strict=True)
+        ]
+        return [*image_checks(self.full_pairs, self.mask, limits), *gloss_checks(views, self.mask, limits), dssim]
 
     def add(self, k: int, part: str, s_img: np.ndarray, t_img: np.ndarray, images: _ReportImages) -> None:
         if self.scale != 1.0:
@@ -417,6 +442,8 @@ class _Comparison:
         dmap = 1.0 - smap
         if part == "full":
             self.full_pairs.append((f"full render, rotation {k}", s_img, t_img))
+        else:
+            self.highlights.append((s_img, t_img))
         mask = self.mask
         self.dssim[part].append(float(dmap[mask].mean()) if mask.any() else float(1.0 - mssim))
         self.dssim_image[part].append(float(1.0 - mssim))

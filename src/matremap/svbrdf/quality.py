@@ -12,13 +12,17 @@ every remap is also measured on what SSIM ignores:
     luminance at 0.8), clipped to [0, 1] and taken from linear sRGB to CIELAB (D65);
   - ``delta_e_fraction``: the fraction of object pixels whose difference exceeds
     :data:`DELTA_E_TOLERANCE`;
-  - ``dssim``: mean 1 - SSIM (paper §6), kept as the structural measure.
+  - ``dssim``: mean 1 - SSIM (paper §6), kept as the structural measure;
+  - ``highlight_energy``, ``highlight_sharpness``, ``flip``: the highlight of each view against the source's and
+    HDR-FLIP (:mod:`matremap.svbrdf.gloss`), which see a lobe sharper or duller, or a highlight removed.
 
 * **Maps** -- the parameter maps read in the common vocabulary of :mod:`matremap.regress.quantities`
   (diffuse albedo, specular reflectance F0):
 
   - ``hue_shift``: mean circular difference of hue, in degrees, over the texels whose source colour is
     saturated (HSV saturation above :data:`SATURATED`);
+  - ``albedo_error``: |log ratio| of the mean diffuse albedo's luminance, target over source;
+  - ``layers``: a coat or sheen lost or invented where the target model has one;
   - ``flat``: a target colour that is constant (or zero) where the source's varies;
   - ``outside``: the fraction of texels outside the transform's training domain;
   - ``clamped``: the fraction of values clipped to fit the output files' range (an 8-bit map of a
@@ -65,13 +69,23 @@ class Thresholds:
     delta_e: float = 12.0
     delta_e_fraction: float = 0.5
     dssim: float = 0.4
-    hue_shift: float = 25.0
+    hue_shift: float = 5.0
     flat: float = 0.0
     outside: float = 0.05
     clamped: float = 0.01
     fit_error: float = 0.25
     #: inputs of the source that change its look and that no model here converts (an anisotropy, a subsurface)
     dropped: float = 0.0
+    #: the highlight's light and peakedness against the source's, |log ratio|, median over the views
+    #: (:mod:`matremap.svbrdf.gloss`)
+    highlight_energy: float = 0.21
+    highlight_sharpness: float = 0.13
+    #: mean HDR-FLIP error of the full renders
+    flip: float = 0.5
+    #: |log ratio| of the mean diffuse albedo (luminance) of the maps, target over source
+    albedo_error: float = 0.11
+    #: coats and sheens lost or invented where the target has them (:func:`layer_checks`)
+    layers: float = 0.0
 
     @classmethod
     def parse(cls, items: Sequence[str]) -> Thresholds:
@@ -281,6 +295,17 @@ def hue_shift(source: np.ndarray, target: np.ndarray) -> float:
     return float(d.mean())
 
 
+def albedo_error(source: np.ndarray, target: np.ndarray) -> tuple[float, float, float]:
+    """|log(mean Y_t / mean Y_s)| of two albedo maps [..., 3] (the target broadcast to the source's shape), with the
+    two means; 0 when both are black (below :data:`DARK`), inf when one is."""
+    s = np.asarray(source, dtype=np.float64)
+    t = np.broadcast_to(np.asarray(target, dtype=np.float64), s.shape)
+    ys, yt = float(luminance(s.reshape(-1, 3)).mean()), float(luminance(t.reshape(-1, 3)).mean())
+    if ys > DARK and yt > DARK:
+        return abs(float(np.log(yt / ys))), ys, yt
+    return (0.0 if max(ys, yt) <= DARK else float("inf")), ys, yt
+
+
 def _spread(a: np.ndarray) -> float:
     return float(np.percentile(a, 95) - np.percentile(a, 5)) if a.size else 0.0
 
@@ -311,12 +336,53 @@ def map_checks(
         if varies(s) and (_spread(yt) <= FLAT_RATIO * _spread(ys) or not np.any(yt > 0)):
             flat.append(q)
     out.append(Check("hue_shift", worst_hue, thresholds.hue_shift, hue_where))
+    if "diffuse" in source and "diffuse" in target:
+        error, mean_s, mean_t = albedo_error(source["diffuse"], target["diffuse"])
+        where = f"mean diffuse albedo {mean_t:.3g} against the source's {mean_s:.3g}"
+        out.append(Check("albedo_error", error, thresholds.albedo_error, where))
     out.append(
         Check("flat", float(len(flat)), thresholds.flat, f"{', '.join(flat)} map constant where the source varies")
         if flat
         else Check("flat", 0.0, thresholds.flat)
     )
     return out
+
+
+#: a layer (coat, sheen) of mean weight at least this shows; one below LAYER_KEPT of the other side's is gone
+LAYER_SEEN = 0.25
+LAYER_KEPT = 0.25
+
+
+def layer_checks(
+    source_spec: Any,
+    source_values: Mapping[str, Any],
+    target_spec: Any,
+    target_values: Mapping[str, Any],
+    thresholds: Thresholds,
+) -> list[Check]:
+    """``layers``: the coats and sheens (:data:`matremap.regress.quantities.LAYERS`) the result lost or invented,
+    counted where the target model has the layer (a target without it is judged by its renders, as an emulation):
+    lost when the source's mean weight is at least :data:`LAYER_SEEN` and the target's below :data:`LAYER_KEPT` of
+    it, invented the other way round."""
+    from matremap.regress import quantities as qty
+
+    def weight(spec: Any, values: Mapping[str, Any], name: str) -> float:
+        layer = qty.layer_params(spec).get(name)
+        if layer is None:
+            return 0.0
+        full = {p.name: sample(values.get(p.name, p.default_array)) for p in spec.params}
+        return float(np.mean(qty.read_layer(name, layer, full)[f"{name}_weight"]))
+
+    changed = []
+    for name in qty.LAYERS:
+        if name not in qty.layer_params(target_spec):
+            continue
+        ws, wt = weight(source_spec, source_values, name), weight(target_spec, target_values, name)
+        if ws >= LAYER_SEEN and wt < LAYER_KEPT * ws:
+            changed.append(f"{name} lost (weight {ws:.3g} -> {wt:.3g})")
+        elif wt >= LAYER_SEEN and ws < LAYER_KEPT * wt:
+            changed.append(f"{name} invented (weight {ws:.3g} -> {wt:.3g})")
+    return [Check("layers", float(len(changed)), thresholds.layers, "; ".join(changed))]
 
 
 def sample(a: Any, limit: int = 512) -> Any:
@@ -330,6 +396,7 @@ def sample(a: Any, limit: int = 512) -> Any:
 
 __all__ = [
     "DELTA_E_TOLERANCE",
+    "albedo_error",
     "VARIES",
     "Check",
     "Thresholds",
@@ -337,6 +404,7 @@ __all__ = [
     "delta_e_2000",
     "hue_shift",
     "image_checks",
+    "layer_checks",
     "luminance",
     "luminance_error",
     "map_checks",
