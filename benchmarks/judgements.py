@@ -253,7 +253,7 @@ def measure(
     light = EnvironmentLight(env, LIGHTS)
     rotations = parse_rotations(ROTATIONS)
     mask = object_mask("sphere", RESOLUTION)
-    limits = Thresholds()
+    limits = Thresholds.calibrated()
     rendered: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
     out: dict[str, Any] = {}
     done = done or {}
@@ -354,7 +354,7 @@ def table(title: str, entries: dict[str, Any], limits: Thresholds) -> str:
 
 def measure_table(entries: dict[str, Any]) -> str:
     """Each measure's largest value over the acceptable cases and the rejected cases it alone fails."""
-    limits = Thresholds()
+    limits = Thresholds.calibrated()
     names = [c["name"] for c in next(iter(entries.values()))["checks"] if hasattr(limits, c["name"])]
     rows = ["| measure | threshold | worst acceptable | rejected cases it fails |", "|---|---|---|---|"]
     for n in dict.fromkeys(names):
@@ -415,7 +415,7 @@ def main() -> None:
         measure(keep=lambda e: MEASURES.write_text(json.dumps(e, indent=1) + "\n"), done=done)
     entries = json.loads(MEASURES.read_text())
     held = held_out(list(entries))
-    limits = Thresholds()
+    limits = Thresholds.calibrated()
     chosen = {k: e for k, e in entries.items() if k not in held}
     print(table("thresholds chosen on", chosen, limits))
     print()

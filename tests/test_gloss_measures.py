@@ -116,9 +116,10 @@ def test_a_gloss_change_fails_the_gate_naming_the_measure_and_view(tmp_path, cha
     (1 - SSIM, luminance, CIEDE2000) passed each; the verdict names the measure that fails and its worst view."""
     env = envmap.builtin(32, 64)
     rotations = [0.0, 120.0, 240.0]
-    ok = evaluate(_ward(0.15), _ward(0.15), env, rotations, tmp_path / "ok", **KW)
+    limits = Thresholds.calibrated()
+    ok = evaluate(_ward(0.15), _ward(0.15), env, rotations, tmp_path / "ok", thresholds=limits, **KW)
     assert ok.verdict.passed, ok.verdict.line()
-    bad = evaluate(_ward(0.15), change, env, rotations, tmp_path / "bad", **KW)
+    bad = evaluate(_ward(0.15), change, env, rotations, tmp_path / "bad", thresholds=limits, **KW)
     failed = {c.name: c for c in bad.verdict.failed}
     assert measure in failed, bad.verdict.line()
     assert "rotation" in failed[measure].where

@@ -60,7 +60,7 @@ KNOWN_MISSES = {"coated blue: duller: alpha x1.5", "coated blue: sharper: alpha 
 def test_the_gate_fails_every_rejected_case_and_passes_every_acceptable_one(bench, entries, part):
     held = bench.held_out(list(entries))
     subset = {k: e for k, e in entries.items() if (k in held) == (part == "held out")}
-    limits = Thresholds()
+    limits = Thresholds.calibrated()
     wrong = {k for k, e in subset.items() if bench.verdict(e, limits).passed != (e["label"] == "acceptable")}
     assert not any(subset[k]["label"] == "acceptable" for k in wrong), sorted(wrong)
     assert wrong == KNOWN_MISSES & set(subset), sorted(wrong)
