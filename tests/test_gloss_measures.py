@@ -86,7 +86,7 @@ def test_principled_evaluation_compares_highlights(tmp_path):
     spec = oiio.ImageBuf(str(tmp_path / "same" / "images" / "r000_specular_source.png")).get_pixels()
     assert spec.max() > 0.2  # the highlight shows
     duller = ("mitsuba3:principled", {**values, "roughness": 0.25 * 1.5**0.5}, {}, None)
-    bad = evaluate(src, duller, env, [0.0], tmp_path / "duller", **KW)
+    bad = evaluate(src, duller, env, [0.0], tmp_path / "duller", thresholds=Thresholds.calibrated(), **KW)
     assert not bad.verdict.passed
     assert "highlight" in bad.verdict.line() or "flip" in bad.verdict.line()
 

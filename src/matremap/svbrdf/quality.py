@@ -86,8 +86,8 @@ class Thresholds:
     flip: float = math.inf
     #: |log ratio| of the mean diffuse albedo (luminance) of the maps, target over source (reported; see above)
     albedo_error: float = math.inf
-    #: coats and sheens lost or invented where the target has them (:func:`layer_checks`)
-    layers: float = 0.0
+    #: coats and sheens lost or invented where the target has them (:func:`layer_checks`; reported, see above)
+    layers: float = math.inf
 
     @classmethod
     def calibrated(cls) -> Thresholds:
