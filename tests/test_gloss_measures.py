@@ -145,3 +145,22 @@ def test_facing_leaves_out_the_rim_of_a_sphere():
     r = np.hypot(x, y) / 30.0
     front = facing(r <= 1.0)
     assert front[r < 0.75].all() and not front[r > 0.85].any()
+
+
+def test_a_coat_lost_or_invented_is_counted_where_the_target_has_one():
+    from matremap.dialects import get_model
+    from matremap.svbrdf.quality import layer_checks
+
+    gltf, openpbr, ward = get_model("gltf:pbr"), get_model("mtlx:open_pbr_surface"), get_model("mitsuba06:ward")
+    limits = Thresholds.calibrated()
+
+    def count(src, sv, dst, dv):
+        (check,) = layer_checks(src, sv, dst, dv, limits)
+        return check.value, check.passed, check.where
+
+    assert count(gltf, {"clearcoat": 1.0}, openpbr, {"coat_weight": 0.9})[:2] == (0.0, True)
+    lost = count(gltf, {"clearcoat": 1.0}, openpbr, {"coat_weight": 0.03})
+    assert lost[:2] == (1.0, False) and "coat lost" in lost[2]
+    invented = count(gltf, {"clearcoat": 0.0}, openpbr, {"coat_weight": 0.8})
+    assert invented[:2] == (1.0, False) and "coat invented" in invented[2]
+    assert count(gltf, {"clearcoat": 1.0}, ward, {})[:2] == (0.0, True)  # no coat to keep: judged by the renders
