@@ -358,3 +358,22 @@ def test_a_reused_process_id_is_not_its_old_owner(tmp_path):
     stale = tmp_path / f"{atomic.MARK}partial-{pid}x{int(start) - 1}-out-x"
     stale.mkdir()
     assert atomic.clean_stale(tmp_path) == [stale] and not stale.exists()
+
+
+def test_a_partial_folder_of_an_exited_but_unreaped_owner_is_removed(tmp_path):
+    """A killed worker whose new parent has not reaped it yet (a zombie) writes nothing more: its leftovers go."""
+    import time
+    from pathlib import Path
+
+    child = subprocess.Popen([sys.executable, "-c", "pass"])
+    token = atomic.owner_token(child.pid)
+    stat = Path(f"/proc/{child.pid}/stat")
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and stat.read_text().rsplit(")", 1)[1].split()[0] != "Z":
+        time.sleep(0.02)  # exited, not waited for: a zombie
+    try:
+        left = tmp_path / f"{atomic.MARK}partial-{token}-out-x"
+        left.mkdir()
+        assert atomic.clean_stale(tmp_path) == [left] and not left.exists()
+    finally:
+        child.wait()

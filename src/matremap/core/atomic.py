@@ -66,14 +66,25 @@ COMMITTED = "committed"
 # owners
 
 
-def _start_time(pid: int) -> str:
-    """The process's start time in clock ticks since boot (Linux), or "" where the system does not say."""
+def _stat_fields(pid: int) -> list[str]:
+    """The fields of ``/proc/PID/stat`` after the command name (Linux; proc(5)), or [] where the system has none."""
     try:
         stat = Path(f"/proc/{pid}/stat").read_text()
     except OSError:
-        return ""
-    fields = stat[stat.rfind(")") + 2 :].split()
+        return []
+    return stat[stat.rfind(")") + 2 :].split()
+
+
+def _start_time(pid: int) -> str:
+    """The process's start time in clock ticks since boot (Linux), or "" where the system does not say."""
+    fields = _stat_fields(pid)
     return fields[19] if len(fields) > 19 else ""
+
+
+def _zombie(pid: int) -> bool:
+    """Whether the process has exited and only waits to be reaped (state Z or X in proc(5)): it writes nothing more."""
+    fields = _stat_fields(pid)
+    return bool(fields) and fields[0] in ("Z", "X")
 
 
 def owner_token(pid: int | None = None) -> str:
@@ -101,6 +112,8 @@ def _alive(token: str) -> bool:
         return False
     except PermissionError:  # another user's process
         return True
+    if _zombie(pid):  # killed, not yet reaped (an orphan whose new parent reaps late)
+        return False
     return not start or _start_time(pid) in ("", start)
 
 
