@@ -88,7 +88,7 @@ from matremap.svbrdf.mixed import (
 )
 from matremap.svbrdf.quality import Check, Thresholds, Verdict, layer_checks, map_checks, sample
 from matremap.svbrdf.textures import MapSet, load_map_set, map_values, read_image, texel_limit
-from matremap.uniform_remap import ANISOTROPIC_PROBE_LIGHTS, complete_fix, glass_is_dielectric, partial_metal
+from matremap.uniform_remap import ANISOTROPIC_PROBE_LIGHTS, complete_fix, partial_metal
 
 #: grid points along the roughness and the specular axes of the sweep, and the diffuse levels
 ROUGHNESS_POINTS, SPECULAR_POINTS, DIFFUSE_ONLY_POINTS = 10, 6, 8
@@ -871,9 +871,8 @@ def _fit_kind(source: Material, job: RemapJob, log: Callable[[str], None]) -> An
     metalness freed."""
     white = {c: [1.0, 1.0, 1.0] for c in invented_colours(source, job.target) if c not in job.fix}
     job = replace(job, fix={**job.fix, **white})
-    fix = complete_fix(source.model, qty.material_values(source), job.target, job.fix)
-    fix = glass_is_dielectric(source, job.target, fix, job.fix)
-    job, fix, metal = free_partial_metal(source, job, fix, log)
+    held = uniform_remap.choose_held(source, job.target, job.fix, log)
+    job, fix, metal = (replace(job, strategy="simple") if held.start else job), held.fix, held.start
     # a layered model's kinds fitted alike, with the layer on or off (a sheen map's black level onto OpenPBR: 0.037
     # two-stage, 0.0068 three-stage); a glass's levels keep their one fit on the transmission probe
     alike = source.model in LAYER_PARAMS and "transmission" not in layers_on(source.model, source.values)
