@@ -30,7 +30,7 @@ a folder :func:`staged_folder` was swapping in is restored or finished. So a SIG
 the previous state or the complete result as soon as the next run starts, and that run needs no
 ``--force``. A process still alive is never touched.
 
-:func:`matremap.core.imageio.atomic_output` is the one-file version of the same idea (its temporary
+:func:`atomic_output` is the one-file version of the same idea (its temporary
 names carry the same mark).
 """
 
@@ -123,6 +123,22 @@ def _owner(name: str) -> tuple[str, str] | None:
         return None
     parts = name[len(MARK) :].split("-", 2)
     return (parts[0], parts[1]) if len(parts) >= 2 else None
+
+
+@contextmanager
+def atomic_output(path: Path) -> Iterator[str]:
+    """Yield a temporary file name beside ``path``; on success it replaces ``path`` (with the
+    permissions a new file would get), on failure it is removed. The name carries this process's mark
+    (:func:`temp_prefix`), so that a run after a SIGKILL removes it."""
+    fd, tmp = tempfile.mkstemp(prefix=temp_prefix("tmp", path.stem), suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    try:
+        yield tmp
+        os.chmod(tmp, 0o666 & ~_umask())
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -460,15 +476,8 @@ def record_written(folder: str | os.PathLike[str], names: list[str] | None = Non
     lists plus ``names`` (relative paths), for files added after the folder was published."""
     folder = Path(folder)
     entries = set(_tree_entries(folder)) if names is None else (written_entries(folder) or set()) | set(names)
-    fd, tmp = tempfile.mkstemp(prefix=temp_prefix("tmp", "record"), dir=folder)
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(_record_text(entries))
-        os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, folder / OUTPUT_RECORD)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    with atomic_output(folder / OUTPUT_RECORD) as tmp:
+        Path(tmp).write_text(_record_text(entries))
 
 
 def _record_text(entries: set[str]) -> str:
@@ -579,6 +588,7 @@ __all__ = [
     "OUTPUT_RECORD",
     "STAGING_PREFIX",
     "AtomicFiles",
+    "atomic_output",
     "check_output_folder",
     "clean_stale",
     "foreign_entries",

@@ -8,13 +8,11 @@ existing file is only replaced when the caller says so.
 from __future__ import annotations
 
 import os
-import tempfile
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
+from matremap.core.atomic import atomic_output
 from matremap.errors import MatremapError, shown
 
 IMAGE_SUFFIXES = (".exr", ".png", ".npy", ".tif", ".tiff", ".hdr")
@@ -64,26 +62,6 @@ def check_output(path: str | os.PathLike, force: bool, suffixes: tuple[str, ...]
     if p.exists() and not force:
         raise MatremapError(f"{p} already exists; pass --force to overwrite it")
     return p
-
-
-@contextmanager
-def atomic_output(path: Path) -> Iterator[str]:
-    """Yield a temporary file name beside ``path``; on success it replaces ``path`` (with the
-    permissions a new file would get), on failure it is removed. The name carries this process's mark
-    (:func:`matremap.core.atomic.temp_prefix`), so that a run after a SIGKILL removes it."""
-    from matremap.core.atomic import temp_prefix
-
-    fd, tmp = tempfile.mkstemp(prefix=temp_prefix("tmp", path.stem), suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    try:
-        yield tmp
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
 
 
 def write_text(path: Path, text: str) -> None:
